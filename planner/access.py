@@ -1,0 +1,217 @@
+"""Access windows of a satellite to a ground station: rise, culmination and set.
+
+The elevation of the satellite above the station's mask is sampled on a grid,
+its local maxima are refined (culminations), and every culmination above the
+mask is bracketed by the grid minima on either side, inside which elevation is
+monotonic, so rise and set are single sign changes refined by bisection. This
+finds grazing passes shorter than the grid step, which a plain sign-change scan
+misses, and times rise and set to ``tol_s`` (default 0.1 ms).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.errors import SearchRangeError, StationError
+from planner.propagation import EarthFrames, Station, Trajectory, mxv
+from planner.search import _find_maxima_core, bisect_roots, time_grid
+
+Vec = NDArray[np.float64]
+
+MAX_SPAN_S = 30 * 86400.0
+
+
+@dataclass(frozen=True, slots=True)
+class LookAngles:
+    """Azimuth (deg from north, through east), elevation (deg) and range (km), each shape (N,)."""
+
+    azimuth_deg: Vec
+    elevation_deg: Vec
+    range_km: Vec
+
+
+@dataclass(frozen=True, slots=True)
+class AccessWindows:
+    """Passes of a satellite over a station; every field has one entry a pass.
+
+    ``rise_s`` and ``set_s`` are clipped to the search span, and ``rise_clipped`` /
+    ``set_clipped`` say where that happened (a pass already in progress at the start).
+    """
+
+    rise_s: Vec
+    culmination_s: Vec
+    set_s: Vec
+    max_elevation_deg: Vec
+    rise_azimuth_deg: Vec
+    culmination_azimuth_deg: Vec
+    set_azimuth_deg: Vec
+    min_range_km: Vec
+    rise_clipped: NDArray[np.bool_]
+    set_clipped: NDArray[np.bool_]
+
+    def __len__(self) -> int:
+        return int(self.rise_s.size)
+
+    def contains(self, t_s: Vec) -> NDArray[np.bool_]:
+        """Return which of the times fall inside some window."""
+        t = np.atleast_1d(t_s)
+        k = np.searchsorted(self.rise_s, t, side="right") - 1
+        ok = k >= 0
+        kk = np.clip(k, 0, max(len(self) - 1, 0))
+        return ok & (len(self) > 0) & (t <= (self.set_s[kk] if len(self) else t))
+
+
+def validate_station(station: Station) -> None:
+    """Raise StationError naming the field for coordinates or masks out of range."""
+    checks = (
+        ("latitude_deg", station.latitude_deg, -90.0, 90.0),
+        ("longitude_deg", station.longitude_deg, -180.0, 360.0),
+        ("altitude_m", station.altitude_m, -500.0, 9000.0),
+        ("min_elevation_deg", station.min_elevation_deg, -5.0, 89.0),
+    )
+    for name, value, lo, hi in checks:
+        if not (math.isfinite(value) and lo <= value <= hi):
+            raise StationError(f"{name} {value} is outside [{lo}, {hi}]", field=name)
+    if station.max_range_km is not None and not (math.isfinite(station.max_range_km) and station.max_range_km > 0):
+        raise StationError(f"max_range_km {station.max_range_km} must be positive", field="max_range_km")
+
+
+def look_angles(r_sat_km: Vec, t_s: Vec, station: Station, frames: EarthFrames) -> LookAngles:
+    """Return the look angles from ``station`` to GCRS positions ``r_sat_km`` (3, N) at ``t_s``."""
+    r_itrs = mxv(frames.gcrs_to_itrs(t_s), r_sat_km)
+    rho = r_itrs - station.itrs_km()[:, None]
+    enu = station.enu_itrs() @ rho
+    rng = np.linalg.norm(rho, axis=0)
+    el = np.degrees(np.arcsin(np.clip(enu[2] / rng, -1.0, 1.0)))
+    az = np.mod(np.degrees(np.arctan2(enu[0], enu[1])), 360.0)
+    return LookAngles(az, el, rng)
+
+
+def elevation_function(traj: Trajectory, station: Station, frames: EarthFrames):  # type: ignore[no-untyped-def]
+    """Return ``f(t_s)``: elevation above the station's mask, in degrees (the access g-function)."""
+    up = station.enu_itrs()[2]
+    site = station.itrs_km()
+    mask = station.min_elevation_deg
+
+    def f(t_s: Vec) -> Vec:
+        r, _ = traj.state(t_s)
+        rho = mxv(frames.gcrs_to_itrs(t_s), r) - site[:, None]
+        return np.degrees(np.arcsin(np.clip(up @ rho / np.linalg.norm(rho, axis=0), -1.0, 1.0))) - mask
+
+    f.step_s = 60.0  # type: ignore[attr-defined]
+    return f
+
+
+def range_function(traj: Trajectory, station: Station, frames: EarthFrames, max_range_km: float):  # type: ignore[no-untyped-def]
+    """Return ``f(t_s)``: ``max_range_km`` minus the slant range (positive when close enough)."""
+    site = station.itrs_km()
+
+    def f(t_s: Vec) -> Vec:
+        r, _ = traj.state(t_s)
+        rho = mxv(frames.gcrs_to_itrs(t_s), r) - site[:, None]
+        return max_range_km - np.linalg.norm(rho, axis=0)
+
+    return f
+
+
+def access_windows(
+    traj: Trajectory,
+    station: Station,
+    frames: EarthFrames,
+    t0_s: float,
+    t1_s: float,
+    step_s: float = 60.0,
+    tol_s: float = 1e-4,
+) -> AccessWindows:
+    """Find every pass of ``traj`` above the station's elevation mask in ``[t0_s, t1_s]``.
+
+    ``step_s`` must be shorter than half the time between a culmination and the
+    next elevation minimum (a few minutes for any Earth orbit), which 60 s is.
+    With ``station.max_range_km`` set, each window is narrowed to where the slant
+    range is within it (passes never inside it are dropped).
+    """
+    validate_station(station)
+    if t1_s - t0_s > MAX_SPAN_S:
+        raise SearchRangeError(
+            f"span of {(t1_s - t0_s) / 86400.0:.2f} days is over the 30-day limit", field="end"
+        )
+    f = elevation_function(traj, station, frames)
+    t = time_grid(t0_s, t1_s, step_s)
+    g = f(t)
+    t_max, g_max = _find_maxima_core(f, t, g, tol_s)
+    # Maxima at the ends of the span (a pass in progress at the start or end).
+    edges_t, edges_g = [], []
+    if g.size > 1 and g[0] > g[1]:
+        edges_t.append(t[0])
+        edges_g.append(g[0])
+    if g.size > 1 and g[-1] > g[-2]:
+        edges_t.append(t[-1])
+        edges_g.append(g[-1])
+    t_max = np.concatenate([t_max, edges_t])
+    g_max = np.concatenate([g_max, edges_g])
+    keep = g_max > 0.0
+    t_max, g_max = t_max[keep], g_max[keep]
+    order = np.argsort(t_max)
+    t_max, g_max = t_max[order], g_max[order]
+
+    # Grid minima bound each culmination; elevation is monotonic in between.
+    i_max = np.clip(np.searchsorted(t, t_max), 0, t.size - 1)
+    minima = np.flatnonzero((g[1:-1] <= g[:-2]) & (g[1:-1] < g[2:])) + 1
+    k = np.searchsorted(minima, i_max)
+    lo_idx = np.where(k > 0, minima[np.clip(k - 1, 0, max(minima.size - 1, 0))] if minima.size else 0, 0)
+    hi_idx = np.where(k < minima.size, minima[np.clip(k, 0, max(minima.size - 1, 0))] if minima.size else t.size - 1, t.size - 1)
+    lo_t, hi_t = t[lo_idx], t[hi_idx]
+    rise_clipped = f(lo_t) > 0.0 if lo_t.size else np.zeros(0, bool)
+    set_clipped = f(hi_t) > 0.0 if hi_t.size else np.zeros(0, bool)
+    rise_lo = np.where(rise_clipped, lo_t, lo_t)
+    rise = bisect_roots(f, rise_lo, np.maximum(t_max, rise_lo), tol_s)
+    rise = np.where(rise_clipped, lo_t, rise)
+    sets = bisect_roots(f, np.minimum(t_max, hi_t), hi_t, tol_s)
+    sets = np.where(set_clipped, hi_t, sets)
+
+    if station.max_range_km is not None and rise.size:
+        rf = range_function(traj, station, frames, station.max_range_km)
+        inside = rf(t_max) > 0.0
+        rise, sets, t_max = rise[inside], sets[inside], t_max[inside]
+        rise_clipped, set_clipped = rise_clipped[inside], set_clipped[inside]
+        far_rise = rf(rise) < 0.0
+        far_set = rf(sets) < 0.0
+        rise = np.where(far_rise, bisect_roots(rf, rise, t_max, tol_s) if rise.size else rise, rise)
+        sets = np.where(far_set, bisect_roots(rf, t_max, sets, tol_s) if sets.size else sets, sets)
+
+    return _describe(traj, station, frames, rise, t_max, sets, rise_clipped, set_clipped)
+
+
+def _describe(
+    traj: Trajectory,
+    station: Station,
+    frames: EarthFrames,
+    rise: Vec,
+    culm: Vec,
+    sets: Vec,
+    rise_clipped: NDArray[np.bool_],
+    set_clipped: NDArray[np.bool_],
+) -> AccessWindows:
+    n = rise.size
+    if n == 0:
+        empty = np.empty(0)
+        return AccessWindows(empty, empty, empty, empty, empty, empty, empty, empty, np.zeros(0, bool), np.zeros(0, bool))
+    t_all = np.concatenate([rise, culm, sets])
+    r, _ = traj.state(t_all)
+    look = look_angles(r, t_all, station, frames)
+    return AccessWindows(
+        rise_s=rise,
+        culmination_s=culm,
+        set_s=sets,
+        max_elevation_deg=look.elevation_deg[n : 2 * n],
+        rise_azimuth_deg=look.azimuth_deg[:n],
+        culmination_azimuth_deg=look.azimuth_deg[n : 2 * n],
+        set_azimuth_deg=look.azimuth_deg[2 * n :],
+        min_range_km=look.range_km[n : 2 * n],
+        rise_clipped=np.asarray(rise_clipped, bool),
+        set_clipped=np.asarray(set_clipped, bool),
+    )

@@ -1,0 +1,143 @@
+"""Algorithm 1, Step 2: the in-plane phasing burn that brings the observer to the target on time.
+
+One impulsive burn, one or two observer revolutions before ``T_access``, puts the
+observer on a Lambert transfer to the target's position at ``T_access``. The
+two-body Lambert solution is then corrected for J2 by shooting: the transfer is
+propagated numerically, the arrival error is added to the aim point, and Lambert
+is solved again, until the numerically propagated arrival is within ``tol_km``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.constants import MU_EARTH_KM3_S2
+from planner.errors import LambertError, PlannerError
+from planner.lambert import lambert, max_revolutions
+from planner.propagation import Trajectory, propagate_j2
+
+Vec = NDArray[np.float64]
+
+
+@dataclass(frozen=True, slots=True)
+class Phasing:
+    """The phasing burn and its numerical verification.
+
+    ``dv_km_s`` is the impulse in GCRS, ``dv_rtn_km_s`` the same in the observer's
+    radial / along-track / cross-track frame at the burn. ``two_body_miss_km`` is
+    how far the plain Lambert burn lands from the target once J2 is included, and
+    ``miss_km`` the verified distance after the J2 correction.
+    """
+
+    t_burn_s: float
+    t_access_s: float
+    revolutions_before: int
+    lambert_revolutions: int
+    low_path: bool
+    dv_km_s: Vec
+    dv_rtn_km_s: Vec
+    dv_total_km_s: float
+    two_body_miss_km: float
+    miss_km: float
+    corrections: int
+    r_observer_km: Vec
+    v_relative_km_s: Vec
+
+
+def rtn_matrix(r_km: Vec, v_km_s: Vec) -> Vec:
+    """Return the rows R (radial), T (along-track), N (orbit normal) at a state, shape (3, 3)."""
+    rhat = r_km / np.linalg.norm(r_km)
+    n = np.cross(r_km, v_km_s)
+    nhat = n / np.linalg.norm(n)
+    return np.array([rhat, np.cross(nhat, rhat), nhat])
+
+
+def period_s(r_km: Vec, v_km_s: Vec) -> float:
+    """Return the two-body period of a state (s)."""
+    energy = 0.5 * float(v_km_s @ v_km_s) - MU_EARTH_KM3_S2 / float(np.linalg.norm(r_km))
+    a = -MU_EARTH_KM3_S2 / (2.0 * energy)
+    return 2.0 * math.pi * math.sqrt(a**3 / MU_EARTH_KM3_S2)
+
+
+def best_lambert(r1: Vec, v1: Vec, r2: Vec, tof_s: float) -> tuple[Vec, int, bool]:
+    """Return the departure velocity, revolutions and branch of the cheapest transfer from (r1, v1) to r2."""
+    best: tuple[float, Vec, int, bool] | None = None
+    h = np.cross(r1, v1)
+    for m in range(0, max_revolutions(r1, r2, tof_s) + 1):
+        for low in (True, False) if m else (True,):
+            try:
+                sol = lambert(r1, r2, tof_s, m, low, prograde_normal=h)
+            except LambertError:
+                continue
+            cost = float(np.linalg.norm(sol.v1_km_s - v1))
+            if best is None or cost < best[0]:
+                best = (cost, sol.v1_km_s, m, low)
+    if best is None:
+        raise LambertError("no Lambert transfer found for this geometry", field="phasing")
+    return best[1], best[2], best[3]
+
+
+def phase(
+    observer: Trajectory,
+    target: Trajectory,
+    t_access_s: float,
+    revolutions_before: tuple[int, ...] = (1, 2),
+    t_earliest_burn_s: float = 0.0,
+    tol_km: float = 1e-3,
+    max_corrections: int = 8,
+) -> Phasing:
+    """Plan the phasing burn for the cheapest of ``revolutions_before`` and verify it numerically.
+
+    Raises PlannerError if every option would burn before ``t_earliest_burn_s``.
+    """
+    r_t, v_t = target.state(t_access_s)
+    r2, v2_target = r_t[:, 0], v_t[:, 0]
+    r_o, v_o = observer.state(t_access_s)
+    period = period_s(r_o[:, 0], v_o[:, 0])
+    options = []
+    for k in revolutions_before:
+        t_burn = t_access_s - k * period
+        if t_burn < t_earliest_burn_s:
+            continue
+        r1s, v1s = observer.state(t_burn)
+        r1, v1 = r1s[:, 0], v1s[:, 0]
+        v_dep, m, low = best_lambert(r1, v1, r2, k * period)
+        options.append((float(np.linalg.norm(v_dep - v1)), k, t_burn, r1, v1, v_dep, m, low))
+    if not options:
+        raise PlannerError(
+            f"the access at {t_access_s:.0f} s is too early for a burn {min(revolutions_before)} revolution(s) "
+            "before it; start the search earlier",
+            field="start",
+        )
+    _, k, t_burn, r1, v1, v_dep, m, low = min(options, key=lambda o: o[0])
+    tof = t_access_s - t_burn
+    aim = r2.copy()
+    r_end, v_end = propagate_j2(r1, v_dep, tof)
+    two_body_miss = float(np.linalg.norm(r_end - r2))
+    corrections = 0
+    h = np.cross(r1, v1)
+    while np.linalg.norm(r_end - r2) > tol_km and corrections < max_corrections:
+        aim = aim + (r2 - r_end)
+        v_dep = lambert(r1, aim, tof, m, low, prograde_normal=h).v1_km_s
+        r_end, v_end = propagate_j2(r1, v_dep, tof)
+        corrections += 1
+    dv = v_dep - v1
+    return Phasing(
+        t_burn_s=t_burn,
+        t_access_s=t_access_s,
+        revolutions_before=k,
+        lambert_revolutions=m,
+        low_path=low,
+        dv_km_s=dv,
+        dv_rtn_km_s=rtn_matrix(r1, v1) @ dv,
+        dv_total_km_s=float(np.linalg.norm(dv)),
+        two_body_miss_km=two_body_miss,
+        miss_km=float(np.linalg.norm(r_end - r2)),
+        corrections=corrections,
+        r_observer_km=r_end,
+        v_relative_km_s=v_end - v2_target,
+    )

@@ -1,0 +1,318 @@
+"""The whole of Algorithm 1: access windows, node alignment, phasing, verification and feasibility.
+
+``make_plan`` joins the pure pieces; it is the one function the service and the
+command line call.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from datetime import datetime, timedelta
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.access import MAX_SPAN_S, AccessWindows, access_windows, validate_station
+from planner.alignment import Candidate, HeightBox, ObserverPlaneModel, align_nodes
+from planner.elements import Elements, height_change_dv_km_s, state_to_elements
+from planner.errors import PlannerError, SearchRangeError
+from planner.illumination import phase_angle_deg, sun_position_km, sunlit
+from planner.manoeuvre import Phasing, phase
+from planner.propagation import (
+    EarthFrames,
+    NumericalJ2Trajectory,
+    SecularJ2Trajectory,
+    SGP4Trajectory,
+    Station,
+    Trajectory,
+    as_utc,
+)
+from planner.search import bisect_roots
+from planner.tle import TLE
+
+Vec = NDArray[np.float64]
+Reading = Literal["osculating", "mean"]
+Criterion = Literal["smallest_change", "least_dv"]
+
+
+@dataclass(frozen=True, slots=True)
+class Orbit:
+    """A satellite: a name and either Table-1 elements or a TLE."""
+
+    name: str
+    elements: Elements | None = None
+    tle: TLE | None = None
+
+    def __post_init__(self) -> None:
+        if (self.elements is None) == (self.tle is None):
+            raise PlannerError(f"{self.name}: give exactly one of elements or tle", field="elements")
+
+    @property
+    def epoch(self) -> datetime:
+        if self.elements is not None:
+            return as_utc(self.elements.epoch)
+        assert self.tle is not None
+        return self.tle.epoch
+
+
+@dataclass(frozen=True, slots=True)
+class PlanOptions:
+    """Everything the search takes besides the two orbits and the station.
+
+    ``start`` defaults to the target's epoch; ``duration_s`` to 10 days (at most 30).
+    ``reading`` says how Table-1 elements are taken (TLEs always go through SGP4).
+    """
+
+    start: datetime | None = None
+    duration_s: float = 10 * 86400.0
+    reading: Reading = "osculating"
+    box: HeightBox = field(default_factory=HeightBox)
+    access_step_s: float = 60.0
+    sample_s: float = 1.0
+    max_miss_km: float = 10.0
+    revolutions_before: tuple[int, ...] = (1, 2)
+    criterion: Criterion = "smallest_change"
+    max_imaging_range_km: float = 50.0
+    max_phase_angle_deg: float = 90.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.duration_s) and self.duration_s > 0):
+            raise SearchRangeError(f"duration {self.duration_s} s must be positive", field="duration_s")
+        if self.duration_s > MAX_SPAN_S:
+            raise SearchRangeError(
+                f"duration {self.duration_s / 86400.0:.2f} days is over the 30-day limit", field="duration_s"
+            )
+        if self.reading not in ("osculating", "mean"):
+            raise PlannerError(f"reading {self.reading!r} must be 'osculating' or 'mean'", field="reading")
+        if not all(k in (1, 2) for k in self.revolutions_before) or not self.revolutions_before:
+            raise PlannerError("revolutions_before must be a non-empty subset of (1, 2)", field="revolutions_before")
+        for name in ("access_step_s", "sample_s", "max_miss_km", "max_imaging_range_km", "max_phase_angle_deg"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise SearchRangeError(f"{name} {value} must be a positive number", field=name)
+        if self.access_step_s > 300.0:
+            raise SearchRangeError("access_step_s above 300 s can miss short passes", field="access_step_s")
+        if self.sample_s > 60.0:
+            raise SearchRangeError("sample_s must be at most 60 s", field="sample_s")
+
+
+@dataclass(frozen=True, slots=True)
+class Feasibility:
+    """Optical conditions at T_access for one candidate.
+
+    ``sunlit`` is known for every candidate; range and phase angle only once a
+    phasing burn has been planned (the chosen candidate), else NaN.
+    """
+
+    sunlit: bool
+    observer_range_km: float
+    phase_angle_deg: float
+    feasible: bool
+    reasons: tuple[str, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Plan:
+    """A complete plan; times are seconds after ``epoch`` (UTC)."""
+
+    epoch: datetime
+    duration_s: float
+    reading: Reading
+    windows: AccessWindows
+    candidates: list[Candidate]
+    feasibility: list[Feasibility]
+    chosen_index: int | None
+    chosen: Candidate | None
+    alignment_dv_km_s: float | None
+    step1_miss_km: float | None
+    phasing: Phasing | None
+    chosen_feasibility: Feasibility | None
+    timings_s: dict[str, float]
+    notes: list[str]
+
+
+def _target_trajectory(orbit: Orbit, epoch: datetime, frames: EarthFrames, t1_s: float, reading: Reading) -> Trajectory:
+    if orbit.tle is not None:
+        return SGP4Trajectory(orbit.tle, epoch, frames)
+    assert orbit.elements is not None
+    if reading == "mean":
+        return SecularJ2Trajectory(orbit.elements, epoch)
+    return NumericalJ2Trajectory.from_elements(orbit.elements, epoch, 0.0, t1_s)
+
+
+def _observer_elements(orbit: Orbit, epoch: datetime, frames: EarthFrames) -> Elements:
+    """Return elements of the observer at the plan epoch (a TLE's osculating GCRS state there)."""
+    if orbit.elements is not None:
+        return orbit.elements
+    assert orbit.tle is not None
+    r, v = SGP4Trajectory(orbit.tle, epoch, frames).state(0.0)
+    a, e, i, raan, argp, m = (float(x) for x in state_to_elements(r[:, 0], v[:, 0]))
+    from planner.constants import R_EARTH_KM
+
+    return Elements(
+        epoch, a * (1 + e) - R_EARTH_KM, a * (1 - e) - R_EARTH_KM,
+        math.degrees(i), math.degrees(raan), math.degrees(argp), math.degrees(m),
+    )
+
+
+def _observer_trajectory(elements: Elements, epoch: datetime, t1_s: float, reading: Reading, tle_based: bool) -> Trajectory:
+    if reading == "mean" and not tle_based:
+        return SecularJ2Trajectory(elements, epoch)
+    return NumericalJ2Trajectory.from_elements(elements, epoch, 0.0, t1_s)
+
+
+def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOptions | None = None) -> Plan:
+    """Plan a GSA scene: access windows, ranked alignments, the phasing burn and its verification.
+
+    The height change is made at the observer's element epoch (for a TLE observer:
+    at the plan start, from its SGP4 state). Candidates are ranked by miss, then
+    by the size of the change. Within a pass the smallest change is taken. The
+    chosen candidate is, by ``criterion``, the best-ranked sunlit one
+    (``smallest_change``) or the sunlit one with the least total Delta-v
+    (``least_dv``; two-body estimate over all candidates); unlit ones only when none
+    is sunlit. It is refined against the changed observer's own propagation, phased
+    and verified numerically.
+    """
+    opts = options or PlanOptions()
+    validate_station(station)
+    timings: dict[str, float] = {}
+    notes: list[str] = []
+    clock = time.perf_counter()
+    epoch = as_utc(opts.start) if opts.start is not None else target.epoch
+    t1 = opts.duration_s
+    frames = EarthFrames(epoch, -3600.0, t1 + 3600.0)
+    tgt = _target_trajectory(target, epoch, frames, t1, opts.reading)
+    obs_el = _observer_elements(observer, epoch, frames)
+    tle_obs = observer.tle is not None
+    obs_base = _observer_trajectory(obs_el, epoch, t1, opts.reading, tle_obs)
+    from planner.propagation import seconds_between
+
+    t_ref = 0.0 if tle_obs else seconds_between(epoch, obs_el.epoch)
+    timings["propagation"] = time.perf_counter() - clock
+
+    clock = time.perf_counter()
+    windows = access_windows(tgt, station, frames, 0.0, t1, step_s=opts.access_step_s)
+    timings["access"] = time.perf_counter() - clock
+
+    clock = time.perf_counter()
+    a, e, i = obs_el.a_km, obs_el.e, math.radians(obs_el.inclination_deg)
+    model = ObserverPlaneModel(obs_base, a, e, i, t_ref)
+    candidates = align_nodes(tgt, model, windows, opts.box, opts.sample_s, opts.max_miss_km)
+    timings["alignment"] = time.perf_counter() - clock
+
+    clock = time.perf_counter()
+    lit = np.zeros(0, bool)
+    sun = np.zeros((3, 0))
+    if candidates:
+        t_acc = np.array([c.t_access_s for c in candidates])
+        sun = sun_position_km(epoch, t_acc)
+        r_acc, _ = tgt.state(t_acc)
+        lit = sunlit(r_acc, sun)
+    feas = [
+        Feasibility(bool(lit[k]), math.nan, math.nan, bool(lit[k]), () if lit[k] else ("target in Earth's shadow",))
+        for k in range(len(candidates))
+    ]
+    chosen_index = None
+    chosen = None
+    phasing = None
+    step1_miss = None
+    alignment_dv = None
+    chosen_feas = None
+    order = [k for k in range(len(candidates)) if lit[k]] + [k for k in range(len(candidates)) if not lit[k]]
+    if candidates and not lit.any():
+        notes.append("no candidate has the target sunlit at T_access; the best unlit one is planned")
+    if opts.criterion == "least_dv" and candidates:
+        cache: dict[tuple[float, float], Trajectory] = {}
+        pool = [k for k in order if lit[k]] or order
+        costs = {k: _phasing_cost_km_s(candidates[k], obs_el, epoch, t1, opts, tgt, tle_obs, model, cache) for k in pool}
+        order = sorted(pool, key=lambda k: costs[k]) + [k for k in order if k not in costs]
+    for k in order:
+        cand = candidates[k]
+        changed = obs_el.with_heights(cand.delta_ha_km, cand.delta_hp_km)
+        obs_new = _observer_trajectory(changed, epoch, t1, opts.reading, tle_obs)
+        t_access, miss1 = _refine_crossing(tgt, obs_new, windows, cand)
+        try:
+            ph = phase(obs_new, tgt, t_access, opts.revolutions_before, t_earliest_burn_s=max(0.0, t_ref))
+        except PlannerError as exc:
+            notes.append(f"candidate {k} skipped: {exc}")
+            continue
+        chosen_index, phasing, step1_miss = k, ph, miss1
+        chosen = Candidate(
+            cand.pass_index, cand.node, t_access, cand.delta_ha_km, cand.delta_hp_km, miss1,
+            cand.rate_change_rad_s, cand.t_access_range_s, cand.family_dha_km, cand.family_dhp_km,
+        )
+        alignment_dv = float(height_change_dv_km_s(a, e, cand.delta_ha_km, cand.delta_hp_km))
+        r_t, _ = tgt.state(t_access)
+        sun_k = sun_position_km(epoch, t_access)
+        # In the last moments the observer closes along -v_rel: that is its line of sight to the target.
+        los = -ph.v_relative_km_s
+        phase_deg = float(phase_angle_deg(r_t[:, 0], sun_k[:, 0], los))
+        reasons = list(feas[k].reasons)
+        if ph.miss_km > opts.max_imaging_range_km:
+            reasons.append(f"observer passes {ph.miss_km:.1f} km away, over {opts.max_imaging_range_km} km")
+        if phase_deg > opts.max_phase_angle_deg:
+            reasons.append(f"Sun phase angle {phase_deg:.1f} deg is over {opts.max_phase_angle_deg} deg")
+        chosen_feas = Feasibility(feas[k].sunlit, ph.miss_km, phase_deg, not reasons, tuple(reasons))
+        feas[k] = chosen_feas
+        break
+    timings["phasing"] = time.perf_counter() - clock
+    if not candidates:
+        notes.append(
+            f"no pass has an alignment within {opts.max_miss_km} km inside the dHa/dHp box; "
+            "widen the box, lengthen the span or raise max_miss_km"
+        )
+    return Plan(
+        epoch, t1, opts.reading, windows, candidates, feas, chosen_index, chosen, alignment_dv, step1_miss,
+        phasing, chosen_feas, timings, notes,
+    )
+
+
+def _refine_crossing(tgt: Trajectory, obs: Trajectory, windows: AccessWindows, cand: Candidate) -> tuple[float, float]:
+    """Return the moment in the candidate's pass where the target truly crosses the changed observer's plane, and the miss there."""
+    from planner.alignment import node_miss_km
+
+    rise, set_ = float(windows.rise_s[cand.pass_index]), float(windows.set_s[cand.pass_index])
+
+    def g(t_s: Vec) -> Vec:
+        r, _ = tgt.state(t_s)
+        ro, vo = obs.state(t_s)
+        n = np.cross(ro, vo, axis=0)
+        return (n * r).sum(axis=0) / (np.linalg.norm(n, axis=0) * np.linalg.norm(r, axis=0))
+
+    lo, hi = max(rise, cand.t_access_s - 60.0), min(set_, cand.t_access_s + 60.0)
+    grid = np.linspace(lo, hi, 121)
+    vals = g(grid)
+    flips = np.flatnonzero(np.sign(vals[1:]) != np.sign(vals[:-1]))
+    if flips.size:
+        j = int(flips[np.argmin(np.abs(grid[flips] - cand.t_access_s))])
+        t_access = float(bisect_roots(g, grid[j : j + 1], grid[j + 1 : j + 2], 1e-4)[0])
+    else:
+        t_access = float(grid[np.argmin(np.abs(vals))])
+    r, v = tgt.state(t_access)
+    ro, vo = obs.state(t_access)
+    miss, _ = node_miss_km(r, v, np.cross(ro, vo, axis=0) / np.linalg.norm(np.cross(ro, vo, axis=0)))
+    return t_access, float(miss[0])
+
+
+def _phasing_cost_km_s(
+    cand: Candidate, obs_el: Elements, epoch: datetime, t1: float, opts: PlanOptions, tgt: Trajectory,
+    tle_obs: bool, model: ObserverPlaneModel, cache: dict[tuple[float, float], Trajectory],
+) -> float:
+    """Return the two-body estimate of a candidate's total Delta-v (height change + phasing), km/s."""
+    key = (cand.delta_ha_km, cand.delta_hp_km)
+    if key not in cache:
+        changed = obs_el.with_heights(*key)
+        cache[key] = _observer_trajectory(changed, epoch, t1, opts.reading, tle_obs)
+    try:
+        ph = phase(cache[key], tgt, cand.t_access_s, opts.revolutions_before, max(0.0, model.t_ref_s), max_corrections=0)
+    except PlannerError:
+        return math.inf
+    return ph.dv_total_km_s + float(height_change_dv_km_s(model.a_km, model.e, *key))
+
+
+def utc(epoch: datetime, t_s: float) -> datetime:
+    """Return the UTC moment ``t_s`` elapsed seconds after ``epoch``."""
+    return epoch + timedelta(seconds=float(t_s))

@@ -1,0 +1,367 @@
+"""The one adapter to skyfield and sgp4: time scales, Earth rotation, ephemerides, propagators.
+
+Everything downstream sees numpy arrays only: times are seconds from a plan epoch
+(``t_s``, a uniform TT-based count), vectors are GCRS (J2000 to 23 mas) in km and
+km/s with shape (3, N). Three propagators share one interface, ``state(t_s)``:
+
+* ``SecularJ2Trajectory``: mean elements with the J2 secular rates (analytic).
+* ``NumericalJ2Trajectory``: two-body + J2 integrated with DOP853, then read
+  anywhere in its span by quintic Hermite interpolation of the integrator's steps.
+* ``SGP4Trajectory``: a TLE through SGP4, TEME rotated into GCRS.
+
+Earth orientation (GCRS to ITRS) and the TEME rotation are taken from skyfield at
+a coarse grid and interpolated, since a 10-day search needs them at ~10^5 times.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import warnings
+from dataclasses import dataclass
+from datetime import datetime, timedelta, timezone
+from functools import lru_cache
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from planner.constants import DAY_S, F_EARTH, J2, MU_EARTH_KM3_S2, OMEGA_EARTH_RAD_S, R_EARTH_KM
+from planner.elements import Elements, elements_to_state, secular_state, state_to_elements
+from planner.errors import PlannerError
+from planner.tle import TLE
+
+Vec = NDArray[np.float64]
+
+_FRAME_GRID_S = 3600.0  # Earth-orientation sampling; see test_earth_rotation_against_skyfield
+
+
+class Trajectory(Protocol):
+    """Anything that gives GCRS position (km) and velocity (km/s) at seconds from the plan epoch."""
+
+    def state(self, t_s: ArrayLike) -> tuple[Vec, Vec]: ...
+
+
+@lru_cache(maxsize=1)
+def timescale() -> Any:
+    """Return skyfield's timescale with its built-in leap-second and Delta-T tables (no download)."""
+    from skyfield.api import load
+
+    return load.timescale(builtin=True)
+
+
+@lru_cache(maxsize=1)
+def ephemeris() -> Any:
+    """Return the de421 ephemeris shipped by the skyfield-data package (no download)."""
+    import skyfield_data
+    from skyfield.api import Loader
+
+    path = os.path.join(os.path.dirname(skyfield_data.__file__), "data")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return Loader(path, verbose=False)("de421.bsp")
+
+
+def as_utc(epoch: datetime) -> datetime:
+    """Return ``epoch`` as an aware UTC datetime (naive datetimes are taken as UTC)."""
+    if epoch.tzinfo is None:
+        return epoch.replace(tzinfo=timezone.utc)
+    return epoch.astimezone(timezone.utc)
+
+
+def skyfield_times(epoch: datetime, t_s: ArrayLike) -> Any:
+    """Return skyfield Time for seconds after ``epoch`` (elapsed SI seconds)."""
+    ts = timescale()
+    t0 = ts.from_datetime(as_utc(epoch))
+    offset_days = np.asarray(t_s, float) / DAY_S
+    return ts.tt_jd(t0.whole, t0.tt_fraction + offset_days)
+
+
+def utc_datetimes(epoch: datetime, t_s: ArrayLike) -> list[datetime]:
+    """Return UTC datetimes (microsecond precision) for elapsed seconds after ``epoch``."""
+    times = skyfield_times(epoch, np.atleast_1d(np.asarray(t_s, float)))
+    return [d.replace(tzinfo=timezone.utc) for d in times.utc_datetime()]
+
+
+def seconds_between(epoch: datetime, moment: datetime) -> float:
+    """Return elapsed seconds from ``epoch`` to ``moment`` (both UTC)."""
+    ts = timescale()
+    return float((ts.from_datetime(as_utc(moment)) - ts.from_datetime(as_utc(epoch))) * DAY_S)
+
+
+def _rot_z(angle: Vec) -> Vec:
+    """Return rotation matrices of shape (3, 3, N) about z by ``angle`` (skyfield's rot_z)."""
+    c, s = np.cos(angle), np.sin(angle)
+    zero, one = np.zeros_like(angle), np.ones_like(angle)
+    return np.array([[c, -s, zero], [s, c, zero], [zero, zero, one]])
+
+
+def mxv(m: Vec, v: Vec) -> Vec:
+    """Multiply matrices (3, 3, ...) by vectors (3, ...), broadcasting over the trailing axes."""
+    return np.einsum("ij...,j...->i...", m, v)
+
+
+class EarthFrames:
+    """GCRS-to-ITRS and TEME-to-GCRS rotations over ``[t0_s, t1_s]`` after ``epoch``.
+
+    skyfield's ITRS rotation is Rz(-GAST) times the precession-nutation matrix M. M
+    changes slowly, so it is sampled hourly and interpolated; GAST is Earth rotation
+    plus a slowly varying part, which is interpolated the same way. Polar motion is
+    not modelled (skyfield's built-in timescale has no table): <= 15 m at the surface.
+    """
+
+    def __init__(self, epoch: datetime, t0_s: float, t1_s: float) -> None:
+        n = max(2, int(math.ceil((t1_s - t0_s) / _FRAME_GRID_S)) + 3)
+        self.epoch = epoch
+        self.grid_s = t0_s - _FRAME_GRID_S + _FRAME_GRID_S * np.arange(n)
+        t = skyfield_times(epoch, self.grid_s)
+        self._m = t.M.reshape(9, n)  # precession-nutation, GCRS to true of date
+        gast_rad = np.unwrap(t.gast * (2.0 * math.pi / 24.0))
+        self._gast0 = gast_rad[0]
+        self._gast_residual = gast_rad - self._gast0 - OMEGA_EARTH_RAD_S * (self.grid_s - self.grid_s[0])
+        from skyfield.sgp4lib import TEME
+
+        self._teme = TEME.rotation_at(t).reshape(9, n)  # GCRS to TEME
+
+    def _interp(self, table: Vec, t_s: Vec) -> Vec:
+        t = np.atleast_1d(t_s)
+        if t.size and (t.min() < self.grid_s[0] or t.max() > self.grid_s[-1]):
+            raise PlannerError(f"time {t.min()}..{t.max()} s is outside the frame span", field="t_s")
+        out = np.empty((table.shape[0], t.size))
+        for k in range(table.shape[0]):
+            out[k] = np.interp(t, self.grid_s, table[k])
+        return out
+
+    def gast_rad(self, t_s: ArrayLike) -> Vec:
+        t = np.atleast_1d(np.asarray(t_s, float))
+        residual = np.interp(t, self.grid_s, self._gast_residual)
+        return self._gast0 + OMEGA_EARTH_RAD_S * (t - self.grid_s[0]) + residual
+
+    def gcrs_to_itrs(self, t_s: ArrayLike) -> Vec:
+        """Return rotation matrices (3, 3, N) taking GCRS vectors to ITRS."""
+        t = np.atleast_1d(np.asarray(t_s, float))
+        m = self._interp(self._m, t).reshape(3, 3, t.size)
+        return np.einsum("ij...,jk...->ik...", _rot_z(-self.gast_rad(t)), m)
+
+    def teme_to_gcrs(self, t_s: ArrayLike) -> Vec:
+        """Return rotation matrices (3, 3, N) taking TEME vectors to GCRS."""
+        t = np.atleast_1d(np.asarray(t_s, float))
+        return self._interp(self._teme, t).reshape(3, 3, t.size).transpose(1, 0, 2)
+
+
+@dataclass(frozen=True, slots=True)
+class Station:
+    """A ground site on the WGS-84 ellipsoid (degrees, metres) with an elevation mask."""
+
+    latitude_deg: float
+    longitude_deg: float
+    altitude_m: float = 0.0
+    min_elevation_deg: float = 0.0
+    max_range_km: float | None = None
+
+    def itrs_km(self) -> Vec:
+        """Return the site's ITRS position, shape (3,)."""
+        lat, lon = math.radians(self.latitude_deg), math.radians(self.longitude_deg)
+        e2 = F_EARTH * (2.0 - F_EARTH)
+        n = R_EARTH_KM / math.sqrt(1.0 - e2 * math.sin(lat) ** 2)
+        h = self.altitude_m / 1000.0
+        return np.array(
+            [
+                (n + h) * math.cos(lat) * math.cos(lon),
+                (n + h) * math.cos(lat) * math.sin(lon),
+                (n * (1.0 - e2) + h) * math.sin(lat),
+            ]
+        )
+
+    def enu_itrs(self) -> Vec:
+        """Return the local east, north, up unit vectors as rows of a (3, 3) array (ITRS)."""
+        lat, lon = math.radians(self.latitude_deg), math.radians(self.longitude_deg)
+        sl, cl, so, co = math.sin(lat), math.cos(lat), math.sin(lon), math.cos(lon)
+        return np.array([[-so, co, 0.0], [-sl * co, -sl * so, cl], [cl * co, cl * so, sl]])
+
+
+class SecularJ2Trajectory:
+    """Mean elements propagated with the J2 secular rates; ``t_s`` counts from ``plan_epoch``."""
+
+    def __init__(self, elements: Elements, plan_epoch: datetime) -> None:
+        self.elements = elements
+        self.offset_s = seconds_between(elements.epoch, plan_epoch)
+        self._rad = elements.radians()
+
+    def state(self, t_s: ArrayLike) -> tuple[Vec, Vec]:
+        t = np.atleast_1d(np.asarray(t_s, float)) + self.offset_s
+        return secular_state(self._rad, t)
+
+
+def j2_acceleration(r_km: Vec) -> Vec:
+    """Return two-body plus J2 acceleration (km/s^2) at positions of shape (3,) or (3, N)."""
+    x, y, z = r_km
+    r2 = x * x + y * y + z * z
+    r = np.sqrt(r2)
+    k = -MU_EARTH_KM3_S2 / (r2 * r)
+    f = 1.5 * J2 * MU_EARTH_KM3_S2 * R_EARTH_KM**2 / (r2 * r2 * r)
+    zr = 5.0 * z * z / r2
+    return np.array([k * x + f * x * (zr - 1.0), k * y + f * y * (zr - 1.0), k * z + f * z * (zr - 3.0)])
+
+
+_F = 1.5 * J2 * MU_EARTH_KM3_S2 * R_EARTH_KM**2
+
+
+def _j2_rhs(_t: float, y: list[float]) -> tuple[float, ...]:
+    # Scalar maths on purpose: for a 6-vector, math beats numpy by ~5x per call, and the
+    # call count (~10^5 for 10 days) dominates the run time (design/propagator_speed.md).
+    x, yy, z, vx, vy, vz = y
+    r2 = x * x + yy * yy + z * z
+    r = math.sqrt(r2)
+    k = -MU_EARTH_KM3_S2 / (r2 * r)
+    f = _F / (r2 * r2 * r)
+    zr = 5.0 * z * z / r2
+    return (vx, vy, vz, k * x + f * x * (zr - 1.0), k * yy + f * yy * (zr - 1.0), k * z + f * z * (zr - 3.0))
+
+
+class NumericalJ2Trajectory:
+    """Two-body + J2 motion integrated once with DOP853, then interpolated anywhere in its span.
+
+    The integrator is scipy's Fortran DOP853 (``scipy.integrate.ode``), which steps
+    in compiled code: 10 days at rtol 1e-10 take ~0.12 s (2.7 m from a 1e-13 run), against ~3.4 s for
+    ``solve_ivp(method="DOP853")``, whose Python stepping costs more than the force
+    model; the two agree (tests/planner/test_propagation.py). The integrator's own
+    steps are kept and read back by quintic Hermite interpolation of position,
+    velocity and acceleration, accurate to well under a metre.
+    """
+
+    def __init__(self, r0_km: ArrayLike, v0_km_s: ArrayLike, t0_s: float, t1_s: float, rtol: float = 1e-10) -> None:
+        from scipy.integrate import ode
+
+        if not (math.isfinite(t0_s) and math.isfinite(t1_s)):
+            raise PlannerError("propagation span must be finite", field="t_s")
+        y0 = np.concatenate([np.asarray(r0_km, float), np.asarray(v0_km_s, float)])
+        steps_t: list[float] = []
+        steps_y: list[Vec] = []
+
+        def solout(t: float, y: Vec) -> int:
+            steps_t.append(t)
+            steps_y.append(np.array(y))
+            return 0
+
+        self.t0_s, self.t1_s = float(t0_s), float(t1_s)
+        if t1_s == t0_s:
+            steps_t, steps_y = [t0_s, t0_s + 1e-9], [y0, y0]
+        else:
+            solver = ode(_j2_rhs).set_integrator("dop853", rtol=rtol, atol=rtol * 1e-2, nsteps=10**7)
+            solver.set_solout(solout)
+            solver.set_initial_value(y0, t0_s)
+            solver.integrate(t1_s)
+            if not solver.successful():
+                raise PlannerError("numerical propagation failed (orbit decayed or diverged)", field="elements")
+        t = np.array(steps_t)
+        y = np.array(steps_y).T
+        order = np.argsort(t)
+        self._t = t[order]
+        self._r = y[:3, order]
+        self._v = y[3:, order]
+        self._a = j2_acceleration(self._r)
+
+    @classmethod
+    def from_elements(cls, elements: Elements, plan_epoch: datetime, t0_s: float, t1_s: float) -> NumericalJ2Trajectory:
+        """Integrate osculating ``elements`` over ``[t0_s, t1_s]`` seconds after ``plan_epoch``."""
+        r0, v0 = elements_to_state(*elements.radians())
+        offset = seconds_between(plan_epoch, elements.epoch)
+        lo, hi = min(t0_s, offset), max(t1_s, offset)
+        # Integrate forward and backward from the element epoch to cover the span.
+        fwd = cls(r0, v0, offset, hi) if hi > offset else None
+        bwd = cls(r0, v0, offset, lo) if lo < offset else None
+        if fwd is None and bwd is None:
+            return cls(r0, v0, offset, offset)
+        if bwd is None:
+            assert fwd is not None
+            return fwd
+        if fwd is None:
+            return bwd
+        return fwd._joined(bwd)
+
+    def _joined(self, other: NumericalJ2Trajectory) -> NumericalJ2Trajectory:
+        joined = object.__new__(NumericalJ2Trajectory)
+        t = np.concatenate([other._t, self._t])
+        order = np.argsort(t, kind="stable")
+        keep = np.concatenate([[True], np.diff(t[order]) > 0])
+        idx = order[keep]
+        joined._t = t[idx]
+        joined._r = np.concatenate([other._r, self._r], axis=1)[:, idx]
+        joined._v = np.concatenate([other._v, self._v], axis=1)[:, idx]
+        joined._a = np.concatenate([other._a, self._a], axis=1)[:, idx]
+        joined.t0_s, joined.t1_s = float(joined._t[0]), float(joined._t[-1])
+        return joined
+
+    def state(self, t_s: ArrayLike) -> tuple[Vec, Vec]:
+        t = np.atleast_1d(np.asarray(t_s, float))
+        if t.size and (t.min() < self._t[0] - 1e-6 or t.max() > self._t[-1] + 1e-6):
+            raise PlannerError(
+                f"time {t.min():.3f}..{t.max():.3f} s is outside the propagated span "
+                f"{self._t[0]:.3f}..{self._t[-1]:.3f} s",
+                field="t_s",
+            )
+        k = np.clip(np.searchsorted(self._t, t, side="right") - 1, 0, self._t.size - 2)
+        h = self._t[k + 1] - self._t[k]
+        s = (t - self._t[k]) / h
+        s2, s3, s4, s5 = s * s, s**3, s**4, s**5
+        p0, v0, a0 = self._r[:, k], self._v[:, k] * h, self._a[:, k] * h * h
+        p1, v1, a1 = self._r[:, k + 1], self._v[:, k + 1] * h, self._a[:, k + 1] * h * h
+        r = (
+            (1 - 10 * s3 + 15 * s4 - 6 * s5) * p0
+            + (s - 6 * s3 + 8 * s4 - 3 * s5) * v0
+            + (0.5 * s2 - 1.5 * s3 + 1.5 * s4 - 0.5 * s5) * a0
+            + (0.5 * s3 - s4 + 0.5 * s5) * a1
+            + (-4 * s3 + 7 * s4 - 3 * s5) * v1
+            + (10 * s3 - 15 * s4 + 6 * s5) * p1
+        )
+        v = (
+            (-30 * s2 + 60 * s3 - 30 * s4) * p0
+            + (1 - 18 * s2 + 32 * s3 - 15 * s4) * v0
+            + (s - 4.5 * s2 + 6 * s3 - 2.5 * s4) * a0
+            + (1.5 * s2 - 4 * s3 + 2.5 * s4) * a1
+            + (-12 * s2 + 28 * s3 - 15 * s4) * v1
+            + (30 * s2 - 60 * s3 + 30 * s4) * p1
+        ) / h
+        return r, v
+
+
+def propagate_j2(r0_km: ArrayLike, v0_km_s: ArrayLike, dt_s: float) -> tuple[Vec, Vec]:
+    """Return the two-body + J2 state ``dt_s`` seconds after ``(r0, v0)`` (shape (3,))."""
+    traj = NumericalJ2Trajectory(r0_km, v0_km_s, 0.0, dt_s)
+    r, v = traj.state(dt_s)
+    return r[:, 0], v[:, 0]
+
+
+class SGP4Trajectory:
+    """A TLE propagated by SGP4 (vectorised), rotated from TEME into GCRS."""
+
+    def __init__(self, tle: TLE, plan_epoch: datetime, frames: EarthFrames) -> None:
+        from sgp4.api import Satrec
+
+        self.tle = tle
+        self.satrec = Satrec.twoline2rv(tle.line1, tle.line2)
+        self.frames = frames
+        from sgp4.api import jday
+
+        e = as_utc(plan_epoch)
+        self._jd_whole, self._jd_frac0 = jday(e.year, e.month, e.day, e.hour, e.minute, e.second + e.microsecond * 1e-6)
+
+    def state(self, t_s: ArrayLike) -> tuple[Vec, Vec]:
+        t = np.atleast_1d(np.asarray(t_s, float))
+        jd = np.full(t.size, self._jd_whole)
+        fr = self._jd_frac0 + t / DAY_S
+        err, r_teme, v_teme = self.satrec.sgp4_array(jd, fr)
+        if np.any(err):
+            from sgp4.api import SGP4_ERRORS
+
+            code = int(err[err != 0][0])
+            raise PlannerError(f"SGP4 failed for this TLE: {SGP4_ERRORS.get(code, code)}", field="tle")
+        rot = self.frames.teme_to_gcrs(t)
+        return mxv(rot, r_teme.T), mxv(rot, v_teme.T)
+
+
+def osculating_elements(traj: Trajectory, t_s: float) -> tuple[float, ...]:
+    """Return the two-body elements ``(a, e, i, raan, argp, M)`` of a trajectory at one time."""
+    r, v = traj.state(t_s)
+    return tuple(float(x) for x in state_to_elements(r[:, 0], v[:, 0]))
