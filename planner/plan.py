@@ -74,7 +74,7 @@ class PlanOptions:
     sample_s: float = 1.0
     max_miss_km: float = 10.0
     revolutions_before: tuple[int, ...] = (1, 2)
-    criterion: Criterion = "smallest_change"
+    criterion: Criterion = "least_dv"
     max_imaging_range_km: float = 50.0
     max_phase_angle_deg: float = 90.0
 

@@ -1,0 +1,50 @@
+"""Request dependencies: the database session, the settings and the calling operator."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Annotated
+
+from fastapi import Depends, HTTPException, Request, Security
+from fastapi.security import APIKeyHeader
+from sqlalchemy.orm import Session
+
+from app import crud
+from app.core.config import Settings
+from app.core.security import hash_api_key
+from app.db.models import Operator
+
+api_key_header = APIKeyHeader(name="X-API-Key", auto_error=False, description="an operator's API key")
+
+
+def get_db(request: Request) -> Iterator[Session]:
+    with request.app.state.session_factory() as session:
+        yield session
+
+
+def get_settings_dep(request: Request) -> Settings:
+    settings: Settings = request.app.state.settings
+    return settings
+
+
+SessionDep = Annotated[Session, Depends(get_db)]
+SettingsDep = Annotated[Settings, Depends(get_settings_dep)]
+
+
+def get_current_operator(
+    session: SessionDep, settings: SettingsDep, key: Annotated[str | None, Security(api_key_header)]
+) -> Operator:
+    """Return the operator whose key made the request; 401 without a valid, unrevoked key."""
+    if not key:
+        raise HTTPException(status_code=401, detail="missing API key: send it in the X-API-Key header")
+    op = crud.operator_for_key(session=session, key=key)
+    if op is None and key in settings.env_api_keys:
+        # Keys from GSA_API_KEYS: each is its own operator, created on first use.
+        op = crud.get_or_create_operator(session=session, name=f"env-{hash_api_key(key)[:12]}")
+        session.commit()
+    if op is None:
+        raise HTTPException(status_code=401, detail="invalid or revoked API key")
+    return op
+
+
+CurrentOperator = Annotated[Operator, Depends(get_current_operator)]

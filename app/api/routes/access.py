@@ -1,0 +1,19 @@
+"""Access windows alone (not stored)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import APIRouter
+
+from app.api.deps import CurrentOperator
+from app.schemas import AccessCreate, AccessPublic
+from app.services.planning import run_access
+
+router = APIRouter(prefix="/access-windows", tags=["access"])
+
+
+@router.post("", response_model=AccessPublic)
+def compute_access(_operator: CurrentOperator, access_in: AccessCreate) -> dict[str, Any]:
+    """Return rise, culmination and set of every pass of the target over the station."""
+    return run_access(access_in)

@@ -1,0 +1,79 @@
+"""Plans: POST runs Algorithm 1 and stores the result; GET reads the caller's history."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Body, HTTPException, Query
+
+from app import crud
+from app.api.deps import CurrentOperator, SessionDep, SettingsDep
+from app.schemas import PAPER_EXAMPLE, PlanCreate, PlanPublic, PlansPublic, PlanSummary
+from app.services.planning import run_plan
+
+router = APIRouter(prefix="/plans", tags=["plans"])
+
+NOT_FOUND = {404: {"description": "no plan with this id belongs to the caller"}}
+
+
+def _public(plan: Any) -> dict[str, Any]:
+    return {
+        **plan.result,
+        "id": plan.id,
+        "created_at": plan.created_at,
+        "target_name": plan.target_name,
+        "observer_name": plan.observer_name,
+        "station_name": plan.station_name,
+    }
+
+
+@router.post("", status_code=201, response_model=PlanPublic)
+def create_plan(
+    session: SessionDep,
+    operator: CurrentOperator,
+    settings: SettingsDep,
+    plan_in: Annotated[PlanCreate, Body(openapi_examples={"paper_table_1": {"value": PAPER_EXAMPLE}})],
+) -> dict[str, Any]:
+    """Plan a GSA scene: access windows, ranked node alignments, the phasing burn and its verification."""
+    _, result = run_plan(plan_in, max_grid_points=settings.max_grid_points)
+    request = plan_in.model_dump(mode="json")
+    plan = crud.create_plan(session=session, operator_id=operator.id, request=request, result=result)
+    return _public(plan)
+
+
+@router.get("", response_model=PlansPublic)
+def list_plans(
+    session: SessionDep,
+    operator: CurrentOperator,
+    settings: SettingsDep,
+    limit: Annotated[int, Query(ge=1, le=1000)] = 20,
+    offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
+    target_name: Annotated[str | None, Query(max_length=200)] = None,
+    created_after: datetime | None = None,
+    created_before: datetime | None = None,
+) -> dict[str, Any]:
+    """List the caller's plans, newest first, filtered by target name and creation time."""
+    if limit > settings.max_page_size:
+        raise HTTPException(status_code=422, detail=f"limit {limit} is over the page size limit {settings.max_page_size}")
+    rows, total = crud.list_plans(
+        session=session, operator_id=operator.id, limit=limit, offset=offset, target_name=target_name,
+        created_after=created_after, created_before=created_before,
+    )
+    data = [
+        PlanSummary(
+            id=p.id, created_at=p.created_at, target_name=p.target_name, observer_name=p.observer_name,
+            station_name=p.station_name, t_access=p.t_access, miss_km=p.miss_km,
+        )
+        for p in rows
+    ]
+    return {"data": data, "count": total}
+
+
+@router.get("/{plan_id}", response_model=PlanPublic, responses=NOT_FOUND)
+def read_plan(session: SessionDep, operator: CurrentOperator, plan_id: str) -> dict[str, Any]:
+    """Return one of the caller's plans."""
+    plan = crud.get_plan(session=session, operator_id=operator.id, plan_id=plan_id)
+    if plan is None:
+        raise HTTPException(status_code=404, detail="Plan not found")
+    return _public(plan)

@@ -1,0 +1,245 @@
+"""The ``gsa`` command line: serve, db, keys, plan, access.
+
+Bad input prints one line on stderr and exits with status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+from pydantic import ValidationError
+
+
+class CliError(Exception):
+    pass
+
+
+def _settings() -> Any:
+    from app.core.config import get_settings
+
+    return get_settings()
+
+
+def _session() -> Any:
+    from app.core.db import make_engine, make_session_factory
+
+    return make_session_factory(make_engine(_settings().database_url))()
+
+
+def cmd_db_upgrade(_args: argparse.Namespace) -> int:
+    from app.core.db import upgrade_database
+
+    url = _settings().database_url
+    upgrade_database(url)
+    print(f"database at {url} is at the latest migration")
+    return 0
+
+
+def ensure_dev_key(settings: Any) -> str | None:
+    """Create a development key on first start (no stored keys, none in GSA_API_KEYS); return it."""
+    from app import crud
+
+    key_file = Path(settings.data_dir) / "dev-api-key.txt"
+    with _session() as session:
+        if crud.count_api_keys(session=session) == 0 and not settings.env_api_keys:
+            _, key = crud.create_api_key(session=session, operator_name="dev", key_name="development")
+            key_file.parent.mkdir(parents=True, exist_ok=True)
+            key_file.write_text(key + "\n")
+            os.chmod(key_file, 0o600)
+            return key
+    if key_file.exists():
+        return key_file.read_text().strip()
+    return None
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    import uvicorn
+
+    from app.core.db import upgrade_database
+
+    settings = _settings()
+    upgrade_database(settings.database_url)
+    key = ensure_dev_key(settings)
+    host = args.host or settings.host
+    port = args.port or settings.port
+    print(f"GSA-ISAR on http://{host}:{port}  (API docs: http://{host}:{port}/docs)")
+    if key:
+        print(f"development API key (send as X-API-Key): {key}")
+        print(f"  it is also in {Path(settings.data_dir) / 'dev-api-key.txt'}")
+    uvicorn.run("app.main:create_app", factory=True, host=host, port=port, workers=args.workers, log_level="info")
+    return 0
+
+
+def cmd_keys(args: argparse.Namespace) -> int:
+    from app import crud
+
+    with _session() as session:
+        if args.keys_cmd == "create":
+            row, key = crud.create_api_key(session=session, operator_name=args.operator or args.name, key_name=args.name)
+            print(f"{row.id}  {key}")
+            print("store this key now: only its hash is kept", file=sys.stderr)
+        elif args.keys_cmd == "list":
+            for row, op in crud.list_api_keys(session=session):
+                state = "revoked" if row.revoked_at else "active"
+                print(f"{row.id}  {row.prefix}...  {row.name}  operator={op.name}  {state}")
+        else:
+            if crud.revoke_api_key(session=session, key_id=args.id) is None:
+                raise CliError(f"no key with id {args.id}")
+            print(f"revoked {args.id}")
+    return 0
+
+
+def _read_json(path: str) -> Any:
+    try:
+        text = Path(path).read_text()
+    except OSError as exc:
+        raise CliError(f"cannot read {path}: {exc.strerror}") from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise CliError(f"{path} is not JSON: {exc.msg} at line {exc.lineno}") from None
+
+
+def _validation_line(exc: ValidationError) -> str:
+    err = exc.errors()[0]
+    loc = ".".join(str(x) for x in err["loc"])
+    return f"{loc}: {err['msg']}"
+
+
+def cmd_plan(args: argparse.Namespace) -> int:
+    from app.errors import InputError
+    from app.schemas import PlanCreate
+    from app.services.planning import run_plan
+
+    try:
+        req = PlanCreate.model_validate(_read_json(args.file))
+        plan, result = run_plan(req)
+    except ValidationError as exc:
+        raise CliError(_validation_line(exc)) from None
+    except InputError as exc:
+        raise CliError(".".join(str(x) for x in exc.loc) + ": " + exc.message) from None
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        print(format_plan(result))
+    if args.plot:
+        from planner.plot import plot_plan
+
+        plot_plan(plan, args.plot, title=f"{req.target.name} / {req.observer.name} / {req.ground_station.name}")
+        print(f"plot written to {args.plot}", file=sys.stderr)
+    return 0
+
+
+def cmd_access(args: argparse.Namespace) -> int:
+    from app.errors import InputError
+    from app.schemas import AccessCreate
+    from app.services.planning import run_access
+
+    try:
+        result = run_access(AccessCreate.model_validate(_read_json(args.file)))
+    except ValidationError as exc:
+        raise CliError(_validation_line(exc)) from None
+    except InputError as exc:
+        raise CliError(".".join(str(x) for x in exc.loc) + ": " + exc.message) from None
+    print(json.dumps(result, indent=2) if args.json else format_windows(result["access_windows"]))
+    return 0
+
+
+def format_windows(windows: list[dict[str, Any]]) -> str:
+    lines = [f"{'rise (UTC)':<27} {'culmination':<27} {'set':<27} {'max el':>7} {'min range':>10}"]
+    for w in windows:
+        lines.append(
+            f"{w['rise'][:26]:<27} {w['culmination'][:26]:<27} {w['set'][:26]:<27} "
+            f"{w['max_elevation_deg']:7.2f} {w['min_range_km']:9.1f}k"
+        )
+    return "\n".join(lines)
+
+
+def format_plan(r: dict[str, Any]) -> str:
+    """Return a plan as a readable report."""
+    out = [f"epoch {r['epoch']}, {r['duration_days']:g} days, elements read as {r['reading']}"]
+    out.append(f"\n{len(r['access_windows'])} access windows")
+    out.append(format_windows(r["access_windows"][:10]))
+    if len(r["access_windows"]) > 10:
+        out.append(f"... and {len(r['access_windows']) - 10} more")
+    out.append(f"\n{len(r['candidates'])} candidates (best of each pass, ranked by miss)")
+    out.append(f"{'#':>3} {'T_access (UTC)':<27} {'dHa km':>8} {'dHp km':>8} {'miss km':>9} {'node':>5} {'sunlit':>7}")
+    for k, c in enumerate(r["candidates"][:15]):
+        out.append(
+            f"{k:3d} {c['t_access'][:26]:<27} {c['delta_ha_km']:8.1f} {c['delta_hp_km']:8.1f} "
+            f"{c['miss_km']:9.3f} {c['node']:>5} {('yes' if c['feasibility']['sunlit'] else 'no'):>7}"
+        )
+    ch = r.get("chosen")
+    if ch:
+        out.append(f"\nchosen: T_access {ch['t_access']}, dHa {ch['delta_ha_km']:.1f} km, dHp {ch['delta_hp_km']:.1f} km")
+        out.append(f"  node-line miss with the changed observer's own propagation: {ch['miss_km']:.3f} km")
+        out.append(f"  height change costs {r['alignment_dv_m_s']:.1f} m/s")
+    ph = r.get("phasing")
+    if ph:
+        v = ph["verification"]
+        out.append(
+            f"phasing: burn {ph['t_burn']} ({ph['revolutions_before']} rev before), "
+            f"dv {ph['dv_total_m_s']:.1f} m/s, RTN [{', '.join(f'{x:.1f}' for x in ph['dv_rtn_m_s'])}] m/s"
+        )
+        out.append(
+            f"verification (numerical J2): miss {v['miss_km'] * 1000:.1f} m at T_access "
+            f"(two-body Lambert alone: {v['two_body_miss_km']:.1f} km), relative speed {v['relative_speed_km_s']:.2f} km/s"
+        )
+    if ch:
+        f = ch["feasibility"]
+        out.append(f"feasible: {'yes' if f['feasible'] else 'no'}" + (f" ({'; '.join(f['reasons'])})" if f["reasons"] else ""))
+    for note in r["notes"]:
+        out.append(f"note: {note}")
+    return "\n".join(out)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="gsa", description="GSA-ISAR: GSA scene planning and ISAR attitude estimation")
+    sub = p.add_subparsers(dest="cmd", required=True)
+    s = sub.add_parser("serve", help="migrate the database and start the API")
+    s.add_argument("--host")
+    s.add_argument("--port", type=int)
+    s.add_argument("--workers", type=int, default=1)
+    s.set_defaults(func=cmd_serve)
+    db = sub.add_parser("db", help="database maintenance")
+    dbs = db.add_subparsers(dest="db_cmd", required=True)
+    dbs.add_parser("upgrade", help="apply all migrations").set_defaults(func=cmd_db_upgrade)
+    k = sub.add_parser("keys", help="API keys")
+    ks = k.add_subparsers(dest="keys_cmd", required=True)
+    kc = ks.add_parser("create", help="create a key and print it once")
+    kc.add_argument("name")
+    kc.add_argument("--operator", help="operator the key belongs to (default: NAME)")
+    ks.add_parser("list", help="list keys")
+    kr = ks.add_parser("revoke", help="revoke a key")
+    kr.add_argument("id")
+    k.set_defaults(func=cmd_keys)
+    pl = sub.add_parser("plan", help="plan a GSA scene from a JSON request (the body of POST /v1/plans)")
+    pl.add_argument("file")
+    pl.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    pl.add_argument("--plot", metavar="PNG", help="draw ground track, elevation and alignment error")
+    pl.set_defaults(func=cmd_plan)
+    ac = sub.add_parser("access", help="access windows from a JSON request (the body of POST /v1/access-windows)")
+    ac.add_argument("file")
+    ac.add_argument("--json", action="store_true")
+    ac.set_defaults(func=cmd_access)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args))
+    except CliError as exc:
+        print(f"gsa: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

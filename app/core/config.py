@@ -1,0 +1,43 @@
+"""Settings, in one place: every GSA_ environment variable the service reads."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import Field, model_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+
+class Settings(BaseSettings):
+    """Service settings, read from ``GSA_*`` environment variables (and a ``.env`` file if present).
+
+    ``GSA_DATABASE_URL`` defaults to a SQLite file under ``GSA_DATA_DIR``;
+    ``GSA_API_KEYS`` is a comma-separated list of keys accepted besides the stored ones.
+    """
+
+    model_config = SettingsConfigDict(env_prefix="GSA_", env_file=".env", env_ignore_empty=True, extra="ignore")
+
+    data_dir: Path = Path("data")
+    database_url: str = ""
+    api_keys: str = ""
+    host: str = "127.0.0.1"
+    port: int = 8000
+    max_page_size: int = Field(default=100, ge=1, le=10_000)
+    max_span_days: float = Field(default=30.0, gt=0, le=30.0)
+    max_grid_points: int = Field(default=25_000_000, ge=1)
+    max_request_bytes: int = Field(default=1_000_000, ge=1024)
+
+    @model_validator(mode="after")
+    def _default_database(self) -> Settings:
+        if not self.database_url:
+            self.database_url = f"sqlite:///{(self.data_dir / 'gsa.db').as_posix()}"
+        return self
+
+    @property
+    def env_api_keys(self) -> list[str]:
+        return [k.strip() for k in self.api_keys.split(",") if k.strip()]
+
+
+def get_settings() -> Settings:
+    """Return settings read from the environment now (cheap; tests change the environment)."""
+    return Settings()

@@ -1,0 +1,103 @@
+"""Database operations; keyword-only, the session passed in, lookups return None when absent."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Any
+
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session
+
+from app.core.security import hash_api_key, new_api_key
+from app.db.models import ApiKey, Operator, Plan, utcnow
+
+
+def get_or_create_operator(*, session: Session, name: str) -> Operator:
+    op = session.scalar(select(Operator).where(Operator.name == name))
+    if op is None:
+        op = Operator(name=name)
+        session.add(op)
+        session.flush()
+    return op
+
+
+def create_api_key(*, session: Session, operator_name: str, key_name: str, key: str | None = None) -> tuple[ApiKey, str]:
+    """Create a key for an operator (created if new); return the row and the plain key (shown once)."""
+    op = get_or_create_operator(session=session, name=operator_name)
+    plain = key or new_api_key()
+    row = ApiKey(operator_id=op.id, name=key_name, prefix=plain[:8], key_hash=hash_api_key(plain))
+    session.add(row)
+    session.commit()
+    return row, plain
+
+
+def operator_for_key(*, session: Session, key: str) -> Operator | None:
+    row = session.scalar(select(ApiKey).where(ApiKey.key_hash == hash_api_key(key), ApiKey.revoked_at.is_(None)))
+    if row is None:
+        return None
+    return session.get(Operator, row.operator_id)
+
+
+def list_api_keys(*, session: Session) -> list[tuple[ApiKey, Operator]]:
+    rows = session.execute(select(ApiKey, Operator).join(Operator).order_by(ApiKey.created_at)).all()
+    return [(k, o) for k, o in rows]
+
+
+def revoke_api_key(*, session: Session, key_id: str) -> ApiKey | None:
+    row = session.get(ApiKey, key_id)
+    if row is None:
+        return None
+    if row.revoked_at is None:
+        row.revoked_at = utcnow()
+        session.commit()
+    return row
+
+
+def count_api_keys(*, session: Session) -> int:
+    return int(session.scalar(select(func.count()).select_from(ApiKey)) or 0)
+
+
+def create_plan(*, session: Session, operator_id: str, request: dict[str, Any], result: dict[str, Any]) -> Plan:
+    chosen = result.get("chosen") or {}
+    t_access = datetime.fromisoformat(chosen["t_access"]) if chosen.get("t_access") else None
+    plan = Plan(
+        operator_id=operator_id,
+        target_name=request["target"]["name"],
+        observer_name=request["observer"]["name"],
+        station_name=request["ground_station"]["name"],
+        t_access=t_access,
+        miss_km=chosen.get("miss_km"),
+        request=request,
+        result=result,
+    )
+    session.add(plan)
+    session.commit()
+    return plan
+
+
+def get_plan(*, session: Session, operator_id: str, plan_id: str) -> Plan | None:
+    return session.scalar(select(Plan).where(Plan.id == plan_id, Plan.operator_id == operator_id))
+
+
+def list_plans(
+    *,
+    session: Session,
+    operator_id: str,
+    limit: int,
+    offset: int,
+    target_name: str | None = None,
+    created_after: datetime | None = None,
+    created_before: datetime | None = None,
+) -> tuple[list[Plan], int]:
+    where = [Plan.operator_id == operator_id]
+    if target_name is not None:
+        where.append(Plan.target_name == target_name)
+    if created_after is not None:
+        where.append(Plan.created_at >= created_after)
+    if created_before is not None:
+        where.append(Plan.created_at < created_before)
+    total = int(session.scalar(select(func.count()).select_from(Plan).where(*where)) or 0)
+    rows = session.scalars(
+        select(Plan).where(*where).order_by(Plan.created_at.desc(), Plan.id).limit(limit).offset(offset)
+    ).all()
+    return list(rows), total

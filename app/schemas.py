@@ -1,0 +1,238 @@
+"""Request and response schemas of the API (pydantic). The planner never sees these."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+Name = Annotated[str, Field(min_length=1, max_length=200, pattern=r"^[^/\\\x00-\x1f]+$")]
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+# Orbits: Table-1 elements or a TLE
+class ElementsIn(Strict):
+    """Orbital elements at an epoch, as in the paper's Table 1 (heights above 6378.137 km)."""
+
+    epoch: datetime
+    ha_km: Finite = Field(ge=100.0, le=1.0e6, description="apogee height, km")
+    hp_km: Finite = Field(ge=100.0, le=1.0e6, description="perigee height, km (at least 100)")
+    inclination_deg: Finite = Field(ge=0.0, le=180.0)
+    raan_deg: Finite = Field(ge=-360.0, le=360.0)
+    arg_perigee_deg: Finite = Field(ge=-360.0, le=360.0)
+    mean_anomaly_deg: Finite = Field(ge=-360.0, le=360.0)
+
+    @model_validator(mode="after")
+    def _apogee_above_perigee(self) -> ElementsIn:
+        if self.ha_km < self.hp_km:
+            raise ValueError(f"ha_km ({self.ha_km}) is below hp_km ({self.hp_km}): give the apogee height first")
+        return self
+
+
+class OrbitIn(Strict):
+    """A satellite: a name and exactly one of ``elements`` or ``tle`` (two lines)."""
+
+    name: Name
+    elements: ElementsIn | None = None
+    tle: list[Annotated[str, Field(max_length=80)]] | None = Field(default=None, min_length=2, max_length=2)
+
+    @model_validator(mode="after")
+    def _one_source(self) -> OrbitIn:
+        if (self.elements is None) == (self.tle is None):
+            raise ValueError("give exactly one of 'elements' or 'tle'")
+        return self
+
+
+class StationIn(Strict):
+    """A ground radar site on the WGS-84 ellipsoid."""
+
+    name: Name = "GS"
+    latitude_deg: Finite = Field(ge=-90.0, le=90.0)
+    longitude_deg: Finite = Field(ge=-180.0, le=360.0)
+    altitude_m: Finite = Field(default=0.0, ge=-500.0, le=9000.0)
+    min_elevation_deg: Finite = Field(default=0.0, ge=-5.0, le=89.0, description="elevation mask")
+    max_range_km: Finite | None = Field(default=None, gt=0.0, le=1.0e5)
+
+
+class SearchIn(Strict):
+    """The search: span, element reading, the (dHa, dHp) box and the choice criterion."""
+
+    start: datetime | None = Field(default=None, description="default: the target's epoch")
+    duration_days: Finite = Field(default=10.0, gt=0.0, le=30.0)
+    reading: Literal["osculating", "mean"] = "osculating"
+    dha_min_km: Finite = Field(default=-50.0, ge=-500.0, le=500.0)
+    dha_max_km: Finite = Field(default=50.0, ge=-500.0, le=500.0)
+    dhp_min_km: Finite = Field(default=-50.0, ge=-500.0, le=500.0)
+    dhp_max_km: Finite = Field(default=50.0, ge=-500.0, le=500.0)
+    step_km: Finite = Field(default=0.1, ge=0.001, le=100.0)
+    max_miss_km: Finite = Field(default=10.0, gt=0.0, le=1.0e5)
+    revolutions_before: list[Literal[1, 2]] = Field(default=[1, 2], min_length=1, max_length=2)
+    criterion: Literal["smallest_change", "least_dv"] = "least_dv"
+    max_imaging_range_km: Finite = Field(default=50.0, gt=0.0)
+    max_phase_angle_deg: Finite = Field(default=90.0, gt=0.0, le=180.0)
+
+    @model_validator(mode="after")
+    def _ordered(self) -> SearchIn:
+        if self.dha_min_km > self.dha_max_km:
+            raise ValueError(f"dha_min_km ({self.dha_min_km}) is above dha_max_km ({self.dha_max_km})")
+        if self.dhp_min_km > self.dhp_max_km:
+            raise ValueError(f"dhp_min_km ({self.dhp_min_km}) is above dhp_max_km ({self.dhp_max_km})")
+        return self
+
+
+PAPER_EXAMPLE: dict[str, Any] = {
+    "target": {
+        "name": "Sat_Target",
+        "elements": {
+            "epoch": "2022-11-27T16:00:00Z", "ha_km": 700, "hp_km": 600, "inclination_deg": 43,
+            "raan_deg": 290, "arg_perigee_deg": 100, "mean_anomaly_deg": 200,
+        },
+    },
+    "observer": {
+        "name": "Sat_Obs",
+        "elements": {
+            "epoch": "2022-11-27T16:00:00Z", "ha_km": 700, "hp_km": 350, "inclination_deg": 99,
+            "raan_deg": 10, "arg_perigee_deg": 0, "mean_anomaly_deg": 316.5,
+        },
+    },
+    "ground_station": {"name": "GS", "latitude_deg": 31.1, "longitude_deg": 121.3, "altitude_m": 0},
+}
+
+
+class PlanCreate(Strict):
+    """What to plan: the paper's Table 1 is the example."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, json_schema_extra={"examples": [PAPER_EXAMPLE]})
+
+    target: OrbitIn
+    observer: OrbitIn
+    ground_station: StationIn
+    search: SearchIn = Field(default_factory=SearchIn)
+
+
+class AccessCreate(Strict):
+    """Access windows of one satellite to one station."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        allow_inf_nan=False,
+        json_schema_extra={
+            "examples": [{"target": PAPER_EXAMPLE["target"], "ground_station": PAPER_EXAMPLE["ground_station"]}]
+        },
+    )
+
+    target: OrbitIn
+    ground_station: StationIn
+    start: datetime | None = None
+    duration_days: Finite = Field(default=7.0, gt=0.0, le=30.0)
+    reading: Literal["osculating", "mean"] = "osculating"
+
+
+# Responses
+class WindowPublic(BaseModel):
+    rise: datetime
+    culmination: datetime
+    set: datetime
+    duration_s: float
+    max_elevation_deg: float
+    rise_azimuth_deg: float
+    culmination_azimuth_deg: float
+    set_azimuth_deg: float
+    min_range_km: float
+    rise_clipped: bool
+    set_clipped: bool
+
+
+class FeasibilityPublic(BaseModel):
+    sunlit: bool
+    feasible: bool
+    reasons: list[str]
+    observer_range_km: float | None
+    phase_angle_deg: float | None
+
+
+class CandidatePublic(BaseModel):
+    pass_index: int
+    node: str
+    t_access: datetime
+    delta_ha_km: float
+    delta_hp_km: float
+    miss_km: float
+    change_km: float
+    t_access_range: list[datetime] | None
+    family: list[list[float]] = Field(description="(dHa, dHp) km pairs aligning the node line at the same moment")
+    feasibility: FeasibilityPublic
+
+
+class VerificationPublic(BaseModel):
+    miss_km: float = Field(description="numerically propagated (J2) observer-target distance at T_access")
+    two_body_miss_km: float = Field(description="distance if the plain two-body Lambert burn were flown")
+    corrections: int
+    relative_speed_km_s: float
+
+
+class PhasingPublic(BaseModel):
+    t_burn: datetime
+    t_access: datetime
+    revolutions_before: int
+    lambert_revolutions: int
+    dv_m_s: list[float] = Field(description="impulse in GCRS, m/s")
+    dv_rtn_m_s: list[float] = Field(description="impulse in radial / along-track / cross-track, m/s")
+    dv_total_m_s: float
+    verification: VerificationPublic
+
+
+class PlanResult(BaseModel):
+    epoch: datetime
+    duration_days: float
+    reading: str
+    access_windows: list[WindowPublic]
+    candidates: list[CandidatePublic]
+    chosen: CandidatePublic | None
+    alignment_dv_m_s: float | None
+    phasing: PhasingPublic | None
+    timings_s: dict[str, float]
+    notes: list[str]
+
+
+class PlanPublic(PlanResult):
+    id: str
+    created_at: datetime
+    target_name: str
+    observer_name: str
+    station_name: str
+
+
+class PlanSummary(BaseModel):
+    id: str
+    created_at: datetime
+    target_name: str
+    observer_name: str
+    station_name: str
+    t_access: datetime | None
+    miss_km: float | None
+
+
+class PlansPublic(BaseModel):
+    data: list[PlanSummary]
+    count: int
+
+
+class AccessPublic(BaseModel):
+    epoch: datetime
+    duration_days: float
+    access_windows: list[WindowPublic]
+
+
+class ErrorDetail(BaseModel):
+    detail: Any
+
+    @field_validator("detail")
+    @classmethod
+    def _any(cls, v: Any) -> Any:
+        return v

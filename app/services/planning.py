@@ -1,0 +1,185 @@
+"""Turn API requests into planner calls and planner results into JSON-ready dicts."""
+
+from __future__ import annotations
+
+import math
+from datetime import datetime, timezone
+from typing import Any
+
+import numpy as np
+
+from app.errors import InputError
+from app.schemas import AccessCreate, OrbitIn, PlanCreate, StationIn
+from planner.access import AccessWindows, access_windows
+from planner.alignment import Candidate, HeightBox
+from planner.elements import Elements
+from planner.errors import PlannerError
+from planner.plan import Feasibility, Orbit, Plan, PlanOptions, make_plan, utc
+from planner.propagation import EarthFrames, Station
+from planner.tle import parse_tle
+
+
+def _aware(moment: datetime) -> datetime:
+    return moment.replace(tzinfo=timezone.utc) if moment.tzinfo is None else moment.astimezone(timezone.utc)
+
+
+def to_orbit(orbit: OrbitIn, where: str) -> Orbit:
+    """Build a planner Orbit, re-raising domain errors with the JSON path of the bad field."""
+    try:
+        if orbit.tle is not None:
+            return Orbit(orbit.name, tle=parse_tle(orbit.tle[0], orbit.tle[1]))
+        assert orbit.elements is not None
+        e = orbit.elements
+        el = Elements(
+            _aware(e.epoch), e.ha_km, e.hp_km, e.inclination_deg, e.raan_deg % 360.0, e.arg_perigee_deg % 360.0,
+            e.mean_anomaly_deg % 360.0,
+        )
+        return Orbit(orbit.name, elements=el)
+    except PlannerError as exc:
+        sub = "tle" if orbit.tle is not None else "elements"
+        loc: list[str | int] = [where, sub] + ([exc.field] if exc.field and exc.field != sub else [])
+        raise InputError(loc, str(exc)) from None
+
+
+def to_station(st: StationIn) -> Station:
+    return Station(st.latitude_deg, st.longitude_deg, st.altitude_m, st.min_elevation_deg, st.max_range_km)
+
+
+def plan_options(req: PlanCreate) -> PlanOptions:
+    s = req.search
+    try:
+        box = HeightBox(s.dha_min_km, s.dha_max_km, s.dhp_min_km, s.dhp_max_km, s.step_km)
+        return PlanOptions(
+            start=_aware(s.start) if s.start else None,
+            duration_s=s.duration_days * 86400.0,
+            reading=s.reading,
+            box=box,
+            max_miss_km=s.max_miss_km,
+            revolutions_before=tuple(sorted(set(s.revolutions_before))),
+            criterion=s.criterion,
+            max_imaging_range_km=s.max_imaging_range_km,
+            max_phase_angle_deg=s.max_phase_angle_deg,
+        )
+    except PlannerError as exc:
+        raise InputError(["search", exc.field or "search"], str(exc)) from None
+
+
+def _num(x: float | None) -> float | None:
+    return None if x is None or not math.isfinite(x) else float(x)
+
+
+def windows_json(epoch: datetime, w: AccessWindows) -> list[dict[str, Any]]:
+    return [
+        {
+            "rise": utc(epoch, w.rise_s[k]).isoformat(),
+            "culmination": utc(epoch, w.culmination_s[k]).isoformat(),
+            "set": utc(epoch, w.set_s[k]).isoformat(),
+            "duration_s": float(w.set_s[k] - w.rise_s[k]),
+            "max_elevation_deg": float(w.max_elevation_deg[k]),
+            "rise_azimuth_deg": float(w.rise_azimuth_deg[k]),
+            "culmination_azimuth_deg": float(w.culmination_azimuth_deg[k]),
+            "set_azimuth_deg": float(w.set_azimuth_deg[k]),
+            "min_range_km": float(w.min_range_km[k]),
+            "rise_clipped": bool(w.rise_clipped[k]),
+            "set_clipped": bool(w.set_clipped[k]),
+        }
+        for k in range(len(w))
+    ]
+
+
+def _feasibility_json(f: Feasibility) -> dict[str, Any]:
+    return {
+        "sunlit": f.sunlit,
+        "feasible": f.feasible,
+        "reasons": list(f.reasons),
+        "observer_range_km": _num(f.observer_range_km),
+        "phase_angle_deg": _num(f.phase_angle_deg),
+    }
+
+
+def _candidate_json(epoch: datetime, c: Candidate, f: Feasibility) -> dict[str, Any]:
+    return {
+        "pass_index": c.pass_index,
+        "node": c.node,
+        "t_access": utc(epoch, c.t_access_s).isoformat(),
+        "delta_ha_km": c.delta_ha_km,
+        "delta_hp_km": c.delta_hp_km,
+        "miss_km": c.miss_km,
+        "change_km": c.change_km,
+        "t_access_range": [utc(epoch, t).isoformat() for t in c.t_access_range_s] if c.t_access_range_s else None,
+        "family": [[round(float(a), 4), round(float(p), 4)] for a, p in zip(c.family_dha_km, c.family_dhp_km, strict=True)],
+        "feasibility": _feasibility_json(f),
+    }
+
+
+def plan_json(plan: Plan) -> dict[str, Any]:
+    """Return the plan as a JSON-ready dict (the stored and returned result)."""
+    ep = plan.epoch
+    phasing = None
+    if plan.phasing is not None:
+        ph = plan.phasing
+        phasing = {
+            "t_burn": utc(ep, ph.t_burn_s).isoformat(),
+            "t_access": utc(ep, ph.t_access_s).isoformat(),
+            "revolutions_before": ph.revolutions_before,
+            "lambert_revolutions": ph.lambert_revolutions,
+            "dv_m_s": [float(x) * 1000.0 for x in ph.dv_km_s],
+            "dv_rtn_m_s": [float(x) * 1000.0 for x in ph.dv_rtn_km_s],
+            "dv_total_m_s": ph.dv_total_km_s * 1000.0,
+            "verification": {
+                "miss_km": ph.miss_km,
+                "two_body_miss_km": ph.two_body_miss_km,
+                "corrections": ph.corrections,
+                "relative_speed_km_s": float(np.linalg.norm(ph.v_relative_km_s)),
+            },
+        }
+    chosen = None
+    if plan.chosen is not None and plan.chosen_feasibility is not None:
+        chosen = _candidate_json(ep, plan.chosen, plan.chosen_feasibility)
+    return {
+        "epoch": ep.isoformat(),
+        "duration_days": plan.duration_s / 86400.0,
+        "reading": plan.reading,
+        "access_windows": windows_json(ep, plan.windows),
+        "candidates": [_candidate_json(ep, c, f) for c, f in zip(plan.candidates, plan.feasibility, strict=True)],
+        "chosen": chosen,
+        "alignment_dv_m_s": None if plan.alignment_dv_km_s is None else plan.alignment_dv_km_s * 1000.0,
+        "phasing": phasing,
+        "timings_s": {k: round(v, 4) for k, v in plan.timings_s.items()},
+        "notes": plan.notes,
+    }
+
+
+def run_plan(req: PlanCreate, max_grid_points: int | None = None) -> tuple[Plan, dict[str, Any]]:
+    """Validate a plan request against the planner, run it, and return the plan and its JSON."""
+    target = to_orbit(req.target, "target")
+    observer = to_orbit(req.observer, "observer")
+    station = to_station(req.ground_station)
+    opts = plan_options(req)
+    if max_grid_points is not None and opts.box.grid_points > max_grid_points:
+        raise InputError(
+            ["search", "step_km"],
+            f"the dHa/dHp grid has {opts.box.grid_points} points, over the limit of {max_grid_points}: widen step_km",
+        )
+    try:
+        plan = make_plan(target, observer, station, opts)
+    except PlannerError as exc:
+        raise InputError(["search", exc.field or "search"], str(exc)) from None
+    return plan, plan_json(plan)
+
+
+def run_access(req: AccessCreate) -> dict[str, Any]:
+    """Compute access windows alone."""
+    target = to_orbit(req.target, "target")
+    station = to_station(req.ground_station)
+    from planner.plan import _target_trajectory
+
+    epoch = _aware(req.start) if req.start else target.epoch
+    t1 = req.duration_days * 86400.0
+    frames = EarthFrames(epoch, -3600.0, t1 + 3600.0)
+    try:
+        traj = _target_trajectory(target, epoch, frames, t1, req.reading)
+        w = access_windows(traj, station, frames, 0.0, t1)
+    except PlannerError as exc:
+        raise InputError([exc.field or "request"], str(exc)) from None
+    return {"epoch": epoch.isoformat(), "duration_days": req.duration_days, "access_windows": windows_json(epoch, w)}
