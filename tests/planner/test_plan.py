@@ -1,0 +1,74 @@
+"""The whole plan on the paper's example: phasing verified by an independent integration."""
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from planner.illumination import sun_position_km, sunlit
+from planner.plan import Orbit, PlanOptions, make_plan
+from planner.propagation import ephemeris, j2_acceleration, skyfield_times
+from tests.utils.orbits import PAPER_EPOCH, PAPER_OBSERVER, PAPER_STATION, PAPER_TARGET
+
+ten_metres_km = 0.01
+
+
+@pytest.fixture(scope="module")
+def plan():
+    return make_plan(Orbit("T", PAPER_TARGET), Orbit("O", PAPER_OBSERVER), PAPER_STATION, PlanOptions())
+
+
+def test_plan_has_candidates_phasing_and_verification(plan):
+    assert len(plan.windows) > 50
+    assert plan.candidates and plan.chosen is not None and plan.phasing is not None
+    assert plan.phasing.miss_km < 1e-3
+    assert plan.phasing.two_body_miss_km > plan.phasing.miss_km
+    assert plan.phasing.revolutions_before in (1, 2)
+    assert plan.step1_miss_km < 0.1
+
+
+def test_phasing_against_independent_integration(plan):
+    ph = plan.phasing
+    from planner.plan import _observer_trajectory
+
+    changed = PAPER_OBSERVER.with_heights(plan.chosen.delta_ha_km, plan.chosen.delta_hp_km)
+    obs = _observer_trajectory(changed, PAPER_EPOCH, plan.duration_s, "osculating", False)
+    r1, v1 = obs.state(ph.t_burn_s)
+    y0 = np.concatenate([r1[:, 0], v1[:, 0] + ph.dv_km_s])
+    sol = solve_ivp(lambda _t, y: np.concatenate([y[3:], j2_acceleration(y[:3])]),
+                    (ph.t_burn_s, ph.t_access_s), y0, method="DOP853", rtol=1e-12, atol=1e-12)
+    from planner.plan import _target_trajectory
+    from planner.propagation import EarthFrames
+
+    tgt = _target_trajectory(Orbit("T", PAPER_TARGET), PAPER_EPOCH, EarthFrames(PAPER_EPOCH, 0, 3600), plan.duration_s,
+                             "osculating")
+    r_t, _ = tgt.state(ph.t_access_s)
+    assert np.linalg.norm(sol.y[:3, -1] - r_t[:, 0]) < ten_metres_km
+
+
+def test_least_dv_is_no_dearer_than_smallest_change(plan):
+    other = make_plan(Orbit("T", PAPER_TARGET), Orbit("O", PAPER_OBSERVER), PAPER_STATION,
+                      PlanOptions(criterion="smallest_change"))
+    assert plan.phasing.dv_total_km_s <= other.phasing.dv_total_km_s + 1e-9
+
+
+def test_sunlit_against_skyfield(plan):
+    eph = ephemeris()
+    t = np.linspace(0.0, 86400.0, 48)
+    from planner.plan import _target_trajectory
+    from planner.propagation import EarthFrames
+
+    tgt = _target_trajectory(Orbit("T", PAPER_TARGET), PAPER_EPOCH, EarthFrames(PAPER_EPOCH, 0, 3600), 86400.0, "mean")
+    r, v = tgt.state(t)
+    ours = sunlit(r, sun_position_km(PAPER_EPOCH, t))
+    from skyfield.constants import AU_KM, DAY_S
+    from skyfield.positionlib import Geocentric
+
+    theirs = Geocentric(r / AU_KM, v / AU_KM * DAY_S, skyfield_times(PAPER_EPOCH, t), center=399).is_sunlit(eph)
+    assert ours.any() and (~ours).any()
+    np.testing.assert_array_equal(ours, theirs)
+
+
+def test_paper_scene_is_in_earth_shadow(plan):
+    """The paper's moment (2022-12-04 11:28 UTC, 19:28 local at the station) has the target unlit."""
+    unlit = [f for c, f in zip(plan.candidates, plan.feasibility, strict=True) if not f.sunlit]
+    assert unlit and any("shadow" in r for f in unlit for r in f.reasons)
