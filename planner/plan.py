@@ -132,6 +132,10 @@ class Plan:
     chosen_feasibility: Feasibility | None
     timings_s: dict[str, float]
     notes: list[str]
+    target_trajectory: Trajectory | None = None
+    observer_trajectory: Trajectory | None = None
+    frames: EarthFrames | None = None
+    station: Station | None = None
 
 
 def _target_trajectory(orbit: Orbit, epoch: datetime, frames: EarthFrames, t1_s: float, reading: Reading) -> Trajectory:
@@ -221,6 +225,7 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
     step1_miss = None
     alignment_dv = None
     chosen_feas = None
+    obs_chosen: Trajectory | None = None
     order = [k for k in range(len(candidates)) if lit[k]] + [k for k in range(len(candidates)) if not lit[k]]
     if candidates and not lit.any():
         notes.append("no candidate has the target sunlit at T_access; the best unlit one is planned")
@@ -239,7 +244,7 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
         except PlannerError as exc:
             notes.append(f"candidate {k} skipped: {exc}")
             continue
-        chosen_index, phasing, step1_miss = k, ph, miss1
+        chosen_index, phasing, step1_miss, obs_chosen = k, ph, miss1, obs_new
         chosen = Candidate(
             cand.pass_index, cand.node, t_access, cand.delta_ha_km, cand.delta_hp_km, miss1,
             cand.rate_change_rad_s, cand.t_access_range_s, cand.family_dha_km, cand.family_dhp_km,
@@ -266,7 +271,7 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
         )
     return Plan(
         epoch, t1, opts.reading, windows, candidates, feas, chosen_index, chosen, alignment_dv, step1_miss,
-        phasing, chosen_feas, timings, notes,
+        phasing, chosen_feas, timings, notes, tgt, obs_chosen, frames, station,
     )
 
 

@@ -1,0 +1,13 @@
+FROM python:3.11-slim
+WORKDIR /srv/gsa
+ENV PYTHONDONTWRITEBYTECODE=1 PYTHONUNBUFFERED=1 GSA_DATA_DIR=/data GSA_HOST=0.0.0.0 GSA_PORT=8000
+COPY pyproject.toml README.md alembic.ini ./
+COPY app ./app
+COPY planner ./planner
+COPY inference ./inference
+COPY migrations ./migrations
+RUN pip install --no-cache-dir -e . && mkdir -p /data
+VOLUME /data
+EXPOSE 8000
+# `gsa serve` applies the Alembic migrations, then starts uvicorn.
+CMD ["gsa", "serve"]

@@ -1,0 +1,153 @@
+import copy
+
+import pytest
+from sqlalchemy import create_engine, func, select, text
+
+from app.db.models import Plan
+from app.schemas import PAPER_EXAMPLE
+from tests.conftest import KEY_A, KEY_B
+from tests.utils.orbits import ISS_L1, ISS_L2
+
+A = {"X-API-Key": KEY_A}
+B = {"X-API-Key": KEY_B}
+
+
+def _count(settings):
+    engine = create_engine(settings.database_url)
+    with engine.connect() as conn:
+        n = conn.scalar(select(func.count()).select_from(Plan))
+    engine.dispose()
+    return n
+
+
+@pytest.fixture(scope="module")
+def paper_plan(client):
+    r = client.post("/v1/plans", json=PAPER_EXAMPLE, headers=A)
+    assert r.status_code == 201, r.text
+    return r.json()
+
+
+def test_healthz(client):
+    r = client.get("/healthz")
+    assert r.status_code == 200
+    assert r.json() == {"status": "ok"}
+
+
+def test_paper_example_is_accepted_and_stored(client, paper_plan):
+    p = paper_plan
+    assert p["target_name"] == "Sat_Target"
+    assert len(p["access_windows"]) > 50
+    assert p["candidates"] and {"t_access", "delta_ha_km", "delta_hp_km", "miss_km", "feasibility"} <= p["candidates"][0].keys()
+    assert p["phasing"]["verification"]["miss_km"] < 1e-3
+    assert p["chosen"]["miss_km"] < 0.1
+    r = client.get(f"/v1/plans/{p['id']}", headers=A)
+    assert r.status_code == 200
+    assert r.json()["candidates"] == p["candidates"]
+
+
+def test_other_operator_gets_404(client, paper_plan):
+    r = client.get(f"/v1/plans/{paper_plan['id']}", headers=B)
+    assert r.status_code == 404
+    assert r.json()["detail"] == "Plan not found"
+    r = client.get("/v1/plans", headers=B)
+    assert r.status_code == 200
+    assert all(item["id"] != paper_plan["id"] for item in r.json()["data"])
+
+
+def test_list_paginates_and_filters(client, paper_plan):
+    r = client.get("/v1/plans", params={"target_name": "Sat_Target", "limit": 1}, headers=A)
+    assert r.status_code == 200
+    body = r.json()
+    assert body["count"] >= 1 and len(body["data"]) == 1
+    assert body["data"][0]["target_name"] == "Sat_Target"
+    r = client.get("/v1/plans", params={"target_name": "nobody"}, headers=A)
+    assert r.json() == {"data": [], "count": 0}
+    r = client.get("/v1/plans", params={"created_after": "2100-01-01T00:00:00Z"}, headers=A)
+    assert r.json()["count"] == 0
+
+
+@pytest.mark.parametrize("headers", [{}, {"X-API-Key": "wrong"}])
+def test_requires_a_valid_key(client, headers):
+    r = client.post("/v1/plans", json=PAPER_EXAMPLE, headers=headers)
+    assert r.status_code == 401
+    assert client.get("/v1/plans", headers=headers).status_code == 401
+
+
+def _with(path, value):
+    body = copy.deepcopy(PAPER_EXAMPLE)
+    node = body
+    for key in path[:-1]:
+        node = node[key]
+    node[path[-1]] = value
+    return body
+
+
+BAD = [
+    (_with(["target", "elements", "hp_km"], 80), "hp_km"),
+    (_with(["target", "elements", "ha_km"], 500), "ha_km"),
+    (_with(["ground_station", "latitude_deg"], 91), "latitude_deg"),
+    (_with(["ground_station", "longitude_deg"], -200), "longitude_deg"),
+    (_with(["search"], {"duration_days": 31}), "duration_days"),
+    (_with(["search"], {"dha_min_km": 10, "dha_max_km": -10}), "dha_min_km"),
+    (_with(["search"], {"step_km": 0}), "step_km"),
+    (_with(["target", "colour"], "red"), "colour"),
+    (_with(["target", "tle"], [ISS_L1, ISS_L2[:-1] + "0"]), "tle"),
+    (_with(["observer", "elements"], None), "observer"),
+    (_with(["target", "name"], "a/b"), "name"),
+]
+
+
+@pytest.mark.parametrize(("body", "field"), BAD)
+def test_bad_input_is_422_naming_the_field_and_stores_nothing(client, settings, body, field):
+    if field == "tle":
+        body["target"].pop("elements")
+    before = _count(settings)
+    r = client.post("/v1/plans", json=body, headers=A)
+    assert r.status_code == 422, r.text
+    assert field in r.text
+    assert _count(settings) == before
+
+
+def test_bad_checksum_message_says_which_line(client):
+    body = copy.deepcopy(PAPER_EXAMPLE)
+    body["target"] = {"name": "ISS", "tle": [ISS_L1, ISS_L2[:-1] + "0"]}
+    r = client.post("/v1/plans", json=body, headers=A)
+    assert r.status_code == 422
+    assert "line 2 checksum" in r.json()["detail"][0]["msg"]
+
+
+def test_tle_target_plan(client):
+    body = copy.deepcopy(PAPER_EXAMPLE)
+    body["target"] = {"name": "ISS", "tle": [ISS_L1, ISS_L2]}
+    body["observer"]["elements"]["epoch"] = "2008-09-20T12:00:00Z"
+    body["search"] = {"start": "2008-09-20T12:00:00Z", "duration_days": 3, "max_miss_km": 50}
+    r = client.post("/v1/plans", json=body, headers=A)
+    assert r.status_code == 201, r.text
+    assert len(r.json()["access_windows"]) > 5
+
+
+def test_access_windows_endpoint(client):
+    body = {"target": PAPER_EXAMPLE["target"], "ground_station": PAPER_EXAMPLE["ground_station"], "duration_days": 1}
+    r = client.post("/v1/access-windows", json=body, headers=A)
+    assert r.status_code == 200, r.text
+    w = r.json()["access_windows"]
+    assert len(w) >= 4
+    assert all(x["rise"] < x["culmination"] < x["set"] for x in w)
+
+
+def test_openapi_carries_the_paper_example(client):
+    r = client.get("/openapi.json")
+    assert r.status_code == 200
+    assert "Sat_Target" in r.text
+
+
+def test_sqlite_is_in_wal_mode(settings):
+    engine = create_engine(settings.database_url)
+    with engine.connect() as conn:
+        assert conn.execute(text("PRAGMA journal_mode")).scalar() == "wal"
+    engine.dispose()
+
+
+def test_page_size_limit(client):
+    r = client.get("/v1/plans", params={"limit": 5000}, headers=A)
+    assert r.status_code == 422

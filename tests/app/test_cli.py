@@ -1,0 +1,48 @@
+import json
+import subprocess
+import sys
+
+from app.schemas import PAPER_EXAMPLE
+
+
+def _gsa(*args, cwd, env_extra=None):
+    import os
+
+    env = dict(os.environ, GSA_DATA_DIR=str(cwd / "data"))
+    env.update(env_extra or {})
+    return subprocess.run([sys.executable, "-m", "app.cli", *args], capture_output=True, text=True, cwd=cwd, env=env)
+
+
+def test_plan_prints_table_json_and_plot(tmp_path):
+    req = tmp_path / "paper.json"
+    req.write_text(json.dumps(PAPER_EXAMPLE))
+    out = _gsa("plan", str(req), "--plot", str(tmp_path / "plan.png"), cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert "candidates" in out.stdout and "verification (numerical J2)" in out.stdout
+    assert (tmp_path / "plan.png").stat().st_size > 10_000
+    js = _gsa("plan", str(req), "--json", cwd=tmp_path)
+    assert json.loads(js.stdout)["phasing"]["verification"]["miss_km"] < 1e-3
+
+
+def test_bad_request_is_one_line_and_nonzero(tmp_path):
+    bad = dict(PAPER_EXAMPLE, ground_station={"name": "GS", "latitude_deg": 95, "longitude_deg": 0})
+    req = tmp_path / "bad.json"
+    req.write_text(json.dumps(bad))
+    out = _gsa("plan", str(req), cwd=tmp_path)
+    assert out.returncode == 2
+    assert out.stderr.count("\n") == 1 and "latitude_deg" in out.stderr
+    missing = _gsa("plan", str(tmp_path / "nope.json"), cwd=tmp_path)
+    assert missing.returncode == 2 and "cannot read" in missing.stderr
+
+
+def test_keys_create_list_revoke(tmp_path):
+    assert _gsa("db", "upgrade", cwd=tmp_path).returncode == 0
+    made = _gsa("keys", "create", "alice", cwd=tmp_path)
+    assert made.returncode == 0
+    key_id, key = made.stdout.split()
+    assert key.startswith("gsa_")
+    listed = _gsa("keys", "list", cwd=tmp_path).stdout
+    assert key_id in listed and "active" in listed and key not in listed
+    assert _gsa("keys", "revoke", key_id, cwd=tmp_path).returncode == 0
+    assert "revoked" in _gsa("keys", "list", cwd=tmp_path).stdout
+    assert _gsa("keys", "revoke", "no-such-id", cwd=tmp_path).returncode == 2

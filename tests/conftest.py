@@ -1,0 +1,30 @@
+"""Shared fixtures: a migrated SQLite database in a temporary data directory and two operators' keys."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from fastapi.testclient import TestClient
+
+from app.core.config import Settings
+from app.core.db import upgrade_database
+from app.main import create_app
+
+KEY_A = "test-key-operator-a"
+KEY_B = "test-key-operator-b"
+
+
+@pytest.fixture(scope="module")
+def settings(tmp_path_factory: pytest.TempPathFactory) -> Settings:
+    data: Path = tmp_path_factory.mktemp("data")
+    s = Settings(data_dir=data, api_keys=f"{KEY_A},{KEY_B}")
+    upgrade_database(s.database_url)
+    return s
+
+
+@pytest.fixture(scope="module")
+def client(settings: Settings) -> Iterator[TestClient]:
+    with TestClient(create_app(settings)) as c:
+        yield c
