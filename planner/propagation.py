@@ -33,7 +33,7 @@ from planner.tle import TLE
 
 Vec = NDArray[np.float64]
 
-_FRAME_GRID_S = 3600.0  # Earth-orientation sampling; see test_earth_rotation_against_skyfield
+_FRAME_GRID_S = 2 * 3600.0  # Earth-orientation sampling; see test_earth_rotation_against_skyfield
 
 
 class Trajectory(Protocol):

@@ -32,38 +32,59 @@ def time_grid(t0_s: float, t1_s: float, step_s: float) -> Vec:
 
 
 def bisect_roots(f: TimeFunction, lo: Vec, hi: Vec, tol_s: float) -> Vec:
-    """Refine sign changes of ``f`` inside brackets ``[lo, hi]`` (arrays) to ``tol_s``."""
-    lo = np.array(lo, float)
-    hi = np.array(hi, float)
-    if lo.size == 0:
-        return lo
-    f_lo = f(lo)
-    while np.max(hi - lo) > tol_s:
-        mid = 0.5 * (lo + hi)
-        f_mid = f(mid)
-        same = np.sign(f_mid) == np.sign(f_lo)
-        lo = np.where(same, mid, lo)
-        f_lo = np.where(same, f_mid, f_lo)
-        hi = np.where(same, hi, mid)
-    return 0.5 * (lo + hi)
+    """Refine sign changes of ``f`` inside brackets ``[lo, hi]`` (arrays) to ``tol_s``.
 
-
-def bisect_maxima(f: TimeFunction, lo: Vec, hi: Vec, tol_s: float, h_s: float = 1e-3) -> Vec:
-    """Refine maxima of ``f`` inside brackets where it rises then falls, to ``tol_s``.
-
-    The slope is read from a central difference of half-width ``h_s`` seconds.
+    Regula falsi with the Illinois modification, vectorised over brackets: the
+    bracket always holds the root, and it usually converges in 5-8 calls of ``f``
+    where bisection needs 20. Stops once every bracket is under ``tol_s`` or the
+    last false-position step moved less than ``tol_s / 100``.
     """
     lo = np.array(lo, float)
     hi = np.array(hi, float)
     if lo.size == 0:
         return lo
-    while np.max(hi - lo) > tol_s:
-        mid = 0.5 * (lo + hi)
-        both = f(np.concatenate([mid + h_s, mid - h_s]))
-        rising = both[: mid.size] > both[mid.size :]
-        lo = np.where(rising, mid, lo)
-        hi = np.where(rising, hi, mid)
-    return 0.5 * (lo + hi)
+    f_lo, f_hi = f(lo), f(hi)
+    x = np.full(lo.size, np.nan)  # no previous estimate: the first step never counts as converged
+    side = np.zeros(lo.size, int)
+    for _ in range(100):
+        denom = f_hi - f_lo
+        safe = np.abs(denom) > 0
+        x_new = np.where(safe, (lo * f_hi - hi * f_lo) / np.where(safe, denom, 1.0), 0.5 * (lo + hi))
+        x_new = np.where((x_new > lo) & (x_new < hi), x_new, 0.5 * (lo + hi))
+        moved = np.abs(x_new - x)
+        x = x_new
+        x = np.where(f_lo == 0, lo, np.where(f_hi == 0, hi, x))
+        if np.all((hi - lo <= tol_s) | (moved < tol_s * 1e-2) | (f_lo == 0) | (f_hi == 0)):
+            break
+        f_x = f(x)
+        left = np.sign(f_x) == np.sign(f_lo)
+        # Illinois: halve the stale end's value when the same side moves twice running.
+        f_hi = np.where(left & (side == 1), 0.5 * f_hi, f_hi)
+        f_lo = np.where(~left & (side == -1), 0.5 * f_lo, f_lo)
+        lo = np.where(left, x, lo)
+        f_lo = np.where(left, f_x, f_lo)
+        hi = np.where(left, hi, x)
+        f_hi = np.where(left, f_hi, f_x)
+        side = np.where(left, 1, -1)
+    return x
+
+
+def bisect_maxima(f: TimeFunction, lo: Vec, hi: Vec, tol_s: float, h_s: float = 1e-3) -> Vec:
+    """Refine maxima of ``f`` inside brackets where it rises then falls, to ``tol_s``.
+
+    The slope is read from a central difference of half-width ``h_s`` seconds, and
+    its zero found by ``bisect_roots`` (so in a handful of calls of ``f``).
+    """
+    lo = np.array(lo, float)
+    hi = np.array(hi, float)
+    if lo.size == 0:
+        return lo
+
+    def slope(t: Vec) -> Vec:
+        both = f(np.concatenate([t + h_s, t - h_s]))
+        return both[: t.size] - both[t.size :]
+
+    return bisect_roots(slope, lo, hi, tol_s)
 
 
 def _find_roots_core(f: TimeFunction, t_s: Vec, values: Vec, tol_s: float) -> tuple[Vec, Vec]:
