@@ -157,7 +157,7 @@ def main() -> None:
         "|---|---|",
         f"| complete plan, `criterion=least_dv` (default) | {plan_t['least_dv']:.3f} s |",
         f"| complete plan, `criterion=smallest_change` | {plan_t['smallest_change']:.3f} s |",
-        f"| stages of one default plan | " + ", ".join(f"{k} {v:.3f} s" for k, v in plan.timings_s.items()) + " |",
+        "| stages of one default plan | " + ", ".join(f"{k} {v:.3f} s" for k, v in plan.timings_s.items()) + " |",
         f"| Step B as a per-moment, per-grid-point Python loop (scaled from {3 * 21 * 21} evaluations) | {bf['loop_s']:,.0f} s ({bf['loop_s'] / 86400:.0f} days) |",
         f"| Step B vectorised over the grid, looped over moments (scaled from 3 moments) | {bf['vector_s']:,.0f} s |",
         f"| speed-up of the complete plan over the vectorised brute force | {bf['vector_s'] / plan_t['least_dv']:,.0f}x |",
