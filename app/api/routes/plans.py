@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from datetime import datetime
+from datetime import datetime, timezone
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, HTTPException, Query
@@ -17,11 +17,18 @@ router = APIRouter(prefix="/plans", tags=["plans"])
 NOT_FOUND = {404: {"description": "no plan with this id belongs to the caller"}}
 
 
+def _utc(moment: datetime | None) -> datetime | None:
+    """Return ``moment`` as aware UTC: SQLite hands back naive datetimes for UTC columns."""
+    if moment is None or moment.tzinfo is not None:
+        return moment
+    return moment.replace(tzinfo=timezone.utc)
+
+
 def _public(plan: Any) -> dict[str, Any]:
     return {
         **plan.result,
         "id": plan.id,
-        "created_at": plan.created_at,
+        "created_at": _utc(plan.created_at),
         "target_name": plan.target_name,
         "observer_name": plan.observer_name,
         "station_name": plan.station_name,
@@ -62,8 +69,8 @@ def list_plans(
     )
     data = [
         PlanSummary(
-            id=p.id, created_at=p.created_at, target_name=p.target_name, observer_name=p.observer_name,
-            station_name=p.station_name, t_access=p.t_access, miss_km=p.miss_km,
+            id=p.id, created_at=_utc(p.created_at), target_name=p.target_name, observer_name=p.observer_name,
+            station_name=p.station_name, t_access=_utc(p.t_access), miss_km=p.miss_km,
         )
         for p in rows
     ]

@@ -60,6 +60,7 @@ def test_list_paginates_and_filters(client, paper_plan):
     body = r.json()
     assert body["count"] >= 1 and len(body["data"]) == 1
     assert body["data"][0]["target_name"] == "Sat_Target"
+    assert body["data"][0]["created_at"].endswith(("Z", "+00:00"))  # times come back in UTC, stated
     r = client.get("/v1/plans", params={"target_name": "nobody"}, headers=A)
     assert r.json() == {"data": [], "count": 0}
     r = client.get("/v1/plans", params={"created_after": "2100-01-01T00:00:00Z"}, headers=A)
