@@ -165,13 +165,15 @@ def access_windows(
     lo_idx = np.where(k > 0, minima[np.clip(k - 1, 0, max(minima.size - 1, 0))] if minima.size else 0, 0)
     hi_idx = np.where(k < minima.size, minima[np.clip(k, 0, max(minima.size - 1, 0))] if minima.size else t.size - 1, t.size - 1)
     lo_t, hi_t = t[lo_idx], t[hi_idx]
-    rise_clipped = f(lo_t) > 0.0 if lo_t.size else np.zeros(0, bool)
-    set_clipped = f(hi_t) > 0.0 if hi_t.size else np.zeros(0, bool)
-    rise_lo = np.where(rise_clipped, lo_t, lo_t)
-    rise = bisect_roots(f, rise_lo, np.maximum(t_max, rise_lo), tol_s)
-    rise = np.where(rise_clipped, lo_t, rise)
-    sets = bisect_roots(f, np.minimum(t_max, hi_t), hi_t, tol_s)
-    sets = np.where(set_clipped, hi_t, sets)
+    n = t_max.size
+    ends = f(np.concatenate([lo_t, hi_t])) > 0.0 if n else np.zeros(0, bool)
+    rise_clipped, set_clipped = ends[:n], ends[n:]
+    # Rise and set of every pass refined together, in one vectorised root search.
+    roots = bisect_roots(
+        f, np.concatenate([lo_t, np.minimum(t_max, hi_t)]), np.concatenate([np.maximum(t_max, lo_t), hi_t]), tol_s
+    )
+    rise = np.where(rise_clipped, lo_t, roots[:n])
+    sets = np.where(set_clipped, hi_t, roots[n:])
 
     if station.max_range_km is not None and rise.size:
         rf = range_function(traj, station, frames, station.max_range_km)
