@@ -5,7 +5,7 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 Name = Annotated[str, Field(min_length=1, max_length=200, pattern=r"^[^/\\\x00-\x1f]+$")]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
@@ -227,12 +227,3 @@ class AccessPublic(BaseModel):
     epoch: datetime
     duration_days: float
     access_windows: list[WindowPublic]
-
-
-class ErrorDetail(BaseModel):
-    detail: Any
-
-    @field_validator("detail")
-    @classmethod
-    def _any(cls, v: Any) -> Any:
-        return v

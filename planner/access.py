@@ -56,14 +56,6 @@ class AccessWindows:
     def __len__(self) -> int:
         return int(self.rise_s.size)
 
-    def contains(self, t_s: Vec) -> NDArray[np.bool_]:
-        """Return which of the times fall inside some window."""
-        t = np.atleast_1d(t_s)
-        k = np.searchsorted(self.rise_s, t, side="right") - 1
-        ok = k >= 0
-        kk = np.clip(k, 0, max(len(self) - 1, 0))
-        return ok & (len(self) > 0) & (t <= (self.set_s[kk] if len(self) else t))
-
 
 def validate_station(station: Station) -> None:
     """Raise StationError naming the field for coordinates or masks out of range."""
@@ -161,10 +153,9 @@ def access_windows(
     # Grid minima bound each culmination; elevation is monotonic in between.
     i_max = np.clip(np.searchsorted(t, t_max), 0, t.size - 1)
     minima = np.flatnonzero((g[1:-1] <= g[:-2]) & (g[1:-1] < g[2:])) + 1
+    bounds = np.concatenate([[0], minima, [t.size - 1]])
     k = np.searchsorted(minima, i_max)
-    lo_idx = np.where(k > 0, minima[np.clip(k - 1, 0, max(minima.size - 1, 0))] if minima.size else 0, 0)
-    hi_idx = np.where(k < minima.size, minima[np.clip(k, 0, max(minima.size - 1, 0))] if minima.size else t.size - 1, t.size - 1)
-    lo_t, hi_t = t[lo_idx], t[hi_idx]
+    lo_t, hi_t = t[bounds[k]], t[bounds[k + 1]]
     n = t_max.size
     ends = f(np.concatenate([lo_t, hi_t])) > 0.0 if n else np.zeros(0, bool)
     rise_clipped, set_clipped = ends[:n], ends[n:]

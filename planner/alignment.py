@@ -15,7 +15,7 @@ for cross-checks and benchmarks.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -274,7 +274,7 @@ def align_nodes(
                 cand = _exact_candidate(target, observer, box, p, t[sl], q_pass, q_d, dha, dhp, tol_s)
                 reach = (q_pass >= q_min) & (q_pass <= q_max)
                 t_range = (float(t[sl][reach].min()), float(t[sl][reach].max())) if reach.any() else None
-                cand = _replace_range(cand, t_range)
+                cand = replace(cand, t_access_range_s=t_range)
             else:
                 q_ext = q_max if lo > q_max else q_min
                 k = int(np.argmin(np.abs(edges - q_ext)))
@@ -316,13 +316,6 @@ def _edge_point(box: HeightBox, k: int, na: int, np_: int) -> tuple[float, float
         (box.dha_max_km, box.dhp_min_km),
         (box.dha_max_km, box.dhp_max_km),
     ][k]
-
-
-def _replace_range(c: Candidate, t_range: tuple[float, float] | None) -> Candidate:
-    return Candidate(
-        c.pass_index, c.node, c.t_access_s, c.delta_ha_km, c.delta_hp_km, c.miss_km, c.rate_change_rad_s,
-        t_range, c.family_dha_km, c.family_dhp_km,
-    )
 
 
 def plane_crossing_function(target: Trajectory, observer: ObserverPlaneModel, q: float):  # type: ignore[no-untyped-def]

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime, timedelta
 from typing import Literal
 
@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from planner.access import MAX_SPAN_S, AccessWindows, access_windows, validate_station
 from planner.alignment import Candidate, HeightBox, ObserverPlaneModel, align_nodes
+from planner.constants import R_EARTH_KM
 from planner.elements import Elements, height_change_dv_km_s, state_to_elements
 from planner.errors import PlannerError, SearchRangeError
 from planner.illumination import phase_angle_deg, sun_position_km, sunlit
@@ -29,6 +30,7 @@ from planner.propagation import (
     Station,
     Trajectory,
     as_utc,
+    seconds_between,
 )
 from planner.search import bisect_roots
 from planner.tle import TLE
@@ -154,8 +156,6 @@ def _observer_elements(orbit: Orbit, epoch: datetime, frames: EarthFrames) -> El
     assert orbit.tle is not None
     r, v = SGP4Trajectory(orbit.tle, epoch, frames).state(0.0)
     a, e, i, raan, argp, m = (float(x) for x in state_to_elements(r[:, 0], v[:, 0]))
-    from planner.constants import R_EARTH_KM
-
     return Elements(
         epoch, a * (1 + e) - R_EARTH_KM, a * (1 - e) - R_EARTH_KM,
         math.degrees(i), math.degrees(raan), math.degrees(argp), math.degrees(m),
@@ -192,8 +192,6 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
     obs_el = _observer_elements(observer, epoch, frames)
     tle_obs = observer.tle is not None
     obs_base = _observer_trajectory(obs_el, epoch, t1, opts.reading, tle_obs)
-    from planner.propagation import seconds_between
-
     t_ref = 0.0 if tle_obs else seconds_between(epoch, obs_el.epoch)
     timings["propagation"] = time.perf_counter() - clock
 
@@ -245,10 +243,7 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
             notes.append(f"candidate {k} skipped: {exc}")
             continue
         chosen_index, phasing, step1_miss, obs_chosen = k, ph, miss1, obs_new
-        chosen = Candidate(
-            cand.pass_index, cand.node, t_access, cand.delta_ha_km, cand.delta_hp_km, miss1,
-            cand.rate_change_rad_s, cand.t_access_range_s, cand.family_dha_km, cand.family_dhp_km,
-        )
+        chosen = replace(cand, t_access_s=t_access, miss_km=miss1)
         alignment_dv = float(height_change_dv_km_s(a, e, cand.delta_ha_km, cand.delta_hp_km))
         r_t, _ = tgt.state(t_access)
         sun_k = sun_position_km(epoch, t_access)

@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from planner.constants import DAY_S, F_EARTH, J2, MU_EARTH_KM3_S2, OMEGA_EARTH_RAD_S, R_EARTH_KM
-from planner.elements import Elements, elements_to_state, secular_state, state_to_elements
+from planner.elements import Elements, elements_to_state, secular_state
 from planner.errors import PlannerError
 from planner.tle import TLE
 
@@ -105,7 +105,7 @@ class EarthFrames:
     """GCRS-to-ITRS and TEME-to-GCRS rotations over ``[t0_s, t1_s]`` after ``epoch``.
 
     skyfield's ITRS rotation is Rz(-GAST) times the precession-nutation matrix M. M
-    changes slowly, so it is sampled hourly and interpolated; GAST is Earth rotation
+    changes slowly, so it is sampled every 2 hours and interpolated; GAST is Earth rotation
     plus a slowly varying part, which is interpolated the same way. Polar motion is
     not modelled (skyfield's built-in timescale has no table): <= 15 m at the surface.
     """
@@ -337,13 +337,11 @@ class SGP4Trajectory:
     """A TLE propagated by SGP4 (vectorised), rotated from TEME into GCRS."""
 
     def __init__(self, tle: TLE, plan_epoch: datetime, frames: EarthFrames) -> None:
-        from sgp4.api import Satrec
+        from sgp4.api import Satrec, jday
 
         self.tle = tle
         self.satrec = Satrec.twoline2rv(tle.line1, tle.line2)
         self.frames = frames
-        from sgp4.api import jday
-
         e = as_utc(plan_epoch)
         self._jd_whole, self._jd_frac0 = jday(e.year, e.month, e.day, e.hour, e.minute, e.second + e.microsecond * 1e-6)
 
@@ -359,9 +357,3 @@ class SGP4Trajectory:
             raise PlannerError(f"SGP4 failed for this TLE: {SGP4_ERRORS.get(code, code)}", field="tle")
         rot = self.frames.teme_to_gcrs(t)
         return mxv(rot, r_teme.T), mxv(rot, v_teme.T)
-
-
-def osculating_elements(traj: Trajectory, t_s: float) -> tuple[float, ...]:
-    """Return the two-body elements ``(a, e, i, raan, argp, M)`` of a trajectory at one time."""
-    r, v = traj.state(t_s)
-    return tuple(float(x) for x in state_to_elements(r[:, 0], v[:, 0]))
