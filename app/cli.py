@@ -80,7 +80,9 @@ def cmd_keys(args: argparse.Namespace) -> int:
 
     with _session() as session:
         if args.keys_cmd == "create":
-            row, key = crud.create_api_key(session=session, operator_name=args.operator or args.name, key_name=args.name)
+            row, key = crud.create_api_key(
+                session=session, operator_name=args.operator or args.name, key_name=args.name
+            )
             print(f"{row.id}  {key}")
             print("store this key now: only its hash is kept", file=sys.stderr)
         elif args.keys_cmd == "list":
@@ -176,7 +178,9 @@ def format_plan(r: dict[str, Any]) -> str:
         )
     ch = r.get("chosen")
     if ch:
-        out.append(f"\nchosen: T_access {ch['t_access']}, dHa {ch['delta_ha_km']:.1f} km, dHp {ch['delta_hp_km']:.1f} km")
+        out.append(
+            f"\nchosen: T_access {ch['t_access']}, dHa {ch['delta_ha_km']:.1f} km, dHp {ch['delta_hp_km']:.1f} km"
+        )
         out.append(f"  node-line miss with the changed observer's own propagation: {ch['miss_km']:.3f} km")
         out.append(f"  height change costs {r['alignment_dv_m_s']:.1f} m/s")
     ph = r.get("phasing")
@@ -192,7 +196,9 @@ def format_plan(r: dict[str, Any]) -> str:
         )
     if ch:
         f = ch["feasibility"]
-        out.append(f"feasible: {'yes' if f['feasible'] else 'no'}" + (f" ({'; '.join(f['reasons'])})" if f["reasons"] else ""))
+        out.append(
+            f"feasible: {'yes' if f['feasible'] else 'no'}" + (f" ({'; '.join(f['reasons'])})" if f["reasons"] else "")
+        )
     for note in r["notes"]:
         out.append(f"note: {note}")
     return "\n".join(out)

@@ -21,7 +21,9 @@ def get_or_create_operator(*, session: Session, name: str) -> Operator:
     return op
 
 
-def create_api_key(*, session: Session, operator_name: str, key_name: str, key: str | None = None) -> tuple[ApiKey, str]:
+def create_api_key(
+    *, session: Session, operator_name: str, key_name: str, key: str | None = None
+) -> tuple[ApiKey, str]:
     """Create a key for an operator (created if new); return the row and the plain key (shown once)."""
     op = get_or_create_operator(session=session, name=operator_name)
     plain = key or new_api_key()

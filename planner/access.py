@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.errors import SearchRangeError, StationError
-from planner.propagation import EarthFrames, Station, Trajectory, mxv
+from planner.propagation import EarthFrames, Station, Trajectory
 from planner.search import _find_maxima_core, bisect_roots, time_grid
 
 Vec = NDArray[np.float64]
@@ -74,7 +74,7 @@ def validate_station(station: Station) -> None:
 
 def look_angles(r_sat_km: Vec, t_s: Vec, station: Station, frames: EarthFrames) -> LookAngles:
     """Return the look angles from ``station`` to GCRS positions ``r_sat_km`` (3, N) at ``t_s``."""
-    r_itrs = mxv(frames.gcrs_to_itrs(t_s), r_sat_km)
+    r_itrs = frames.to_itrs(t_s, r_sat_km)
     rho = r_itrs - station.itrs_km()[:, None]
     enu = station.enu_itrs() @ rho
     rng = np.linalg.norm(rho, axis=0)
@@ -91,10 +91,9 @@ def elevation_function(traj: Trajectory, station: Station, frames: EarthFrames):
 
     def f(t_s: Vec) -> Vec:
         r, _ = traj.state(t_s)
-        rho = mxv(frames.gcrs_to_itrs(t_s), r) - site[:, None]
+        rho = frames.to_itrs(t_s, r) - site[:, None]
         return np.degrees(np.arcsin(np.clip(up @ rho / np.linalg.norm(rho, axis=0), -1.0, 1.0))) - mask
 
-    f.step_s = 60.0  # type: ignore[attr-defined]
     return f
 
 
@@ -104,7 +103,7 @@ def range_function(traj: Trajectory, station: Station, frames: EarthFrames, max_
 
     def f(t_s: Vec) -> Vec:
         r, _ = traj.state(t_s)
-        rho = mxv(frames.gcrs_to_itrs(t_s), r) - site[:, None]
+        rho = frames.to_itrs(t_s, r) - site[:, None]
         return max_range_km - np.linalg.norm(rho, axis=0)
 
     return f
@@ -116,25 +115,28 @@ def access_windows(
     frames: EarthFrames,
     t0_s: float,
     t1_s: float,
-    step_s: float = 60.0,
+    step_s: float = 120.0,
     tol_s: float = 1e-4,
 ) -> AccessWindows:
     """Find every pass of ``traj`` above the station's elevation mask in ``[t0_s, t1_s]``.
 
     ``step_s`` must be shorter than half the time between a culmination and the
-    next elevation minimum (a few minutes for any Earth orbit), which 60 s is.
+    next elevation minimum (over ten minutes for any Earth orbit), which 120 s is.
     With ``station.max_range_km`` set, each window is narrowed to where the slant
     range is within it (passes never inside it are dropped).
     """
     validate_station(station)
     if t1_s - t0_s > MAX_SPAN_S:
-        raise SearchRangeError(
-            f"span of {(t1_s - t0_s) / 86400.0:.2f} days is over the 30-day limit", field="end"
-        )
+        raise SearchRangeError(f"span of {(t1_s - t0_s) / 86400.0:.2f} days is over the 30-day limit", field="end")
     f = elevation_function(traj, station, frames)
     t = time_grid(t0_s, t1_s, step_s)
     g = f(t)
-    t_max, g_max = _find_maxima_core(f, t, g, tol_s)
+    # Only culminations that can reach the mask are refined. Near a culmination an Earth
+    # satellite's elevation curves by at most ~2.5 deg within 60 s (a 200-km orbit seen
+    # at the horizon: (v / range)^2 t^2 / 2), so 15 deg below the mask at a 120-s step is safe.
+    margin_deg = max(5.0, 15.0 * (step_s / 120.0) ** 2)
+    # Culminations to 1 ms: elevation is flat there, so a finer time buys nothing.
+    t_max, g_max = _find_maxima_core(f, t, g, max(tol_s, 1e-3), floor=-margin_deg)
     # Maxima at the ends of the span (a pass in progress at the start or end).
     edges_t, edges_g = [], []
     if g.size > 1 and g[0] > g[1]:
@@ -159,12 +161,22 @@ def access_windows(
     n = t_max.size
     ends = f(np.concatenate([lo_t, hi_t])) > 0.0 if n else np.zeros(0, bool)
     rise_clipped, set_clipped = ends[:n], ends[n:]
-    # Rise and set of every pass refined together, in one vectorised root search.
-    roots = bisect_roots(
-        f, np.concatenate([lo_t, np.minimum(t_max, hi_t)]), np.concatenate([np.maximum(t_max, lo_t), hi_t]), tol_s
-    )
-    rise = np.where(rise_clipped, lo_t, roots[:n])
-    sets = np.where(set_clipped, hi_t, roots[n:])
+    # Narrow each bracket to the grid step where the elevation crosses the mask (for a
+    # grazing pass with no grid crossing, to the step beside the culmination), then refine
+    # rise and set of every pass together in one vectorised root search. An end still above
+    # the mask at the span's edge (clipped) has no crossing to refine.
+    idx = np.arange(t.size)
+    last_below = np.maximum.accumulate(np.where(g <= 0.0, idx, 0))
+    next_below = np.minimum.accumulate(np.where(g <= 0.0, idx, t.size - 1)[::-1])[::-1]
+    i_lo = np.maximum(last_below[i_max], bounds[k])
+    i_hi = np.minimum(next_below[np.minimum(i_max + 1, t.size - 1)], bounds[k + 1])
+    lo_all = np.concatenate([t[i_lo], np.maximum(t_max, t[np.maximum(i_hi - 1, 0)])])
+    hi_all = np.concatenate([np.minimum(t_max, t[np.minimum(i_lo + 1, t.size - 1)]), t[i_hi]])
+    lo_all = np.minimum(lo_all, hi_all)
+    open_end = ~ends if n else np.zeros(0, bool)
+    crossing = np.concatenate([lo_t, hi_t])
+    crossing[open_end] = bisect_roots(f, lo_all[open_end], hi_all[open_end], tol_s)
+    rise, sets = crossing[:n], crossing[n:]
 
     if station.max_range_km is not None and rise.size:
         rf = range_function(traj, station, frames, station.max_range_km)
@@ -192,7 +204,9 @@ def _describe(
     n = rise.size
     if n == 0:
         empty = np.empty(0)
-        return AccessWindows(empty, empty, empty, empty, empty, empty, empty, empty, np.zeros(0, bool), np.zeros(0, bool))
+        return AccessWindows(
+            empty, empty, empty, empty, empty, empty, empty, empty, np.zeros(0, bool), np.zeros(0, bool)
+        )
     t_all = np.concatenate([rise, culm, sets])
     r, _ = traj.state(t_all)
     look = look_angles(r, t_all, station, frames)

@@ -44,13 +44,9 @@ class HeightBox:
             if not math.isfinite(getattr(self, name)):
                 raise SearchRangeError(f"{name} must be finite", field=name)
         if self.dha_min_km > self.dha_max_km:
-            raise SearchRangeError(
-                f"dHa range {self.dha_min_km}..{self.dha_max_km} km is inverted", field="dha_min_km"
-            )
+            raise SearchRangeError(f"dHa range {self.dha_min_km}..{self.dha_max_km} km is inverted", field="dha_min_km")
         if self.dhp_min_km > self.dhp_max_km:
-            raise SearchRangeError(
-                f"dHp range {self.dhp_min_km}..{self.dhp_max_km} km is inverted", field="dhp_min_km"
-            )
+            raise SearchRangeError(f"dHp range {self.dhp_min_km}..{self.dhp_max_km} km is inverted", field="dhp_min_km")
         if not self.step_km > 0.0:
             raise SearchRangeError(f"step {self.step_km} km must be positive", field="step_km")
         if self.grid_points > 25_000_000:
@@ -284,8 +280,16 @@ def align_nodes(
                 j = int(np.argmin(miss))
                 fam_a, fam_p = height_family(observer, box, q_ext)
                 cand = Candidate(
-                    p, "+OC" if sign[j] > 0 else "-OC", float(t[sl][j]), dha, dhp, float(miss[j]), q_ext,
-                    None, fam_a, fam_p,
+                    p,
+                    "+OC" if sign[j] > 0 else "-OC",
+                    float(t[sl][j]),
+                    dha,
+                    dhp,
+                    float(miss[j]),
+                    q_ext,
+                    None,
+                    fam_a,
+                    fam_p,
                 )
             if cand.miss_km > max_miss_km:
                 continue
@@ -352,14 +356,10 @@ def _exact_candidate(
     r, v = target.state(t_root)
     miss, sign = node_miss_km(r, v, observer.normal(np.array([t_root]), q_d))
     fam_a, fam_p = height_family(observer, box, q_d)
-    return Candidate(
-        p, "+OC" if sign[0] > 0 else "-OC", t_root, dha, dhp, float(miss[0]), q_d, None, fam_a, fam_p
-    )
+    return Candidate(p, "+OC" if sign[0] > 0 else "-OC", t_root, dha, dhp, float(miss[0]), q_d, None, fam_a, fam_p)
 
 
-def brute_force_miss(
-    target: Trajectory, observer: ObserverPlaneModel, t_s: Vec, dha_km: Vec, dhp_km: Vec
-) -> Vec:
+def brute_force_miss(target: Trajectory, observer: ObserverPlaneModel, t_s: Vec, dha_km: Vec, dhp_km: Vec) -> Vec:
     """Return the miss (km) at every access moment and every grid point, shape (T, A, P).
 
     The paper's search written out directly: for each moment and each (dHa, dHp) the

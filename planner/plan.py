@@ -72,7 +72,7 @@ class PlanOptions:
     duration_s: float = 10 * 86400.0
     reading: Reading = "osculating"
     box: HeightBox = field(default_factory=HeightBox)
-    access_step_s: float = 60.0
+    access_step_s: float = 120.0
     sample_s: float = 1.0
     max_miss_km: float = 10.0
     revolutions_before: tuple[int, ...] = (1, 2)
@@ -157,12 +157,19 @@ def _observer_elements(orbit: Orbit, epoch: datetime, frames: EarthFrames) -> El
     r, v = SGP4Trajectory(orbit.tle, epoch, frames).state(0.0)
     a, e, i, raan, argp, m = (float(x) for x in state_to_elements(r[:, 0], v[:, 0]))
     return Elements(
-        epoch, a * (1 + e) - R_EARTH_KM, a * (1 - e) - R_EARTH_KM,
-        math.degrees(i), math.degrees(raan), math.degrees(argp), math.degrees(m),
+        epoch,
+        a * (1 + e) - R_EARTH_KM,
+        a * (1 - e) - R_EARTH_KM,
+        math.degrees(i),
+        math.degrees(raan),
+        math.degrees(argp),
+        math.degrees(m),
     )
 
 
-def _observer_trajectory(elements: Elements, epoch: datetime, t1_s: float, reading: Reading, tle_based: bool) -> Trajectory:
+def _observer_trajectory(
+    elements: Elements, epoch: datetime, t1_s: float, reading: Reading, tle_based: bool
+) -> Trajectory:
     if reading == "mean" and not tle_based:
         return SecularJ2Trajectory(elements, epoch)
     return NumericalJ2Trajectory.from_elements(elements, epoch, 0.0, t1_s)
@@ -230,7 +237,9 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
     if opts.criterion == "least_dv" and candidates:
         cache: dict[tuple[float, float], Trajectory] = {}
         pool = [k for k in order if lit[k]] or order
-        costs = {k: _phasing_cost_km_s(candidates[k], obs_el, epoch, t1, opts, tgt, tle_obs, model, cache) for k in pool}
+        costs = {
+            k: _phasing_cost_km_s(candidates[k], obs_el, epoch, t1, opts, tgt, tle_obs, model, cache) for k in pool
+        }
         order = sorted(pool, key=lambda k: costs[k]) + [k for k in order if k not in costs]
     for k in order:
         cand = candidates[k]
@@ -265,8 +274,24 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
             "widen the box, lengthen the span or raise max_miss_km"
         )
     return Plan(
-        epoch, t1, opts.reading, windows, candidates, feas, chosen_index, chosen, alignment_dv, step1_miss,
-        phasing, chosen_feas, timings, notes, tgt, obs_chosen, frames, station,
+        epoch,
+        t1,
+        opts.reading,
+        windows,
+        candidates,
+        feas,
+        chosen_index,
+        chosen,
+        alignment_dv,
+        step1_miss,
+        phasing,
+        chosen_feas,
+        timings,
+        notes,
+        tgt,
+        obs_chosen,
+        frames,
+        station,
     )
 
 
@@ -298,8 +323,15 @@ def _refine_crossing(tgt: Trajectory, obs: Trajectory, windows: AccessWindows, c
 
 
 def _phasing_cost_km_s(
-    cand: Candidate, obs_el: Elements, epoch: datetime, t1: float, opts: PlanOptions, tgt: Trajectory,
-    tle_obs: bool, model: ObserverPlaneModel, cache: dict[tuple[float, float], Trajectory],
+    cand: Candidate,
+    obs_el: Elements,
+    epoch: datetime,
+    t1: float,
+    opts: PlanOptions,
+    tgt: Trajectory,
+    tle_obs: bool,
+    model: ObserverPlaneModel,
+    cache: dict[tuple[float, float], Trajectory],
 ) -> float:
     """Return the two-body estimate of a candidate's total Delta-v (height change + phasing), km/s."""
     key = (cand.delta_ha_km, cand.delta_hp_km)
@@ -307,7 +339,9 @@ def _phasing_cost_km_s(
         changed = obs_el.with_heights(*key)
         cache[key] = _observer_trajectory(changed, epoch, t1, opts.reading, tle_obs)
     try:
-        ph = phase(cache[key], tgt, cand.t_access_s, opts.revolutions_before, max(0.0, model.t_ref_s), max_corrections=0)
+        ph = phase(
+            cache[key], tgt, cand.t_access_s, opts.revolutions_before, max(0.0, model.t_ref_s), max_corrections=0
+        )
     except PlannerError:
         return math.inf
     return ph.dv_total_km_s + float(height_change_dv_km_s(model.a_km, model.e, *key))

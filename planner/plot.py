@@ -6,7 +6,6 @@ import numpy as np
 
 from planner.access import look_angles
 from planner.alignment import node_miss_km
-from planner.propagation import mxv
 
 
 def plot_plan(plan, path: str, title: str = "") -> None:  # type: ignore[no-untyped-def]
@@ -19,12 +18,14 @@ def plot_plan(plan, path: str, title: str = "") -> None:  # type: ignore[no-unty
     fig, axes = plt.subplots(1, 3, figsize=(17, 5), gridspec_kw={"width_ratios": [1.6, 1, 1]})
     tgt, frames, station = plan.target_trajectory, plan.frames, plan.station
     chosen = plan.chosen
-    t_c = chosen.t_access_s if chosen is not None else float(plan.windows.culmination_s[0]) if len(plan.windows) else 0.0
+    t_c = (
+        chosen.t_access_s if chosen is not None else float(plan.windows.culmination_s[0]) if len(plan.windows) else 0.0
+    )
 
     # Ground track over two revolutions centred on T_access.
     t = np.linspace(max(0.0, t_c - 6000.0), min(plan.duration_s, t_c + 6000.0), 2000)
     r, _ = tgt.state(t)
-    r_itrs = mxv(frames.gcrs_to_itrs(t), r)
+    r_itrs = frames.to_itrs(t, r)
     lat = np.degrees(np.arctan2(r_itrs[2], np.hypot(r_itrs[0], r_itrs[1])))
     lon = np.degrees(np.arctan2(r_itrs[1], r_itrs[0]))
     visible = look_angles(r, t, station, frames).elevation_deg >= station.min_elevation_deg
@@ -35,11 +36,21 @@ def plot_plan(plan, path: str, title: str = "") -> None:  # type: ignore[no-unty
     ax.plot(station.longitude_deg, station.latitude_deg, "r^", ms=10, label="station")
     if chosen is not None:
         rc, _ = tgt.state(t_c)
-        rci = mxv(frames.gcrs_to_itrs(np.array([t_c])), rc)
-        ax.plot(np.degrees(np.arctan2(rci[1], rci[0])), np.degrees(np.arctan2(rci[2], np.hypot(rci[0], rci[1]))),
-                "k*", ms=14, label="T_access")
-    ax.set(xlim=(-180, 180), ylim=(-90, 90), xlabel="longitude (deg)", ylabel="latitude (deg)",
-           title="ground track around the chosen access")
+        rci = frames.to_itrs(np.array([t_c]), rc)
+        ax.plot(
+            np.degrees(np.arctan2(rci[1], rci[0])),
+            np.degrees(np.arctan2(rci[2], np.hypot(rci[0], rci[1]))),
+            "k*",
+            ms=14,
+            label="T_access",
+        )
+    ax.set(
+        xlim=(-180, 180),
+        ylim=(-90, 90),
+        xlabel="longitude (deg)",
+        ylabel="latitude (deg)",
+        title="ground track around the chosen access",
+    )
     ax.grid(alpha=0.3)
     ax.legend(loc="lower left", fontsize=8)
 
@@ -66,8 +77,11 @@ def plot_plan(plan, path: str, title: str = "") -> None:  # type: ignore[no-unty
         miss, _ = node_miss_km(rt, vt, n / np.linalg.norm(n, axis=0))
         ax.plot(tm - t_c, miss, color="tab:red")
         ax.axvline(0.0, color="k", ls="--")
-        ax.set(xlabel="seconds from T_access", ylabel="node line to target (km)",
-               title=f"alignment, dHa {chosen.delta_ha_km:.1f} km, dHp {chosen.delta_hp_km:.1f} km")
+        ax.set(
+            xlabel="seconds from T_access",
+            ylabel="node line to target (km)",
+            title=f"alignment, dHa {chosen.delta_ha_km:.1f} km, dHp {chosen.delta_hp_km:.1f} km",
+        )
         ax.grid(alpha=0.3)
     fig.suptitle(title)
     fig.tight_layout()

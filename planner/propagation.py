@@ -19,7 +19,7 @@ import math
 import os
 import warnings
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from functools import lru_cache
 from typing import Any, Protocol
 
@@ -33,7 +33,7 @@ from planner.tle import TLE
 
 Vec = NDArray[np.float64]
 
-_FRAME_GRID_S = 2 * 3600.0  # Earth-orientation sampling; see test_earth_rotation_against_skyfield
+_FRAME_GRID_S = 6 * 3600.0  # Earth-orientation sampling; see test_earth_rotation_against_skyfield
 
 
 class Trajectory(Protocol):
@@ -65,8 +65,8 @@ def ephemeris() -> Any:
 def as_utc(epoch: datetime) -> datetime:
     """Return ``epoch`` as an aware UTC datetime (naive datetimes are taken as UTC)."""
     if epoch.tzinfo is None:
-        return epoch.replace(tzinfo=timezone.utc)
-    return epoch.astimezone(timezone.utc)
+        return epoch.replace(tzinfo=UTC)
+    return epoch.astimezone(UTC)
 
 
 def skyfield_times(epoch: datetime, t_s: ArrayLike) -> Any:
@@ -80,7 +80,7 @@ def skyfield_times(epoch: datetime, t_s: ArrayLike) -> Any:
 def utc_datetimes(epoch: datetime, t_s: ArrayLike) -> list[datetime]:
     """Return UTC datetimes (microsecond precision) for elapsed seconds after ``epoch``."""
     times = skyfield_times(epoch, np.atleast_1d(np.asarray(t_s, float)))
-    return [d.replace(tzinfo=timezone.utc) for d in times.utc_datetime()]
+    return [d.replace(tzinfo=UTC) for d in times.utc_datetime()]
 
 
 def seconds_between(epoch: datetime, moment: datetime) -> float:
@@ -105,48 +105,66 @@ class EarthFrames:
     """GCRS-to-ITRS and TEME-to-GCRS rotations over ``[t0_s, t1_s]`` after ``epoch``.
 
     skyfield's ITRS rotation is Rz(-GAST) times the precession-nutation matrix M. M
-    changes slowly, so it is sampled every 2 hours and interpolated; GAST is Earth rotation
-    plus a slowly varying part, which is interpolated the same way. Polar motion is
-    not modelled (skyfield's built-in timescale has no table): <= 15 m at the surface.
+    changes slowly, so it is sampled every 6 hours and interpolated by cubic splines;
+    GAST is Earth rotation plus a slowly varying part, which is interpolated the same
+    way (within 1e-9 rad of skyfield, tests/planner/test_propagation.py). Sampling is
+    what costs: skyfield's IAU 2000A nutation is ~50 us a time. Polar motion is not
+    modelled (skyfield's built-in timescale has no table): <= 15 m at the surface.
     """
 
     def __init__(self, epoch: datetime, t0_s: float, t1_s: float) -> None:
-        n = max(2, int(math.ceil((t1_s - t0_s) / _FRAME_GRID_S)) + 3)
-        self.epoch = epoch
-        self.grid_s = t0_s - _FRAME_GRID_S + _FRAME_GRID_S * np.arange(n)
-        t = skyfield_times(epoch, self.grid_s)
-        self._m = t.M.reshape(9, n)  # precession-nutation, GCRS to true of date
-        gast_rad = np.unwrap(t.gast * (2.0 * math.pi / 24.0))
-        self._gast0 = gast_rad[0]
-        self._gast_residual = gast_rad - self._gast0 - OMEGA_EARTH_RAD_S * (self.grid_s - self.grid_s[0])
+        from scipy.interpolate import CubicSpline
         from skyfield.sgp4lib import TEME
 
-        self._teme = TEME.rotation_at(t).reshape(9, n)  # GCRS to TEME
+        n = max(2, int(math.ceil((t1_s - t0_s) / _FRAME_GRID_S))) + 5
+        self.epoch = epoch
+        self.grid_s = t0_s - 2 * _FRAME_GRID_S + _FRAME_GRID_S * np.arange(n)
+        t = skyfield_times(epoch, self.grid_s)
+        gast_rad = np.unwrap(t.gast * (2.0 * math.pi / 24.0))
+        self._gast0 = float(gast_rad[0])
+        residual = gast_rad - self._gast0 - OMEGA_EARTH_RAD_S * (self.grid_s - self.grid_s[0])
+        # Columns 0-8: precession-nutation M (GCRS to true of date); 9: the GAST residual.
+        self._earth = CubicSpline(self.grid_s, np.vstack([t.M.reshape(9, n), residual]).T)
+        self._teme = CubicSpline(self.grid_s, TEME.rotation_at(t).reshape(9, n).T)  # GCRS to TEME
 
-    def _interp(self, table: Vec, t_s: Vec) -> Vec:
-        t = np.atleast_1d(t_s)
-        if t.size and (t.min() < self.grid_s[0] or t.max() > self.grid_s[-1]):
+    def _check(self, t_s: ArrayLike) -> Vec:
+        t = np.atleast_1d(np.asarray(t_s, float))
+        if t.size and (t.min() < self.grid_s[1] or t.max() > self.grid_s[-2]):
             raise PlannerError(f"time {t.min()}..{t.max()} s is outside the frame span", field="t_s")
-        out = np.empty((table.shape[0], t.size))
-        for k in range(table.shape[0]):
-            out[k] = np.interp(t, self.grid_s, table[k])
-        return out
+        return t
+
+    def _m_and_gast(self, t: Vec) -> tuple[Vec, Vec]:
+        cols = self._earth(t)
+        gast = self._gast0 + OMEGA_EARTH_RAD_S * (t - self.grid_s[0]) + cols[:, 9]
+        return cols[:, :9].T.reshape(3, 3, t.size), gast
 
     def gast_rad(self, t_s: ArrayLike) -> Vec:
-        t = np.atleast_1d(np.asarray(t_s, float))
-        residual = np.interp(t, self.grid_s, self._gast_residual)
-        return self._gast0 + OMEGA_EARTH_RAD_S * (t - self.grid_s[0]) + residual
+        """Return Greenwich apparent sidereal time (rad, unwrapped) at ``t_s``."""
+        return self._m_and_gast(self._check(t_s))[1]
 
     def gcrs_to_itrs(self, t_s: ArrayLike) -> Vec:
         """Return rotation matrices (3, 3, N) taking GCRS vectors to ITRS."""
-        t = np.atleast_1d(np.asarray(t_s, float))
-        m = self._interp(self._m, t).reshape(3, 3, t.size)
-        return np.einsum("ij...,jk...->ik...", _rot_z(-self.gast_rad(t)), m)
+        t = self._check(t_s)
+        m, gast = self._m_and_gast(t)
+        return np.einsum("ij...,jk...->ik...", _rot_z(-gast), m)
+
+    def to_itrs(self, t_s: ArrayLike, r_gcrs_km: Vec) -> Vec:
+        """Rotate GCRS vectors (3, N) at ``t_s`` into ITRS.
+
+        The same rotation as ``gcrs_to_itrs`` without forming the matrices: precession-
+        nutation first, then Earth rotation applied to x and y directly (the access
+        search calls this thousands of times a plan).
+        """
+        t = self._check(t_s)
+        m, gast = self._m_and_gast(t)
+        tod = mxv(m, r_gcrs_km)
+        c, s = np.cos(gast), np.sin(gast)
+        return np.array([c * tod[0] + s * tod[1], c * tod[1] - s * tod[0], tod[2]])
 
     def teme_to_gcrs(self, t_s: ArrayLike) -> Vec:
         """Return rotation matrices (3, 3, N) taking TEME vectors to GCRS."""
-        t = np.atleast_1d(np.asarray(t_s, float))
-        return self._interp(self._teme, t).reshape(3, 3, t.size).transpose(1, 0, 2)
+        t = self._check(t_s)
+        return self._teme(t).T.reshape(3, 3, t.size).transpose(1, 0, 2)
 
 
 @dataclass(frozen=True, slots=True)

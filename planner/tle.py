@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 
 from planner.errors import TLEError
 
@@ -25,7 +25,7 @@ class TLE:
         yy = int(self.line1[18:20])
         year = 2000 + yy if yy < 57 else 1900 + yy
         day = float(self.line1[20:32])
-        return datetime(year, 1, 1, tzinfo=timezone.utc) + timedelta(days=day - 1.0)
+        return datetime(year, 1, 1, tzinfo=UTC) + timedelta(days=day - 1.0)
 
 
 def tle_checksum(line: str) -> int:
@@ -65,9 +65,7 @@ def parse_tle(line1: str, line2: str, field: str = "tle") -> TLE:
             raise TLEError(f"line {number} must end with a checksum digit", field=field)
         expected = tle_checksum(line)
         if int(line[68]) != expected:
-            raise TLEError(
-                f"line {number} checksum is {line[68]} but its characters sum to {expected}", field=field
-            )
+            raise TLEError(f"line {number} checksum is {line[68]} but its characters sum to {expected}", field=field)
         lines.append(line)
     l1, l2 = lines
     if l1[2:7] != l2[2:7]:

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Any
 
 import numpy as np
@@ -20,7 +20,7 @@ from planner.tle import parse_tle
 
 
 def _aware(moment: datetime) -> datetime:
-    return moment.replace(tzinfo=timezone.utc) if moment.tzinfo is None else moment.astimezone(timezone.utc)
+    return moment.replace(tzinfo=UTC) if moment.tzinfo is None else moment.astimezone(UTC)
 
 
 def to_orbit(orbit: OrbitIn, where: str) -> Orbit:
@@ -31,7 +31,12 @@ def to_orbit(orbit: OrbitIn, where: str) -> Orbit:
         assert orbit.elements is not None
         e = orbit.elements
         el = Elements(
-            _aware(e.epoch), e.ha_km, e.hp_km, e.inclination_deg, e.raan_deg % 360.0, e.arg_perigee_deg % 360.0,
+            _aware(e.epoch),
+            e.ha_km,
+            e.hp_km,
+            e.inclination_deg,
+            e.raan_deg % 360.0,
+            e.arg_perigee_deg % 360.0,
             e.mean_anomaly_deg % 360.0,
         )
         return Orbit(orbit.name, elements=el)
@@ -107,7 +112,9 @@ def _candidate_json(epoch: datetime, c: Candidate, f: Feasibility) -> dict[str, 
         "miss_km": c.miss_km,
         "change_km": c.change_km,
         "t_access_range": [utc(epoch, t).isoformat() for t in c.t_access_range_s] if c.t_access_range_s else None,
-        "family": [[round(float(a), 4), round(float(p), 4)] for a, p in zip(c.family_dha_km, c.family_dhp_km, strict=True)],
+        "family": [
+            [round(float(a), 4), round(float(p), 4)] for a, p in zip(c.family_dha_km, c.family_dhp_km, strict=True)
+        ],
         "feasibility": _feasibility_json(f),
     }
 

@@ -1,11 +1,12 @@
 """Step B against the paper's worked example (section 3.3) and against the brute-force search."""
 
 import math
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 import numpy as np
 import pytest
 
+from planner.access import access_windows
 from planner.alignment import (
     HeightBox,
     ObserverPlaneModel,
@@ -13,14 +14,13 @@ from planner.alignment import (
     brute_force_miss,
     plane_crossing_function,
 )
-from planner.access import access_windows
 from planner.errors import SearchRangeError
 from planner.propagation import EarthFrames, NumericalJ2Trajectory, SecularJ2Trajectory, seconds_between
 from planner.search import bisect_roots
 from tests.utils.orbits import PAPER_EPOCH, PAPER_OBSERVER, PAPER_STATION, PAPER_TARGET
 
 SPAN_S = 10 * 86400.0
-PAPER_T_ACCESS = datetime(2022, 12, 4, 11, 28, 29, tzinfo=timezone.utc)
+PAPER_T_ACCESS = datetime(2022, 12, 4, 11, 28, 29, tzinfo=UTC)
 PAPER_DHA_KM, PAPER_DHP_KM = 19.0, 29.3
 one_km = 1.0
 
@@ -125,8 +125,11 @@ def test_no_solution_box_gives_nearest_corner(osculating):
 
 @pytest.mark.parametrize(
     "kwargs",
-    [dict(dha_min_km=10.0, dha_max_km=-10.0), dict(step_km=0.0), dict(step_km=0.001, dha_min_km=-500, dha_max_km=500,
-                                                                       dhp_min_km=-500, dhp_max_km=500)],
+    [
+        dict(dha_min_km=10.0, dha_max_km=-10.0),
+        dict(step_km=0.0),
+        dict(step_km=0.001, dha_min_km=-500, dha_max_km=500, dhp_min_km=-500, dhp_max_km=500),
+    ],
 )
 def test_bad_boxes(kwargs):
     with pytest.raises(SearchRangeError):

@@ -97,8 +97,15 @@ def test_height_change_dv_matches_hohmann():
     ],
 )
 def test_bad_elements_name_the_field(field, kwargs):
-    base = dict(epoch=PAPER_EPOCH, ha_km=700.0, hp_km=600.0, inclination_deg=43.0, raan_deg=0.0,
-                arg_perigee_deg=0.0, mean_anomaly_deg=0.0)
+    base = dict(
+        epoch=PAPER_EPOCH,
+        ha_km=700.0,
+        hp_km=600.0,
+        inclination_deg=43.0,
+        raan_deg=0.0,
+        arg_perigee_deg=0.0,
+        mean_anomaly_deg=0.0,
+    )
     base.update(kwargs)
     with pytest.raises(ElementsError) as err:
         Elements(**base)

@@ -34,20 +34,28 @@ def test_phasing_against_independent_integration(plan):
     obs = _observer_trajectory(changed, PAPER_EPOCH, plan.duration_s, "osculating", False)
     r1, v1 = obs.state(ph.t_burn_s)
     y0 = np.concatenate([r1[:, 0], v1[:, 0] + ph.dv_km_s])
-    sol = solve_ivp(lambda _t, y: np.concatenate([y[3:], j2_acceleration(y[:3])]),
-                    (ph.t_burn_s, ph.t_access_s), y0, method="DOP853", rtol=1e-12, atol=1e-12)
+    sol = solve_ivp(
+        lambda _t, y: np.concatenate([y[3:], j2_acceleration(y[:3])]),
+        (ph.t_burn_s, ph.t_access_s),
+        y0,
+        method="DOP853",
+        rtol=1e-12,
+        atol=1e-12,
+    )
     from planner.plan import _target_trajectory
     from planner.propagation import EarthFrames
 
-    tgt = _target_trajectory(Orbit("T", PAPER_TARGET), PAPER_EPOCH, EarthFrames(PAPER_EPOCH, 0, 3600), plan.duration_s,
-                             "osculating")
+    tgt = _target_trajectory(
+        Orbit("T", PAPER_TARGET), PAPER_EPOCH, EarthFrames(PAPER_EPOCH, 0, 3600), plan.duration_s, "osculating"
+    )
     r_t, _ = tgt.state(ph.t_access_s)
     assert np.linalg.norm(sol.y[:3, -1] - r_t[:, 0]) < ten_metres_km
 
 
 def test_least_dv_is_no_dearer_than_smallest_change(plan):
-    other = make_plan(Orbit("T", PAPER_TARGET), Orbit("O", PAPER_OBSERVER), PAPER_STATION,
-                      PlanOptions(criterion="smallest_change"))
+    other = make_plan(
+        Orbit("T", PAPER_TARGET), Orbit("O", PAPER_OBSERVER), PAPER_STATION, PlanOptions(criterion="smallest_change")
+    )
     assert plan.phasing.dv_total_km_s <= other.phasing.dv_total_km_s + 1e-9
 
 

@@ -24,7 +24,12 @@ def test_numerical_j2_against_solve_ivp():
     t = np.linspace(0.0, 86400.0, 37)
     ref = solve_ivp(
         lambda _t, y: np.concatenate([y[3:], j2_acceleration(y[:3])]),
-        (0.0, 86400.0), np.concatenate([r0, v0]), method="DOP853", rtol=1e-12, atol=1e-12, t_eval=t,
+        (0.0, 86400.0),
+        np.concatenate([r0, v0]),
+        method="DOP853",
+        rtol=1e-12,
+        atol=1e-12,
+        t_eval=t,
     )
     r, v = traj.state(t)
     assert np.abs(r - ref.y[:3]).max() < one_metre_km
@@ -56,6 +61,8 @@ def test_earth_rotation_against_skyfield():
     theirs = itrs.rotation_at(skyfield_times(ISS_EPOCH, t))
     # 1e-9 rad is 6 mm at the Earth's surface.
     assert np.abs(ours - theirs).max() < 1e-9
+    r = np.random.default_rng(1).normal(size=(3, t.size)) * 7000.0
+    np.testing.assert_allclose(frames.to_itrs(t, r), np.einsum("ij...,j...->i...", theirs, r), atol=1e-8)
 
 
 def test_sgp4_in_gcrs_against_skyfield():

@@ -1,11 +1,11 @@
 """Factories for the paper's Table 1 orbits and a reference TLE."""
 
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 from planner.elements import Elements
 from planner.propagation import Station
 
-PAPER_EPOCH = datetime(2022, 11, 27, 16, 0, tzinfo=timezone.utc)
+PAPER_EPOCH = datetime(2022, 11, 27, 16, 0, tzinfo=UTC)
 PAPER_TARGET = Elements(PAPER_EPOCH, 700.0, 600.0, 43.0, 290.0, 100.0, 200.0)
 PAPER_OBSERVER = Elements(PAPER_EPOCH, 700.0, 350.0, 99.0, 10.0, 0.0, 316.5)
 PAPER_STATION = Station(31.1, 121.3, 0.0, 0.0)
@@ -13,4 +13,4 @@ PAPER_STATION = Station(31.1, 121.3, 0.0, 0.0)
 # ISS, the TLE of the sgp4 and skyfield documentation.
 ISS_L1 = "1 25544U 98067A   08264.51782528 -.00002182  00000-0 -11606-4 0  2927"
 ISS_L2 = "2 25544  51.6416 247.4627 0006703 130.5360 325.0288 15.72125391563537"
-ISS_EPOCH = datetime(2008, 9, 20, 12, 0, tzinfo=timezone.utc)
+ISS_EPOCH = datetime(2008, 9, 20, 12, 0, tzinfo=UTC)

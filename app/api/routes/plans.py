@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, HTTPException, Query
@@ -21,7 +21,7 @@ def _utc(moment: datetime | None) -> datetime | None:
     """Return ``moment`` as aware UTC: SQLite hands back naive datetimes for UTC columns."""
     if moment is None or moment.tzinfo is not None:
         return moment
-    return moment.replace(tzinfo=timezone.utc)
+    return moment.replace(tzinfo=UTC)
 
 
 def _public(plan: Any) -> dict[str, Any]:
@@ -62,15 +62,27 @@ def list_plans(
 ) -> dict[str, Any]:
     """List the caller's plans, newest first, filtered by target name and creation time."""
     if limit > settings.max_page_size:
-        raise HTTPException(status_code=422, detail=f"limit {limit} is over the page size limit {settings.max_page_size}")
+        raise HTTPException(
+            status_code=422, detail=f"limit {limit} is over the page size limit {settings.max_page_size}"
+        )
     rows, total = crud.list_plans(
-        session=session, operator_id=operator.id, limit=limit, offset=offset, target_name=target_name,
-        created_after=created_after, created_before=created_before,
+        session=session,
+        operator_id=operator.id,
+        limit=limit,
+        offset=offset,
+        target_name=target_name,
+        created_after=created_after,
+        created_before=created_before,
     )
     data = [
         PlanSummary(
-            id=p.id, created_at=_utc(p.created_at), target_name=p.target_name, observer_name=p.observer_name,
-            station_name=p.station_name, t_access=_utc(p.t_access), miss_km=p.miss_km,
+            id=p.id,
+            created_at=_utc(p.created_at),
+            target_name=p.target_name,
+            observer_name=p.observer_name,
+            station_name=p.station_name,
+            t_access=_utc(p.t_access),
+            miss_km=p.miss_km,
         )
         for p in rows
     ]

@@ -37,7 +37,10 @@ def test_paper_example_is_accepted_and_stored(client, paper_plan):
     p = paper_plan
     assert p["target_name"] == "Sat_Target"
     assert len(p["access_windows"]) > 50
-    assert p["candidates"] and {"t_access", "delta_ha_km", "delta_hp_km", "miss_km", "feasibility"} <= p["candidates"][0].keys()
+    assert (
+        p["candidates"]
+        and {"t_access", "delta_ha_km", "delta_hp_km", "miss_km", "feasibility"} <= p["candidates"][0].keys()
+    )
     assert p["phasing"]["verification"]["miss_km"] < 1e-3
     assert p["chosen"]["miss_km"] < 0.1
     r = client.get(f"/v1/plans/{p['id']}", headers=A)
