@@ -24,7 +24,8 @@ bench: $(STAMP)
 	$(BIN)/python bench/run.py
 
 lint: $(STAMP)
-	$(BIN)/ruff check app planner inference tests bench
+	$(BIN)/ruff check app planner inference tests bench migrations
+	$(BIN)/mypy
 
 clean:
 	rm -rf $(VENV) data

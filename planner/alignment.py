@@ -77,7 +77,7 @@ class HeightBox:
 
 def _axis(lo: float, hi: float, step: float) -> Vec:
     n = int(math.floor((hi - lo) / step + 1e-9)) + 1
-    return lo + step * np.arange(n)
+    return lo + step * np.arange(n, dtype=np.float64)
 
 
 @dataclass(frozen=True, slots=True)
@@ -155,8 +155,12 @@ def _required_turns(u: Vec, n_b: Vec) -> tuple[Vec, Vec]:
     rr = np.hypot(a, b)
     psi = np.arctan2(b, a)
     half = np.arccos(np.clip(-c / np.where(rr > 0, rr, 1.0), -1.0, 1.0))
-    wrap = lambda x: np.mod(x + np.pi, 2.0 * np.pi) - np.pi  # noqa: E731
-    return wrap(psi + half), wrap(psi - half)
+    return _wrap_pi(psi + half), _wrap_pi(psi - half)
+
+
+def _wrap_pi(x: Vec) -> Vec:
+    """Return angles wrapped into [-pi, pi)."""
+    return np.mod(x + np.pi, 2.0 * np.pi) - np.pi
 
 
 def _min_change_for_rate(model: ObserverPlaneModel, box: HeightBox, q: float) -> tuple[float, float]:

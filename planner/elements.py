@@ -42,11 +42,11 @@ class Elements:
 
     @property
     def a_km(self) -> float:
-        return semi_major_axis_km(self.ha_km, self.hp_km)
+        return float(semi_major_axis_km(self.ha_km, self.hp_km))
 
     @property
     def e(self) -> float:
-        return eccentricity(self.ha_km, self.hp_km)
+        return float(eccentricity(self.ha_km, self.hp_km))
 
     def with_heights(self, delta_ha_km: float, delta_hp_km: float) -> Elements:
         """Return these elements with apogee and perigee heights changed.

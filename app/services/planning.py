@@ -42,7 +42,9 @@ def to_orbit(orbit: OrbitIn, where: str) -> Orbit:
         return Orbit(orbit.name, elements=el)
     except PlannerError as exc:
         sub = "tle" if orbit.tle is not None else "elements"
-        loc: list[str | int] = [where, sub] + ([exc.field] if exc.field and exc.field != sub else [])
+        loc: list[str | int] = [where, sub]
+        if exc.field and exc.field != sub:
+            loc.append(exc.field)
         raise InputError(loc, str(exc)) from None
 
 

@@ -14,14 +14,12 @@ from app.services.planning import run_plan
 
 router = APIRouter(prefix="/plans", tags=["plans"])
 
-NOT_FOUND = {404: {"description": "no plan with this id belongs to the caller"}}
+NOT_FOUND: dict[int | str, dict[str, Any]] = {404: {"description": "no plan with this id belongs to the caller"}}
 
 
-def _utc(moment: datetime | None) -> datetime | None:
+def _utc(moment: datetime) -> datetime:
     """Return ``moment`` as aware UTC: SQLite hands back naive datetimes for UTC columns."""
-    if moment is None or moment.tzinfo is not None:
-        return moment
-    return moment.replace(tzinfo=UTC)
+    return moment if moment.tzinfo is not None else moment.replace(tzinfo=UTC)
 
 
 def _public(plan: Any) -> dict[str, Any]:
@@ -81,7 +79,7 @@ def list_plans(
             target_name=p.target_name,
             observer_name=p.observer_name,
             station_name=p.station_name,
-            t_access=_utc(p.t_access),
+            t_access=_utc(p.t_access) if p.t_access else None,
             miss_km=p.miss_km,
         )
         for p in rows
