@@ -1,0 +1,337 @@
+"""Labelled ISAR data sets: deterministic, sharded, hashed; and the ``simulate`` command.
+
+A data set directory holds ``shard-00000.npz`` ... and ``manifest.json``. Each shard
+has, per frame: ``image`` (float16, the normalised magnitude the networks read),
+``label`` (packed bits of the binary projection), ``angles_deg`` (z, y, x), ``snr_db``
+and ``seed``. The manifest records every parameter, each shard's sha256 and a
+content hash over them. Frame i's seed is derived from (seed, i) alone, so the data
+are the same whatever the number of workers. The set is written to ``DIR.partial``
+and renamed at the end: an interrupted run never leaves a set that looks complete.
+
+Runs with numpy and scipy only (``python -m inference.dataset ...``), so a bare GPU
+machine can make its own training data.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import math
+import os
+import shutil
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from inference.errors import DatasetError, InferenceError
+from inference.isar import Imager, Radar, check_fits, normalise_frame, simulate
+from inference.targets import TargetModel, load_model, tiangong_like
+
+FORMAT_VERSION = 1
+
+
+@dataclass(frozen=True, slots=True)
+class DatasetSpec:
+    """What to generate. Angles are uniform in [-max_angle_deg, max_angle_deg] on each axis."""
+
+    n: int
+    seed: int = 0
+    snr_min_db: float | None = -3.0
+    snr_max_db: float | None = 15.0
+    max_angle_deg: float = 45.0
+    shard_size: int = 250
+    n_train: int | None = None  # the paper's split is n_train=4000 of 5000
+    model_path: str | None = None
+    model_scale: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.n, int) or self.n <= 0:
+            raise DatasetError(f"n must be a positive integer, got {self.n}", field="n")
+        if self.n > 10_000_000:
+            raise DatasetError(f"n {self.n} is over the limit of 10,000,000", field="n")
+        if (self.snr_min_db is None) != (self.snr_max_db is None):
+            raise DatasetError("give both ends of the SNR range, or neither for noise-free frames", field="snr_db")
+        if self.snr_min_db is not None and self.snr_max_db is not None:
+            if not (math.isfinite(self.snr_min_db) and math.isfinite(self.snr_max_db)):
+                raise DatasetError("SNR range must be finite", field="snr_db")
+            if self.snr_min_db > self.snr_max_db:
+                raise DatasetError(
+                    f"SNR range {self.snr_min_db}:{self.snr_max_db} dB is inverted; write LOW:HIGH", field="snr_db"
+                )
+        if not 0.0 <= self.max_angle_deg <= 89.0:
+            raise DatasetError(f"max_angle_deg {self.max_angle_deg} is outside [0, 89]", field="max_angle_deg")
+        if self.shard_size <= 0:
+            raise DatasetError("shard_size must be positive", field="shard_size")
+        if self.n_train is not None and not 0 <= self.n_train <= self.n:
+            raise DatasetError(f"n_train {self.n_train} must be within [0, n={self.n}]", field="n_train")
+
+
+def frame_seed(seed: int, index: int) -> int:
+    """Return the seed of frame ``index``: a function of (seed, index) only."""
+    digest = hashlib.sha256(f"gsa-isar:{seed}:{index}".encode()).digest()
+    return int.from_bytes(digest[:8], "little") >> 1
+
+
+def frame_truth(spec: DatasetSpec, index: int) -> tuple[tuple[float, float, float], float | None, int]:
+    """Return the angles (z, y, x deg), SNR (dB or None) and seed of frame ``index``."""
+    s = frame_seed(spec.seed, index)
+    rng = np.random.default_rng(s)
+    angles = tuple(float(a) for a in rng.uniform(-spec.max_angle_deg, spec.max_angle_deg, 3))
+    snr = None
+    if spec.snr_min_db is not None and spec.snr_max_db is not None:
+        snr = float(rng.uniform(spec.snr_min_db, spec.snr_max_db))
+    return (angles[0], angles[1], angles[2]), snr, s
+
+
+def build_model(spec: DatasetSpec, radar: Radar) -> TargetModel:
+    model = tiangong_like() if spec.model_path is None else load_model(spec.model_path, spec.model_scale)
+    check_fits(model, radar)
+    return model
+
+
+def render_frames(
+    spec: DatasetSpec, radar: Radar, start: int, stop: int, model: TargetModel | None = None
+) -> dict[str, NDArray[Any]]:
+    """Simulate frames ``start``..``stop - 1`` of the set; return the arrays of one shard."""
+    model = model or build_model(spec, radar)
+    imager = Imager(radar)
+    n = stop - start
+    images = np.empty((n, radar.n_range, radar.n_azimuth), np.float16)
+    labels = np.empty((n, radar.n_range, radar.n_azimuth // 8), np.uint8)
+    angles = np.empty((n, 3), np.float32)
+    snrs = np.full(n, np.nan, np.float32)
+    seeds = np.empty(n, np.int64)
+    for k, index in enumerate(range(start, stop)):
+        ang, snr, s = frame_truth(spec, index)
+        frame = simulate(model, imager, ang, snr, s)
+        images[k] = normalise_frame(np.abs(frame.image))
+        labels[k] = np.packbits(frame.label, axis=1)
+        angles[k] = ang
+        snrs[k] = np.nan if snr is None else snr
+        seeds[k] = s
+    return {"image": images, "label": labels, "angles_deg": angles, "snr_db": snrs, "seed": seeds,
+            "index": np.arange(start, stop)}  # fmt: skip
+
+
+def _write_shard(args: tuple[DatasetSpec, Radar, int, int, str]) -> tuple[str, str, int]:
+    spec, radar, start, stop, path = args
+    arrays = render_frames(spec, radar, start, stop)
+    np.savez(path, **arrays)
+    return Path(path).name, sha256_file(path), stop - start
+
+
+def sha256_file(path: str | Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def generate(spec: DatasetSpec, out: str | Path, radar: Radar | None = None, workers: int | None = None,
+             progress: bool = True) -> dict[str, Any]:  # fmt: skip
+    """Generate the data set into ``out`` (which must not exist) and return its manifest."""
+    radar = radar or Radar()
+    out = Path(out)
+    if out.exists():
+        raise DatasetError(f"{out} already exists; choose a new directory", field="out")
+    model = build_model(spec, radar)  # fail on a bad model before any work
+    partial = out.with_name(out.name + ".partial")
+    if partial.exists():
+        shutil.rmtree(partial)
+    partial.mkdir(parents=True)
+    bounds = [(s, min(s + spec.shard_size, spec.n)) for s in range(0, spec.n, spec.shard_size)]
+    jobs = [(spec, radar, s, e, str(partial / f"shard-{k:05d}.npz")) for k, (s, e) in enumerate(bounds)]
+    workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
+    t0 = time.perf_counter()
+    done = 0
+    shards: list[dict[str, Any]] = []
+    try:
+        if workers == 1:
+            results = map(_write_shard, jobs)
+            for name, digest, count in results:
+                done += count
+                shards.append({"file": name, "sha256": digest, "frames": count})
+                _progress(progress, done, spec.n, t0)
+        else:
+            with ProcessPoolExecutor(workers) as pool:
+                for name, digest, count in pool.map(_write_shard, jobs):
+                    done += count
+                    shards.append({"file": name, "sha256": digest, "frames": count})
+                    _progress(progress, done, spec.n, t0)
+    except BaseException:
+        shutil.rmtree(partial, ignore_errors=True)
+        raise
+    elapsed = time.perf_counter() - t0
+    manifest = {
+        "format_version": FORMAT_VERSION,
+        "spec": asdict(spec),
+        "radar": asdict(radar),
+        "model": {"name": model.name, "description": model.description, "radius_m": model.radius_m,
+                  "scatterers": int(len(model.scatterers)), "mirror_planes": model.mirror_planes},
+        "frames": spec.n,
+        "split": {"train": [0, spec.n_train], "test": [spec.n_train, spec.n]} if spec.n_train is not None else None,
+        "normalisation": "inference.isar.normalise_frame (40 dB below the 99.5th percentile)",
+        "shards": shards,
+        "content_sha256": hashlib.sha256("".join(s["sha256"] for s in shards).encode()).hexdigest(),
+        "generated_in_s": round(elapsed, 2),
+        "frames_per_s": round(spec.n / elapsed, 1),
+        "workers": workers,
+    }  # fmt: skip
+    (partial / "manifest.json").write_text(json.dumps(manifest, indent=2))
+    partial.rename(out)
+    return manifest
+
+
+def _progress(show: bool, done: int, total: int, t0: float) -> None:
+    if not show:
+        return
+    rate = done / max(time.perf_counter() - t0, 1e-9)
+    eta = (total - done) / rate if rate > 0 else float("nan")
+    print(f"simulate: {done}/{total} frames, {rate:.0f} frames/s, {eta:.0f} s left", file=sys.stderr, flush=True)
+
+
+def load_manifest(data_dir: str | Path, verify: bool = True) -> dict[str, Any]:
+    """Read a data set's manifest; with ``verify``, check every shard exists and matches its sha256.
+
+    Raises DatasetError naming the problem before any work is done.
+    """
+    d = Path(data_dir)
+    path = d / "manifest.json"
+    if not path.is_file():
+        raise DatasetError(f"{d} has no manifest.json: not a data set (make one with `gsa simulate`)", field="data")
+    try:
+        manifest: dict[str, Any] = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise DatasetError(f"{path} is not valid JSON: {exc.msg}", field="data") from None
+    if manifest.get("format_version") != FORMAT_VERSION or not manifest.get("shards"):
+        raise DatasetError(f"{path} is not a version-{FORMAT_VERSION} manifest with shards", field="data")
+    if verify:
+        for shard in manifest["shards"]:
+            f = d / shard["file"]
+            if not f.is_file():
+                raise DatasetError(f"shard {f} listed in the manifest is missing", field="data")
+            if sha256_file(f) != shard["sha256"]:
+                raise DatasetError(f"shard {f} does not match its sha256 in the manifest", field="data")
+    return manifest
+
+
+def load_arrays(data_dir: str | Path, verify: bool = True) -> dict[str, NDArray[Any]]:
+    """Load a whole data set into memory (labels unpacked to bool)."""
+    d = Path(data_dir)
+    manifest = load_manifest(d, verify)
+    parts: dict[str, list[NDArray[Any]]] = {}
+    for shard in manifest["shards"]:
+        with np.load(d / shard["file"]) as z:
+            for key in z.files:
+                parts.setdefault(key, []).append(z[key])
+    out = {k: np.concatenate(v) for k, v in parts.items()}
+    out["label"] = np.unpackbits(out["label"], axis=2).astype(bool)
+    return out
+
+
+def preview(spec: DatasetSpec, path: str | Path, radar: Radar | None = None, count: int = 6) -> None:
+    """Draw ``count`` frames of the set beside their labels (like the paper's Figure 9) to a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    radar = radar or Radar()
+    arrays = render_frames(spec, radar, 0, min(count, spec.n))
+    n = len(arrays["index"])
+    fig, axes = plt.subplots(2, n, figsize=(2.6 * n, 5.6), squeeze=False)
+    extent = [-radar.extent_m[1] / 2, radar.extent_m[1] / 2, radar.extent_m[0] / 2, -radar.extent_m[0] / 2]
+    for k in range(n):
+        z, y, x = arrays["angles_deg"][k]
+        snr = arrays["snr_db"][k]
+        axes[0, k].imshow(arrays["image"][k].astype(np.float32), cmap="gray", extent=extent, vmin=0, vmax=1)
+        axes[0, k].set_title(f"z {z:.0f} y {y:.0f} x {x:.0f}\n" + ("noise-free" if np.isnan(snr) else f"{snr:.1f} dB"),
+                             fontsize=8)  # fmt: skip
+        axes[1, k].imshow(np.unpackbits(arrays["label"][k], axis=1), cmap="gray", extent=extent)
+        for ax in axes[:, k]:
+            ax.set_xlabel("cross-range (m)", fontsize=7)
+            ax.tick_params(labelsize=6)
+    axes[0, 0].set_ylabel("ISAR frame\nrange (m)", fontsize=8)
+    axes[1, 0].set_ylabel("label\nrange (m)", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def parse_snr(text: str) -> tuple[float | None, float | None]:
+    """Parse 'LOW:HIGH' (dB), a single value, or 'none'."""
+    if text.strip().lower() == "none":
+        return None, None
+    try:
+        if ":" in text:
+            lo, hi = (float(x) for x in text.split(":", 1))
+        else:
+            lo = hi = float(text)
+    except ValueError:
+        raise DatasetError(f"--snr-db {text!r}: write LOW:HIGH in dB, e.g. -3:15, or 'none'", field="snr_db") from None
+    return lo, hi
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--n", type=int, default=5000, help="number of frames (default 5000)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--snr-db", default="-3:15", help="SNR range LOW:HIGH in dB, or 'none' (default -3:15)")
+    p.add_argument("--max-angle-deg", type=float, default=45.0)
+    p.add_argument("--split", action="store_true", help="the paper's split: first 80%% train, last 20%% test")
+    p.add_argument("--shard-size", type=int, default=250)
+    p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    p.add_argument("--model", help="an OBJ or PLY target model (default: the built-in Tiangong-like station)")
+    p.add_argument(
+        "--model-scale", type=float, default=1.0, help="multiply the model's coordinates (e.g. 0.001 for mm)"
+    )
+    p.add_argument("--bandwidth-hz", type=float, default=1.6e9)
+    p.add_argument("--carrier-hz", type=float, default=15e9)
+    p.add_argument("--n-range", type=int, default=256)
+    p.add_argument("--n-azimuth", type=int, default=256)
+    p.add_argument("--aperture-deg", type=float, default=5.1)
+    p.add_argument("--out", help="new directory for the data set")
+    p.add_argument("--preview", metavar="PNG", help="draw a few frames beside their labels instead")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the simulate command from parsed arguments; raises InferenceError on bad input."""
+    lo, hi = parse_snr(args.snr_db)
+    n_train = int(round(0.8 * args.n)) if args.split else None
+    spec = DatasetSpec(
+        args.n, args.seed, lo, hi, args.max_angle_deg, args.shard_size, n_train, args.model, args.model_scale
+    )
+    radar = Radar(args.carrier_hz, args.bandwidth_hz, args.n_range, args.n_azimuth, args.aperture_deg)
+    if args.preview:
+        build_model(spec, radar)
+        preview(spec, args.preview, radar)
+        print(f"preview written to {args.preview}")
+        return 0
+    if not args.out:
+        raise DatasetError("give --out DIR for the data set (or --preview PNG)", field="out")
+    m = generate(spec, args.out, radar, args.workers)
+    print(
+        f"{m['frames']} frames in {args.out} ({m['frames_per_s']} frames/s, content sha256 {m['content_sha256'][:16]})"
+    )
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m inference.dataset", description="simulate a labelled ISAR data set")
+    add_arguments(p)
+    try:
+        return run(p.parse_args(argv))
+    except InferenceError as exc:
+        print(f"simulate: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
