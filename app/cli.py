@@ -204,6 +204,16 @@ def format_plan(r: dict[str, Any]) -> str:
     return "\n".join(out)
 
 
+def cmd_simulate(args: argparse.Namespace) -> int:
+    from inference.dataset import run
+    from inference.errors import InferenceError
+
+    try:
+        return run(args)
+    except InferenceError as exc:
+        raise CliError(str(exc)) from None
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="gsa", description="GSA-ISAR: GSA scene planning and ISAR attitude estimation")
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -233,6 +243,11 @@ def build_parser() -> argparse.ArgumentParser:
     ac.add_argument("file")
     ac.add_argument("--json", action="store_true")
     ac.set_defaults(func=cmd_access)
+    sim = sub.add_parser("simulate", help="simulate a labelled ISAR data set (or --preview a few frames)")
+    from inference.dataset import add_arguments
+
+    add_arguments(sim)
+    sim.set_defaults(func=cmd_simulate)
     return p
 
 

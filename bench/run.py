@@ -184,6 +184,10 @@ def main() -> None:
         f"| skyfield `find_events` | {acc['skyfield_s'] * 1000:.1f} ms | up to {acc['skyfield_err_s']:.3f} s from ours |",
         "",
     ]
+    print("isar: simulation speed ...", flush=True)
+    from bench.isar import bench_isar
+
+    lines += bench_isar()
     Path("BENCHMARKS.md").write_text("\n".join(lines))
     print("\n".join(lines))
 

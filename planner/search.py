@@ -100,7 +100,9 @@ def _find_roots_core(f: TimeFunction, t_s: Vec, values: Vec, tol_s: float) -> tu
     return roots, ~positive[idx]
 
 
-def find_roots(f: TimeFunction, t0_s: float, t1_s: float, step_s: float, tol_s: float = 1e-4) -> tuple[Vec, NDArray[np.bool_]]:
+def find_roots(
+    f: TimeFunction, t0_s: float, t1_s: float, step_s: float, tol_s: float = 1e-4
+) -> tuple[Vec, NDArray[np.bool_]]:
     """Return the times where ``f`` changes sign in ``[t0_s, t1_s]`` and the direction of each.
 
     >>> t, rising = find_roots(np.sin, 0.5, 10.0, 0.5, tol_s=1e-9)

@@ -195,7 +195,9 @@ def test_model_files(tmp_path):
     box = load_model(obj)
     assert len(box.scatterers) > 50 and np.abs(box.surface).max() <= 1.05
     ply = tmp_path / "pts.ply"
-    ply.write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n1 0 0\n0 1 0\n")
+    ply.write_text(
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n1 0 0\n0 1 0\n"
+    )
     assert len(load_model(ply).surface) == 3
     with pytest.raises(ModelFileError, match="does not exist"):
         load_model(tmp_path / "missing.obj")

@@ -1,0 +1,109 @@
+"""Data set generation: determinism whatever the workers, manifests, bad input, and the command line."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from inference.dataset import DatasetSpec, frame_truth, generate, load_arrays, load_manifest, parse_snr
+from inference.errors import DatasetError
+from inference.isar import Radar
+
+SMALL = Radar(n_range=64, n_azimuth=64, bandwidth_hz=0.4e9, aperture_deg=5.1 / 4)  # 24 m x 29 m at 64 x 64
+
+
+def test_same_data_whatever_the_workers(tmp_path):
+    spec = DatasetSpec(n=6, seed=7, shard_size=2, n_train=4)
+    one = generate(spec, tmp_path / "one", SMALL, workers=1, progress=False)
+    two = generate(spec, tmp_path / "two", SMALL, workers=2, progress=False)
+    assert one["content_sha256"] == two["content_sha256"]
+    assert one["split"] == {"train": [0, 4], "test": [4, 6]}
+    other = generate(DatasetSpec(n=6, seed=8, shard_size=2), tmp_path / "three", SMALL, workers=1, progress=False)
+    assert other["content_sha256"] != one["content_sha256"]
+    data = load_arrays(tmp_path / "one")
+    assert data["image"].shape == (6, 64, 64) and data["label"].shape == (6, 64, 64)
+    assert data["label"].dtype == bool and data["label"].any()
+    assert 0.0 <= float(data["image"].min()) and float(data["image"].max()) <= 1.0
+    # Each frame's truth is a function of (seed, index) alone.
+    angles, snr, seed = frame_truth(spec, 5)
+    np.testing.assert_allclose(data["angles_deg"][5], angles, rtol=1e-6)
+    assert data["snr_db"][5] == pytest.approx(snr, rel=1e-6) and data["seed"][5] == seed
+    assert np.all(np.abs(data["angles_deg"]) <= 45.0)
+    assert np.all((data["snr_db"] >= -3.0) & (data["snr_db"] <= 15.0))
+
+
+def test_manifest_catches_tampering(tmp_path):
+    generate(DatasetSpec(n=2, shard_size=1), tmp_path / "d", SMALL, workers=1, progress=False)
+    assert load_manifest(tmp_path / "d")["frames"] == 2
+    shard = tmp_path / "d" / "shard-00001.npz"
+    shard.write_bytes(shard.read_bytes()[:-10])
+    with pytest.raises(DatasetError, match="does not match its sha256"):
+        load_manifest(tmp_path / "d")
+    shard.unlink()
+    with pytest.raises(DatasetError, match="missing"):
+        load_manifest(tmp_path / "d")
+    with pytest.raises(DatasetError, match="no manifest"):
+        load_manifest(tmp_path)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [({"n": 0}, "n"), ({"n": -5}, "n"), ({"n": 3, "snr_min_db": 10.0, "snr_max_db": 0.0}, "snr_db"),
+     ({"n": 3, "n_train": 4}, "n_train"), ({"n": 3, "max_angle_deg": 95.0}, "max_angle_deg")],
+)  # fmt: skip
+def test_bad_specs(kwargs, field):
+    with pytest.raises(DatasetError) as err:
+        DatasetSpec(**kwargs)
+    assert err.value.field == field
+
+
+def test_parse_snr():
+    assert parse_snr("-3:15") == (-3.0, 15.0)
+    assert parse_snr("5") == (5.0, 5.0)
+    assert parse_snr("none") == (None, None)
+    with pytest.raises(DatasetError):
+        parse_snr("loud")
+
+
+def _simulate(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "app.cli", "simulate", *args], capture_output=True, text=True, cwd=cwd)
+
+
+def test_simulate_command(tmp_path):
+    out = _simulate("--n", "4", "--seed", "1", "--snr-db", "0:10", "--shard-size", "2", "--n-range", "64",
+                    "--n-azimuth", "64", "--bandwidth-hz", "0.4e9", "--aperture-deg", "1.275", "--split",
+                    "--workers", "1", "--out", str(tmp_path / "set"), cwd=tmp_path)  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    assert "4/4 frames" in out.stderr
+    manifest = json.loads((tmp_path / "set" / "manifest.json").read_text())
+    assert manifest["frames"] == 4 and manifest["split"]["train"] == [0, 3]
+    prev = _simulate("--preview", str(tmp_path / "p.png"), "--n", "3", "--n-range", "64", "--n-azimuth", "64",
+                     "--bandwidth-hz", "0.4e9", "--aperture-deg", "1.275", cwd=tmp_path)  # fmt: skip
+    assert prev.returncode == 0 and (tmp_path / "p.png").stat().st_size > 5000
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--n", "0"], "positive integer"),
+        (["--n", "3", "--snr-db", "15:-3"], "inverted"),
+        (["--n", "3", "--bandwidth-hz", "0"], "bandwidth_hz"),
+        (["--n", "3", "--n-range", "0"], "n_range"),
+        (["--n", "3", "--model", "missing.obj"], "does not exist"),
+    ],
+)
+def test_simulate_bad_input_is_one_line_and_leaves_nothing(tmp_path, args, message):
+    out = _simulate(*args, "--out", str(tmp_path / "set"), cwd=tmp_path)
+    assert out.returncode == 2
+    assert out.stderr.count("\n") == 1 and message in out.stderr
+    assert not (tmp_path / "set").exists() and not (tmp_path / "set.partial").exists()
+
+
+def test_model_far_larger_than_the_frame(tmp_path):
+    obj = tmp_path / "big.obj"
+    obj.write_text("v -20 0 0\nv 20 0 0\nv 0 20 0\nf 1 2 3\n")
+    out = _simulate("--n", "2", "--model", str(obj), "--out", str(tmp_path / "set"), cwd=tmp_path)
+    assert out.returncode == 2 and "frame is only" in out.stderr
+    assert not (tmp_path / "set").exists()
