@@ -252,12 +252,12 @@ def polar_echo_direct(
     scatterer, every frequency, every aspect.
     """
     nr, na = radar.n_range, radar.n_azimuth
-    f = radar.carrier_hz + radar.bandwidth_hz / nr * np.arange(-nr // 2, nr // 2)
-    b = math.radians(radar.aperture_deg) / na * np.arange(-na // 2, na // 2)
+    f: Vec = radar.carrier_hz + radar.bandwidth_hz / nr * np.arange(-nr // 2, nr // 2, dtype=np.float64)
+    b: Vec = math.radians(radar.aperture_deg) / na * np.arange(-na // 2, na // 2, dtype=np.float64)
     los, _ = line_of_sight(math.radians(radar.pitch_deg), b)  # (3, na)
     ranges = points_obs @ los  # (K, na)
     k = 4.0 * math.pi * f / C_M_S  # (nr,)
-    echo = np.zeros((nr, na), complex)
+    echo = np.zeros((nr, na), np.complex128)
     for j in range(na):
         echo[:, j] = np.exp(-1j * np.outer(k, ranges[:, j])) @ amplitudes
     return echo, f, b

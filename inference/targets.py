@@ -278,9 +278,9 @@ def _read_ply(path: Path) -> tuple[Vec, NDArray[np.int64]]:
             for _ in range(count):
                 n = int(np.frombuffer(body, ct, 1, offset)[0])
                 offset += ct.itemsize
-                idx = np.frombuffer(body, it, n, offset).astype(np.int64)
+                poly = np.frombuffer(body, it, n, offset).astype(np.int64).tolist()
                 offset += it.itemsize * n
-                rows += [[idx[0], idx[j], idx[j + 1]] for j in range(1, n - 1)]
+                rows += [[poly[0], poly[j], poly[j + 1]] for j in range(1, n - 1)]
             faces = np.array(rows, np.int64).reshape(-1, 3)
         else:
             raise ModelFileError(f"{path}: binary PLY element {name!r} is not supported", field="model")
