@@ -214,6 +214,46 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from None
 
 
+def cmd_train(args: argparse.Namespace) -> int:
+    from inference.errors import InferenceError
+    from inference.train import run
+
+    try:
+        return run(args)
+    except InferenceError as exc:
+        raise CliError(str(exc)) from None
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from inference.errors import InferenceError
+    from inference.export import export
+    from inference.runtime import DEFAULT_MODEL_DIR
+
+    try:
+        card = export(args.run, args.out or DEFAULT_MODEL_DIR)
+    except InferenceError as exc:
+        raise CliError(str(exc)) from None
+    for role, f in card["files"].items():
+        print(
+            f"{role}: {f['file']} {f['bytes'] / 1e6:.1f} MB sha256 {f['sha256'][:16]} parity {f['parity_max_rel_diff']:.1e}"
+        )
+    return 0
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from inference.errors import InferenceError
+    from inference.evaluate import evaluate, table
+    from inference.runtime import DEFAULT_MODEL_DIR
+
+    try:
+        res = evaluate(args.models or DEFAULT_MODEL_DIR, args.data, args.n_snr, out_dir=args.out)
+    except InferenceError as exc:
+        raise CliError(str(exc)) from None
+    print(table(res))
+    print(f"written to {args.out}/results.json, results.md and errors.png")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="gsa", description="GSA-ISAR: GSA scene planning and ISAR attitude estimation")
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -248,6 +288,21 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_arguments(sim)
     sim.set_defaults(func=cmd_simulate)
+    tr = sub.add_parser("train", help="train UNet++ and Swin on a simulated data set")
+    from inference.train import add_arguments as train_arguments
+
+    train_arguments(tr)
+    tr.set_defaults(func=cmd_train)
+    ex = sub.add_parser("export", help="export a training run to ONNX with a model card")
+    ex.add_argument("--run", required=True, help="training run directory")
+    ex.add_argument("--out", help="output directory (default: the package's shipped models)")
+    ex.set_defaults(func=cmd_export)
+    ev = sub.add_parser("evaluate", help="the paper's Tables 4 and 7 for the ONNX models")
+    ev.add_argument("--models", help="directory with model_card.json (default: the shipped models)")
+    ev.add_argument("--data", help="data set whose test split gives the 'with enhancement' row")
+    ev.add_argument("--n-snr", type=int, default=1000)
+    ev.add_argument("--out", default="results")
+    ev.set_defaults(func=cmd_evaluate)
     return p
 
 

@@ -1,0 +1,148 @@
+"""Evaluate the exported models on the paper's protocol: Table 4 and Table 7, plus geodesic errors.
+
+Runs the ONNX models (what the service runs) on a data set's test split and on fresh
+test sets simulated at 0, 5 and 10 dB, prints the tables beside the paper's figures,
+writes ``results.json`` and ``results.md``, and draws error histograms.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from inference.dataset import DatasetSpec, load_arrays, load_manifest, render_frames
+from inference.errors import InferenceError
+from inference.isar import Radar, rotation_matrix
+from inference.runtime import Estimator
+
+PAPER = {
+    "without enhancement": (1.387, 1.223, 1.797),
+    "with enhancement": (0.730, 0.705, 0.958),
+    "0 dB": (0.618, 0.833, 0.876),
+    "5 dB": (0.619, 0.805, 0.815),
+    "10 dB": (0.616, 0.805, 0.805),
+}
+
+
+def geodesic_deg(pred: NDArray[np.floating], true: NDArray[np.floating]) -> NDArray[np.float64]:
+    """Return the rotation angle (deg) between predicted and true attitudes, Euler z, y, x in degrees [N, 3]."""
+    out = np.empty(len(pred))
+    for k, (p, t) in enumerate(zip(pred, true, strict=True)):
+        r = rotation_matrix(*p).T @ rotation_matrix(*t)
+        out[k] = math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(r) - 1.0) / 2.0))))
+    return out
+
+
+def summarise(pred: NDArray[np.floating], true: NDArray[np.floating]) -> dict[str, Any]:
+    err = pred - true
+    geo = geodesic_deg(pred, true)
+    return {
+        "n": int(len(true)),
+        "mae_deg": np.abs(err).mean(axis=0).round(4).tolist(),
+        "geodesic_mean_deg": round(float(geo.mean()), 4),
+        "geodesic_p95_deg": round(float(np.percentile(geo, 95)), 4),
+    }
+
+
+def evaluate(
+    model_dir: str | Path, data_dir: str | Path | None = None, n_snr: int = 1000, seed: int = 10_000,
+    out_dir: str | Path = "results", radar: Radar | None = None, progress: bool = True,
+) -> dict[str, Any]:  # fmt: skip
+    """Evaluate the ONNX models in ``model_dir``; return and write the results."""
+    est = Estimator.load(model_dir)
+    manifest = load_manifest(data_dir) if data_dir is not None else None
+    # The SNR test sets use the data set's radar (or Table 3's).
+    radar = radar or (Radar(**manifest["radar"]) if manifest else Radar())
+    results: dict[str, Any] = {"model": est.identity, "paper_mae_deg": PAPER, "rows": {}}
+    errors: dict[str, NDArray[np.float64]] = {}
+
+    def run(name: str, images: NDArray[Any], angles: NDArray[Any]) -> None:
+        pred = np.concatenate(
+            [est.estimate(images[k : k + 16].astype(np.float32)).angles_deg for k in range(0, len(images), 16)]
+        )
+        results["rows"][name] = summarise(pred, angles)
+        errors[name] = pred - angles
+        if progress:
+            r = results["rows"][name]
+            print(
+                f"evaluate: {name}: MAE z/y/x {r['mae_deg']} deg, geodesic p95 {r['geodesic_p95_deg']} deg",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    if data_dir is not None and manifest is not None:
+        data = load_arrays(data_dir, verify=False)
+        split = manifest.get("split")
+        lo, hi = split["test"] if split else (int(0.8 * len(data["image"])), len(data["image"]))
+        run("with enhancement", data["image"][lo:hi], data["angles_deg"][lo:hi])
+    for snr in (0.0, 5.0, 10.0):
+        spec = DatasetSpec(n=n_snr, seed=seed + int(snr), snr_min_db=snr, snr_max_db=snr)
+        arrays = render_frames(spec, radar, 0, n_snr)
+        run(f"{snr:g} dB", arrays["image"], arrays["angles_deg"])
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "results.json").write_text(json.dumps(results, indent=2))
+    (out / "results.md").write_text(table(results))
+    plot_errors(errors, out / "errors.png")
+    return results
+
+
+def table(results: dict[str, Any]) -> str:
+    lines = [
+        "| setting | ours z / y / x (deg) | paper z / y / x (deg) | geodesic mean / p95 (deg) |",
+        "|---|---|---|---|",
+    ]
+    for name, row in results["rows"].items():
+        paper = PAPER.get(name)
+        ours = " / ".join(f"{v:.3f}" for v in row["mae_deg"])
+        theirs = " / ".join(f"{v:.3f}" for v in paper) if paper else "-"
+        lines.append(
+            f"| {name} (n={row['n']}) | {ours} | {theirs} | {row['geodesic_mean_deg']:.3f} / {row['geodesic_p95_deg']:.3f} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def plot_errors(errors: dict[str, NDArray[np.float64]], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
+    for k, axis in enumerate("zyx"):
+        for name, err in errors.items():
+            axes[k].hist(err[:, k], bins=60, histtype="step", label=name)
+        axes[k].set(xlabel=f"{axis} error (deg)", ylabel="frames")
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m inference.evaluate")
+    p.add_argument("--models", default=None, help="directory with model_card.json (default: the shipped models)")
+    p.add_argument("--data", help="data set whose test split gives Table 4's row")
+    p.add_argument("--n-snr", type=int, default=1000, help="frames per SNR for Table 7 (default 1000)")
+    p.add_argument("--out", default="results")
+    args = p.parse_args(argv)
+    try:
+        from inference.runtime import DEFAULT_MODEL_DIR
+
+        res = evaluate(args.models or DEFAULT_MODEL_DIR, args.data, args.n_snr, out_dir=args.out)
+    except InferenceError as exc:
+        print(f"evaluate: error: {exc}", file=sys.stderr)
+        return 2
+    print(table(res))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

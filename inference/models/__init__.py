@@ -1,0 +1,1 @@
+"""The networks: UNet++ (frame enhancement) and a Swin transformer (attitude regression)."""

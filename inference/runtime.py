@@ -1,0 +1,142 @@
+"""Serve the exported models with ONNX Runtime. Imports onnxruntime and numpy only (never torch).
+
+``Estimator.load(model_dir)`` reads ``model_card.json``, checks every ONNX file
+against its sha256 (a missing, truncated or altered file raises ModelFileError
+naming it), and opens one session per network with tuned options: full graph
+optimisation, a fixed intra-op thread count, sequential execution.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from inference.errors import ModelFileError
+
+DEFAULT_MODEL_DIR = Path(__file__).resolve().parent / "models" / "shipped"
+
+
+def sha256_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def read_card(model_dir: str | Path) -> dict[str, Any]:
+    """Read and check a model card and the files it lists; raise ModelFileError naming any bad file."""
+    d = Path(model_dir)
+    card_path = d / "model_card.json"
+    if not card_path.is_file():
+        raise ModelFileError(f"model card {card_path} is missing", field="model")
+    try:
+        card: dict[str, Any] = json.loads(card_path.read_text())
+    except json.JSONDecodeError as exc:
+        raise ModelFileError(f"model card {card_path} is not JSON: {exc.msg}", field="model") from None
+    for role in ("unetpp", "swin"):
+        entry = card.get("files", {}).get(role)
+        if not entry:
+            raise ModelFileError(f"model card {card_path} lists no {role} file", field="model")
+        f = d / entry["file"]
+        if not f.is_file():
+            raise ModelFileError(f"model file {f} is missing", field="model")
+        if sha256_file(f) != entry["sha256"]:
+            raise ModelFileError(
+                f"model file {f} does not match the sha256 in its card (truncated or altered)", field="model"
+            )
+    return card
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Attitudes for a batch: Euler z, y, x (deg), enhanced frames, and seconds per stage."""
+
+    angles_deg: NDArray[np.float32]
+    enhanced: NDArray[np.float32]
+    timings_s: dict[str, float]
+
+
+class Estimator:
+    """UNet++ then Swin in ONNX Runtime."""
+
+    def __init__(self, model_dir: Path, card: dict[str, Any], sessions: dict[str, Any]) -> None:
+        self.model_dir = model_dir
+        self.card = card
+        self._sessions = sessions
+        self.angle_scale_deg = float(card.get("angle_scale_deg", 45.0))
+        self.img_size = int(card["config"]["img_size"])
+
+    @classmethod
+    def load(cls, model_dir: str | Path = DEFAULT_MODEL_DIR, threads: int | None = None) -> Estimator:
+        import os
+
+        import onnxruntime as ort
+
+        d = Path(model_dir)
+        card = read_card(d)
+        opts = ort.SessionOptions()
+        opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+        opts.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+        opts.intra_op_num_threads = threads or os.cpu_count() or 1
+        opts.inter_op_num_threads = 1
+        sessions = {}
+        for role in ("unetpp", "swin"):
+            path = d / card["files"][role]["file"]
+            try:
+                sessions[role] = ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
+            except Exception as exc:  # onnxruntime raises its own exception types
+                raise ModelFileError(f"model file {path} cannot be loaded: {exc}", field="model") from None
+        return cls(d, card, sessions)
+
+    @property
+    def identity(self) -> dict[str, Any]:
+        return {
+            "name": self.card.get("name"),
+            "config": self.card["config"]["name"],
+            "unetpp_sha256": self.card["files"]["unetpp"]["sha256"],
+            "swin_sha256": self.card["files"]["swin"]["sha256"],
+        }
+
+    def enhance(self, frames: NDArray[np.float32]) -> NDArray[np.float32]:
+        """Run UNet++ on normalised frames [N, H, W]; return enhanced frames [N, H, W]."""
+        out = self._sessions["unetpp"].run(None, {"frame": frames[:, None].astype(np.float32)})[0]
+        return np.asarray(out[:, 0], np.float32)
+
+    def attitude(self, frames: NDArray[np.float32]) -> NDArray[np.float32]:
+        """Run Swin on (enhanced) frames [N, H, W]; return Euler z, y, x in degrees [N, 3]."""
+        out = self._sessions["swin"].run(None, {"frame": frames[:, None].astype(np.float32)})[0]
+        return np.asarray(out * self.angle_scale_deg, np.float32)
+
+    def estimate(self, frames: NDArray[np.float32]) -> Estimate:
+        """Estimate attitudes of normalised frames [N, H, W] (``inference.isar.normalise_frame`` output)."""
+        t0 = time.perf_counter()
+        enhanced = self.enhance(frames)
+        t1 = time.perf_counter()
+        angles = self.attitude(enhanced)
+        t2 = time.perf_counter()
+        return Estimate(angles, enhanced, {"unetpp": t1 - t0, "swin": t2 - t1})
+
+
+def euler_to_quaternion(z_deg: float, y_deg: float, x_deg: float) -> tuple[float, float, float, float]:
+    """Return the unit quaternion (w, x, y, z) of R = Rz(z) Ry(y) Rx(x).
+
+    >>> [round(q, 6) for q in euler_to_quaternion(90.0, 0.0, 0.0)]
+    [0.707107, 0.0, 0.0, 0.707107]
+    """
+    hz, hy, hx = (math.radians(a) / 2.0 for a in (z_deg, y_deg, x_deg))
+    cz, sz, cy, sy, cx, sx = math.cos(hz), math.sin(hz), math.cos(hy), math.sin(hy), math.cos(hx), math.sin(hx)
+    return (
+        cz * cy * cx + sz * sy * sx,
+        cz * cy * sx - sz * sy * cx,
+        cz * sy * cx + sz * cy * sx,
+        sz * cy * cx - cz * sy * sx,
+    )

@@ -1,0 +1,312 @@
+"""Train UNet++ and Swin on a simulated data set (Hou et al. 2023 section 4.3.3).
+
+The paper's protocol: Adam, lr 2e-4 decayed x0.98 each epoch, batch 32, 100
+epochs; per batch the UNet++ forward and its loss, Swin on the enhanced frames and
+its loss, update Swin, update UNet++ (``mode="joint"``). ``mode="two-stage"`` trains
+UNet++ first and then Swin on its frozen output; ``enhance=False`` trains Swin on
+raw frames (the paper's "without enhancement" row). Angles are regressed scaled by
+``ANGLE_SCALE_DEG`` to [-1, 1].
+
+Needs numpy, scipy and torch only. Resumable (``checkpoint.pt`` each epoch), seeded,
+bf16 autocast on a GPU, and it stops cleanly after the epoch in which
+``max_minutes`` runs out, so long runs fit in short commands.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import platform
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from inference.dataset import load_arrays, load_manifest
+from inference.errors import DatasetError, InferenceError
+from inference.models.build import ModelConfig, build_models, get_config
+from inference.models.swin import angle_loss
+from inference.models.unetpp import relative_frobenius_loss
+
+ANGLE_SCALE_DEG = 45.0
+
+
+def split_indices(manifest: dict[str, Any], n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return train and test indices: the manifest's split, or the last 20 % as test."""
+    split = manifest.get("split")
+    if split:
+        return np.arange(*split["train"]), np.arange(*split["test"])
+    cut = int(round(0.8 * n))
+    return np.arange(cut), np.arange(cut, n)
+
+
+def _device(name: str | None) -> torch.device:
+    if name:
+        return torch.device(name)
+    return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+
+
+def _batches(idx: np.ndarray, batch: int, rng: np.random.Generator | None) -> list[np.ndarray]:
+    order = rng.permutation(idx) if rng is not None else idx
+    return [order[k : k + batch] for k in range(0, len(order), batch)]
+
+
+def _tensors(data: dict[str, np.ndarray], sel: np.ndarray, device: torch.device) -> tuple[torch.Tensor, ...]:
+    x = torch.from_numpy(data["image"][sel].astype(np.float32)).unsqueeze(1).to(device)
+    y = torch.from_numpy(data["label"][sel].astype(np.float32)).unsqueeze(1).to(device)
+    a = torch.from_numpy(data["angles_deg"][sel].astype(np.float32) / ANGLE_SCALE_DEG).to(device)
+    return x, y, a
+
+
+@torch.no_grad()
+def predict(
+    unet: torch.nn.Module | None, swin: torch.nn.Module, images: np.ndarray, device: torch.device, batch: int = 32
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Return angles in degrees [N, 3] (and enhanced frames [N, H, W] when ``unet`` is given)."""
+    unet_was, swin_was = (unet.training if unet else False), swin.training
+    if unet:
+        unet.eval()
+    swin.eval()
+    angles, enhanced = [], []
+    for k in range(0, len(images), batch):
+        x = torch.from_numpy(images[k : k + batch].astype(np.float32)).unsqueeze(1).to(device)
+        if unet is not None:
+            x = unet(x)
+            enhanced.append(x[:, 0].float().cpu().numpy())
+        angles.append(swin(x).float().cpu().numpy() * ANGLE_SCALE_DEG)
+    if unet:
+        unet.train(unet_was)
+    swin.train(swin_was)
+    return np.concatenate(angles), (np.concatenate(enhanced) if enhanced else None)
+
+
+def train(
+    data_dir: str | Path,
+    out_dir: str | Path,
+    config: str | ModelConfig = "smoke",
+    epochs: int | None = None,
+    batch_size: int | None = None,
+    lr: float | None = None,
+    mode: str = "joint",
+    enhance: bool = True,
+    seed: int = 0,
+    device: str | None = None,
+    resume: bool = False,
+    max_minutes: float | None = None,
+    max_train_frames: int | None = None,
+    log_every: int = 20,
+    compile_models: bool = False,
+) -> dict[str, Any]:
+    """Train both networks (or Swin alone with ``enhance=False``) and return the training record."""
+    cfg = config if isinstance(config, ModelConfig) else get_config(config, epochs=epochs, batch_size=batch_size, lr=lr)
+    if mode not in ("joint", "two-stage"):
+        raise InferenceError(f"mode {mode!r} must be 'joint' or 'two-stage'", field="mode")
+    manifest = load_manifest(data_dir, verify=True)  # fails before any work on a bad data set
+    data = load_arrays(data_dir, verify=False)
+    n, h, w = data["image"].shape
+    if (h, w) != (cfg.img_size, cfg.img_size):
+        raise DatasetError(
+            f"frames are {h}x{w} but config {cfg.name!r} takes {cfg.img_size}x{cfg.img_size}", field="data"
+        )
+    train_idx, test_idx = split_indices(manifest, n)
+    if max_train_frames:
+        train_idx = train_idx[:max_train_frames]
+    if len(train_idx) == 0:
+        raise DatasetError(f"{data_dir} has no training frames", field="data")
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    torch.manual_seed(seed)
+    dev = _device(device)
+    unet, swin = build_models(cfg)
+    unet.to(dev)
+    swin.to(dev)
+    opt_u = torch.optim.Adam(unet.parameters(), lr=cfg.lr)
+    opt_s = torch.optim.Adam(swin.parameters(), lr=cfg.lr)
+    sch_u = torch.optim.lr_scheduler.ExponentialLR(opt_u, cfg.lr_decay)
+    sch_s = torch.optim.lr_scheduler.ExponentialLR(opt_s, cfg.lr_decay)
+    history: list[dict[str, float]] = []
+    start_epoch = 0
+    ckpt_path = out / "checkpoint.pt"
+    if resume and ckpt_path.exists():
+        ck = torch.load(ckpt_path, map_location=dev, weights_only=False)
+        unet.load_state_dict(ck["unet"])
+        swin.load_state_dict(ck["swin"])
+        opt_u.load_state_dict(ck["opt_u"])
+        opt_s.load_state_dict(ck["opt_s"])
+        sch_u.load_state_dict(ck["sch_u"])
+        sch_s.load_state_dict(ck["sch_s"])
+        history, start_epoch = ck["history"], ck["epoch"]
+        print(f"train: resumed at epoch {start_epoch}", file=sys.stderr, flush=True)
+    run_u, run_s = unet, swin
+    if compile_models and dev.type == "cuda":
+        run_u, run_s = torch.compile(unet), torch.compile(swin)
+    amp = (
+        torch.autocast(device_type="cuda", dtype=torch.bfloat16)
+        if dev.type == "cuda"
+        else torch.autocast("cpu", enabled=False)
+    )
+    rng = np.random.default_rng(seed + start_epoch)
+    t_start = time.perf_counter()
+    stage_split = cfg.epochs // 2 if mode == "two-stage" else 0
+    for epoch in range(start_epoch, cfg.epochs):
+        unet.train()
+        swin.train()
+        train_unet = enhance and (mode == "joint" or epoch < stage_split)
+        train_swin = mode == "joint" or epoch >= stage_split or not enhance
+        sums = {"unet_loss": 0.0, "swin_loss": 0.0}
+        batches = _batches(train_idx, cfg.batch_size, rng)
+        t_epoch = time.perf_counter()
+        for step, sel in enumerate(batches):
+            x, y, a = _tensors(data, np.sort(sel), dev)
+            with amp:
+                if enhance:
+                    enhanced = run_u(x) if train_unet else run_u(x).detach()
+                    loss_u = relative_frobenius_loss(enhanced.float(), y)
+                    swin_in = enhanced.detach()
+                else:
+                    loss_u = torch.zeros((), device=dev)
+                    swin_in = x
+                loss_s = angle_loss(run_s(swin_in).float(), a)
+            if train_swin:
+                opt_s.zero_grad(set_to_none=True)
+                loss_s.backward()
+                opt_s.step()
+            if train_unet:
+                opt_u.zero_grad(set_to_none=True)
+                loss_u.backward()
+                opt_u.step()
+            sums["unet_loss"] += float(loss_u.detach())
+            sums["swin_loss"] += float(loss_s.detach())
+            if log_every and (step + 1) % log_every == 0:
+                print(
+                    f"train: epoch {epoch + 1}/{cfg.epochs} step {step + 1}/{len(batches)} "
+                    f"unet {sums['unet_loss'] / (step + 1):.4f} swin {sums['swin_loss'] / (step + 1):.4f} "
+                    f"({(time.perf_counter() - t_epoch) / (step + 1):.2f} s/step)",
+                    file=sys.stderr,
+                    flush=True,
+                )
+        sch_u.step()
+        sch_s.step()
+        pred, _ = (
+            predict(unet if enhance else None, swin, data["image"][test_idx], dev) if len(test_idx) else (None, None)
+        )
+        mae = np.abs(pred - data["angles_deg"][test_idx]).mean(axis=0).tolist() if pred is not None else [math.nan] * 3
+        record = {
+            "epoch": epoch + 1,
+            "unet_loss": sums["unet_loss"] / len(batches),
+            "swin_loss": sums["swin_loss"] / len(batches),
+            "test_mae_deg": mae,
+            "seconds": time.perf_counter() - t_epoch,
+        }
+        history.append(record)
+        print(
+            f"train: epoch {epoch + 1}/{cfg.epochs} done: unet {record['unet_loss']:.4f} swin {record['swin_loss']:.4f} "
+            f"test MAE z/y/x {mae[0]:.2f}/{mae[1]:.2f}/{mae[2]:.2f} deg ({record['seconds']:.0f} s)",
+            file=sys.stderr,
+            flush=True,
+        )
+        torch.save(
+            {"unet": unet.state_dict(), "swin": swin.state_dict(), "opt_u": opt_u.state_dict(),
+             "opt_s": opt_s.state_dict(), "sch_u": sch_u.state_dict(), "sch_s": sch_s.state_dict(),
+             "history": history, "epoch": epoch + 1, "config": cfg.as_dict()},
+            ckpt_path,
+        )  # fmt: skip
+        if max_minutes is not None and (time.perf_counter() - t_start) / 60.0 > max_minutes:
+            print(
+                f"train: stopping after epoch {epoch + 1}: {max_minutes} min used; --resume continues", file=sys.stderr
+            )
+            break
+    done = bool(history) and history[-1]["epoch"] >= cfg.epochs
+    torch.save({"state_dict": unet.state_dict(), "config": cfg.as_dict()}, out / "unetpp.pt")
+    torch.save({"state_dict": swin.state_dict(), "config": cfg.as_dict(), "enhance": enhance}, out / "swin.pt")
+    record_all = {
+        "config": cfg.as_dict(),
+        "mode": mode,
+        "enhance": enhance,
+        "seed": seed,
+        "complete": done,
+        "data": {"dir": str(data_dir), "content_sha256": manifest["content_sha256"], "frames": int(n),
+                 "train": int(len(train_idx)), "test": int(len(test_idx))},
+        "hardware": {"device": str(dev), "name": torch.cuda.get_device_name(0) if dev.type == "cuda" else platform.processor()
+                     or platform.machine(), "torch": torch.__version__, "threads": torch.get_num_threads()},
+        "train_seconds": sum(h["seconds"] for h in history),
+        "history": history,
+    }  # fmt: skip
+    (out / "training.json").write_text(json.dumps(record_all, indent=2))
+    plot_history(history, out / "loss.png")
+    return record_all
+
+
+def plot_history(history: list[dict[str, Any]], path: Path) -> None:
+    """Draw the loss curves and test MAE per epoch (skipped when matplotlib is absent)."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return
+    if not history:
+        return
+    ep = [h["epoch"] for h in history]
+    fig, ax = plt.subplots(1, 2, figsize=(10, 3.8))
+    ax[0].plot(ep, [h["unet_loss"] for h in history], label="UNet++ (relative Frobenius)")
+    ax[0].plot(ep, [h["swin_loss"] for h in history], label="Swin (MSE, scaled angles)")
+    ax[0].set(xlabel="epoch", ylabel="training loss", yscale="log")
+    ax[0].legend()
+    mae = np.array([h["test_mae_deg"] for h in history])
+    for k, name in enumerate("zyx"):
+        ax[1].plot(ep, mae[:, k], label=name)
+    ax[1].set(xlabel="epoch", ylabel="test MAE (deg)")
+    ax[1].legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--data", required=True, help="data set directory (from `gsa simulate`)")
+    p.add_argument("--config", default="compact", help="paper, compact, cpu or smoke")
+    p.add_argument("--out", default="runs/train", help="output directory (checkpoints, weights, loss plot)")
+    p.add_argument("--epochs", type=int)
+    p.add_argument("--batch-size", type=int)
+    p.add_argument("--lr", type=float)
+    p.add_argument("--mode", default="joint", choices=["joint", "two-stage"])
+    p.add_argument("--no-enhance", action="store_true", help="train Swin on raw frames (no UNet++)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device")
+    p.add_argument("--resume", action="store_true")
+    p.add_argument("--max-minutes", type=float, help="stop after the epoch in which this much time has passed")
+    p.add_argument("--max-train-frames", type=int)
+    p.add_argument("--compile", action="store_true", help="torch.compile on a GPU")
+
+
+def run(args: argparse.Namespace) -> int:
+    rec = train(
+        args.data, args.out, args.config, args.epochs, args.batch_size, args.lr, args.mode, not args.no_enhance,
+        args.seed, args.device, args.resume, args.max_minutes, args.max_train_frames, compile_models=args.compile,
+    )  # fmt: skip
+    last = rec["history"][-1] if rec["history"] else None
+    if last:
+        z, y, x = last["test_mae_deg"]
+        print(f"trained {last['epoch']} epochs into {args.out}: test MAE z/y/x {z:.2f}/{y:.2f}/{x:.2f} deg")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m inference.train")
+    add_arguments(p)
+    try:
+        return run(p.parse_args(argv))
+    except InferenceError as exc:
+        print(f"train: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,146 @@
+"""Networks, training, ONNX export and the runtime, on the smoke configuration."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+import torch
+
+from inference.dataset import DatasetSpec, generate
+from inference.errors import DatasetError, InferenceError, ModelFileError
+from inference.export import export
+from inference.isar import Radar
+from inference.models.build import build_models, get_config
+from inference.models.swin import SwinTransformer, window_partition, window_reverse
+from inference.models.unetpp import UNetPlusPlus, relative_frobenius_loss
+from inference.runtime import Estimator, euler_to_quaternion
+from inference.train import train
+
+SMALL = Radar(n_range=64, n_azimuth=64, bandwidth_hz=0.4e9, aperture_deg=5.1 / 4)
+
+
+@pytest.fixture(scope="module")
+def smoke_data(tmp_path_factory):
+    d = tmp_path_factory.mktemp("data") / "set"
+    generate(DatasetSpec(n=24, seed=3, shard_size=12, n_train=16), d, SMALL, workers=1, progress=False)
+    return d
+
+
+@pytest.fixture(scope="module")
+def smoke_run(smoke_data, tmp_path_factory):
+    out = tmp_path_factory.mktemp("run")
+    record = train(smoke_data, out, "smoke", epochs=2, log_every=0)
+    return out, record
+
+
+def test_paper_sizes():
+    unet, swin = build_models(get_config("paper"))
+    assert sum(p.numel() for p in unet.parameters()) == pytest.approx(9.04e6, rel=0.01)
+    assert sum(p.numel() for p in swin.parameters()) == pytest.approx(27.5e6, rel=0.01)
+
+
+def test_shapes_and_window_round_trip():
+    x = torch.randn(2, 16, 16, 5)
+    assert torch.equal(window_reverse(window_partition(x, 8), 8, 16, 16), x)
+    unet = UNetPlusPlus(1, (4, 8, 16, 32, 64))
+    assert unet(torch.zeros(3, 1, 64, 64)).shape == (3, 1, 64, 64)
+    swin = SwinTransformer(img_size=64, embed_dim=12, depths=(2, 2, 1, 1), num_heads=(1, 1, 2, 2))
+    assert swin(torch.zeros(3, 1, 64, 64)).shape == (3, 3)
+
+
+def test_shifted_window_mask_blocks_wrapped_neighbours():
+    swin = SwinTransformer(img_size=64, embed_dim=12, depths=(2, 1, 1, 1), num_heads=(1, 1, 1, 1))
+    block = swin.stages[0].blocks[1]
+    assert block.shift == 4 and block.attn_mask is not None
+    mask = block.attn_mask
+    assert mask.shape == (4, 64, 64) and (mask == 0).all(dim=(1, 2)).tolist()[0]  # first window: no wrap
+    assert (mask[-1] < 0).any()  # the corner window mixes wrapped regions
+
+
+def test_relative_frobenius_loss():
+    label = torch.ones(1, 1, 4, 4)
+    assert float(relative_frobenius_loss(label, label)) == 0.0
+    assert float(relative_frobenius_loss(torch.zeros_like(label), label)) == pytest.approx(1.0)
+
+
+def test_training_lowers_the_losses_and_writes_everything(smoke_run):
+    out, record = smoke_run
+    hist = record["history"]
+    assert len(hist) == 2 and record["complete"]
+    assert hist[-1]["unet_loss"] < hist[0]["unet_loss"]
+    for name in ("unetpp.pt", "swin.pt", "checkpoint.pt", "training.json", "loss.png"):
+        assert (out / name).is_file()
+    assert record["data"]["train"] == 16 and record["data"]["test"] == 8
+
+
+def test_resume_continues_from_the_checkpoint(smoke_data, smoke_run, tmp_path):
+    out, _ = smoke_run
+    shutil.copytree(out, tmp_path / "run")
+    record = train(smoke_data, tmp_path / "run", "smoke", epochs=3, resume=True, log_every=0)
+    assert [h["epoch"] for h in record["history"]] == [1, 2, 3]
+
+
+def test_export_parity_and_runtime(smoke_run, smoke_data, tmp_path):
+    out, _ = smoke_run
+    from inference.dataset import load_arrays
+
+    frames = load_arrays(smoke_data)["image"][:4].astype(np.float32)
+    card = export(out, tmp_path / "models", frames=frames)
+    for role in ("unetpp", "swin"):
+        assert card["files"][role]["parity_max_rel_diff"] < 1e-4
+    est = Estimator.load(tmp_path / "models")
+    res = est.estimate(frames)
+    assert res.angles_deg.shape == (4, 3) and res.enhanced.shape == (4, 64, 64)
+    # The same numbers as torch.
+    unet, swin = build_models(get_config("smoke"))
+    unet.load_state_dict(torch.load(out / "unetpp.pt", weights_only=False)["state_dict"])
+    swin.load_state_dict(torch.load(out / "swin.pt", weights_only=False)["state_dict"])
+    unet.eval()
+    swin.eval()
+    with torch.no_grad():
+        ref = swin(unet(torch.from_numpy(frames[:, None]))).numpy() * 45.0
+    np.testing.assert_allclose(res.angles_deg, ref, rtol=1e-3, atol=1e-3)
+
+
+def test_runtime_refuses_bad_model_files(smoke_run, tmp_path):
+    out, _ = smoke_run
+    export(out, tmp_path / "m")
+    path = tmp_path / "m" / "swin.onnx"
+    path.write_bytes(path.read_bytes()[:-100])
+    with pytest.raises(ModelFileError, match="swin.onnx does not match"):
+        Estimator.load(tmp_path / "m")
+    path.unlink()
+    with pytest.raises(ModelFileError, match="swin.onnx is missing"):
+        Estimator.load(tmp_path / "m")
+    with pytest.raises(ModelFileError, match="model_card.json is missing"):
+        Estimator.load(tmp_path / "nothing")
+
+
+def test_training_refuses_bad_data(smoke_data, tmp_path):
+    with pytest.raises(DatasetError, match="no manifest"):
+        train(tmp_path, tmp_path / "out", "smoke")
+    with pytest.raises(DatasetError, match="takes 256x256"):
+        train(smoke_data, tmp_path / "out", "compact")
+    bad = tmp_path / "bad"
+    shutil.copytree(smoke_data, bad)
+    manifest = json.loads((bad / "manifest.json").read_text())
+    manifest["shards"][0]["sha256"] = "0" * 64
+    (bad / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(DatasetError, match="does not match its sha256"):
+        train(bad, tmp_path / "out", "smoke")
+    with pytest.raises(InferenceError, match="unknown config"):
+        get_config("huge")
+
+
+def test_quaternion_matches_rotation_matrix():
+    from inference.isar import rotation_matrix
+
+    z, y, x = 30.0, -20.0, 10.0
+    w, qx, qy, qz = euler_to_quaternion(z, y, x)
+    r = np.array([
+        [1 - 2 * (qy**2 + qz**2), 2 * (qx * qy - w * qz), 2 * (qx * qz + w * qy)],
+        [2 * (qx * qy + w * qz), 1 - 2 * (qx**2 + qz**2), 2 * (qy * qz - w * qx)],
+        [2 * (qx * qz - w * qy), 2 * (qy * qz + w * qx), 1 - 2 * (qx**2 + qy**2)],
+    ])  # fmt: skip
+    np.testing.assert_allclose(r, rotation_matrix(z, y, x), atol=1e-12)
