@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -99,7 +99,7 @@ def export(
     training = json.loads(training_path.read_text()) if training_path.is_file() else {}
     card = {
         "name": f"gsa-isar-{cfg['name']}",
-        "exported": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "exported": datetime.now(UTC).isoformat(timespec="seconds"),
         "opset": OPSET,
         "input": "frame [batch, 1, H, W] float32: inference.isar.normalise_frame output",
         "outputs": {"unetpp": "enhanced frame [batch, 1, H, W]", "swin": f"Euler z, y, x / {ANGLE_SCALE_DEG} deg"},

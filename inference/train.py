@@ -20,6 +20,7 @@ import math
 import platform
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -129,7 +130,7 @@ def train(
     opt_s = torch.optim.Adam(swin.parameters(), lr=cfg.lr)
     sch_u = torch.optim.lr_scheduler.ExponentialLR(opt_u, cfg.lr_decay)
     sch_s = torch.optim.lr_scheduler.ExponentialLR(opt_s, cfg.lr_decay)
-    history: list[dict[str, float]] = []
+    history: list[dict[str, Any]] = []
     start_epoch = 0
     ckpt_path = out / "checkpoint.pt"
     if resume and ckpt_path.exists():
@@ -142,7 +143,8 @@ def train(
         sch_s.load_state_dict(ck["sch_s"])
         history, start_epoch = ck["history"], ck["epoch"]
         print(f"train: resumed at epoch {start_epoch}", file=sys.stderr, flush=True)
-    run_u, run_s = unet, swin
+    run_u: Callable[[torch.Tensor], torch.Tensor] = unet
+    run_s: Callable[[torch.Tensor], torch.Tensor] = swin
     if compile_models and dev.type == "cuda":
         run_u, run_s = torch.compile(unet), torch.compile(swin)
     amp = (
@@ -174,11 +176,11 @@ def train(
                 loss_s = angle_loss(run_s(swin_in).float(), a)
             if train_swin:
                 opt_s.zero_grad(set_to_none=True)
-                loss_s.backward()
+                loss_s.backward()  # type: ignore[no-untyped-call]
                 opt_s.step()
             if train_unet:
                 opt_u.zero_grad(set_to_none=True)
-                loss_u.backward()
+                loss_u.backward()  # type: ignore[no-untyped-call]
                 opt_u.step()
             sums["unet_loss"] += float(loss_u.detach())
             sums["swin_loss"] += float(loss_s.detach())
