@@ -254,6 +254,71 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_estimate(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from app.errors import InputError
+    from inference.errors import InferenceError
+
+    try:
+        data = Path(args.file).read_bytes()
+    except OSError as exc:
+        raise CliError(f"cannot read {args.file}: {exc.strerror}") from None
+    if args.server:
+        import httpx
+
+        try:
+            r = httpx.post(
+                args.server.rstrip("/") + "/v1/estimates", files={"file": (Path(args.file).name, data)},
+                data={"resample": str(args.resample).lower()}, headers={"X-API-Key": args.api_key or ""}, timeout=60,
+            )  # fmt: skip
+        except httpx.HTTPError as exc:
+            raise CliError(f"cannot reach {args.server}: {exc}") from None
+        if r.status_code >= 400:
+            raise CliError(f"server answered {r.status_code}: {r.text[:300]}")
+        body = r.json()
+        angles = body["attitude"]["euler_zyx_deg"]
+        print(f"estimate {body['id']}: z {angles[0]:.2f} y {angles[1]:.2f} x {angles[2]:.2f} deg (observation frame)")
+        return 0
+    from app.services import estimation as svc
+    from inference.runtime import Estimator
+
+    try:
+        est = Estimator.load(args.models or _settings().model_dir)
+        (up,) = svc.decode(data, Path(args.file).name, allow_stack=False)
+        frame = svc.prepare(up, est.img_size, args.resample)
+        res = est.estimate(frame[None])
+    except InputError as exc:
+        raise CliError(exc.message) from None
+    except InferenceError as exc:
+        raise CliError(str(exc)) from None
+    z, y, x = (float(a) for a in res.angles_deg[0])
+    q = svc.attitude_json(res.angles_deg[0])["quaternion_wxyz"]
+    print(
+        f"z {z:.2f} y {y:.2f} x {x:.2f} deg (observation frame); quaternion w x y z {', '.join(f'{v:.5f}' for v in q)}"
+    )
+    print(f"UNet++ {res.timings_s['unetpp'] * 1000:.0f} ms, Swin {res.timings_s['swin'] * 1000:.0f} ms")
+    if args.plot:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots(1, 2, figsize=(8, 4.2))
+        ax[0].imshow(frame, cmap="gray", vmin=0, vmax=1)
+        ax[0].set_title("input (normalised)")
+        ax[1].imshow(np.clip(res.enhanced[0], 0, 1), cmap="gray", vmin=0, vmax=1)
+        ax[1].set_title(f"enhanced; z {z:.1f} y {y:.1f} x {x:.1f} deg")
+        for a in ax:
+            a.set_xlabel("cross-range cell")
+            a.set_ylabel("range cell")
+        fig.tight_layout()
+        fig.savefig(args.plot, dpi=100)
+        plt.close(fig)
+        print(f"plot written to {args.plot}", file=sys.stderr)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="gsa", description="GSA-ISAR: GSA scene planning and ISAR attitude estimation")
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -303,6 +368,14 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--n-snr", type=int, default=1000)
     ev.add_argument("--out", default="results")
     ev.set_defaults(func=cmd_evaluate)
+    es = sub.add_parser("estimate", help="estimate the attitude in one ISAR frame (.npy, .npz, PNG, TIFF)")
+    es.add_argument("file")
+    es.add_argument("--models", help="model directory (default: GSA_MODEL_DIR or the shipped models)")
+    es.add_argument("--resample", action="store_true", help="resample a frame of another size")
+    es.add_argument("--server", help="send it to a running service instead, e.g. http://127.0.0.1:8000")
+    es.add_argument("--api-key")
+    es.add_argument("--plot", metavar="PNG", help="draw the input beside the enhanced frame")
+    es.set_defaults(func=cmd_estimate)
     return p
 
 

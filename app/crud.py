@@ -9,7 +9,7 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from app.core.security import hash_api_key, new_api_key
-from app.db.models import ApiKey, Operator, Plan, utcnow
+from app.db.models import ApiKey, Estimate, Operator, Plan, utcnow
 
 
 def get_or_create_operator(*, session: Session, name: str) -> Operator:
@@ -103,3 +103,52 @@ def list_plans(
         select(Plan).where(*where).order_by(Plan.created_at.desc(), Plan.id).limit(limit).offset(offset)
     ).all()
     return list(rows), total
+
+
+def create_estimates(*, session: Session, rows: list[Estimate]) -> list[Estimate]:
+    """Store several estimates in one transaction (all or none)."""
+    session.add_all(rows)
+    session.commit()
+    return rows
+
+
+def get_estimate(*, session: Session, operator_id: str, estimate_id: str) -> Estimate | None:
+    return session.scalar(select(Estimate).where(Estimate.id == estimate_id, Estimate.operator_id == operator_id))
+
+
+def list_estimates(
+    *,
+    session: Session,
+    operator_id: str,
+    limit: int,
+    offset: int,
+    plan_id: str | None = None,
+    created_after: datetime | None = None,
+    created_before: datetime | None = None,
+) -> tuple[list[Estimate], int]:
+    where = [Estimate.operator_id == operator_id]
+    if plan_id is not None:
+        where.append(Estimate.plan_id == plan_id)
+    if created_after is not None:
+        where.append(Estimate.created_at >= created_after)
+    if created_before is not None:
+        where.append(Estimate.created_at < created_before)
+    total = int(session.scalar(select(func.count()).select_from(Estimate).where(*where)) or 0)
+    rows = session.scalars(
+        select(Estimate).where(*where).order_by(Estimate.created_at.desc(), Estimate.id).limit(limit).offset(offset)
+    ).all()
+    return list(rows), total
+
+
+def delete_estimate(*, session: Session, estimate: Estimate) -> None:
+    session.delete(estimate)
+    session.commit()
+
+
+def blob_in_use(*, session: Session, digest: str) -> bool:
+    hit = session.scalar(
+        select(func.count())
+        .select_from(Estimate)
+        .where((Estimate.original_sha256 == digest) | (Estimate.enhanced_sha256 == digest))
+    )
+    return bool(hit)

@@ -237,3 +237,45 @@ class AccessPublic(BaseModel):
     epoch: datetime
     duration_days: float
     access_windows: list[WindowPublic]
+
+
+class AttitudePublic(BaseModel):
+    euler_zyx_deg: list[float] = Field(description="Euler angles z, y, x (deg): R = Rz Ry Rx, body to frame")
+    quaternion_wxyz: list[float]
+    rotation_matrix: list[list[float]]
+
+
+class EstimatePublic(BaseModel):
+    id: str
+    created_at: datetime
+    plan_id: str | None
+    observed_at: datetime | None
+    input_name: str
+    input_sha256: str
+    shape: list[int]
+    dtype: str
+    snr_db: float | None
+    attitude: AttitudePublic = Field(description="in the ISAR observation frame")
+    attitude_lvlh: AttitudePublic | None = None
+    attitude_j2000: AttitudePublic | None = None
+    model: dict[str, Any]
+    timings_s: dict[str, float]
+    links: dict[str, str]
+
+
+class EstimatesPublic(BaseModel):
+    data: list[EstimatePublic]
+    count: int
+
+
+class ScenePublic(BaseModel):
+    plan_id: str
+    target_name: str
+    t_access: datetime | None
+    miss_km: float | None
+    estimates: list[EstimatePublic]
+
+
+class ScenesPublic(BaseModel):
+    data: list[ScenePublic]
+    count: int

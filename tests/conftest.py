@@ -16,10 +16,17 @@ KEY_A = "test-key-operator-a"
 KEY_B = "test-key-operator-b"
 
 
+@pytest.fixture(scope="session")
+def smoke_models(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from tests.utils.models import make_smoke_models
+
+    return make_smoke_models(tmp_path_factory.mktemp("smoke"))
+
+
 @pytest.fixture(scope="module")
-def settings(tmp_path_factory: pytest.TempPathFactory) -> Settings:
+def settings(tmp_path_factory: pytest.TempPathFactory, smoke_models: Path) -> Settings:
     data: Path = tmp_path_factory.mktemp("data")
-    s = Settings(data_dir=data, api_keys=f"{KEY_A},{KEY_B}")
+    s = Settings(data_dir=data, api_keys=f"{KEY_A},{KEY_B}", model_dir=smoke_models)
     upgrade_database(s.database_url)
     return s
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
-from typing import Annotated
+from typing import Annotated, cast
 
 from fastapi import Depends, HTTPException, Request, Security
 from fastapi.security import APIKeyHeader
@@ -13,6 +13,7 @@ from app import crud
 from app.core.config import Settings
 from app.core.security import hash_api_key
 from app.db.models import Operator
+from inference.runtime import Estimator
 
 api_key_header = APIKeyHeader(name="X-API-Key", auto_error=False, description="an operator's API key")
 
@@ -48,3 +49,13 @@ def get_current_operator(
 
 
 CurrentOperator = Annotated[Operator, Depends(get_current_operator)]
+
+
+def get_estimator(request: Request) -> Estimator:
+    est = request.app.state.estimator
+    if est is None:
+        raise HTTPException(status_code=503, detail="attitude models are not loaded")
+    return cast(Estimator, est)
+
+
+EstimatorDep = Annotated[Estimator, Depends(get_estimator)]

@@ -1,7 +1,9 @@
 from fastapi import APIRouter
 
-from app.api.routes import access, plans
+from app.api.routes import access, estimates, plans, scenes
 
 api_router = APIRouter()
 api_router.include_router(plans.router)
 api_router.include_router(access.router)
+api_router.include_router(estimates.router)
+api_router.include_router(scenes.router)

@@ -7,6 +7,9 @@ from pathlib import Path
 from pydantic import Field, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+# The shipped models: inference/models/shipped (see its model_card.json).
+DEFAULT_MODEL_DIR = Path(__file__).resolve().parents[2] / "inference" / "models" / "shipped"
+
 
 class Settings(BaseSettings):
     """Service settings, read from ``GSA_*`` environment variables (and a ``.env`` file if present).
@@ -26,6 +29,10 @@ class Settings(BaseSettings):
     max_span_days: float = Field(default=30.0, gt=0, le=30.0)
     max_grid_points: int = Field(default=25_000_000, ge=1)
     max_request_bytes: int = Field(default=1_000_000, ge=1024)
+    max_upload_bytes: int = Field(default=8 * 1024 * 1024, ge=1024)
+    max_batch_frames: int = Field(default=64, ge=1, le=4096)
+    model_dir: Path = DEFAULT_MODEL_DIR
+    ort_threads: int = Field(default=0, ge=0, le=256, description="0: all cores")
 
     @model_validator(mode="after")
     def _default_database(self) -> Settings:

@@ -46,3 +46,32 @@ def test_keys_create_list_revoke(tmp_path):
     assert _gsa("keys", "revoke", key_id, cwd=tmp_path).returncode == 0
     assert "revoked" in _gsa("keys", "list", cwd=tmp_path).stdout
     assert _gsa("keys", "revoke", "no-such-id", cwd=tmp_path).returncode == 2
+
+
+def test_estimate_locally_with_plot(tmp_path, smoke_models):
+    import io
+
+    import numpy as np
+
+    from inference.isar import Imager, simulate
+    from inference.targets import tiangong_like
+    from tests.utils.models import SMOKE_RADAR
+
+    frame = simulate(tiangong_like(), Imager(SMOKE_RADAR), (5.0, 5.0, 5.0), 10.0, 0).image
+    buf = io.BytesIO()
+    np.save(buf, frame)
+    (tmp_path / "f.npy").write_bytes(buf.getvalue())
+    out = _gsa(
+        "estimate",
+        str(tmp_path / "f.npy"),
+        "--models",
+        str(smoke_models),
+        "--plot",
+        str(tmp_path / "e.png"),
+        cwd=tmp_path,
+    )
+    assert out.returncode == 0, out.stderr
+    assert "quaternion" in out.stdout and (tmp_path / "e.png").stat().st_size > 5000
+    np.save(tmp_path / "bad.npy", np.zeros((3, 3, 3)))
+    bad = _gsa("estimate", str(tmp_path / "bad.npy"), "--models", str(smoke_models), cwd=tmp_path)
+    assert bad.returncode == 2 and "2-D" in bad.stderr and bad.stderr.count("\n") == 1

@@ -1,0 +1,227 @@
+"""Attitude estimates: upload ISAR frames, run the ONNX models, keep the history."""
+
+from __future__ import annotations
+
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+from fastapi import APIRouter, File, Form, HTTPException, Query, UploadFile
+from fastapi.responses import FileResponse, Response
+
+from app import crud
+from app.api.deps import CurrentOperator, EstimatorDep, SessionDep, SettingsDep
+from app.db.models import Estimate, utcnow
+from app.errors import InputError
+from app.schemas import EstimatePublic, EstimatesPublic
+from app.services import estimation as svc
+
+router = APIRouter(prefix="/estimates", tags=["estimates"])
+
+NOT_FOUND: dict[int | str, dict[str, Any]] = {404: {"description": "no estimate with this id belongs to the caller"}}
+
+
+def _utc(moment: datetime | None) -> datetime | None:
+    if moment is None or moment.tzinfo is not None:
+        return moment
+    return moment.replace(tzinfo=UTC)
+
+
+def public(e: Estimate) -> dict[str, Any]:
+    r = e.result
+    return {
+        "id": e.id,
+        "created_at": _utc(e.created_at),
+        "plan_id": e.plan_id,
+        "observed_at": _utc(e.observed_at),
+        "input_name": e.input_name,
+        "input_sha256": e.input_sha256,
+        "shape": e.shape,
+        "dtype": e.dtype,
+        "snr_db": e.snr_db,
+        "attitude": r["attitude"],
+        "attitude_lvlh": r.get("attitude_lvlh"),
+        "attitude_j2000": r.get("attitude_j2000"),
+        "model": r["model"],
+        "timings_s": r["timings_s"],
+        "links": {
+            "self": f"/v1/estimates/{e.id}",
+            "enhanced_png": f"/v1/estimates/{e.id}/enhanced.png",
+            "original_png": f"/v1/estimates/{e.id}/original.png",
+        },
+    }
+
+
+async def _read(upload: UploadFile, limit: int) -> bytes:
+    data = await upload.read(limit + 1)
+    if len(data) > limit:
+        raise HTTPException(
+            status_code=413, detail=f"file {upload.filename!r} is over the upload limit of {limit} bytes"
+        )
+    return data
+
+
+def _estimate(
+    *, session: Any, operator_id: str, settings: Any, est: Any, uploads: list[svc.Upload], resample: bool,
+    plan_id: str | None, observed_at: datetime | None, snr_db: float | None,
+) -> list[Estimate]:  # fmt: skip
+    """Validate everything, run the models on one batch, store the images, then the rows in one transaction."""
+    if not uploads:
+        raise InputError(["file"], "no frames in the upload")
+    if len(uploads) > settings.max_batch_frames:
+        raise InputError(["file"], f"{len(uploads)} frames is over the batch limit of {settings.max_batch_frames}")
+    if (observed_at is None) != (plan_id is None) and observed_at is not None:
+        raise InputError(["plan_id"], "observed_at needs a plan_id to place the attitude in LVLH and J2000")
+    plan = None
+    if plan_id is not None:
+        plan = crud.get_plan(session=session, operator_id=operator_id, plan_id=plan_id)
+        if plan is None:
+            raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
+    t0 = time.perf_counter()
+    frames = np.stack([svc.prepare(u, est.img_size, resample) for u in uploads])
+    t_prep = time.perf_counter() - t0
+    angles, enhanced, timings = svc.run_models(est, frames)
+    per_frame = {"preprocess": t_prep / len(uploads), **{k: v / len(uploads) for k, v in timings.items()}}
+    in_frames: list[dict[str, Any] | None] = [None] * len(uploads)
+    if plan is not None and observed_at is not None:
+        in_frames = [svc.attitudes_in_frames(plan.request, observed_at, a) for a in angles]
+    rows = []
+    for k, u in enumerate(uploads):
+        original = svc.store_blob(settings.data_dir, svc.png_bytes(frames[k]))
+        enh = svc.store_blob(settings.data_dir, svc.png_bytes(enhanced[k]))
+        result: dict[str, Any] = {"attitude": svc.attitude_json(angles[k]), "model": est.identity,
+                                  "timings_s": {**per_frame, "batch_size": len(uploads)}}  # fmt: skip
+        placed = in_frames[k]
+        if placed is not None:
+            result["attitude_lvlh"] = placed["lvlh"]
+            result["attitude_j2000"] = placed["j2000"]
+        rows.append(
+            Estimate(
+                operator_id=operator_id,
+                created_at=utcnow(),
+                plan_id=plan_id,
+                observed_at=observed_at,
+                input_name=u.name[:255],
+                input_sha256=u.sha256,
+                shape=list(u.shape),
+                dtype=u.dtype,
+                snr_db=snr_db,
+                result=result,
+                original_sha256=original,
+                enhanced_sha256=enh,
+            )  # fmt: skip
+        )
+    return crud.create_estimates(session=session, rows=rows)
+
+
+@router.post("", status_code=201, response_model=EstimatePublic, responses={413: {"description": "file too large"}})
+async def create_estimate(
+    session: SessionDep,
+    operator: CurrentOperator,
+    settings: SettingsDep,
+    est: EstimatorDep,
+    file: Annotated[UploadFile, File(description=".npy/.npz (2-D, real or complex) or 8/16-bit grayscale PNG/TIFF")],
+    resample: Annotated[bool, Form()] = False,
+    plan_id: Annotated[str | None, Form(max_length=36)] = None,
+    observed_at: Annotated[datetime | None, Form()] = None,
+    snr_db: Annotated[float | None, Form(ge=-100, le=200)] = None,
+) -> dict[str, Any]:
+    """Estimate the attitude of one ISAR frame; the result is stored."""
+    data = await _read(file, settings.max_upload_bytes)
+    uploads = svc.decode(data, file.filename or "upload", allow_stack=False)
+    if len(uploads) != 1:
+        raise InputError(["file"], f"the file holds {len(uploads)} frames; send stacks to /v1/estimates/batch")
+    rows = _estimate(session=session, operator_id=operator.id, settings=settings, est=est, uploads=uploads,
+                     resample=resample, plan_id=plan_id, observed_at=_utc(observed_at), snr_db=snr_db)  # fmt: skip
+    return public(rows[0])
+
+
+@router.post(
+    "/batch", status_code=201, response_model=EstimatesPublic, responses={413: {"description": "file too large"}}
+)
+async def create_estimates_batch(
+    session: SessionDep,
+    operator: CurrentOperator,
+    settings: SettingsDep,
+    est: EstimatorDep,
+    files: Annotated[list[UploadFile], File(description="several frames, or one .npz stack [N, H, W]")],
+    resample: Annotated[bool, Form()] = False,
+    plan_id: Annotated[str | None, Form(max_length=36)] = None,
+    observed_at: Annotated[datetime | None, Form()] = None,
+) -> dict[str, Any]:
+    """Estimate several frames as one batch through the models; one stored row each."""
+    uploads: list[svc.Upload] = []
+    for f in files:
+        uploads += svc.decode(await _read(f, settings.max_upload_bytes), f.filename or "upload")
+    rows = _estimate(session=session, operator_id=operator.id, settings=settings, est=est, uploads=uploads,
+                     resample=resample, plan_id=plan_id, observed_at=_utc(observed_at), snr_db=None)  # fmt: skip
+    return {"data": [public(r) for r in rows], "count": len(rows)}
+
+
+@router.get("", response_model=EstimatesPublic)
+def list_estimates(
+    session: SessionDep,
+    operator: CurrentOperator,
+    settings: SettingsDep,
+    limit: Annotated[int, Query(ge=1, le=1000)] = 20,
+    offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
+    plan_id: Annotated[str | None, Query(max_length=36)] = None,
+    created_after: datetime | None = None,
+    created_before: datetime | None = None,
+) -> dict[str, Any]:
+    """List the caller's estimates, newest first, filtered by plan and creation time."""
+    if limit > settings.max_page_size:
+        raise HTTPException(
+            status_code=422, detail=f"limit {limit} is over the page size limit {settings.max_page_size}"
+        )
+    rows, total = crud.list_estimates(session=session, operator_id=operator.id, limit=limit, offset=offset,
+                                      plan_id=plan_id, created_after=created_after, created_before=created_before)  # fmt: skip
+    return {"data": [public(r) for r in rows], "count": total}
+
+
+def _owned(session: Any, operator_id: str, estimate_id: str) -> Estimate:
+    e = crud.get_estimate(session=session, operator_id=operator_id, estimate_id=estimate_id)
+    if e is None:
+        raise HTTPException(status_code=404, detail="Estimate not found")
+    return e
+
+
+@router.get("/{estimate_id}", response_model=EstimatePublic, responses=NOT_FOUND)
+def read_estimate(session: SessionDep, operator: CurrentOperator, estimate_id: str) -> dict[str, Any]:
+    """Return one of the caller's estimates."""
+    return public(_owned(session, operator.id, estimate_id))
+
+
+def _png(settings: Any, digest: str) -> Response:
+    path = svc.blob_path(Path(settings.data_dir), digest)
+    if not path.is_file():
+        raise HTTPException(status_code=404, detail="Image not found")
+    return FileResponse(path, media_type="image/png")
+
+
+@router.get("/{estimate_id}/enhanced.png", response_class=FileResponse, responses=NOT_FOUND)
+def enhanced_png(session: SessionDep, operator: CurrentOperator, settings: SettingsDep, estimate_id: str) -> Response:
+    """The UNet++-enhanced frame."""
+    return _png(settings, _owned(session, operator.id, estimate_id).enhanced_sha256)
+
+
+@router.get("/{estimate_id}/original.png", response_class=FileResponse, responses=NOT_FOUND)
+def original_png(session: SessionDep, operator: CurrentOperator, settings: SettingsDep, estimate_id: str) -> Response:
+    """The uploaded frame as the models saw it (normalised)."""
+    return _png(settings, _owned(session, operator.id, estimate_id).original_sha256)
+
+
+@router.delete("/{estimate_id}", status_code=204, responses=NOT_FOUND)
+def delete_estimate(
+    session: SessionDep, operator: CurrentOperator, settings: SettingsDep, estimate_id: str
+) -> Response:
+    """Delete one of the caller's estimates (its images go when no other estimate uses them)."""
+    e = _owned(session, operator.id, estimate_id)
+    digests = {e.original_sha256, e.enhanced_sha256}
+    crud.delete_estimate(session=session, estimate=e)
+    for d in digests:
+        if not crud.blob_in_use(session=session, digest=d):
+            svc.blob_path(Path(settings.data_dir), d).unlink(missing_ok=True)
+    return Response(status_code=204)

@@ -1,0 +1,254 @@
+"""Uploads to frames, frames to stored estimates, and attitudes in the frames operators fly in."""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import math
+import zipfile
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from app.errors import InputError
+from inference.isar import euler_from_matrix, normalise_frame, rotation_matrix
+from inference.runtime import Estimator, euler_to_quaternion
+
+MAX_NPZ_MEMBER_BYTES = 64 * 1024 * 1024  # decompressed; refuses zip bombs before reading them
+
+
+@dataclass(frozen=True, slots=True)
+class Upload:
+    """One decoded frame: the magnitude image and what it came from."""
+
+    name: str
+    sha256: str
+    shape: tuple[int, ...]
+    dtype: str
+    magnitude: NDArray[np.float64]
+
+
+def _loc(name: str) -> list[str | int]:
+    return ["file", name]
+
+
+def _check_array(arr: NDArray[Any], name: str) -> NDArray[np.float64]:
+    if arr.dtype.kind not in "biufc":
+        raise InputError(_loc(name), f"unsupported dtype {arr.dtype}; send real or complex numbers")
+    if arr.ndim != 2:
+        raise InputError(_loc(name), f"a frame must be a 2-D array; this one has shape {list(arr.shape)}")
+    if arr.size == 0:
+        raise InputError(_loc(name), "the frame is empty")
+    mag = np.abs(arr.astype(np.complex128 if arr.dtype.kind == "c" else np.float64))
+    if not np.all(np.isfinite(mag)):
+        raise InputError(_loc(name), "the frame contains NaN or infinite values")
+    return np.asarray(mag, np.float64)
+
+
+def _npy(data: bytes, name: str) -> NDArray[Any]:
+    try:
+        return np.load(io.BytesIO(data), allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        raise InputError(_loc(name), f"not a readable .npy array: {exc}") from None
+
+
+def _npz_arrays(data: bytes, name: str) -> list[tuple[str, NDArray[Any]]]:
+    try:
+        with zipfile.ZipFile(io.BytesIO(data)) as zf:
+            members = zf.infolist()
+            if not members:
+                raise InputError(_loc(name), "the .npz archive is empty")
+            for m in members:
+                if m.file_size > MAX_NPZ_MEMBER_BYTES:
+                    raise InputError(
+                        _loc(name), f"{m.filename} unpacks to {m.file_size} bytes, over {MAX_NPZ_MEMBER_BYTES}"
+                    )
+            return [(m.filename.removesuffix(".npy"), _npy(zf.read(m), name)) for m in members]
+    except zipfile.BadZipFile:
+        raise InputError(_loc(name), "not a readable .npz archive") from None
+
+
+def _image(data: bytes, name: str) -> NDArray[Any]:
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        img = Image.open(io.BytesIO(data))
+        img.load()
+    except (UnidentifiedImageError, OSError, ValueError) as exc:
+        raise InputError(_loc(name), f"not a readable PNG or TIFF image: {exc}") from None
+    if img.mode not in ("L", "I;16", "I;16B", "I;16L", "I"):
+        raise InputError(_loc(name), f"image mode {img.mode} is not 8- or 16-bit grayscale")
+    arr = np.asarray(img)
+    if arr.dtype.kind not in "ui" or arr.dtype.itemsize > 4:
+        raise InputError(_loc(name), f"image of dtype {arr.dtype} is not 8- or 16-bit grayscale")
+    return arr
+
+
+def decode(data: bytes, name: str, allow_stack: bool = True) -> list[Upload]:
+    """Decode an upload (.npy, .npz, .png, .tif/.tiff) into frames; with ``allow_stack``, arrays [N, H, W] too."""
+    if not data:
+        raise InputError(_loc(name), "the file is empty")
+    digest = hashlib.sha256(data).hexdigest()
+    head = data[:8]
+    if head.startswith(b"\x93NUMPY"):
+        arrays = [(name, _npy(data, name))]
+    elif head.startswith(b"PK"):
+        arrays = _npz_arrays(data, name)
+    elif head.startswith(b"\x89PNG") or head[:4] in (b"II*\x00", b"MM\x00*"):
+        arrays = [(name, _image(data, name))]
+    else:
+        raise InputError(_loc(name), "unknown format: send .npy, .npz, or 8/16-bit grayscale PNG or TIFF")
+    out = []
+    for label, arr in arrays:
+        stack = arr if arr.ndim == 3 and allow_stack else arr[None] if arr.ndim == 2 else None
+        if stack is None:
+            if arr.ndim == 3:
+                raise InputError(
+                    _loc(name),
+                    f"a frame must be a 2-D array; this one has shape {list(arr.shape)} "
+                    "(send stacks [N, H, W] to /v1/estimates/batch)",
+                )
+            _check_array(arr, name)  # raises with the shape
+            continue
+        for k, frame in enumerate(stack):
+            frame_name = name if len(stack) == 1 and len(arrays) == 1 else f"{name}:{label}[{k}]"
+            out.append(Upload(frame_name, digest, tuple(frame.shape), str(arr.dtype), _check_array(frame, name)))
+    return out
+
+
+def prepare(upload: Upload, size: int, resample: bool) -> NDArray[np.float32]:
+    """Return the normalised frame the models take: the training normalisation, resampled if asked."""
+    mag = upload.magnitude
+    if mag.shape != (size, size):
+        if not resample:
+            raise InputError(
+                _loc(upload.name),
+                f"frame is {mag.shape[0]}x{mag.shape[1]}; the models take {size}x{size} (or send resample=true)",
+            )
+        if min(mag.shape) < 8 or max(mag.shape) > 8192:
+            raise InputError(
+                _loc(upload.name), f"frame of {list(mag.shape)} cannot be resampled: 8 to 8192 pixels a side"
+            )
+        from scipy.ndimage import zoom
+
+        mag = zoom(mag, (size / mag.shape[0], size / mag.shape[1]), order=1)
+    return normalise_frame(mag)
+
+
+def png_bytes(frame: NDArray[np.floating]) -> bytes:
+    """Encode a frame in [0, 1] (clipped) as an 8-bit grayscale PNG."""
+    from PIL import Image
+
+    img = Image.fromarray((np.clip(frame, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8), mode="L")
+    buf = io.BytesIO()
+    img.save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def store_blob(data_dir: Path, data: bytes) -> str:
+    """Store bytes content-addressed under ``data_dir/images``; return their sha256."""
+    digest = hashlib.sha256(data).hexdigest()
+    path = blob_path(data_dir, digest)
+    if not path.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp")
+        tmp.write_bytes(data)
+        tmp.replace(path)
+    return digest
+
+
+def blob_path(data_dir: Path, digest: str) -> Path:
+    return Path(data_dir) / "images" / digest[:2] / f"{digest}.png"
+
+
+def attitude_json(angles_deg: NDArray[np.floating]) -> dict[str, Any]:
+    z, y, x = (float(a) for a in angles_deg)
+    r = rotation_matrix(z, y, x)
+    return {
+        "euler_zyx_deg": [z, y, x],
+        "quaternion_wxyz": list(euler_to_quaternion(z, y, x)),
+        "rotation_matrix": r.round(12).tolist(),
+    }
+
+
+def frames_at(plan_request: dict[str, Any], observed_at: datetime) -> dict[str, NDArray[np.float64]]:
+    """Return the observation, LVLH and J2000 (GCRS) axes at ``observed_at`` for a stored plan's target and station.
+
+    Each is a matrix whose columns are the frame's axes in GCRS. Observation frame: X from the
+    target toward the radar, Y along the rate of change of that line of sight, Z = X x Y.
+    LVLH: x radial (out), y along-track, z along the orbit normal.
+    """
+    from app.schemas import PlanCreate
+    from app.services.planning import plan_options, to_orbit, to_station
+    from planner.plan import _target_trajectory
+    from planner.propagation import EarthFrames, as_utc, seconds_between
+
+    req = PlanCreate.model_validate(plan_request)
+    target = to_orbit(req.target, "target")
+    station = to_station(req.ground_station)
+    reading = plan_options(req).reading
+    epoch = as_utc(observed_at)
+    frames = EarthFrames(epoch, -3600.0, 3600.0)
+    traj = _target_trajectory(target, epoch, frames, 10.0, reading) if target.tle else None
+    if traj is None:
+        from planner.propagation import NumericalJ2Trajectory, SecularJ2Trajectory
+
+        assert target.elements is not None
+        if reading == "mean":
+            traj = SecularJ2Trajectory(target.elements, epoch)
+        else:
+            offset = seconds_between(epoch, target.elements.epoch)
+            if abs(offset) > 60 * 86400:
+                raise InputError(["observed_at"], "observed_at is more than 60 days from the target's epoch")
+            traj = NumericalJ2Trajectory.from_elements(target.elements, epoch, -1.0, 1.0)
+    t = np.array([-0.5, 0.0, 0.5])
+    r, v = traj.state(t)
+    site_itrs = station.itrs_km()
+    site = np.stack([frames.gcrs_to_itrs(np.array([tk]))[:, :, 0].T @ site_itrs for tk in t], axis=1)
+    los = site - r
+    x_axis = los[:, 1] / np.linalg.norm(los[:, 1])
+    rate = (los[:, 2] / np.linalg.norm(los[:, 2]) - los[:, 0] / np.linalg.norm(los[:, 0])) / 1.0
+    rate -= (rate @ x_axis) * x_axis
+    y_axis = rate / np.linalg.norm(rate)
+    obs = np.stack([x_axis, y_axis, np.cross(x_axis, y_axis)], axis=1)
+    rr, vv = r[:, 1], v[:, 1]
+    radial = rr / np.linalg.norm(rr)
+    normal = np.cross(rr, vv) / np.linalg.norm(np.cross(rr, vv))
+    lvlh = np.stack([radial, np.cross(normal, radial), normal], axis=1)
+    return {"observation": obs, "lvlh": lvlh, "j2000": np.eye(3)}
+
+
+def attitudes_in_frames(
+    plan_request: dict[str, Any], observed_at: datetime, angles_deg: NDArray[np.floating]
+) -> dict[str, Any]:
+    """Return the estimated attitude (body to frame) in the LVLH and J2000 frames too."""
+    axes = frames_at(plan_request, observed_at)
+    body_to_obs = rotation_matrix(*(float(a) for a in angles_deg))
+    body_to_gcrs = axes["observation"] @ body_to_obs
+    out = {}
+    for name in ("lvlh", "j2000"):
+        r = axes[name].T @ body_to_gcrs
+        out[name] = attitude_json(np.array(euler_from_matrix(r)))
+        out[name]["rotation_matrix"] = r.round(12).tolist()
+    out["observation_axes_in_j2000"] = axes["observation"].round(12).tolist()
+    return out
+
+
+def utc_now() -> datetime:
+    return datetime.now(UTC)
+
+
+def finite_or_none(x: float | None) -> float | None:
+    return None if x is None or not math.isfinite(x) else x
+
+
+def run_models(
+    est: Estimator, frames: NDArray[np.float32]
+) -> tuple[NDArray[np.float32], NDArray[np.float32], dict[str, float]]:
+    """Run the two networks on a stack; return angles [N, 3], enhanced [N, H, W] and timings."""
+    res = est.estimate(frames)
+    return res.angles_deg, res.enhanced, res.timings_s

@@ -1,0 +1,209 @@
+import io
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+from PIL import Image
+from sqlalchemy import create_engine, func, select
+
+from app.db.models import Estimate
+from app.main import create_app
+from app.schemas import PAPER_EXAMPLE
+from app.services.estimation import decode, prepare
+from inference.errors import ModelFileError
+from inference.isar import Imager, normalise_frame, simulate
+from inference.targets import tiangong_like
+from tests.conftest import KEY_A, KEY_B
+from tests.utils.models import SMOKE_RADAR
+
+A = {"X-API-Key": KEY_A}
+B = {"X-API-Key": KEY_B}
+
+
+@pytest.fixture(scope="module")
+def frame():
+    return simulate(tiangong_like(), Imager(SMOKE_RADAR), (10.0, -5.0, 20.0), 10.0, 1).image
+
+
+def _npy(arr):
+    buf = io.BytesIO()
+    np.save(buf, arr)
+    return buf.getvalue()
+
+
+def _count(settings):
+    engine = create_engine(settings.database_url)
+    with engine.connect() as conn:
+        n = conn.scalar(select(func.count()).select_from(Estimate))
+    engine.dispose()
+    return n
+
+
+def _post(client, data, name="frame.npy", headers=A, **form):
+    return client.post("/v1/estimates", files={"file": (name, data)}, data=form, headers=headers)
+
+
+def test_readyz_reports_the_models(client):
+    r = client.get("/readyz")
+    assert r.status_code == 200
+    assert r.json()["models"]["config"] == "smoke"
+
+
+def test_estimate_complex_npy(client, frame):
+    r = _post(client, _npy(frame))
+    assert r.status_code == 201, r.text
+    body = r.json()
+    att = body["attitude"]
+    assert len(att["euler_zyx_deg"]) == 3 and len(att["quaternion_wxyz"]) == 4
+    assert np.allclose(np.linalg.det(np.array(att["rotation_matrix"])), 1.0)
+    assert body["model"]["config"] == "smoke" and body["dtype"] == "complex128"
+    assert set(body["timings_s"]) >= {"preprocess", "unetpp", "swin"}
+    png = client.get(body["links"]["enhanced_png"], headers=A)
+    assert png.status_code == 200 and png.content.startswith(b"\x89PNG")
+    assert client.get(body["links"]["original_png"], headers=A).status_code == 200
+    assert client.get(body["links"]["self"], headers=A).json()["id"] == body["id"]
+
+
+def test_upload_uses_the_training_normalisation(frame):
+    (up,) = decode(_npy(frame), "f.npy")
+    np.testing.assert_array_equal(prepare(up, 64, False), normalise_frame(np.abs(frame)))
+
+
+def test_png_8_and_16_bit(client, frame):
+    mag = np.abs(frame)
+    for dtype, scale in ((np.uint8, 255), (np.uint16, 65535)):
+        img = Image.fromarray((mag / mag.max() * scale).astype(dtype))
+        buf = io.BytesIO()
+        img.save(buf, format="PNG")
+        r = _post(client, buf.getvalue(), name="frame.png")
+        assert r.status_code == 201, r.text
+
+
+def test_batch_endpoint_stores_one_row_each(client, settings, frame):
+    stack = np.stack([np.abs(frame)] * 3)
+    buf = io.BytesIO()
+    np.savez(buf, frames=stack)
+    before = _count(settings)
+    r = client.post(
+        "/v1/estimates/batch",
+        files=[("files", ("s.npz", buf.getvalue())), ("files", ("f.npy", _npy(frame)))],
+        headers=A,
+    )
+    assert r.status_code == 201, r.text
+    assert r.json()["count"] == 4 and _count(settings) == before + 4
+
+
+def test_plan_ties_attitude_to_lvlh_and_j2000(client, frame):
+    plan = client.post("/v1/plans", json=PAPER_EXAMPLE, headers=A).json()
+    r = _post(client, _npy(frame), plan_id=plan["id"], observed_at=plan["chosen"]["t_access"])
+    assert r.status_code == 201, r.text
+    body = r.json()
+    r_obs = np.array(body["attitude"]["rotation_matrix"])
+    r_j2000 = np.array(body["attitude_j2000"]["rotation_matrix"])
+    r_lvlh = np.array(body["attitude_lvlh"]["rotation_matrix"])
+    for m in (r_j2000, r_lvlh):
+        np.testing.assert_allclose(m @ m.T, np.eye(3), atol=1e-9)
+    assert not np.allclose(r_obs, r_j2000)
+    scenes = client.get("/v1/scenes", headers=A).json()
+    scene = next(s for s in scenes["data"] if s["plan_id"] == plan["id"])
+    assert [e["id"] for e in scene["estimates"]] == [body["id"]]
+    listed = client.get("/v1/estimates", params={"plan_id": plan["id"]}, headers=A).json()
+    assert listed["count"] == 1
+
+
+def test_other_operator_cannot_see_or_delete(client, frame):
+    eid = _post(client, _npy(frame)).json()["id"]
+    assert client.get(f"/v1/estimates/{eid}", headers=B).status_code == 404
+    assert client.get(f"/v1/estimates/{eid}/enhanced.png", headers=B).status_code == 404
+    assert client.delete(f"/v1/estimates/{eid}", headers=B).status_code == 404
+    assert client.get(f"/v1/estimates/{eid}", headers=A).status_code == 200
+    assert client.delete(f"/v1/estimates/{eid}", headers=A).status_code == 204
+    assert client.get(f"/v1/estimates/{eid}", headers=A).status_code == 404
+
+
+def _bomb():
+    import zipfile
+
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
+        zf.writestr("x.npy", b"\x00" * (80 * 1024 * 1024))
+    return buf.getvalue()
+
+
+def _tiff32():
+    buf = io.BytesIO()
+    Image.fromarray(np.zeros((64, 64), np.float32)).save(buf, format="TIFF")
+    return buf.getvalue()
+
+
+BAD = [
+    (b"hello, not an image", "f.bin", "unknown format"),
+    (b"", "f.npy", "empty"),
+    (_npy(np.zeros((64, 64, 2))), "f.npy", "2-D"),
+    (_npy(np.full((64, 64), np.nan)), "f.npy", "NaN"),
+    (_npy(np.full((64, 64), np.inf)), "f.npy", "NaN or infinite"),
+    (_npy(np.zeros((32, 32))), "f.npy", "the models take 64x64"),
+    (_npy(np.array(["a"] * 4).reshape(2, 2)), "f.npy", "dtype"),
+    (
+        b"\x93NUMPY\x01\x00{'descr': '<f8', 'fortran_order': False, 'shape': (999999, 999999), }" + b" " * 10 + b"\n",
+        "f.npy",
+        "not a readable",
+    ),
+    (b"\x89PNG\r\n\x1a\n" + b"\x00" * 40, "f.png", "not a readable PNG"),
+    (_bomb(), "f.npz", "unpacks to"),
+    (_tiff32(), "f.tif", "8- or 16-bit"),
+]
+
+
+@pytest.mark.parametrize(("data", "name", "message"), BAD)
+def test_bad_uploads_are_4xx_and_store_nothing(client, settings, data, name, message):
+    before = _count(settings)
+    r = _post(client, data, name=name)
+    assert r.status_code == 422, r.text
+    assert message in r.json()["detail"][0]["msg"]
+    assert _count(settings) == before
+
+
+def test_unknown_plan_and_oversize(client, settings, frame):
+    before = _count(settings)
+    r = _post(client, _npy(frame), plan_id="no-such-plan", observed_at="2022-12-04T11:28:36Z")
+    assert r.status_code == 422 and "no plan" in r.json()["detail"][0]["msg"]
+    big = _npy(np.zeros((1100, 1100)))  # 9.7 MB, over the 8 MB default
+    r = _post(client, big)
+    assert r.status_code == 413
+    assert _count(settings) == before
+
+
+def test_resample_on_request(client):
+    r = _post(client, _npy(np.random.default_rng(0).random((100, 80))), resample="true")
+    assert r.status_code == 201, r.text
+
+
+def test_sixteen_concurrent_clients_lose_nothing(client, settings, frame):
+    before = _count(settings)
+    data = _npy(frame)
+    lock = threading.Lock()
+    ids = []
+
+    def one(_):
+        r = _post(client, data)
+        with lock:
+            ids.append((r.status_code, r.json().get("id")))
+
+    with ThreadPoolExecutor(16) as pool:
+        list(pool.map(one, range(16)))
+    assert all(code == 201 for code, _ in ids)
+    assert len({i for _, i in ids}) == 16 and _count(settings) == before + 16
+
+
+def test_service_refuses_to_start_on_a_corrupt_model(settings, tmp_path):
+    import shutil
+
+    bad = tmp_path / "models"
+    shutil.copytree(settings.model_dir, bad)
+    (bad / "unetpp.onnx").write_bytes(b"truncated")
+    with pytest.raises(ModelFileError, match="unetpp.onnx"):
+        create_app(settings.model_copy(update={"model_dir": bad}))
+    assert TestClient  # the factory raised before any request could be served
