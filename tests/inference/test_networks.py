@@ -144,3 +144,20 @@ def test_quaternion_matches_rotation_matrix():
         [2 * (qx * qz - w * qy), 2 * (qy * qz + w * qx), 1 - 2 * (qx**2 + qy**2)],
     ])  # fmt: skip
     np.testing.assert_allclose(r, rotation_matrix(z, y, x), atol=1e-12)
+
+
+def test_gpu_pipeline_at_toy_size(tmp_path):
+    """The GPU command end to end on a CPU: simulate, train, pieces out, join back, export."""
+    from inference.pipeline import join
+    from inference.pipeline import run as pipeline_run
+
+    manifest = pipeline_run("smoke", 12, tmp_path / "work", tmp_path / "out", max_minutes=5, epochs=1, radar=SMALL)
+    assert manifest["complete"] and manifest["swin"]
+    for f in (tmp_path / "out").iterdir():
+        assert f.stat().st_size < 16 * 1024 * 1024
+    join(tmp_path / "out", tmp_path / "run")
+    card = export(tmp_path / "run", tmp_path / "models")
+    assert card["files"]["swin"]["parity_max_rel_diff"] < 1e-4
+    # A second call resumes instead of starting again.
+    again = pipeline_run("smoke", 12, tmp_path / "work", tmp_path / "out2", max_minutes=5, epochs=2, radar=SMALL)
+    assert again["epochs"] == 2
