@@ -188,6 +188,17 @@ def main() -> None:
     from bench.isar import bench_isar
 
     lines += bench_isar()
+    print("networks: ONNX Runtime against torch eager ...", flush=True)
+    from bench.models import bench_models
+
+    lines += bench_models()
+    from inference.runtime import DEFAULT_MODEL_DIR
+
+    if (DEFAULT_MODEL_DIR / "model_card.json").exists():
+        print("service: end-to-end estimate latency ...", flush=True)
+        from bench.service import bench_service
+
+        lines += bench_service(DEFAULT_MODEL_DIR)
     Path("BENCHMARKS.md").write_text("\n".join(lines))
     print("\n".join(lines))
 

@@ -1,0 +1,126 @@
+"""End-to-end estimate latency of a real uvicorn server against the raw two-model time, and the batch gain."""
+
+from __future__ import annotations
+
+import io
+import os
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def bench_service(model_dir: Path, clients: int = 8, per_client: int = 12) -> list[str]:
+    import httpx
+
+    from app.core.db import upgrade_database
+    from inference.isar import Imager, Radar, normalise_frame, simulate
+    from inference.runtime import Estimator
+    from inference.targets import tiangong_like
+
+    est = Estimator.load(model_dir)
+    size = est.img_size
+    frame = simulate(tiangong_like(), Imager(Radar(n_range=size, n_azimuth=size)), (10.0, 5.0, -5.0), 10.0, 0).image
+    buf = io.BytesIO()
+    np.save(buf, np.abs(frame).astype(np.float32))
+    npy = buf.getvalue()
+    norm = normalise_frame(np.abs(frame))[None]
+    est.estimate(norm)
+    raw = []
+    for _ in range(20):
+        t0 = time.perf_counter()
+        est.estimate(norm)
+        raw.append(time.perf_counter() - t0)
+    raw_ms = statistics.median(raw) * 1000
+
+    tmp = Path(tempfile.mkdtemp())
+    env = dict(os.environ, GSA_DATA_DIR=str(tmp), GSA_API_KEYS="bench-key", GSA_MODEL_DIR=str(model_dir))
+    upgrade_database(f"sqlite:///{tmp / 'gsa.db'}")
+    port = _free_port()
+    server = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "uvicorn",
+            "app.main:create_app",
+            "--factory",
+            "--port",
+            str(port),
+            "--log-level",
+            "warning",
+        ],
+        env=env,
+    )
+    url = f"http://127.0.0.1:{port}"
+    try:
+        for _ in range(100):
+            try:
+                if httpx.get(url + "/healthz", timeout=1).status_code == 200:
+                    break
+            except httpx.HTTPError:
+                time.sleep(0.2)
+        headers = {"X-API-Key": "bench-key"}
+
+        def one(_: int) -> list[float]:
+            out = []
+            with httpx.Client(timeout=60) as c:
+                for _ in range(per_client):
+                    t0 = time.perf_counter()
+                    r = c.post(url + "/v1/estimates", files={"file": ("f.npy", npy)}, headers=headers)
+                    out.append(time.perf_counter() - t0)
+                    assert r.status_code == 201, r.text
+            return out
+
+        one(0)
+        t0 = time.perf_counter()
+        with ThreadPoolExecutor(clients) as pool:
+            lat = sorted(x for xs in pool.map(one, range(clients)) for x in xs)
+        wall = time.perf_counter() - t0
+        single_fps = len(lat) / wall
+        p50, p99 = np.percentile(lat, 50) * 1000, np.percentile(lat, 99) * 1000
+        # One client, one request at a time: what a request costs beyond the models.
+        seq = sorted(one(0))
+        seq_ms = statistics.median(seq) * 1000
+        stack = io.BytesIO()
+        np.savez(stack, frames=np.repeat(np.abs(frame)[None].astype(np.float32), 32, axis=0))
+        with httpx.Client(timeout=120) as c:
+            c.post(url + "/v1/estimates/batch", files=[("files", ("s.npz", stack.getvalue()))], headers=headers)
+            t0 = time.perf_counter()
+            for _ in range(3):
+                r = c.post(url + "/v1/estimates/batch", files=[("files", ("s.npz", stack.getvalue()))], headers=headers)
+                assert r.status_code == 201
+            batch_fps = 96 / (time.perf_counter() - t0)
+    finally:
+        server.terminate()
+        server.wait(10)
+    return [
+        "## Estimation service",
+        "",
+        f"A real uvicorn server (1 worker) on SQLite with the models in `{model_dir.name}`, {size} x {size} .npy uploads.",
+        "",
+        "| what | figure |",
+        "|---|---|",
+        f"| raw two-model time (Estimator, batch 1, median of 20) | {raw_ms:.1f} ms |",
+        f"| POST /v1/estimates, one client, median | {seq_ms:.1f} ms (overhead {seq_ms - raw_ms:.1f} ms, {100 * (seq_ms - raw_ms) / raw_ms:.0f} % of model time) |",
+        f"| POST /v1/estimates, {clients} concurrent clients x {per_client}: p50 / p99 | {p50:.0f} / {p99:.0f} ms ({single_fps:.1f} frames/s) |",
+        f"| POST /v1/estimates/batch, 32 frames a request | {batch_fps:.1f} frames/s ({batch_fps / single_fps:.1f}x single) |",
+        "",
+    ]
+
+
+if __name__ == "__main__":
+    from inference.runtime import DEFAULT_MODEL_DIR
+
+    print("\n".join(bench_service(Path(sys.argv[1]) if len(sys.argv) > 1 else DEFAULT_MODEL_DIR)))
