@@ -246,7 +246,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from inference.runtime import DEFAULT_MODEL_DIR
 
     try:
-        res = evaluate(args.models or DEFAULT_MODEL_DIR, args.data, args.n_snr, out_dir=args.out)
+        res = evaluate(args.models or DEFAULT_MODEL_DIR, args.data, args.n_snr, out_dir=args.out, record=args.record)
     except InferenceError as exc:
         raise CliError(str(exc)) from None
     print(table(res))
@@ -367,6 +367,7 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--data", help="data set whose test split gives the 'with enhancement' row")
     ev.add_argument("--n-snr", type=int, default=1000)
     ev.add_argument("--out", default="results")
+    ev.add_argument("--record", action="store_true", help="also write the results into the model card")
     ev.set_defaults(func=cmd_evaluate)
     es = sub.add_parser("estimate", help="estimate the attitude in one ISAR frame (.npy, .npz, PNG, TIFF)")
     es.add_argument("file")

@@ -46,7 +46,13 @@ def bench_service(model_dir: Path, clients: int = 8, per_client: int = 12) -> li
     raw_ms = statistics.median(raw) * 1000
 
     tmp = Path(tempfile.mkdtemp())
-    env = dict(os.environ, GSA_DATA_DIR=str(tmp), GSA_API_KEYS="bench-key", GSA_MODEL_DIR=str(model_dir))
+    env = dict(
+        os.environ,
+        GSA_DATA_DIR=str(tmp),
+        GSA_API_KEYS="bench-key",
+        GSA_MODEL_DIR=str(model_dir),
+        GSA_MAX_UPLOAD_BYTES=str(32 * 1024 * 1024),
+    )  # a 32-frame float32 stack is 8.4 MB
     upgrade_database(f"sqlite:///{tmp / 'gsa.db'}")
     port = _free_port()
     server = subprocess.Popen(
@@ -100,7 +106,7 @@ def bench_service(model_dir: Path, clients: int = 8, per_client: int = 12) -> li
             t0 = time.perf_counter()
             for _ in range(3):
                 r = c.post(url + "/v1/estimates/batch", files=[("files", ("s.npz", stack.getvalue()))], headers=headers)
-                assert r.status_code == 201
+                assert r.status_code == 201, r.text
             batch_fps = 96 / (time.perf_counter() - t0)
     finally:
         server.terminate()

@@ -53,9 +53,9 @@ def summarise(pred: NDArray[np.floating], true: NDArray[np.floating]) -> dict[st
 
 def evaluate(
     model_dir: str | Path, data_dir: str | Path | None = None, n_snr: int = 1000, seed: int = 10_000,
-    out_dir: str | Path = "results", radar: Radar | None = None, progress: bool = True,
+    out_dir: str | Path = "results", radar: Radar | None = None, progress: bool = True, record: bool = False,
 ) -> dict[str, Any]:  # fmt: skip
-    """Evaluate the ONNX models in ``model_dir``; return and write the results."""
+    """Evaluate the ONNX models in ``model_dir``; return and write the results (and, with ``record``, into the card)."""
     est = Estimator.load(model_dir)
     manifest = load_manifest(data_dir) if data_dir is not None else None
     # The SNR test sets use the data set's radar (or Table 3's).
@@ -91,6 +91,11 @@ def evaluate(
     (out / "results.json").write_text(json.dumps(results, indent=2))
     (out / "results.md").write_text(table(results))
     plot_errors(errors, out / "errors.png")
+    if record:
+        card_path = Path(model_dir) / "model_card.json"
+        card = json.loads(card_path.read_text())
+        card["evaluation"] = {"rows": results["rows"], "n_per_snr": n_snr, "data": str(data_dir) if data_dir else None}
+        card_path.write_text(json.dumps(card, indent=2))
     return results
 
 
