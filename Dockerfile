@@ -6,6 +6,8 @@ COPY app ./app
 COPY planner ./planner
 COPY inference ./inference
 COPY migrations ./migrations
+# torch==2.13.0 from PyPI is a CUDA build on x86_64 (several GB); for a slim image, install the
+# CPU wheel of the same version from PyTorch's CPU index first, then the package.
 RUN pip install --no-cache-dir -e . && mkdir -p /data
 VOLUME /data
 EXPOSE 8000
