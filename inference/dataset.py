@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 
 from inference.errors import DatasetError, InferenceError
 from inference.isar import Imager, Radar, check_fits, normalise_frame, simulate
+from inference.runtime import sha256_file
 from inference.targets import TargetModel, load_model, tiangong_like
 
 FORMAT_VERSION = 1
@@ -125,14 +126,6 @@ def _write_shard(args: tuple[DatasetSpec, Radar, int, int, str]) -> tuple[str, s
     arrays = render_frames(spec, radar, start, stop)
     np.savez(path, **arrays)  # type: ignore[arg-type]  # numpy's stub reserves allow_pickle
     return Path(path).name, sha256_file(path), stop - start
-
-
-def sha256_file(path: str | Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def generate(spec: DatasetSpec, out: str | Path, radar: Radar | None = None, workers: int | None = None,

@@ -24,7 +24,7 @@ from inference.errors import ModelFileError
 DEFAULT_MODEL_DIR = Path(__file__).resolve().parent / "models" / "shipped"
 
 
-def sha256_file(path: Path) -> str:
+def sha256_file(path: str | Path) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as f:
         for chunk in iter(lambda: f.read(1 << 20), b""):

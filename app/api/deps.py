@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
-from typing import Annotated, cast
+from datetime import UTC, datetime
+from typing import Annotated, cast, overload
 
 from fastapi import Depends, HTTPException, Request, Security
 from fastapi.security import APIKeyHeader
@@ -59,3 +60,14 @@ def get_estimator(request: Request) -> Estimator:
 
 
 EstimatorDep = Annotated[Estimator, Depends(get_estimator)]
+
+
+@overload
+def as_utc(moment: datetime) -> datetime: ...
+@overload
+def as_utc(moment: None) -> None: ...
+def as_utc(moment: datetime | None) -> datetime | None:
+    """Return ``moment`` as aware UTC: SQLite hands back naive datetimes for UTC columns."""
+    if moment is None or moment.tzinfo is not None:
+        return moment
+    return moment.replace(tzinfo=UTC)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from datetime import UTC, datetime
+from datetime import datetime
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -12,7 +12,7 @@ from fastapi import APIRouter, File, Form, HTTPException, Query, UploadFile
 from fastapi.responses import FileResponse, Response
 
 from app import crud
-from app.api.deps import CurrentOperator, EstimatorDep, SessionDep, SettingsDep
+from app.api.deps import CurrentOperator, EstimatorDep, SessionDep, SettingsDep, as_utc
 from app.db.models import Estimate, utcnow
 from app.errors import InputError
 from app.schemas import EstimatePublic, EstimatesPublic
@@ -23,19 +23,13 @@ router = APIRouter(prefix="/estimates", tags=["estimates"])
 NOT_FOUND: dict[int | str, dict[str, Any]] = {404: {"description": "no estimate with this id belongs to the caller"}}
 
 
-def _utc(moment: datetime | None) -> datetime | None:
-    if moment is None or moment.tzinfo is not None:
-        return moment
-    return moment.replace(tzinfo=UTC)
-
-
 def public(e: Estimate) -> dict[str, Any]:
     r = e.result
     return {
         "id": e.id,
-        "created_at": _utc(e.created_at),
+        "created_at": as_utc(e.created_at),
         "plan_id": e.plan_id,
-        "observed_at": _utc(e.observed_at),
+        "observed_at": as_utc(e.observed_at),
         "input_name": e.input_name,
         "input_sha256": e.input_sha256,
         "shape": e.shape,
@@ -134,7 +128,7 @@ async def create_estimate(
     if len(uploads) != 1:
         raise InputError(["file"], f"the file holds {len(uploads)} frames; send stacks to /v1/estimates/batch")
     rows = _estimate(session=session, operator_id=operator.id, settings=settings, est=est, uploads=uploads,
-                     resample=resample, plan_id=plan_id, observed_at=_utc(observed_at), snr_db=snr_db)  # fmt: skip
+                     resample=resample, plan_id=plan_id, observed_at=as_utc(observed_at), snr_db=snr_db)  # fmt: skip
     return public(rows[0])
 
 
@@ -156,7 +150,7 @@ async def create_estimates_batch(
     for f in files:
         uploads += svc.decode(await _read(f, settings.max_upload_bytes), f.filename or "upload")
     rows = _estimate(session=session, operator_id=operator.id, settings=settings, est=est, uploads=uploads,
-                     resample=resample, plan_id=plan_id, observed_at=_utc(observed_at), snr_db=None)  # fmt: skip
+                     resample=resample, plan_id=plan_id, observed_at=as_utc(observed_at), snr_db=None)  # fmt: skip
     return {"data": [public(r) for r in rows], "count": len(rows)}
 
 

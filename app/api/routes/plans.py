@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from datetime import UTC, datetime
+from datetime import datetime
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, HTTPException, Query
 
 from app import crud
-from app.api.deps import CurrentOperator, SessionDep, SettingsDep
+from app.api.deps import CurrentOperator, SessionDep, SettingsDep, as_utc
 from app.schemas import PAPER_EXAMPLE, PlanCreate, PlanPublic, PlansPublic, PlanSummary
 from app.services.planning import run_plan
 
@@ -17,16 +17,11 @@ router = APIRouter(prefix="/plans", tags=["plans"])
 NOT_FOUND: dict[int | str, dict[str, Any]] = {404: {"description": "no plan with this id belongs to the caller"}}
 
 
-def _utc(moment: datetime) -> datetime:
-    """Return ``moment`` as aware UTC: SQLite hands back naive datetimes for UTC columns."""
-    return moment if moment.tzinfo is not None else moment.replace(tzinfo=UTC)
-
-
 def _public(plan: Any) -> dict[str, Any]:
     return {
         **plan.result,
         "id": plan.id,
-        "created_at": _utc(plan.created_at),
+        "created_at": as_utc(plan.created_at),
         "target_name": plan.target_name,
         "observer_name": plan.observer_name,
         "station_name": plan.station_name,
@@ -75,11 +70,11 @@ def list_plans(
     data = [
         PlanSummary(
             id=p.id,
-            created_at=_utc(p.created_at),
+            created_at=as_utc(p.created_at),
             target_name=p.target_name,
             observer_name=p.observer_name,
             station_name=p.station_name,
-            t_access=_utc(p.t_access) if p.t_access else None,
+            t_access=as_utc(p.t_access),
             miss_km=p.miss_km,
         )
         for p in rows

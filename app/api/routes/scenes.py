@@ -7,8 +7,8 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Query
 from sqlalchemy import func, select
 
-from app.api.deps import CurrentOperator, SessionDep
-from app.api.routes.estimates import _utc, public
+from app.api.deps import CurrentOperator, SessionDep, as_utc
+from app.api.routes.estimates import public
 from app.db.models import Estimate, Plan
 from app.schemas import ScenesPublic
 
@@ -35,6 +35,6 @@ def list_scenes(
             .where(Estimate.plan_id == p.id, Estimate.operator_id == operator.id)
             .order_by(Estimate.created_at)
         ).all()
-        data.append({"plan_id": p.id, "target_name": p.target_name, "t_access": _utc(p.t_access), "miss_km": p.miss_km,
+        data.append({"plan_id": p.id, "target_name": p.target_name, "t_access": as_utc(p.t_access), "miss_km": p.miss_km,
                      "estimates": [public(e) for e in ests]})  # fmt: skip
     return {"data": data, "count": total}
