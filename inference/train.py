@@ -85,6 +85,22 @@ def predict(
     return np.concatenate(angles), (np.concatenate(enhanced) if enhanced else None)
 
 
+@torch.no_grad()
+def enhance_all(unet: torch.nn.Module, images: np.ndarray, device: torch.device, batch: int = 16) -> np.ndarray:
+    """Run a frozen UNet++ over every frame once and return the enhanced frames as float16 [N, H, W]."""
+    unet.eval()
+    out = np.empty(images.shape, np.float16)
+    t0 = time.perf_counter()
+    for k in range(0, len(images), batch):
+        x = torch.from_numpy(images[k : k + batch].astype(np.float32)).unsqueeze(1).to(device)
+        out[k : k + batch] = unet(x)[:, 0].float().cpu().numpy()
+        done = min(k + batch, len(images))
+        if done % (batch * 20) == 0 or done == len(images):
+            print(f"train: enhancing frames with the frozen UNet++ {done}/{len(images)} "
+                  f"({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)  # fmt: skip
+    return out
+
+
 def train(
     data_dir: str | Path,
     out_dir: str | Path,
@@ -101,11 +117,26 @@ def train(
     max_train_frames: int | None = None,
     log_every: int = 20,
     compile_models: bool = False,
+    unet_epochs: int | None = None,
+    unet_from: str | Path | None = None,
+    threads: int | None = None,
 ) -> dict[str, Any]:
-    """Train both networks (or Swin alone with ``enhance=False``) and return the training record."""
+    """Train both networks (or Swin alone with ``enhance=False``) and return the training record.
+
+    ``mode="two-stage"`` trains UNet++ for ``unet_epochs`` (default half the epochs),
+    then freezes it, runs it once over every frame and trains Swin on those cached
+    enhanced frames, which is what makes Swin epochs cheap on a CPU. ``unet_from``
+    starts UNet++ from the weights of an earlier run's ``unetpp.pt``.
+    """
     cfg = config if isinstance(config, ModelConfig) else get_config(config, epochs=epochs, batch_size=batch_size, lr=lr)
     if mode not in ("joint", "two-stage"):
         raise InferenceError(f"mode {mode!r} must be 'joint' or 'two-stage'", field="mode")
+    if unet_epochs is not None and not 0 <= unet_epochs <= cfg.epochs:
+        raise InferenceError(f"unet_epochs {unet_epochs} must be between 0 and epochs ({cfg.epochs})", field="unet_epochs")
+    if unet_from is not None and not Path(unet_from).is_file():
+        raise InferenceError(f"{unet_from} does not exist; give an earlier run's unetpp.pt", field="unet_from")
+    if threads:
+        torch.set_num_threads(threads)
     manifest = load_manifest(data_dir, verify=True)  # fails before any work on a bad data set
     data = load_arrays(data_dir, verify=False)
     n, h, w = data["image"].shape
@@ -124,6 +155,12 @@ def train(
     torch.manual_seed(seed)
     dev = _device(device)
     unet, swin = build_models(cfg)
+    if unet_from is not None:
+        ck0 = torch.load(unet_from, map_location="cpu", weights_only=False)
+        try:
+            unet.load_state_dict({k: v.float() for k, v in ck0["state_dict"].items()})
+        except (RuntimeError, KeyError) as exc:
+            raise InferenceError(f"{unet_from} does not fit config {cfg.name!r}: {exc}", field="unet_from") from None
     unet.to(dev)
     swin.to(dev)
     opt_u = torch.optim.Adam(unet.parameters(), lr=cfg.lr)
@@ -154,19 +191,25 @@ def train(
     )
     rng = np.random.default_rng(seed + start_epoch)
     t_start = time.perf_counter()
-    stage_split = cfg.epochs // 2 if mode == "two-stage" else 0
+    stage_split = (cfg.epochs // 2 if unet_epochs is None else unet_epochs) if mode == "two-stage" else 0
+    cache: np.ndarray | None = None  # UNet++ output for every frame once UNet++ is frozen
     for epoch in range(start_epoch, cfg.epochs):
         unet.train()
         swin.train()
         train_unet = enhance and (mode == "joint" or epoch < stage_split)
         train_swin = mode == "joint" or epoch >= stage_split or not enhance
+        if enhance and mode == "two-stage" and not train_unet and cache is None:
+            cache = enhance_all(unet, data["image"], dev)
         sums = {"unet_loss": 0.0, "swin_loss": 0.0}
         batches = _batches(train_idx, cfg.batch_size, rng)
         t_epoch = time.perf_counter()
         for step, sel in enumerate(batches):
             x, y, a = _tensors(data, np.sort(sel), dev)
             with amp:
-                if enhance:
+                if cache is not None:
+                    loss_u = torch.zeros((), device=dev)
+                    swin_in = torch.from_numpy(cache[np.sort(sel)].astype(np.float32)).unsqueeze(1).to(dev)
+                elif enhance:
                     enhanced = run_u(x) if train_unet else run_u(x).detach()
                     loss_u = relative_frobenius_loss(enhanced.float(), y)
                     swin_in = enhanced.detach()
@@ -194,9 +237,12 @@ def train(
                 )
         sch_u.step()
         sch_s.step()
-        pred, _ = (
-            predict(unet if enhance else None, swin, data["image"][test_idx], dev) if len(test_idx) else (None, None)
-        )
+        if not len(test_idx):
+            pred = None
+        elif cache is not None:
+            pred, _ = predict(None, swin, cache[test_idx], dev)
+        else:
+            pred, _ = predict(unet if enhance else None, swin, data["image"][test_idx], dev)
         mae = np.abs(pred - data["angles_deg"][test_idx]).mean(axis=0).tolist() if pred is not None else [math.nan] * 3
         record = {
             "epoch": epoch + 1,
@@ -229,6 +275,8 @@ def train(
     record_all = {
         "config": cfg.as_dict(),
         "mode": mode,
+        "unet_epochs": stage_split if mode == "two-stage" else None,
+        "unet_from": str(unet_from) if unet_from is not None else None,
         "enhance": enhance,
         "seed": seed,
         "complete": done,
@@ -279,6 +327,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--batch-size", type=int)
     p.add_argument("--lr", type=float)
     p.add_argument("--mode", default="joint", choices=["joint", "two-stage"])
+    p.add_argument("--unet-epochs", type=int, help="two-stage: epochs of UNet++ before Swin (default half)")
+    p.add_argument("--unet-from", help="start UNet++ from an earlier run's unetpp.pt")
+    p.add_argument("--threads", type=int, help="torch CPU threads (default: all cores)")
     p.add_argument("--no-enhance", action="store_true", help="train Swin on raw frames (no UNet++)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device")
@@ -292,6 +343,7 @@ def run(args: argparse.Namespace) -> int:
     rec = train(
         args.data, args.out, args.config, args.epochs, args.batch_size, args.lr, args.mode, not args.no_enhance,
         args.seed, args.device, args.resume, args.max_minutes, args.max_train_frames, compile_models=args.compile,
+        unet_epochs=args.unet_epochs, unet_from=args.unet_from, threads=args.threads,
     )  # fmt: skip
     last = rec["history"][-1] if rec["history"] else None
     if last:

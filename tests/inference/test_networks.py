@@ -81,6 +81,23 @@ def test_resume_continues_from_the_checkpoint(smoke_data, smoke_run, tmp_path):
     assert [h["epoch"] for h in record["history"]] == [1, 2, 3]
 
 
+def test_two_stage_from_a_trained_unet_freezes_it_and_trains_swin(smoke_data, smoke_run, tmp_path):
+    out, _ = smoke_run
+    unet_before = torch.load(out / "unetpp.pt", weights_only=False)["state_dict"]
+    swin_before = torch.load(out / "swin.pt", weights_only=False)["state_dict"]
+    record = train(smoke_data, tmp_path / "two", "smoke", epochs=2, mode="two-stage", unet_epochs=0,
+                   unet_from=out / "unetpp.pt", log_every=0)  # fmt: skip
+    unet_after = torch.load(tmp_path / "two" / "unetpp.pt", weights_only=False)["state_dict"]
+    swin_after = torch.load(tmp_path / "two" / "swin.pt", weights_only=False)["state_dict"]
+    assert all(torch.equal(unet_before[k], unet_after[k]) for k in unet_before)  # frozen, loaded as given
+    assert any(not torch.equal(swin_before[k], swin_after[k]) for k in swin_before)
+    assert record["unet_epochs"] == 0 and all(h["unet_loss"] == 0.0 for h in record["history"])
+    with pytest.raises(InferenceError, match="unet_epochs"):
+        train(smoke_data, tmp_path / "bad", "smoke", epochs=2, mode="two-stage", unet_epochs=5)
+    with pytest.raises(InferenceError, match="unetpp.pt"):
+        train(smoke_data, tmp_path / "bad", "smoke", unet_from=tmp_path / "missing.pt")
+
+
 def test_export_parity_and_runtime(smoke_run, smoke_data, tmp_path):
     out, _ = smoke_run
     from inference.dataset import load_arrays
