@@ -40,6 +40,12 @@ def cmd_db_upgrade(_args: argparse.Namespace) -> int:
     return 0
 
 
+def _secret(settings: Any) -> bytes:
+    from app.core.security import load_key_secret
+
+    return load_key_secret(settings.key_secret, settings.data_dir)
+
+
 def ensure_dev_key(settings: Any) -> str | None:
     """Create a development key on first start (no stored keys, none in GSA_API_KEYS); return it."""
     from app import crud
@@ -47,7 +53,9 @@ def ensure_dev_key(settings: Any) -> str | None:
     key_file = Path(settings.data_dir) / "dev-api-key.txt"
     with _session() as session:
         if crud.count_api_keys(session=session) == 0 and not settings.env_api_keys:
-            _, key = crud.create_api_key(session=session, operator_name="dev", key_name="development")
+            _, key = crud.create_api_key(
+                session=session, secret=_secret(settings), operator_name="dev", key_name="development"
+            )
             key_file.parent.mkdir(parents=True, exist_ok=True)
             key_file.write_text(key + "\n")
             os.chmod(key_file, 0o600)
@@ -61,17 +69,28 @@ def cmd_serve(args: argparse.Namespace) -> int:
     import uvicorn
 
     from app.core.db import upgrade_database
+    from app.core.observability import configure_logging, uvicorn_log_config
+    from app.services.estimation import sweep_blobs
 
     settings = _settings()
+    configure_logging(settings.log_level, settings.log_json)
     upgrade_database(settings.database_url)
+    _secret(settings)  # made once here, before the workers start
     key = ensure_dev_key(settings)
+    with _session() as session:  # files a crash left without their rows
+        removed = sweep_blobs(session=session, data_dir=Path(settings.data_dir), grace_s=settings.orphan_grace_s)
     host = args.host or settings.host
     port = args.port or settings.port
     print(f"GSA-ISAR on http://{host}:{port}  (API docs: http://{host}:{port}/docs)")
+    if removed:
+        print(f"removed {removed} image files that no estimate refers to")
     if key:
         print(f"development API key (send as X-API-Key): {key}")
         print(f"  it is also in {Path(settings.data_dir) / 'dev-api-key.txt'}")
-    uvicorn.run("app.main:create_app", factory=True, host=host, port=port, workers=args.workers, log_level="info")
+    sys.stdout.flush()
+    log_config = uvicorn_log_config(settings.log_level) if settings.log_json else None
+    uvicorn.run("app.main:create_app", factory=True, host=host, port=port, workers=args.workers,
+                log_level=settings.log_level, log_config=log_config, access_log=not settings.log_json)  # fmt: skip
     return 0
 
 
@@ -81,7 +100,10 @@ def cmd_keys(args: argparse.Namespace) -> int:
     with _session() as session:
         if args.keys_cmd == "create":
             row, key = crud.create_api_key(
-                session=session, operator_name=args.operator or args.name, key_name=args.name
+                session=session,
+                secret=_secret(_settings()),
+                operator_name=args.operator or args.name,
+                key_name=args.name,
             )
             print(f"{row.id}  {key}")
             print("store this key now: only its hash is kept", file=sys.stderr)

@@ -8,7 +8,7 @@ from typing import Any
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
-from app.core.security import hash_api_key, new_api_key
+from app.core.security import HMAC_SCHEME, LEGACY_SCHEME, digests_equal, key_digest, key_prefix, new_api_key
 from app.db.models import ApiKey, Estimate, Operator, Plan, utcnow
 
 
@@ -22,22 +22,31 @@ def get_or_create_operator(*, session: Session, name: str) -> Operator:
 
 
 def create_api_key(
-    *, session: Session, operator_name: str, key_name: str, key: str | None = None
+    *, session: Session, secret: bytes, operator_name: str, key_name: str, key: str | None = None
 ) -> tuple[ApiKey, str]:
     """Create a key for an operator (created if new); return the row and the plain key (shown once)."""
     op = get_or_create_operator(session=session, name=operator_name)
     plain = key or new_api_key()
-    row = ApiKey(operator_id=op.id, name=key_name, prefix=plain[:8], key_hash=hash_api_key(plain))
+    row = ApiKey(operator_id=op.id, name=key_name, prefix=key_prefix(plain), key_hash=key_digest(plain, secret),
+                 hash_scheme=HMAC_SCHEME)  # fmt: skip
     session.add(row)
     session.commit()
     return row, plain
 
 
-def operator_for_key(*, session: Session, key: str) -> Operator | None:
-    row = session.scalar(select(ApiKey).where(ApiKey.key_hash == hash_api_key(key), ApiKey.revoked_at.is_(None)))
-    if row is None:
+def operator_for_key(*, session: Session, secret: bytes, key: str) -> Operator | None:
+    """Return the operator of an active key: rows found by prefix, digests compared in constant time."""
+    rows = session.scalars(select(ApiKey).where(ApiKey.prefix == key_prefix(key), ApiKey.revoked_at.is_(None))).all()
+    found = None
+    for row in rows:  # every candidate is compared, so the time does not say which one matched
+        if digests_equal(key_digest(key, secret, row.hash_scheme), row.key_hash) and found is None:
+            found = row
+    if found is None:
         return None
-    return session.get(Operator, row.operator_id)
+    if found.hash_scheme == LEGACY_SCHEME:  # rows from before migration 0003: rewrite as HMAC on first use
+        found.key_hash, found.hash_scheme = key_digest(key, secret), HMAC_SCHEME
+        session.commit()
+    return session.get(Operator, found.operator_id)
 
 
 def list_api_keys(*, session: Session) -> list[tuple[ApiKey, Operator]]:

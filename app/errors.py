@@ -1,33 +1,73 @@
-"""Map domain errors to HTTP in one place: bad input is a 422 that names the field."""
+"""Map errors to HTTP in one place: bad input is a 4xx that names the field, and every error body carries the request id."""
 
 from __future__ import annotations
 
 from typing import Any
 
 from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from app.core.observability import current_request_id
 from planner.errors import PlannerError
 
 
 class InputError(ValueError):
     """A request that passed the schema but that the planner cannot use; ``loc`` is the JSON path."""
 
-    def __init__(self, loc: list[str | int], message: str) -> None:
+    def __init__(self, loc: list[str | int], message: str, where: str = "body") -> None:
         super().__init__(message)
         self.loc = loc
         self.message = message
+        self.where = where
 
 
 def _body(loc: list[Any], msg: str) -> dict[str, Any]:
-    return {"detail": [{"loc": loc, "msg": msg, "type": "value_error"}]}
+    return {"detail": [{"loc": loc, "msg": msg, "type": "value_error"}], "request_id": current_request_id()}
+
+
+def _safe(value: Any, depth: int = 0) -> Any:
+    """Make a validation error's parts JSON-safe: bytes that are not UTF-8, odd objects, deep nests."""
+    if isinstance(value, bytes):
+        return value[:200].decode("utf-8", errors="replace")
+    if isinstance(value, str):
+        return value if len(value) <= 200 else value[:200] + "..."
+    if value is None or isinstance(value, bool | int):
+        return value
+    if isinstance(value, float):
+        return value if value == value and abs(value) != float("inf") else str(value)
+    if depth > 4:
+        return str(value)[:200]
+    if isinstance(value, dict):
+        return {str(k): _safe(v, depth + 1) for k, v in list(value.items())[:50]}
+    if isinstance(value, list | tuple):
+        return [_safe(v, depth + 1) for v in list(value)[:50]]
+    return str(value)[:200]
 
 
 def install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(InputError)
     async def _input_error(_request: Request, exc: InputError) -> JSONResponse:
-        return JSONResponse(status_code=422, content=_body(["body", *exc.loc], exc.message))
+        return JSONResponse(status_code=422, content=_body([exc.where, *exc.loc], exc.message))
 
     @app.exception_handler(PlannerError)
     async def _planner_error(_request: Request, exc: PlannerError) -> JSONResponse:
         return JSONResponse(status_code=422, content=_body(["body", exc.field or "request"], str(exc)))
+
+    @app.exception_handler(RequestValidationError)
+    async def _validation_error(_request: Request, exc: RequestValidationError) -> JSONResponse:
+        errors = [
+            {"loc": _safe(list(e.get("loc", ()))), "msg": _safe(e.get("msg", "")), "type": _safe(e.get("type", "")),
+             **({"input": _safe(e["input"])} if "input" in e else {})}
+            for e in exc.errors()
+        ]  # fmt: skip
+        return JSONResponse(status_code=422, content={"detail": errors, "request_id": current_request_id()})
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http_error(_request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        return JSONResponse(
+            status_code=exc.status_code,
+            content={"detail": exc.detail, "request_id": current_request_id()},
+            headers=getattr(exc, "headers", None),
+        )

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 from typing import Any
 
-from fastapi import FastAPI, Request
+from fastapi import FastAPI
 from fastapi.responses import JSONResponse
 
 from app.api.main import api_router
 from app.core.config import Settings, get_settings
-from app.core.db import make_engine, make_session_factory
+from app.core.db import database_status, make_engine, make_session_factory
+from app.core.observability import RequestContextMiddleware
+from app.core.security import load_key_secret
 from app.errors import install_error_handlers
 
 
@@ -27,30 +29,24 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     app.state.estimator = Estimator.load(settings.model_dir, threads=settings.ort_threads or None)
     app.state.settings = settings
+    app.state.key_secret = load_key_secret(settings.key_secret, settings.data_dir)
     app.state.engine = engine
     app.state.session_factory = make_session_factory(engine)
     install_error_handlers(app)
 
-    @app.middleware("http")
-    async def _limit_body(request: Request, call_next: Any) -> Any:
-        length = request.headers.get("content-length")
-        multipart = request.headers.get("content-type", "").startswith("multipart/")
-        # Uploads are checked file by file against max_upload_bytes; this bounds a whole batch.
-        limit = settings.max_upload_bytes * 8 if multipart else settings.max_request_bytes
-        if length is not None and length.isdigit() and int(length) > limit:
-            return JSONResponse(
-                status_code=413, content={"detail": f"request body of {length} bytes is over the limit of {limit}"}
-            )
-        return await call_next(request)
+    def body_limit(_scope: Any, headers: dict[str, str]) -> int:
+        # Uploads are checked file by file against max_upload_bytes; this bounds a whole request.
+        multipart = headers.get("content-type", "").startswith("multipart/")
+        return settings.max_batch_bytes if multipart else settings.max_request_bytes
 
-    @app.get("/readyz", tags=["health"])
-    def readyz() -> dict[str, Any]:
-        """Say the database answers and which models are loaded."""
-        from sqlalchemy import text
+    app.add_middleware(RequestContextMiddleware, body_limit=body_limit)
 
-        with engine.connect() as conn:
-            conn.execute(text("SELECT 1"))
-        return {"status": "ready", "database": "ok", "models": app.state.estimator.identity}
+    @app.get("/readyz", tags=["health"], responses={503: {"description": "the database does not answer"}})
+    def readyz() -> Any:
+        """Say whether the database answers at the migrated schema, and which models are loaded."""
+        db = database_status(engine)
+        body = {"status": "ready" if db["ok"] else "not ready", "database": db, "models": app.state.estimator.identity}
+        return body if db["ok"] else JSONResponse(status_code=503, content=body)
 
     @app.get("/healthz", tags=["health"])
     def healthz() -> dict[str, str]:

@@ -279,3 +279,17 @@ class ScenePublic(BaseModel):
 class ScenesPublic(BaseModel):
     data: list[ScenePublic]
     count: int
+
+
+class ErrorMessage(BaseModel):
+    """An error that is not about one field: its reason and the request id to quote."""
+
+    detail: str
+    request_id: str | None = None
+
+
+ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
+    400: {"model": ErrorMessage, "description": "the body could not be parsed"},
+    401: {"model": ErrorMessage, "description": "no API key, or an invalid or revoked one"},
+    413: {"model": ErrorMessage, "description": "the request or an uploaded file is over its size limit"},
+}

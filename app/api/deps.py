@@ -12,7 +12,7 @@ from sqlalchemy.orm import Session
 
 from app import crud
 from app.core.config import Settings
-from app.core.security import hash_api_key
+from app.core.security import digests_equal, key_fingerprint
 from app.db.models import Operator
 from inference.runtime import Estimator
 
@@ -34,15 +34,16 @@ SettingsDep = Annotated[Settings, Depends(get_settings_dep)]
 
 
 def get_current_operator(
-    session: SessionDep, settings: SettingsDep, key: Annotated[str | None, Security(api_key_header)]
+    request: Request, session: SessionDep, settings: SettingsDep, key: Annotated[str | None, Security(api_key_header)]
 ) -> Operator:
     """Return the operator whose key made the request; 401 without a valid, unrevoked key."""
     if not key:
         raise HTTPException(status_code=401, detail="missing API key: send it in the X-API-Key header")
-    op = crud.operator_for_key(session=session, key=key)
-    if op is None and key in settings.env_api_keys:
+    op = crud.operator_for_key(session=session, secret=request.app.state.key_secret, key=key)
+    matches = [digests_equal(key, k) for k in settings.env_api_keys]  # every one compared: constant time
+    if op is None and any(matches):
         # Keys from GSA_API_KEYS: each is its own operator, created on first use.
-        op = crud.get_or_create_operator(session=session, name=f"env-{hash_api_key(key)[:12]}")
+        op = crud.get_or_create_operator(session=session, name=f"env-{key_fingerprint(key)}")
         session.commit()
     if op is None:
         raise HTTPException(status_code=401, detail="invalid or revoked API key")
@@ -71,3 +72,13 @@ def as_utc(moment: datetime | None) -> datetime | None:
     if moment is None or moment.tzinfo is not None:
         return moment
     return moment.replace(tzinfo=UTC)
+
+
+def check_page_size(limit: int, settings: Settings) -> None:
+    """Refuse a page larger than the operator's ``GSA_MAX_PAGE_SIZE``."""
+    from app.errors import InputError
+
+    if limit > settings.max_page_size:
+        raise InputError(
+            ["limit"], f"limit {limit} is over the page size limit {settings.max_page_size}", where="query"
+        )

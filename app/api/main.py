@@ -1,8 +1,9 @@
 from fastapi import APIRouter
 
 from app.api.routes import access, estimates, plans, scenes
+from app.schemas import ERROR_RESPONSES
 
-api_router = APIRouter()
+api_router = APIRouter(responses=ERROR_RESPONSES)
 api_router.include_router(plans.router)
 api_router.include_router(access.router)
 api_router.include_router(estimates.router)

@@ -16,6 +16,10 @@ class Settings(BaseSettings):
 
     ``GSA_DATABASE_URL`` defaults to a SQLite file under ``GSA_DATA_DIR``;
     ``GSA_API_KEYS`` is a comma-separated list of keys accepted besides the stored ones.
+    ``GSA_KEY_SECRET`` is the HMAC secret API keys are stored under; when unset it is
+    made once and kept in ``GSA_DATA_DIR/key-secret`` (several hosts must share one).
+    ``GSA_ORPHAN_GRACE_S``: image files no row refers to are removed at start-up once
+    older than this (0 on one host; raise it when hosts share the image folder).
     """
 
     model_config = SettingsConfigDict(env_prefix="GSA_", env_file=".env", env_ignore_empty=True, extra="ignore")
@@ -30,9 +34,15 @@ class Settings(BaseSettings):
     max_grid_points: int = Field(default=25_000_000, ge=1)
     max_request_bytes: int = Field(default=1_000_000, ge=1024)
     max_upload_bytes: int = Field(default=8 * 1024 * 1024, ge=1024)
+    max_batch_bytes: int = Field(default=64 * 1024 * 1024, ge=1024)
+    max_image_side: int = Field(default=4096, ge=8, le=65_536)
     max_batch_frames: int = Field(default=64, ge=1, le=4096)
     model_dir: Path = DEFAULT_MODEL_DIR
     ort_threads: int = Field(default=0, ge=0, le=256, description="0: all cores")
+    key_secret: str = ""
+    orphan_grace_s: float = Field(default=0.0, ge=0.0)
+    log_level: str = Field(default="info", pattern="^(debug|info|warning|error)$")
+    log_json: bool = True
 
     @model_validator(mode="after")
     def _default_database(self) -> Settings:

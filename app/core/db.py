@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -55,3 +56,34 @@ def upgrade_database(url: str) -> None:
     cfg.set_main_option("script_location", str(migrations_dir()))
     cfg.set_main_option("sqlalchemy.url", url.replace("%", "%%"))
     command.upgrade(cfg, "head")
+
+
+@lru_cache(maxsize=1)
+def head_revision() -> str | None:
+    """Return the newest Alembic revision shipped with the code."""
+    from alembic.config import Config
+    from alembic.script import ScriptDirectory
+
+    cfg = Config()
+    cfg.set_main_option("script_location", str(migrations_dir()))
+    return ScriptDirectory.from_config(cfg).get_current_head()
+
+
+def database_status(engine: Engine) -> dict[str, Any]:
+    """Say whether the database answers and is migrated to the code's schema (never raises)."""
+    from alembic.runtime.migration import MigrationContext
+    from sqlalchemy import text
+    from sqlalchemy.exc import SQLAlchemyError
+
+    head = head_revision()
+    try:
+        with engine.connect() as conn:
+            conn.execute(text("SELECT 1"))
+            revision = MigrationContext.configure(conn).get_current_revision()
+    except SQLAlchemyError as exc:
+        return {"ok": False, "dialect": engine.dialect.name, "error": type(exc).__name__, "head": head}
+    ok = revision == head
+    out: dict[str, Any] = {"ok": ok, "dialect": engine.dialect.name, "revision": revision, "head": head}
+    if not ok:
+        out["error"] = "the database is not at the code's schema: run `gsa db upgrade`"
+    return out

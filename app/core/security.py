@@ -1,19 +1,73 @@
-"""API keys: random tokens, stored as SHA-256 digests.
+"""API keys: random tokens, stored as HMAC-SHA256 under a server secret, compared in constant time.
 
-A key is 32 random bytes (``gsa_`` + 43 url-safe characters), so a fast digest is
-enough: nothing can be guessed by brute force, and a lookup by digest never
-compares secrets byte by byte.
+A key is 32 random bytes (``gsa_`` + 43 url-safe characters). Why HMAC and not a
+slow salted hash: a slow hash (bcrypt, scrypt) protects low-entropy secrets such
+as passwords against guessing; a 256-bit random key cannot be guessed either way,
+and a slow hash would add tens of milliseconds to every request. The HMAC's secret
+lives outside the database (``GSA_KEY_SECRET`` or ``DATA_DIR/key-secret``), so a
+copied database alone cannot even confirm a key. Rows are found by the key's
+non-secret 8-character prefix and the digest is compared with
+``hmac.compare_digest``. Keys are never logged: the access log has no headers.
+Rows from before migration 0003 hold plain SHA-256 digests (``sha256`` scheme) and
+are rewritten as HMAC the first time their key is used.
 """
 
 from __future__ import annotations
 
 import hashlib
+import hmac
+import os
 import secrets
+from pathlib import Path
+
+HMAC_SCHEME = "hmac-sha256"
+LEGACY_SCHEME = "sha256"
+PREFIX_CHARS = 8
 
 
 def new_api_key() -> str:
     return "gsa_" + secrets.token_urlsafe(32)
 
 
-def hash_api_key(key: str) -> str:
-    return hashlib.sha256(key.encode("utf-8")).hexdigest()
+def key_prefix(key: str) -> str:
+    return key[:PREFIX_CHARS]
+
+
+def key_digest(key: str, secret: bytes, scheme: str = HMAC_SCHEME) -> str:
+    """Return the stored form of ``key`` under ``scheme``."""
+    data = key.encode("utf-8", errors="surrogatepass")
+    if scheme == LEGACY_SCHEME:
+        return hashlib.sha256(data).hexdigest()
+    return hmac.new(secret, data, hashlib.sha256).hexdigest()
+
+
+def digests_equal(a: str, b: str) -> bool:
+    return hmac.compare_digest(a.encode("ascii", errors="replace"), b.encode("ascii", errors="replace"))
+
+
+def key_fingerprint(key: str) -> str:
+    """A short non-secret name for a key from GSA_API_KEYS (its operator is ``env-<fingerprint>``)."""
+    return hashlib.sha256(key.encode("utf-8", errors="surrogatepass")).hexdigest()[:12]
+
+
+def load_key_secret(configured: str, data_dir: Path) -> bytes:
+    """Return the HMAC secret: ``GSA_KEY_SECRET`` if set, else ``data_dir/key-secret`` (made once, mode 600)."""
+    if configured:
+        return configured.encode("utf-8")
+    path = Path(data_dir) / "key-secret"
+    if not path.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f"key-secret.{os.getpid()}.tmp")
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        with os.fdopen(fd, "w") as fh:
+            fh.write(secrets.token_hex(32))
+        try:
+            os.link(tmp, path)  # atomic and exclusive: two starting workers agree on one secret
+        except FileExistsError:
+            pass
+        finally:
+            tmp.unlink()
+    secret = path.read_text().strip()
+    if len(secret) < 32:
+        raise ValueError(f"{path} holds a secret shorter than 32 characters; delete it or set GSA_KEY_SECRET")
+    return secret.encode("utf-8")

@@ -5,6 +5,8 @@ from __future__ import annotations
 import hashlib
 import io
 import math
+import os
+import threading
 import zipfile
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -155,10 +157,40 @@ def store_blob(data_dir: Path, data: bytes) -> str:
     path = blob_path(data_dir, digest)
     if not path.exists():
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(".tmp")
+        tmp = path.with_name(f"{digest}.{os.getpid()}.{threading.get_ident()}.tmp")
         tmp.write_bytes(data)
         tmp.replace(path)
     return digest
+
+
+def sweep_blobs(*, session: Any, data_dir: Path, grace_s: float = 0.0) -> int:
+    """Remove image files (and half-written ``.tmp`` files) that no estimate refers to; return how many.
+
+    Only files older than ``grace_s`` go, so a host sharing the folder can finish a write in flight.
+    """
+    import time
+
+    from sqlalchemy import select
+
+    from app.db.models import Estimate
+
+    root = Path(data_dir) / "images"
+    if not root.is_dir():
+        return 0
+    used: set[str] = set()
+    for orig, enh in session.execute(select(Estimate.original_sha256, Estimate.enhanced_sha256)):
+        used.update((orig, enh))
+    cutoff = time.time() - grace_s
+    removed = 0
+    for path in root.glob("*/*"):
+        stale = path.suffix == ".tmp" or (path.suffix == ".png" and path.stem not in used)
+        try:
+            if stale and path.stat().st_mtime <= cutoff:
+                path.unlink()
+                removed += 1
+        except FileNotFoundError:
+            continue
+    return removed
 
 
 def blob_path(data_dir: Path, digest: str) -> Path:

@@ -12,7 +12,7 @@ from fastapi import APIRouter, File, Form, HTTPException, Query, UploadFile
 from fastapi.responses import FileResponse, Response
 
 from app import crud
-from app.api.deps import CurrentOperator, EstimatorDep, SessionDep, SettingsDep, as_utc
+from app.api.deps import CurrentOperator, EstimatorDep, SessionDep, SettingsDep, as_utc, check_page_size
 from app.db.models import Estimate, utcnow
 from app.errors import InputError
 from app.schemas import EstimatePublic, EstimatesPublic
@@ -82,9 +82,11 @@ def _estimate(
     if plan is not None and observed_at is not None:
         in_frames = [svc.attitudes_in_frames(plan.request, observed_at, a) for a in angles]
     rows = []
+    blobs: list[bytes] = []
     for k, u in enumerate(uploads):
-        original = svc.store_blob(settings.data_dir, svc.png_bytes(frames[k]))
-        enh = svc.store_blob(settings.data_dir, svc.png_bytes(enhanced[k]))
+        blobs += [svc.png_bytes(frames[k]), svc.png_bytes(enhanced[k])]
+        original = svc.store_blob(settings.data_dir, blobs[-2])
+        enh = svc.store_blob(settings.data_dir, blobs[-1])
         result: dict[str, Any] = {"attitude": svc.attitude_json(angles[k]), "model": est.identity,
                                   "timings_s": {**per_frame, "batch_size": len(uploads)}}  # fmt: skip
         placed = in_frames[k]
@@ -107,7 +109,10 @@ def _estimate(
                 enhanced_sha256=enh,
             )  # fmt: skip
         )
-    return crud.create_estimates(session=session, rows=rows)
+    stored = crud.create_estimates(session=session, rows=rows)
+    for blob in blobs:  # a concurrent delete of an estimate with the same image may have removed it meanwhile
+        svc.store_blob(settings.data_dir, blob)
+    return stored
 
 
 @router.post("", status_code=201, response_model=EstimatePublic, responses={413: {"description": "file too large"}})
@@ -166,10 +171,7 @@ def list_estimates(
     created_before: datetime | None = None,
 ) -> dict[str, Any]:
     """List the caller's estimates, newest first, filtered by plan and creation time."""
-    if limit > settings.max_page_size:
-        raise HTTPException(
-            status_code=422, detail=f"limit {limit} is over the page size limit {settings.max_page_size}"
-        )
+    check_page_size(limit, settings)
     rows, total = crud.list_estimates(session=session, operator_id=operator.id, limit=limit, offset=offset,
                                       plan_id=plan_id, created_after=created_after, created_before=created_before)  # fmt: skip
     return {"data": [public(r) for r in rows], "count": total}

@@ -8,7 +8,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Body, HTTPException, Query
 
 from app import crud
-from app.api.deps import CurrentOperator, SessionDep, SettingsDep, as_utc
+from app.api.deps import CurrentOperator, SessionDep, SettingsDep, as_utc, check_page_size
 from app.schemas import PAPER_EXAMPLE, PlanCreate, PlanPublic, PlansPublic, PlanSummary
 from app.services.planning import run_plan
 
@@ -54,10 +54,7 @@ def list_plans(
     created_before: datetime | None = None,
 ) -> dict[str, Any]:
     """List the caller's plans, newest first, filtered by target name and creation time."""
-    if limit > settings.max_page_size:
-        raise HTTPException(
-            status_code=422, detail=f"limit {limit} is over the page size limit {settings.max_page_size}"
-        )
+    check_page_size(limit, settings)
     rows, total = crud.list_plans(
         session=session,
         operator_id=operator.id,

@@ -1,0 +1,182 @@
+"""Request ids, JSON-lines logs and the outermost safety net of the service.
+
+Every request gets an id (the caller's ``X-Request-ID`` when it is a short token,
+else a fresh one). It is returned in the ``X-Request-ID`` header, carried by every
+error body and by every log line written while the request runs. One access line
+per request is logged as JSON: method, path, status, duration, request id; never
+headers, so API keys are never logged.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import re
+import sys
+import time
+import traceback
+import uuid
+from contextvars import ContextVar
+from datetime import UTC, datetime
+from typing import Any
+
+from starlette.datastructures import MutableHeaders
+from starlette.exceptions import HTTPException
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+REQUEST_ID_HEADER = "X-Request-ID"
+_REQUEST_ID_RE = re.compile(r"^[A-Za-z0-9._:-]{1,64}$")
+request_id_var: ContextVar[str | None] = ContextVar("request_id", default=None)
+
+log = logging.getLogger("gsa.access")
+errors_log = logging.getLogger("gsa.errors")
+
+
+def current_request_id() -> str | None:
+    return request_id_var.get()
+
+
+def request_id_from(header: str | None) -> str:
+    """Return the caller's request id when it is a short safe token, else a new one."""
+    if header and _REQUEST_ID_RE.match(header):
+        return header
+    return uuid.uuid4().hex
+
+
+class JsonFormatter(logging.Formatter):
+    """One JSON object per line: time, level, logger, message, request id and any ``extra`` fields."""
+
+    _SKIP = frozenset(vars(logging.makeLogRecord({})).keys()) | {"message", "asctime", "color_message"}
+
+    def format(self, record: logging.LogRecord) -> str:
+        out: dict[str, Any] = {
+            "ts": datetime.fromtimestamp(record.created, UTC).isoformat(timespec="milliseconds"),
+            "level": record.levelname.lower(),
+            "logger": record.name,
+            "msg": record.getMessage(),
+        }
+        rid = current_request_id()
+        if rid is not None:
+            out["request_id"] = rid
+        for key, value in vars(record).items():
+            if key not in self._SKIP and not key.startswith("_"):
+                out[key] = value
+        if record.exc_info:
+            out["exc"] = "".join(traceback.format_exception(*record.exc_info)).rstrip()
+        return json.dumps(out, default=str)
+
+
+def configure_logging(level: str = "info", json_lines: bool = True) -> None:
+    """Send every logger (ours and uvicorn's) to stderr, as JSON lines unless ``json_lines`` is false."""
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(JsonFormatter() if json_lines else logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    root = logging.getLogger()
+    root.handlers[:] = [handler]
+    root.setLevel(level.upper())
+    for name in ("uvicorn", "uvicorn.error"):
+        lg = logging.getLogger(name)
+        lg.handlers[:] = []
+        lg.propagate = True
+    # Our access line replaces uvicorn's (which would not carry the request id).
+    logging.getLogger("uvicorn.access").disabled = True
+
+
+def uvicorn_log_config(level: str = "info") -> dict[str, Any]:
+    """A ``logging.config`` dictionary for uvicorn workers: JSON lines on stderr, no uvicorn access log."""
+    return {
+        "version": 1,
+        "disable_existing_loggers": False,
+        "formatters": {"json": {"()": "app.core.observability.JsonFormatter"}},
+        "handlers": {"stderr": {"class": "logging.StreamHandler", "formatter": "json", "stream": "ext://sys.stderr"}},
+        "root": {"handlers": ["stderr"], "level": level.upper()},
+        "loggers": {
+            "uvicorn": {"handlers": [], "propagate": True},
+            "uvicorn.error": {"handlers": [], "propagate": True},
+            "uvicorn.access": {"handlers": [], "propagate": False, "level": "CRITICAL"},
+        },
+    }
+
+
+class BodyTooLarge(HTTPException):
+    """Raised while the body arrives; an HTTPException so that FastAPI's body parsing passes it on as a 413."""
+
+    def __init__(self, limit: int) -> None:
+        super().__init__(413, f"request body is over the limit of {limit} bytes")
+        self.limit = limit
+
+
+def _json_response(status: int, body: dict[str, Any], rid: str) -> list[Message]:
+    payload = json.dumps(body).encode()
+    headers = [(b"content-type", b"application/json"), (b"content-length", str(len(payload)).encode()),
+               (REQUEST_ID_HEADER.lower().encode(), rid.encode())]  # fmt: skip
+    return [{"type": "http.response.start", "status": status, "headers": headers},
+            {"type": "http.response.body", "body": payload}]  # fmt: skip
+
+
+class RequestContextMiddleware:
+    """Outermost middleware: request id, body-size limits, the access log line, and a JSON 500 for any bug.
+
+    ``body_limit(scope)`` gives the byte limit of a request's body; it is checked against
+    ``Content-Length`` up front and against the bytes actually received (chunked uploads).
+    """
+
+    def __init__(self, app: ASGIApp, body_limit: Any) -> None:
+        self.app = app
+        self.body_limit = body_limit
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope.get("headers", [])}
+        rid = request_id_from(headers.get("x-request-id"))
+        token = request_id_var.set(rid)
+        scope.setdefault("state", {})["request_id"] = rid
+        t0 = time.perf_counter()
+        state = {"status": 500, "started": False}
+        limit = int(self.body_limit(scope, headers))
+
+        async def send_with_id(message: Message) -> None:
+            if message["type"] == "http.response.start":
+                state["status"], state["started"] = message["status"], True
+                MutableHeaders(scope=message)[REQUEST_ID_HEADER] = rid
+            await send(message)
+
+        received = 0
+
+        async def receive_limited() -> Message:
+            nonlocal received
+            message = await receive()
+            if message["type"] == "http.request":
+                received += len(message.get("body", b""))
+                if received > limit:
+                    raise BodyTooLarge(limit)
+            return message
+
+        try:
+            length = headers.get("content-length")
+            if length is not None and (not length.isdigit() or int(length) > limit):
+                raise BodyTooLarge(limit)
+            await self.app(scope, receive_limited, send_with_id)
+        except BodyTooLarge as exc:
+            if state["started"]:
+                raise
+            state["status"] = 413
+            for m in _json_response(413, {"detail": exc.detail, "request_id": rid}, rid):
+                await send(m)
+        except Exception:
+            errors_log.exception("unhandled error in %s %s", scope.get("method"), scope.get("path"))
+            if state["started"]:
+                raise
+            state["status"] = 500
+            body = {"detail": "internal server error; this is a bug, please report it with the request id",
+                    "request_id": rid}  # fmt: skip
+            for m in _json_response(500, body, rid):
+                await send(m)
+        finally:
+            log.info(
+                "request",
+                extra={"method": scope.get("method"), "path": scope.get("path"), "status": state["status"],
+                       "duration_ms": round((time.perf_counter() - t0) * 1000.0, 2)},
+            )  # fmt: skip
+            request_id_var.reset(token)
