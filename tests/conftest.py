@@ -23,10 +23,25 @@ def smoke_models(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return make_smoke_models(tmp_path_factory.mktemp("smoke"))
 
 
+@pytest.fixture(scope="session")
+def pg_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Where the session's PostgreSQL server keeps its data (started on first use)."""
+    return tmp_path_factory.mktemp("pg")
+
+
+@pytest.fixture(scope="module", params=["sqlite", "postgresql"])
+def backend(request: pytest.FixtureRequest) -> str:
+    """Every database-backed test module runs once on SQLite and once on a real PostgreSQL server."""
+    return str(request.param)
+
+
 @pytest.fixture(scope="module")
-def settings(tmp_path_factory: pytest.TempPathFactory, smoke_models: Path) -> Settings:
+def settings(tmp_path_factory: pytest.TempPathFactory, smoke_models: Path, backend: str, pg_root: Path) -> Settings:
+    from tests.utils.databases import database_url
+
     data: Path = tmp_path_factory.mktemp("data")
-    s = Settings(data_dir=data, api_keys=f"{KEY_A},{KEY_B}", model_dir=smoke_models)
+    s = Settings(data_dir=data, api_keys=f"{KEY_A},{KEY_B}", model_dir=smoke_models,
+                 database_url=database_url(backend, data, pg_root))  # fmt: skip
     upgrade_database(s.database_url)
     return s
 

@@ -8,6 +8,7 @@ import math
 import os
 import threading
 import zipfile
+import zlib
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -38,27 +39,63 @@ def _loc(name: str) -> list[str | int]:
     return ["file", name]
 
 
-def _check_array(arr: NDArray[Any], name: str) -> NDArray[np.float64]:
+DEFAULT_MAX_SIDE = 4096
+
+
+def _check_side(shape: tuple[int, ...], name: str, max_side: int) -> None:
+    if shape and max(shape[-2:]) > max_side:
+        raise InputError(
+            _loc(name),
+            f"frame of {list(shape)} is over the image size limit of {max_side} pixels a side (GSA_MAX_IMAGE_SIDE)",
+        )
+
+
+def _check_array(arr: NDArray[Any], name: str, max_side: int = DEFAULT_MAX_SIDE) -> NDArray[np.float64]:
     if arr.dtype.kind not in "biufc":
         raise InputError(_loc(name), f"unsupported dtype {arr.dtype}; send real or complex numbers")
     if arr.ndim != 2:
         raise InputError(_loc(name), f"a frame must be a 2-D array; this one has shape {list(arr.shape)}")
     if arr.size == 0:
         raise InputError(_loc(name), "the frame is empty")
+    _check_side(arr.shape, name, max_side)
     mag = np.abs(arr.astype(np.complex128 if arr.dtype.kind == "c" else np.float64))
     if not np.all(np.isfinite(mag)):
         raise InputError(_loc(name), "the frame contains NaN or infinite values")
     return np.asarray(mag, np.float64)
 
 
-def _npy(data: bytes, name: str) -> NDArray[Any]:
+def _npy(data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE) -> NDArray[Any]:
+    """Read a .npy array after checking its header against the bytes that follow (numpy allocates first)."""
+    buf = io.BytesIO(data)
     try:
-        return np.load(io.BytesIO(data), allow_pickle=False)
+        version = np.lib.format.read_magic(buf)
+        if version == (1, 0):
+            shape, _fortran, dtype = np.lib.format.read_array_header_1_0(buf)
+        elif version in ((2, 0), (3, 0)):
+            shape, _fortran, dtype = np.lib.format.read_array_header_2_0(buf)
+        else:
+            raise ValueError(f"unsupported .npy version {version}")
+    except (ValueError, OSError, EOFError, SyntaxError, TypeError) as exc:
+        raise InputError(_loc(name), f"not a readable .npy array: {exc}") from None
+    if dtype.hasobject:
+        raise InputError(_loc(name), f"unsupported dtype {dtype}; send real or complex numbers")
+    if len(shape) > 3 or any(int(d) < 0 for d in shape):
+        raise InputError(_loc(name), f"a frame must be a 2-D array (or a 3-D stack); this one has shape {list(shape)}")
+    _check_side(tuple(int(d) for d in shape), name, max_side)
+    need = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+    if need != len(data) - buf.tell():
+        raise InputError(
+            _loc(name),
+            f"the .npy header promises {need} bytes of {dtype} {list(shape)} but {len(data) - buf.tell()} follow",
+        )
+    try:
+        buf.seek(0)
+        return np.load(buf, allow_pickle=False)
     except (ValueError, OSError, EOFError) as exc:
         raise InputError(_loc(name), f"not a readable .npy array: {exc}") from None
 
 
-def _npz_arrays(data: bytes, name: str) -> list[tuple[str, NDArray[Any]]]:
+def _npz_arrays(data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE) -> list[tuple[str, NDArray[Any]]]:
     try:
         with zipfile.ZipFile(io.BytesIO(data)) as zf:
             members = zf.infolist()
@@ -69,18 +106,30 @@ def _npz_arrays(data: bytes, name: str) -> list[tuple[str, NDArray[Any]]]:
                     raise InputError(
                         _loc(name), f"{m.filename} unpacks to {m.file_size} bytes, over {MAX_NPZ_MEMBER_BYTES}"
                     )
-            return [(m.filename.removesuffix(".npy"), _npy(zf.read(m), name)) for m in members]
-    except zipfile.BadZipFile:
+            if len(members) > 4096:
+                raise InputError(_loc(name), f"the .npz archive holds {len(members)} members; at most 4096")
+            total = sum(m.file_size for m in members)
+            if total > 4 * MAX_NPZ_MEMBER_BYTES:
+                raise InputError(
+                    _loc(name), f"the .npz archive unpacks to {total} bytes, over {4 * MAX_NPZ_MEMBER_BYTES}"
+                )
+            return [(m.filename.removesuffix(".npy"), _npy(zf.read(m), name, max_side)) for m in members]
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, NotImplementedError, EOFError, OSError, RuntimeError) as exc:
+        if isinstance(exc, InputError):
+            raise
+        raise InputError(_loc(name), f"not a readable .npz archive: {exc}") from None
+    except zlib.error:
         raise InputError(_loc(name), "not a readable .npz archive") from None
 
 
-def _image(data: bytes, name: str) -> NDArray[Any]:
+def _image(data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE) -> NDArray[Any]:
     from PIL import Image, UnidentifiedImageError
 
     try:
         img = Image.open(io.BytesIO(data))
+        _check_side((img.size[1], img.size[0]), name, max_side)  # before decoding a single pixel
         img.load()
-    except (UnidentifiedImageError, OSError, ValueError) as exc:
+    except (UnidentifiedImageError, OSError, ValueError, SyntaxError, Image.DecompressionBombError) as exc:
         raise InputError(_loc(name), f"not a readable PNG or TIFF image: {exc}") from None
     if img.mode not in ("L", "I;16", "I;16B", "I;16L", "I"):
         raise InputError(_loc(name), f"image mode {img.mode} is not 8- or 16-bit grayscale")
@@ -90,18 +139,18 @@ def _image(data: bytes, name: str) -> NDArray[Any]:
     return arr
 
 
-def decode(data: bytes, name: str, allow_stack: bool = True) -> list[Upload]:
+def decode(data: bytes, name: str, allow_stack: bool = True, max_side: int = DEFAULT_MAX_SIDE) -> list[Upload]:
     """Decode an upload (.npy, .npz, .png, .tif/.tiff) into frames; with ``allow_stack``, arrays [N, H, W] too."""
     if not data:
         raise InputError(_loc(name), "the file is empty")
     digest = hashlib.sha256(data).hexdigest()
     head = data[:8]
     if head.startswith(b"\x93NUMPY"):
-        arrays = [(name, _npy(data, name))]
+        arrays = [(name, _npy(data, name, max_side))]
     elif head.startswith(b"PK"):
-        arrays = _npz_arrays(data, name)
+        arrays = _npz_arrays(data, name, max_side)
     elif head.startswith(b"\x89PNG") or head[:4] in (b"II*\x00", b"MM\x00*"):
-        arrays = [(name, _image(data, name))]
+        arrays = [(name, _image(data, name, max_side))]
     else:
         raise InputError(_loc(name), "unknown format: send .npy, .npz, or 8/16-bit grayscale PNG or TIFF")
     out = []
@@ -114,11 +163,13 @@ def decode(data: bytes, name: str, allow_stack: bool = True) -> list[Upload]:
                     f"a frame must be a 2-D array; this one has shape {list(arr.shape)} "
                     "(send stacks [N, H, W] to /v1/estimates/batch)",
                 )
-            _check_array(arr, name)  # raises with the shape
+            _check_array(arr, name, max_side)  # raises with the shape
             continue
         for k, frame in enumerate(stack):
             frame_name = name if len(stack) == 1 and len(arrays) == 1 else f"{name}:{label}[{k}]"
-            out.append(Upload(frame_name, digest, tuple(frame.shape), str(arr.dtype), _check_array(frame, name)))
+            out.append(
+                Upload(frame_name, digest, tuple(frame.shape), str(arr.dtype), _check_array(frame, name, max_side))
+            )
     return out
 
 

@@ -129,7 +129,7 @@ async def create_estimate(
 ) -> dict[str, Any]:
     """Estimate the attitude of one ISAR frame; the result is stored."""
     data = await _read(file, settings.max_upload_bytes)
-    uploads = svc.decode(data, file.filename or "upload", allow_stack=False)
+    uploads = svc.decode(data, file.filename or "upload", allow_stack=False, max_side=settings.max_image_side)
     if len(uploads) != 1:
         raise InputError(["file"], f"the file holds {len(uploads)} frames; send stacks to /v1/estimates/batch")
     rows = _estimate(session=session, operator_id=operator.id, settings=settings, est=est, uploads=uploads,
@@ -153,7 +153,8 @@ async def create_estimates_batch(
     """Estimate several frames as one batch through the models; one stored row each."""
     uploads: list[svc.Upload] = []
     for f in files:
-        uploads += svc.decode(await _read(f, settings.max_upload_bytes), f.filename or "upload")
+        data = await _read(f, settings.max_upload_bytes)
+        uploads += svc.decode(data, f.filename or "upload", max_side=settings.max_image_side)
     rows = _estimate(session=session, operator_id=operator.id, settings=settings, est=est, uploads=uploads,
                      resample=resample, plan_id=plan_id, observed_at=as_utc(observed_at), snr_db=None)  # fmt: skip
     return {"data": [public(r) for r in rows], "count": len(rows)}
