@@ -176,7 +176,7 @@ class RequestContextMiddleware:
         finally:
             log.info(
                 "request",
-                extra={"method": scope.get("method"), "path": scope.get("path"), "status": state["status"],
+                extra={"request_id": rid, "method": scope.get("method"), "path": scope.get("path"), "status": state["status"],
                        "duration_ms": round((time.perf_counter() - t0) * 1000.0, 2)},
             )  # fmt: skip
             request_id_var.reset(token)

@@ -1,0 +1,224 @@
+"""Access control generated from the app's route table, API keys at rest, request ids and logs.
+
+Every ``/v1`` route is taken from the app's route table (as its OpenAPI document lists it), so a new route is covered (or the
+test names it) without anyone remembering to add it here.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import io
+import json
+import logging
+import re
+
+import numpy as np
+import pytest
+from sqlalchemy import create_engine, func, select, text
+
+from app import crud
+from app.core.db import head_revision, make_engine, make_session_factory
+from app.core.observability import JsonFormatter
+from app.core.security import LEGACY_SCHEME, key_digest, load_key_secret
+from app.db.models import ApiKey, Estimate, Plan
+from app.schemas import PAPER_EXAMPLE
+from tests.conftest import KEY_A, KEY_B
+
+A = {"X-API-Key": KEY_A}
+B = {"X-API-Key": KEY_B}
+# The stored record each path parameter names; a route with any other parameter fails the test.
+ID_PARAMS = {"plan_id": "plan", "estimate_id": "estimate"}
+
+
+def _v1_routes(app):
+    """Every (method, path) under /v1, from the route table as the app publishes it (its OpenAPI paths)."""
+    paths = app.openapi()["paths"]
+    return sorted((m.upper(), p) for p, ops in paths.items() if p.startswith("/v1") for m in ops)
+
+
+def _npy(arr):
+    buf = io.BytesIO()
+    np.save(buf, arr)
+    return buf.getvalue()
+
+
+def _counts(settings):
+    engine = create_engine(settings.database_url)
+    with engine.connect() as conn:
+        out = {t.__tablename__: conn.scalar(select(func.count()).select_from(t)) for t in (Plan, Estimate, ApiKey)}
+    engine.dispose()
+    return out
+
+
+@pytest.fixture(scope="module")
+def records(client):
+    """One plan and one estimate of operator A (the estimate tied to the plan)."""
+    plan = client.post("/v1/plans", json=copy.deepcopy(PAPER_EXAMPLE), headers=A)
+    assert plan.status_code == 201, plan.text
+    frame = np.random.default_rng(0).random((64, 64))
+    est = client.post("/v1/estimates", files={"file": ("f.npy", _npy(frame))}, data={"plan_id": plan.json()["id"]},
+                      headers=A)  # fmt: skip
+    assert est.status_code == 201, est.text
+    return {"plan": plan.json()["id"], "estimate": est.json()["id"]}
+
+
+@pytest.fixture(scope="module")
+def revoked_key(client):
+    app = client.app
+    with app.state.session_factory() as session:
+        row, key = crud.create_api_key(session=session, secret=app.state.key_secret, operator_name="gone", key_name="k")
+        crud.revoke_api_key(session=session, key_id=row.id)
+    return key
+
+
+def _path(path, records):
+    params = re.findall(r"{(\w+)}", path)
+    missing = [p for p in params if p not in ID_PARAMS]
+    assert not missing, f"route {path} has path parameters {missing}: add them to ID_PARAMS"
+    return path.format(**{p: records[ID_PARAMS[p]] for p in params})
+
+
+def test_every_v1_route_answers_401_without_a_valid_key(client, records, revoked_key):
+    routes = _v1_routes(client.app)
+    assert len(routes) >= 11
+    for method, path in routes:
+        url = _path(path, records)
+        for headers in ({}, {"X-API-Key": revoked_key}, {"X-API-Key": "gsa_" + "x" * 43}, {"X-API-Key": KEY_A[:-1]}):
+            r = client.request(method, url, headers=headers)
+            assert r.status_code == 401, (method, path, headers, r.text)
+            assert r.json()["request_id"] == r.headers["X-Request-ID"]
+
+
+def test_another_operators_records_are_404_and_unchanged(client, settings, records):
+    before = {name: client.get(f"/v1/{name}s/{rid}", headers=A).json() for name, rid in records.items()}
+    counts = _counts(settings)
+    checked = 0
+    for method, path in _v1_routes(client.app):
+        if "{" not in path:
+            continue
+        r = client.request(method, _path(path, records), headers=B)
+        assert r.status_code == 404, (method, path, r.text)
+        checked += 1
+    assert checked >= 5  # plan, estimate, its two images, delete
+    assert _counts(settings) == counts
+    after = {name: client.get(f"/v1/{name}s/{rid}", headers=A).json() for name, rid in records.items()}
+    assert after == before
+
+
+def test_listings_never_show_another_operators_records(client, records):
+    for method, path in _v1_routes(client.app):
+        if method != "GET" or "{" in path:
+            continue
+        r = client.get(path, headers=B)
+        assert r.status_code == 200, (path, r.text)
+        assert records["plan"] not in r.text and records["estimate"] not in r.text, path
+        assert records["plan"] in client.get(path, headers=A).text or path == "/v1/estimates"
+    listed = client.get("/v1/estimates", headers=A).json()["data"]
+    assert records["estimate"] in [e["id"] for e in listed]
+
+
+def test_keys_are_stored_as_hmac_under_the_server_secret(client, settings):
+    app = client.app
+    with app.state.session_factory() as session:
+        row, key = crud.create_api_key(session=session, secret=app.state.key_secret, operator_name="hmac", key_name="k")
+        assert row.hash_scheme == "hmac-sha256"
+        assert row.key_hash != hashlib.sha256(key.encode()).hexdigest()
+        assert row.key_hash == key_digest(key, app.state.key_secret)
+        assert key not in json.dumps([row.key_hash, row.prefix, row.name])
+        assert crud.operator_for_key(session=session, secret=b"another secret" * 3, key=key) is None
+    assert client.get("/v1/plans", headers={"X-API-Key": key}).status_code == 200
+
+
+def test_legacy_sha256_keys_still_work_and_are_rewritten_as_hmac(client):
+    app = client.app
+    key = "gsa_legacy-key-from-before-migration-0003-xxxxxxx"
+    with app.state.session_factory() as session:
+        op = crud.get_or_create_operator(session=session, name="legacy")
+        session.add(ApiKey(operator_id=op.id, name="old", prefix=key[:8], key_hash=key_digest(key, b"", LEGACY_SCHEME),
+                           hash_scheme=LEGACY_SCHEME))  # fmt: skip
+        session.commit()
+    assert client.get("/v1/plans", headers={"X-API-Key": key}).status_code == 200
+    with app.state.session_factory() as session:
+        row = session.scalar(select(ApiKey).where(ApiKey.name == "old"))
+        assert row.hash_scheme == "hmac-sha256" and row.key_hash == key_digest(key, app.state.key_secret)
+    assert client.get("/v1/plans", headers={"X-API-Key": key}).status_code == 200
+
+
+def test_key_secret_is_made_once_private_and_refused_when_short(tmp_path):
+    s1 = load_key_secret("", tmp_path)
+    assert load_key_secret("", tmp_path) == s1 and len(s1) == 64
+    assert (tmp_path / "key-secret").stat().st_mode & 0o077 == 0
+    assert load_key_secret("configured-secret", tmp_path) == b"configured-secret"
+    (tmp_path / "key-secret").write_text("short")
+    with pytest.raises(ValueError, match="key-secret"):
+        load_key_secret("", tmp_path)
+
+
+def test_request_id_is_returned_echoed_and_in_error_bodies(client):
+    r = client.get("/v1/plans", headers=A)
+    assert re.fullmatch(r"[0-9a-f]{32}", r.headers["X-Request-ID"])
+    r = client.get("/v1/plans", headers={**A, "X-Request-ID": "op-trace-42"})
+    assert r.headers["X-Request-ID"] == "op-trace-42"
+    r = client.get("/v1/plans", headers={**A, "X-Request-ID": "bad id with spaces"})
+    assert re.fullmatch(r"[0-9a-f]{32}", r.headers["X-Request-ID"])
+    r = client.get("/v1/plans", params={"limit": 0}, headers={**A, "X-Request-ID": "trace-7"})
+    assert r.status_code == 422 and r.json()["request_id"] == "trace-7"
+    r = client.get("/v1/plans/nope", headers={**A, "X-Request-ID": "trace-8"})
+    assert r.status_code == 404 and r.json()["request_id"] == "trace-8"
+
+
+def test_logs_are_json_lines_with_the_request_id_and_never_the_key(client, caplog):
+    caplog.set_level(logging.INFO, logger="gsa.access")
+    client.get("/v1/plans", headers={**A, "X-Request-ID": "log-check-1"})
+    lines = [JsonFormatter().format(rec) for rec in caplog.records]
+    access = [json.loads(line) for line in lines if "log-check-1" in line]
+    assert access and access[-1]["path"] == "/v1/plans" and access[-1]["status"] == 200
+    assert access[-1]["method"] == "GET" and access[-1]["duration_ms"] >= 0
+    assert all(KEY_A not in line for line in lines)
+
+
+def test_a_bug_is_a_json_500_with_the_request_id(settings, caplog):
+    from fastapi.testclient import TestClient
+
+    from app.main import create_app
+
+    app = create_app(settings)
+
+    @app.get("/boom")
+    def boom() -> None:
+        raise RuntimeError("a bug")
+
+    with TestClient(app, raise_server_exceptions=False) as c:
+        r = c.get("/boom", headers={"X-Request-ID": "bug-1"})
+    assert r.status_code == 500
+    assert r.json()["request_id"] == "bug-1" and r.headers["X-Request-ID"] == "bug-1"
+    assert any(rec.name == "gsa.errors" and rec.exc_info for rec in caplog.records)
+
+
+def test_readyz_reports_database_schema_and_models(client, settings):
+    r = client.get("/readyz")
+    assert r.status_code == 200
+    db = r.json()["database"]
+    assert db["ok"] and db["revision"] == head_revision() and db["dialect"] in ("sqlite", "postgresql")
+    assert r.json()["models"]["name"]
+
+
+def test_readyz_is_503_on_an_unmigrated_database(settings, tmp_path):
+    from fastapi.testclient import TestClient
+
+    from app.main import create_app
+
+    bare = settings.model_copy(update={"database_url": f"sqlite:///{tmp_path / 'empty.db'}", "data_dir": tmp_path})
+    with TestClient(create_app(bare)) as c:
+        r = c.get("/readyz")
+    assert r.status_code == 503 and not r.json()["database"]["ok"]
+    assert "gsa db upgrade" in r.json()["database"]["error"]
+
+
+def test_database_answers_on_its_backend(settings, backend):
+    engine = make_engine(settings.database_url)
+    with make_session_factory(engine)() as session:
+        assert session.execute(text("SELECT 1")).scalar() == 1
+    assert engine.dialect.name == backend
+    engine.dispose()
