@@ -74,11 +74,26 @@ def as_utc(moment: datetime | None) -> datetime | None:
     return moment.replace(tzinfo=UTC)
 
 
-def check_page_size(limit: int, settings: Settings) -> None:
-    """Refuse a page larger than the operator's ``GSA_MAX_PAGE_SIZE``."""
+DEFAULT_PAGE_SIZE = 20
+
+
+def check_page_size(limit: int | None, settings: Settings) -> int:
+    """Return the page size: 20 (or the limit, if smaller) when not given; refuse one over ``GSA_MAX_PAGE_SIZE``."""
     from app.errors import InputError
 
+    if limit is None:
+        return min(DEFAULT_PAGE_SIZE, settings.max_page_size)
     if limit > settings.max_page_size:
         raise InputError(
             ["limit"], f"limit {limit} is over the page size limit {settings.max_page_size}", where="query"
+        )
+
+
+def check_span(days: float, settings: Settings, loc: list[str | int]) -> None:
+    """Refuse a planning span longer than the operator's ``GSA_MAX_SPAN_DAYS``."""
+    from app.errors import InputError
+
+    if days > settings.max_span_days:
+        raise InputError(
+            loc, f"{days} days is over the span limit of {settings.max_span_days} days (GSA_MAX_SPAN_DAYS)"
         )

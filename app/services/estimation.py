@@ -61,6 +61,8 @@ def _check_array(arr: NDArray[Any], name: str, max_side: int = DEFAULT_MAX_SIDE)
     mag = np.abs(arr.astype(np.complex128 if arr.dtype.kind == "c" else np.float64))
     if not np.all(np.isfinite(mag)):
         raise InputError(_loc(name), "the frame contains NaN or infinite values")
+    if not np.any(mag):
+        raise InputError(_loc(name), "the frame is all zero: there is no echo to estimate an attitude from")
     return np.asarray(mag, np.float64)
 
 

@@ -6,7 +6,7 @@ from typing import Any
 
 from fastapi import APIRouter
 
-from app.api.deps import CurrentOperator
+from app.api.deps import CurrentOperator, SettingsDep, check_span
 from app.schemas import AccessCreate, AccessPublic
 from app.services.planning import run_access
 
@@ -14,6 +14,7 @@ router = APIRouter(prefix="/access-windows", tags=["access"])
 
 
 @router.post("", response_model=AccessPublic)
-def compute_access(_operator: CurrentOperator, access_in: AccessCreate) -> dict[str, Any]:
+def compute_access(_operator: CurrentOperator, settings: SettingsDep, access_in: AccessCreate) -> dict[str, Any]:
     """Return rise, culmination and set of every pass of the target over the station."""
+    check_span(access_in.duration_days, settings, ["duration_days"])
     return run_access(access_in)

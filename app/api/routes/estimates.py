@@ -165,14 +165,14 @@ def list_estimates(
     session: SessionDep,
     operator: CurrentOperator,
     settings: SettingsDep,
-    limit: Annotated[int, Query(ge=1, le=1000)] = 20,
+    limit: Annotated[int | None, Query(ge=1, le=10_000, description="page size (default 20)")] = None,
     offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
     plan_id: Annotated[str | None, Query(max_length=36)] = None,
     created_after: datetime | None = None,
     created_before: datetime | None = None,
 ) -> dict[str, Any]:
     """List the caller's estimates, newest first, filtered by plan and creation time."""
-    check_page_size(limit, settings)
+    limit = check_page_size(limit, settings)
     rows, total = crud.list_estimates(session=session, operator_id=operator.id, limit=limit, offset=offset,
                                       plan_id=plan_id, created_after=created_after, created_before=created_before)  # fmt: skip
     return {"data": [public(r) for r in rows], "count": total}

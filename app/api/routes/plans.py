@@ -8,7 +8,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Body, HTTPException, Query
 
 from app import crud
-from app.api.deps import CurrentOperator, SessionDep, SettingsDep, as_utc, check_page_size
+from app.api.deps import CurrentOperator, SessionDep, SettingsDep, as_utc, check_page_size, check_span
 from app.schemas import PAPER_EXAMPLE, PlanCreate, PlanPublic, PlansPublic, PlanSummary
 from app.services.planning import run_plan
 
@@ -36,6 +36,7 @@ def create_plan(
     plan_in: Annotated[PlanCreate, Body(openapi_examples={"paper_table_1": {"value": PAPER_EXAMPLE}})],
 ) -> dict[str, Any]:
     """Plan a GSA scene: access windows, ranked node alignments, the phasing burn and its verification."""
+    check_span(plan_in.search.duration_days, settings, ["search", "duration_days"])
     _, result = run_plan(plan_in, max_grid_points=settings.max_grid_points)
     request = plan_in.model_dump(mode="json")
     plan = crud.create_plan(session=session, operator_id=operator.id, request=request, result=result)
@@ -47,14 +48,14 @@ def list_plans(
     session: SessionDep,
     operator: CurrentOperator,
     settings: SettingsDep,
-    limit: Annotated[int, Query(ge=1, le=1000)] = 20,
+    limit: Annotated[int | None, Query(ge=1, le=10_000, description="page size (default 20)")] = None,
     offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
     target_name: Annotated[str | None, Query(max_length=200)] = None,
     created_after: datetime | None = None,
     created_before: datetime | None = None,
 ) -> dict[str, Any]:
     """List the caller's plans, newest first, filtered by target name and creation time."""
-    check_page_size(limit, settings)
+    limit = check_page_size(limit, settings)
     rows, total = crud.list_plans(
         session=session,
         operator_id=operator.id,

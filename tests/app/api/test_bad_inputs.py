@@ -1,0 +1,245 @@
+"""A catalogue of named bad inputs: each gets its 4xx, a message naming what to fix, and changes nothing stored.
+
+The app runs with small operator limits (upload size, image side, page size, span,
+grid, batch) so that every limit is shown to be enforced. Row counts of every table
+and the number of stored image files are compared before and after each case.
+"""
+
+from __future__ import annotations
+
+import copy
+import io
+import json
+import zipfile
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+from PIL import Image
+from sqlalchemy import create_engine, func, select
+
+from app.db.models import ApiKey, Estimate, Operator, Plan
+from app.main import create_app
+from app.schemas import PAPER_EXAMPLE
+from tests.conftest import KEY_A
+
+A = {"X-API-Key": KEY_A}
+ISS_L1 = "1 25544U 98067A   08264.51782528 -.00002182  00000-0 -11606-4 0  2927"
+ISS_L2 = "2 25544  51.6416 247.4627 0006703 130.5360 325.0288 15.72125391563537"
+LIMITS = {"max_upload_bytes": 200_000, "max_batch_bytes": 400_000, "max_request_bytes": 65_536, "max_image_side": 128,
+          "max_page_size": 5, "max_span_days": 2.0, "max_grid_points": 1000, "max_batch_frames": 2}  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def limited(settings):
+    s = settings.model_copy(update=LIMITS)
+    with TestClient(create_app(s)) as c:
+        yield c, s
+
+
+def _npy(arr: Any) -> bytes:
+    buf = io.BytesIO()
+    np.save(buf, arr, allow_pickle=True)
+    return buf.getvalue()
+
+
+def _frame(shape=(64, 64)) -> np.ndarray:
+    return np.random.default_rng(1).random(shape) + 0.1
+
+
+def _png(arr: np.ndarray, mode: str | None = None) -> bytes:
+    buf = io.BytesIO()
+    Image.fromarray(arr, mode=mode).save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def _tiff_float() -> bytes:
+    buf = io.BytesIO()
+    Image.fromarray(_frame().astype(np.float32), mode="F").save(buf, format="TIFF")
+    return buf.getvalue()
+
+
+def _lying_npy() -> bytes:
+    good = _npy(_frame())
+    header_end = good.index(b"\n") + 1
+    header = good[10:header_end].replace(b"(64, 64)", b"(4000, 4000)")
+    return good[:8] + len(header).to_bytes(2, "little") + header + good[header_end:]
+
+
+def _zip_bomb() -> bytes:
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
+        zf.writestr("frame.npy", _npy(np.zeros((6000, 6000), np.float64))[:80] + b"\0" * (100 * 1024 * 1024))
+    return buf.getvalue()
+
+
+def _plan(**changes: Any) -> Callable[[], dict[str, Any]]:
+    """A plan request: the paper's example with dotted-path changes (value None deletes the key)."""
+
+    def make() -> dict[str, Any]:
+        body = copy.deepcopy(PAPER_EXAMPLE)
+        body["search"] = {"duration_days": 1}  # within the span limit, so each case fails for its own reason
+        for path, value in changes.items():
+            *parents, leaf = path.split(".")
+            node = body
+            for p in parents:
+                node = node.setdefault(p, {})
+            if value is None:
+                node.pop(leaf, None)
+            else:
+                node[leaf] = value
+        return {"json": body}
+
+    return make
+
+
+def _raw(text: str) -> Callable[[], dict[str, Any]]:
+    return lambda: {"content": text.encode(), "headers": {"Content-Type": "application/json"}}
+
+
+def _upload(data: bytes | Callable[[], bytes], name: str = "f.npy", **form: str) -> Callable[[], dict[str, Any]]:
+    return lambda: {"files": {"file": (name, data() if callable(data) else data)}, "data": form}
+
+
+@dataclass(frozen=True)
+class Case:
+    name: str
+    method: str
+    path: str
+    request: Callable[[], dict[str, Any]]
+    status: int
+    says: str  # the message must contain this (the field or what to fix)
+
+
+PLANS, EST = "/v1/plans", "/v1/estimates"
+CASES = [
+    # TLEs
+    Case("tle_line_too_short", "POST", PLANS, _plan(**{"target.elements": None, "target.tle": [ISS_L1[:60], ISS_L2]}), 422, "tle"),
+    Case("tle_bad_checksum", "POST", PLANS, _plan(**{"target.elements": None, "target.tle": [ISS_L1, ISS_L2[:-1] + "0"]}), 422, "checksum"),
+    Case("tle_non_ascii", "POST", PLANS, _plan(**{"target.elements": None, "target.tle": [ISS_L1[:-2] + "é7", ISS_L2]}), 422, "tle"),
+    Case("tle_one_line", "POST", PLANS, _plan(**{"target.elements": None, "target.tle": [ISS_L1]}), 422, "tle"),
+    Case("tle_and_elements_both", "POST", PLANS, _plan(**{"target.tle": [ISS_L1, ISS_L2]}), 422, "exactly one"),
+    # numbers that make no sense
+    Case("elements_nan", "POST", PLANS, _raw(json.dumps(PAPER_EXAMPLE).replace('"ha_km": 700', '"ha_km": NaN', 1)), 422, "ha_km"),
+    Case("elements_infinity", "POST", PLANS, _raw(json.dumps(PAPER_EXAMPLE).replace('"hp_km": 600', '"hp_km": Infinity', 1)), 422, "hp_km"),
+    Case("elements_1e308", "POST", PLANS, _plan(**{"target.elements.ha_km": 1e308}), 422, "ha_km"),
+    Case("perigee_negative", "POST", PLANS, _plan(**{"target.elements.hp_km": -50}), 422, "hp_km"),
+    Case("inclination_over_180", "POST", PLANS, _plan(**{"observer.elements.inclination_deg": 200}), 422, "inclination_deg"),
+    Case("apogee_below_perigee", "POST", PLANS, _plan(**{"target.elements.ha_km": 500}), 422, "ha_km"),
+    Case("latitude_91", "POST", PLANS, _plan(**{"ground_station.latitude_deg": 91}), 422, "latitude_deg"),
+    # types, shapes and unknown fields
+    Case("string_for_number", "POST", PLANS, _plan(**{"target.elements.ha_km": "high"}), 422, "ha_km"),
+    Case("list_for_object", "POST", PLANS, _plan(target=[1, 2]), 422, "target"),
+    Case("unknown_field", "POST", PLANS, _plan(**{"target.elements.colour": "red"}), 422, "colour"),
+    Case("epoch_not_a_date", "POST", PLANS, _plan(**{"target.elements.epoch": "yesterday"}), 422, "epoch"),
+    Case("body_not_json", "POST", PLANS, _raw("{not json"), 422, "JSON"),
+    Case("body_empty", "POST", PLANS, _raw(""), 422, "body"),
+    # names
+    Case("name_with_path_separator", "POST", PLANS, _plan(**{"target.name": "../../etc/passwd"}), 422, "name"),
+    Case("name_with_nul", "POST", PLANS, _plan(**{"observer.name": "obs\x00; DROP TABLE plans;--"}), 422, "name"),
+    Case("name_10000_characters", "POST", PLANS, _plan(**{"target.name": "x'; DELETE FROM plans;--" * 400}), 422, "name"),
+    # operator limits
+    Case("span_over_limit", "POST", PLANS, _plan(**{"search.duration_days": 5}), 422, "GSA_MAX_SPAN_DAYS"),
+    Case("grid_over_limit", "POST", PLANS, _plan(**{"search.step_km": 0.01}), 422, "step_km"),
+    Case("access_span_over_limit", "POST", "/v1/access-windows",
+         lambda: {"json": {"target": PAPER_EXAMPLE["target"], "ground_station": PAPER_EXAMPLE["ground_station"], "duration_days": 3}},
+         422, "duration_days"),
+    Case("request_body_over_limit", "POST", PLANS, _plan(**{"target.name": "x" * 70_000}), 413, "limit"),
+    # uploads
+    Case("upload_empty", "POST", EST, _upload(b""), 422, "empty"),
+    Case("upload_unknown_format", "POST", EST, _upload(b"hello, this is text", "f.txt"), 422, "unknown format"),
+    Case("npy_truncated", "POST", EST, _upload(lambda: _npy(_frame())[:1000]), 422, "npy"),
+    Case("npy_lying_header", "POST", EST, _upload(_lying_npy), 422, "npy"),
+    Case("npy_object_dtype", "POST", EST, _upload(lambda: _npy(np.array([{"a": 1}], dtype=object))), 422, "dtype"),
+    Case("npy_strings", "POST", EST, _upload(lambda: _npy(np.full((64, 64), "abc"))), 422, "dtype"),
+    Case("npz_zip_bomb", "POST", EST, _upload(_zip_bomb, "bomb.npz"), 422, "unpacks to"),
+    Case("png_that_is_not", "POST", EST, _upload(b"\x89PNG\r\n\x1a\n" + b"garbage" * 50, "f.png"), 422, "PNG"),
+    Case("tiff_float_depth", "POST", EST, _upload(_tiff_float, "f.tif"), 422, "grayscale"),
+    Case("png_rgb", "POST", EST, _upload(lambda: _png(np.zeros((64, 64, 3), np.uint8) + 9), "f.png"), 422, "grayscale"),
+    Case("frame_wrong_shape", "POST", EST, _upload(lambda: _npy(_frame((32, 48)))), 422, "resample"),
+    Case("frame_3d_to_single", "POST", EST, _upload(lambda: _npy(_frame((2, 64, 64)))), 422, "batch"),
+    Case("frame_4d", "POST", EST, _upload(lambda: _npy(_frame((1, 2, 64, 64)))), 422, "2-D"),
+    Case("frame_all_nan", "POST", EST, _upload(lambda: _npy(np.full((64, 64), np.nan))), 422, "NaN"),
+    Case("frame_with_inf", "POST", EST, _upload(lambda: _npy(np.where(_frame() > 0.5, np.inf, 1.0))), 422, "infinite"),
+    Case("frame_all_zero", "POST", EST, _upload(lambda: _npy(np.zeros((64, 64)))), 422, "all zero"),
+    Case("image_side_over_limit", "POST", EST, _upload(lambda: _npy(_frame((64, 200))), resample="true"), 422, "GSA_MAX_IMAGE_SIDE"),
+    Case("upload_over_size_limit", "POST", EST, _upload(lambda: _npy(_frame((100, 300)))), 413, "upload limit"),
+    Case("unknown_plan_id", "POST", EST, _upload(lambda: _npy(_frame()), plan_id="0" * 36), 422, "plan_id"),
+    Case("observed_at_without_plan", "POST", EST, _upload(lambda: _npy(_frame()), observed_at="2022-11-28T11:28:29Z"), 422, "plan_id"),
+    Case("snr_not_a_number", "POST", EST, _upload(lambda: _npy(_frame()), snr_db="nan"), 422, "snr_db"),
+    Case("batch_over_frame_limit", "POST", EST + "/batch",
+         lambda: {"files": [("files", (f"f{k}.npy", _npy(_frame()))) for k in range(3)]}, 422, "batch limit"),
+    # listings
+    Case("page_size_over_limit", "GET", PLANS + "?limit=10", lambda: {}, 422, "limit"),
+    Case("page_size_zero", "GET", EST + "?limit=0", lambda: {}, 422, "limit"),
+    Case("offset_negative", "GET", PLANS + "?offset=-1", lambda: {}, 422, "offset"),
+    Case("filter_not_a_date", "GET", EST + "?created_after=tuesday", lambda: {}, 422, "created_after"),
+    Case("plan_id_10000_characters", "GET", PLANS + "/" + "9" * 10000, lambda: {}, 404, "not found"),
+]  # fmt: skip
+
+
+def _state(settings) -> dict[str, int]:
+    engine = create_engine(settings.database_url)
+    with engine.connect() as conn:
+        counts = {
+            t.__tablename__: conn.scalar(select(func.count()).select_from(t))
+            for t in (Operator, ApiKey, Plan, Estimate)
+        }
+    engine.dispose()
+    images = settings.data_dir / "images"
+    counts["image_files"] = sum(1 for _ in images.rglob("*")) if images.exists() else 0
+    return counts
+
+
+def test_the_catalogue_is_large_and_its_names_unique():
+    assert len(CASES) >= 30
+    assert len({c.name for c in CASES}) == len(CASES)
+
+
+@pytest.mark.parametrize("case", CASES, ids=lambda c: c.name)
+def test_bad_input(limited, case: Case):
+    client, settings = limited
+    client.get("/v1/plans", headers=A)  # the operator row exists before the count
+    before = _state(settings)
+    kwargs = case.request()
+    headers = {**A, **kwargs.pop("headers", {})}
+    r = client.request(case.method, case.path, headers=headers, **kwargs)
+    assert r.status_code == case.status, r.text[:500]
+    assert case.says.lower() in r.text.lower(), r.text[:500]
+    assert r.json()["request_id"] == r.headers["X-Request-ID"]
+    assert _state(settings) == before
+
+
+def test_a_good_upload_passes_the_same_limits(limited):
+    """The limits refuse the cases above, not ordinary work."""
+    client, settings = limited
+    before = _state(settings)
+    r = client.post(EST, files={"file": ("ok.npy", _npy(_frame()))}, headers=A)
+    assert r.status_code == 201, r.text
+    after = _state(settings)
+    assert after["estimates"] == before["estimates"] + 1 and after["image_files"] >= before["image_files"]
+
+
+def test_hostile_strings_in_filters_match_nothing_and_change_nothing(limited):
+    client, settings = limited
+    before = _state(settings)
+    for value in ("' OR 1=1 --", "%", "_", 'x"; DROP TABLE plans; --', "ü" * 100):
+        r = client.get(PLANS, params={"target_name": value}, headers=A)
+        assert r.status_code == 200 and r.json()["count"] == 0, (value, r.text)
+    assert _state(settings) == before
+
+
+def test_a_chunked_body_over_the_limit_is_413_without_content_length(limited):
+    client, settings = limited
+    before = _state(settings)
+
+    def chunks():
+        for _ in range(100):
+            yield b" " * 1000
+
+    r = client.post(PLANS, content=chunks(), headers={**A, "Content-Type": "application/json"})
+    assert r.status_code == 413 and "limit" in r.json()["detail"]
+    assert _state(settings) == before
