@@ -1,9 +1,34 @@
-from fastapi import APIRouter
+from fastapi import APIRouter, Depends, Request
+from fastapi.dependencies.models import Dependant
+from fastapi.routing import APIRoute
 
 from app.api.routes import access, estimates, plans, scenes
+from app.errors import InputError
 from app.schemas import ERROR_RESPONSES
 
-api_router = APIRouter(responses=ERROR_RESPONSES)
+
+def _query_names(dep: Dependant) -> set[str]:
+    names = {p.alias for p in dep.query_params}
+    for sub in dep.dependencies:
+        names |= _query_names(sub)
+    return names
+
+
+def reject_unknown_query(request: Request) -> None:
+    """Refuse query parameters a route does not take: a misspelt filter must not silently list everything."""
+    route = request.scope.get("route")
+    if not isinstance(route, APIRoute) or not request.query_params:
+        return
+    allowed = _query_names(route.dependant)
+    unknown = sorted(set(request.query_params.keys()) - allowed)
+    if unknown:
+        takes = ", ".join(sorted(allowed)) or "none"
+        raise InputError(
+            [unknown[0]], f"unknown query parameter {unknown[0]!r}; this route takes: {takes}", where="query"
+        )
+
+
+api_router = APIRouter(responses=ERROR_RESPONSES, dependencies=[Depends(reject_unknown_query)])
 api_router.include_router(plans.router)
 api_router.include_router(access.router)
 api_router.include_router(estimates.router)
