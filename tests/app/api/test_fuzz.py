@@ -77,7 +77,7 @@ def test_no_route_answers_5xx_or_off_schema(fuzz_app):
             if "X-API-Key" in headers or not negative:  # a negative case may leave the key out on purpose: 401
                 headers["X-API-Key"] = KEY_A
             response = case.call(headers=headers)
-            SEEN[(op.label, response.status_code)] += 1
+            SEEN[(case.operation.label, response.status_code)] += 1
             MODES[case.meta.generation.mode.value if case.meta else "unknown"] += 1
             case.validate_response(response, checks=CHECKS)
 
