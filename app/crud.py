@@ -6,6 +6,7 @@ from datetime import datetime
 from typing import Any
 
 from sqlalchemy import func, select
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from app.core.security import HMAC_SCHEME, LEGACY_SCHEME, digests_equal, key_digest, key_prefix, new_api_key
@@ -13,12 +14,24 @@ from app.db.models import ApiKey, Estimate, Operator, Plan, utcnow
 
 
 def get_or_create_operator(*, session: Session, name: str) -> Operator:
+    """Return the operator called ``name``, creating it if new (safe when several workers race to create it).
+
+    Call it with nothing else pending in the session: losing the race rolls the transaction back.
+    """
     op = session.scalar(select(Operator).where(Operator.name == name))
-    if op is None:
+    if op is not None:
+        return op
+    try:
         op = Operator(name=name)
         session.add(op)
         session.flush()
-    return op
+        return op
+    except IntegrityError:  # another worker created it between our read and our insert
+        session.rollback()
+        op = session.scalar(select(Operator).where(Operator.name == name))
+        if op is None:
+            raise
+        return op
 
 
 def create_api_key(
