@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup run test bench lint clean
+.PHONY: setup run test bench fuzz load lint clean
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -22,6 +22,16 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python bench/run.py
+	$(BIN)/python bench/load.py
+
+# 5000+ generated requests per database (313 per route); the counts go to BENCHMARKS.md.
+fuzz: $(STAMP)
+	GSA_FUZZ_EXAMPLES_PER_ROUTE=313 GSA_FUZZ_REPORT=/tmp/gsa-fuzz.json $(BIN)/python -m pytest -q -p no:cacheprovider tests/app/api/test_fuzz.py
+	$(BIN)/python bench/fuzz.py /tmp/gsa-fuzz.json
+
+# A real server with 2 workers under 16 clients, on SQLite and PostgreSQL; figures to BENCHMARKS.md.
+load: $(STAMP)
+	$(BIN)/python bench/load.py
 
 lint: $(STAMP)
 	$(BIN)/ruff check app planner inference tests bench migrations

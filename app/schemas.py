@@ -2,11 +2,25 @@
 
 from __future__ import annotations
 
+import re
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
+_ISO_DATE = re.compile(r"^\d{4}-\d{2}-\d{2}")
+
+
+def _iso_only(value: Any) -> Any:
+    """Take date-times as ISO 8601 text only: a bare number (``0``, ``1.7e9``) is refused, not read as Unix time."""
+    if isinstance(value, str) and not _ISO_DATE.match(value.strip()):
+        raise ValueError("give an ISO 8601 date-time such as 2022-11-28T11:28:29Z")
+    if isinstance(value, int | float):
+        raise ValueError("give an ISO 8601 date-time such as 2022-11-28T11:28:29Z, not a number")
+    return value
+
+
+IsoDateTime = Annotated[datetime, BeforeValidator(_iso_only)]
 Name = Annotated[str, Field(min_length=1, max_length=200, pattern=r"^[^/\\\x00-\x1f]+$")]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 
@@ -19,7 +33,7 @@ class Strict(BaseModel):
 class ElementsIn(Strict):
     """Orbital elements at an epoch, as in the paper's Table 1 (heights above 6378.137 km)."""
 
-    epoch: datetime
+    epoch: IsoDateTime
     ha_km: Finite = Field(ge=100.0, le=1.0e6, description="apogee height, km")
     hp_km: Finite = Field(ge=100.0, le=1.0e6, description="perigee height, km (at least 100)")
     inclination_deg: Finite = Field(ge=0.0, le=180.0)
@@ -62,7 +76,7 @@ class StationIn(Strict):
 class SearchIn(Strict):
     """The search: span, element reading, the (dHa, dHp) box and the choice criterion."""
 
-    start: datetime | None = Field(default=None, description="default: the target's epoch")
+    start: IsoDateTime | None = Field(default=None, description="default: the target's epoch")
     duration_days: Finite = Field(default=10.0, gt=0.0, le=30.0)
     reading: Literal["osculating", "mean"] = "osculating"
     dha_min_km: Finite = Field(default=-50.0, ge=-500.0, le=500.0)
@@ -138,7 +152,7 @@ class AccessCreate(Strict):
 
     target: OrbitIn
     ground_station: StationIn
-    start: datetime | None = None
+    start: IsoDateTime | None = None
     duration_days: Finite = Field(default=7.0, gt=0.0, le=30.0)
     reading: Literal["osculating", "mean"] = "osculating"
 

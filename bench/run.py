@@ -199,6 +199,9 @@ def main() -> None:
         from bench.service import bench_service
 
         lines += bench_service(DEFAULT_MODEL_DIR)
+    from bench.sections import kept_sections
+
+    lines += kept_sections(("Load", "Fuzzing"))  # written by `make load` and `make fuzz`
     Path("BENCHMARKS.md").write_text("\n".join(lines))
     print("\n".join(lines))
 

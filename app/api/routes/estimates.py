@@ -15,7 +15,7 @@ from app import crud
 from app.api.deps import CurrentOperator, EstimatorDep, SessionDep, SettingsDep, as_utc, check_page_size
 from app.db.models import Estimate, utcnow
 from app.errors import InputError
-from app.schemas import EstimatePublic, EstimatesPublic
+from app.schemas import EstimatePublic, EstimatesPublic, IsoDateTime
 from app.services import estimation as svc
 
 router = APIRouter(prefix="/estimates", tags=["estimates"])
@@ -124,7 +124,7 @@ async def create_estimate(
     file: Annotated[UploadFile, File(description=".npy/.npz (2-D, real or complex) or 8/16-bit grayscale PNG/TIFF")],
     resample: Annotated[bool, Form()] = False,
     plan_id: Annotated[str | None, Form(max_length=36)] = None,
-    observed_at: Annotated[datetime | None, Form()] = None,
+    observed_at: Annotated[IsoDateTime | None, Form()] = None,
     snr_db: Annotated[float | None, Form(ge=-100, le=200)] = None,
 ) -> dict[str, Any]:
     """Estimate the attitude of one ISAR frame; the result is stored."""
@@ -148,7 +148,7 @@ async def create_estimates_batch(
     files: Annotated[list[UploadFile], File(description="several frames, or one .npz stack [N, H, W]")],
     resample: Annotated[bool, Form()] = False,
     plan_id: Annotated[str | None, Form(max_length=36)] = None,
-    observed_at: Annotated[datetime | None, Form()] = None,
+    observed_at: Annotated[IsoDateTime | None, Form()] = None,
 ) -> dict[str, Any]:
     """Estimate several frames as one batch through the models; one stored row each."""
     uploads: list[svc.Upload] = []
@@ -168,8 +168,8 @@ def list_estimates(
     limit: Annotated[int | None, Query(ge=1, le=10_000, description="page size (default 20)")] = None,
     offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
     plan_id: Annotated[str | None, Query(max_length=36)] = None,
-    created_after: datetime | None = None,
-    created_before: datetime | None = None,
+    created_after: IsoDateTime | None = None,
+    created_before: IsoDateTime | None = None,
 ) -> dict[str, Any]:
     """List the caller's estimates, newest first, filtered by plan and creation time."""
     limit = check_page_size(limit, settings)

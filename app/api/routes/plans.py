@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-from datetime import datetime
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, HTTPException, Query
 
 from app import crud
 from app.api.deps import CurrentOperator, SessionDep, SettingsDep, as_utc, check_page_size, check_span
-from app.schemas import PAPER_EXAMPLE, PlanCreate, PlanPublic, PlansPublic, PlanSummary
+from app.schemas import PAPER_EXAMPLE, IsoDateTime, PlanCreate, PlanPublic, PlansPublic, PlanSummary
 from app.services.planning import run_plan
 
 router = APIRouter(prefix="/plans", tags=["plans"])
@@ -51,8 +50,8 @@ def list_plans(
     limit: Annotated[int | None, Query(ge=1, le=10_000, description="page size (default 20)")] = None,
     offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
     target_name: Annotated[str | None, Query(max_length=200)] = None,
-    created_after: datetime | None = None,
-    created_before: datetime | None = None,
+    created_after: IsoDateTime | None = None,
+    created_before: IsoDateTime | None = None,
 ) -> dict[str, Any]:
     """List the caller's plans, newest first, filtered by target name and creation time."""
     limit = check_page_size(limit, settings)

@@ -1,0 +1,74 @@
+"""Load figures for BENCHMARKS.md: a real `gsa serve` with 2 workers, 16 clients x 50 mixed requests.
+
+Run with `make load`. Uses the shipped models and 256 x 256 frames, on the default
+SQLite database and on PostgreSQL 16 (the pgserver wheel); replaces the "Load" section.
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+from datetime import UTC, datetime
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench.run import machine  # noqa: E402
+from bench.sections import replace_section  # noqa: E402
+from inference.runtime import DEFAULT_MODEL_DIR  # noqa: E402
+from tests.utils.databases import database_url  # noqa: E402
+from tests.utils.server import Server, run_load, stored_ids  # noqa: E402
+
+KEYS = ["bench-load-key-a", "bench-load-key-b"]
+CLIENTS, EACH = 16, 50
+
+
+def one(backend: str, root: Path) -> dict:
+    data = root / backend
+    data.mkdir(parents=True)
+    env = {"GSA_DATA_DIR": str(data), "GSA_DATABASE_URL": database_url(backend, data, root / "pg"),
+           "GSA_MODEL_DIR": str(DEFAULT_MODEL_DIR), "GSA_API_KEYS": ",".join(KEYS), "GSA_ORT_THREADS": "1",
+           "GSA_LOG_LEVEL": "warning"}  # fmt: skip
+    srv = Server(env, workers=2, log_path=root / f"{backend}.log").start()
+    try:
+        res = run_load(srv.url, KEYS, clients=CLIENTS, requests_each=EACH, frame_size=256)
+        lost = dup = 0
+        for key in KEYS:
+            for kind in ("plan", "estimate"):
+                acked, stored = res.acked[key][kind], stored_ids(srv.url, key, kind)
+                lost += len(set(acked) - set(stored))
+                dup += len(acked) - len(set(acked)) + len(stored) - len(set(stored))
+    finally:
+        srv.stop()
+    errors5 = sum(n for s in res.statuses.values() for code, n in s.items() if code >= 500)
+    writes = sum(len(v["plan"]) + len(v["estimate"]) for v in res.acked.values())
+    return {"res": res, "lost": lost, "dup": dup, "5xx": errors5, "writes": writes,
+            "locked": sum("locked" in e for e in res.errors)}  # fmt: skip
+
+
+def main() -> None:
+    today = datetime.now(UTC).strftime("%Y-%m-%d")
+    lines = ["## Load", "",
+             f"Machine: {machine()}. Date: {today}. Command: `make load` (bench/load.py).",
+             f"`gsa serve --workers 2`, shipped models, 256 x 256 frames, {CLIENTS} concurrent clients x {EACH} mixed requests",
+             "(15 % one-day plans, 30 % single estimates, 5 % 4-frame batches, 15 % plan listings, 15 % estimate listings,",
+             "15 % reads of the client's own records, 5 % scenes). Every acknowledged write is read back afterwards.", ""]  # fmt: skip
+    with tempfile.TemporaryDirectory() as tmp:
+        for backend in ("sqlite", "postgresql"):
+            print(f"load: {backend} ...", flush=True)
+            r = one(backend, Path(tmp))
+            res = r["res"]
+            lines += [f"### {backend}", "",
+                      f"{CLIENTS * EACH} requests in {res.wall_s:.1f} s ({CLIENTS * EACH / res.wall_s:.1f} requests/s); "
+                      f"{r['writes']} acknowledged writes: {r['lost']} lost, {r['dup']} duplicated; {r['5xx']} server errors; "
+                      f"{r['locked']} 'database is locked' seen by a client; {len(res.errors)} client-side errors.", "",
+                      "| request | n | p50 | p95 | p99 | max |", "|---|---|---|---|---|---|"]  # fmt: skip
+            for op, p in res.percentiles().items():
+                lines.append(f"| {op} | {p['n']} | {p['p50_ms']:.0f} ms | {p['p95_ms']:.0f} ms | {p['p99_ms']:.0f} ms | {p['max_ms']:.0f} ms |")
+            lines.append("")
+    replace_section("Load", lines)
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
