@@ -87,6 +87,7 @@ def check_page_size(limit: int | None, settings: Settings) -> int:
         raise InputError(
             ["limit"], f"limit {limit} is over the page size limit {settings.max_page_size}", where="query"
         )
+    return limit
 
 
 def check_span(days: float, settings: Settings, loc: list[str | int]) -> None:

@@ -244,3 +244,19 @@ def test_a_chunked_body_over_the_limit_is_413_without_content_length(limited):
     r = client.post(PLANS, content=chunks(), headers={**A, "Content-Type": "application/json"})
     assert r.status_code == 413 and "limit" in r.json()["detail"]
     assert _state(settings) == before
+
+
+def test_pages_hold_at_most_the_limit_and_default_to_the_operator_cap(limited):
+    client, _settings = limited
+    for k in range(7):
+        assert client.post(EST, files={"file": (f"p{k}.npy", _npy(_frame() + k))}, headers=A).status_code == 201
+    total = client.get(EST, params={"limit": 1}, headers=A).json()["count"]
+    assert total >= 7
+    assert len(client.get(EST, params={"limit": 3}, headers=A).json()["data"]) == 3
+    assert len(client.get(EST, headers=A).json()["data"]) == 5  # default 20, capped by GSA_MAX_PAGE_SIZE=5
+    pages = [
+        e["id"]
+        for off in range(0, total, 5)
+        for e in client.get(EST, params={"limit": 5, "offset": off}, headers=A).json()["data"]
+    ]
+    assert len(pages) == len(set(pages)) == total
