@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import copy
 import hashlib
-import io
 import json
 import logging
 import re
@@ -24,6 +23,7 @@ from app.core.security import LEGACY_SCHEME, key_digest, load_key_secret
 from app.db.models import ApiKey, Estimate, Plan
 from app.schemas import PAPER_EXAMPLE
 from tests.conftest import KEY_A, KEY_B
+from tests.utils.server import npy_bytes
 
 A = {"X-API-Key": KEY_A}
 B = {"X-API-Key": KEY_B}
@@ -35,12 +35,6 @@ def _v1_routes(app):
     """Every (method, path) under /v1, from the route table as the app publishes it (its OpenAPI paths)."""
     paths = app.openapi()["paths"]
     return sorted((m.upper(), p) for p, ops in paths.items() if p.startswith("/v1") for m in ops)
-
-
-def _npy(arr):
-    buf = io.BytesIO()
-    np.save(buf, arr)
-    return buf.getvalue()
 
 
 def _counts(settings):
@@ -57,7 +51,7 @@ def records(client):
     plan = client.post("/v1/plans", json=copy.deepcopy(PAPER_EXAMPLE), headers=A)
     assert plan.status_code == 201, plan.text
     frame = np.random.default_rng(0).random((64, 64))
-    est = client.post("/v1/estimates", files={"file": ("f.npy", _npy(frame))}, data={"plan_id": plan.json()["id"]},
+    est = client.post("/v1/estimates", files={"file": ("f.npy", npy_bytes(frame))}, data={"plan_id": plan.json()["id"]},
                       headers=A)  # fmt: skip
     assert est.status_code == 201, est.text
     return {"plan": plan.json()["id"], "estimate": est.json()["id"]}
