@@ -167,6 +167,14 @@ def delete_estimate(*, session: Session, estimate: Estimate) -> None:
     session.commit()
 
 
+def blob_digests(*, session: Session) -> set[str]:
+    """Every image digest any estimate refers to (all operators)."""
+    used: set[str] = set()
+    for original, enhanced in session.execute(select(Estimate.original_sha256, Estimate.enhanced_sha256)):
+        used.update((original, enhanced))
+    return used
+
+
 def blob_in_use(*, session: Session, digest: str) -> bool:
     hit = session.scalar(
         select(func.count())

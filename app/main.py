@@ -34,7 +34,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.session_factory = make_session_factory(engine)
     install_error_handlers(app)
 
-    def body_limit(_scope: Any, headers: dict[str, str]) -> int:
+    def body_limit(headers: dict[str, str]) -> int:
         # Uploads are checked file by file against max_upload_bytes; this bounds a whole request.
         multipart = headers.get("content-type", "").startswith("multipart/")
         return settings.max_batch_bytes if multipart else settings.max_request_bytes

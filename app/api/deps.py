@@ -14,6 +14,7 @@ from app import crud
 from app.core.config import Settings
 from app.core.security import digests_equal, key_fingerprint
 from app.db.models import Operator
+from app.errors import InputError
 from inference.runtime import Estimator
 
 api_key_header = APIKeyHeader(name="X-API-Key", auto_error=False, description="an operator's API key")
@@ -79,8 +80,6 @@ DEFAULT_PAGE_SIZE = 20
 
 def check_page_size(limit: int | None, settings: Settings) -> int:
     """Return the page size: 20 (or the limit, if smaller) when not given; refuse one over ``GSA_MAX_PAGE_SIZE``."""
-    from app.errors import InputError
-
     if limit is None:
         return min(DEFAULT_PAGE_SIZE, settings.max_page_size)
     if limit > settings.max_page_size:
@@ -92,8 +91,6 @@ def check_page_size(limit: int | None, settings: Settings) -> int:
 
 def check_span(days: float, settings: Settings, loc: list[str | int]) -> None:
     """Refuse a planning span longer than the operator's ``GSA_MAX_SPAN_DAYS``."""
-    from app.errors import InputError
-
     if days > settings.max_span_days:
         raise InputError(
             loc, f"{days} days is over the span limit of {settings.max_span_days} days (GSA_MAX_SPAN_DAYS)"

@@ -116,7 +116,7 @@ def _json_response(status: int, body: dict[str, Any], rid: str) -> list[Message]
 class RequestContextMiddleware:
     """Outermost middleware: request id, body-size limits, the access log line, and a JSON 500 for any bug.
 
-    ``body_limit(scope)`` gives the byte limit of a request's body; it is checked against
+    ``body_limit(headers)`` gives the byte limit of a request's body; it is checked against
     ``Content-Length`` up front and against the bytes actually received (chunked uploads).
     """
 
@@ -131,10 +131,9 @@ class RequestContextMiddleware:
         headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope.get("headers", [])}
         rid = request_id_from(headers.get("x-request-id"))
         token = request_id_var.set(rid)
-        scope.setdefault("state", {})["request_id"] = rid
         t0 = time.perf_counter()
         state = {"status": 500, "started": False}
-        limit = int(self.body_limit(scope, headers))
+        limit = int(self.body_limit(headers))
 
         async def send_with_id(message: Message) -> None:
             if message["type"] == "http.response.start":

@@ -47,7 +47,7 @@ def digests_equal(a: str, b: str) -> bool:
 
 def key_fingerprint(key: str) -> str:
     """A short non-secret name for a key from GSA_API_KEYS (its operator is ``env-<fingerprint>``)."""
-    return hashlib.sha256(key.encode("utf-8", errors="surrogatepass")).hexdigest()[:12]
+    return key_digest(key, b"", LEGACY_SCHEME)[:12]
 
 
 def load_key_secret(configured: str, data_dir: Path) -> bytes:

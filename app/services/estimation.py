@@ -50,14 +50,14 @@ def _check_side(shape: tuple[int, ...], name: str, max_side: int) -> None:
         )
 
 
-def _check_array(arr: NDArray[Any], name: str, max_side: int = DEFAULT_MAX_SIDE) -> NDArray[np.float64]:
+def _check_array(arr: NDArray[Any], name: str) -> NDArray[np.float64]:
+    """Check a decoded frame (its side was checked from the file's header) and return its magnitude."""
     if arr.dtype.kind not in "biufc":
         raise InputError(_loc(name), f"unsupported dtype {arr.dtype}; send real or complex numbers")
     if arr.ndim != 2:
         raise InputError(_loc(name), f"a frame must be a 2-D array; this one has shape {list(arr.shape)}")
     if arr.size == 0:
         raise InputError(_loc(name), "the frame is empty")
-    _check_side(arr.shape, name, max_side)
     mag = np.abs(arr.astype(np.complex128 if arr.dtype.kind == "c" else np.float64))
     if not np.all(np.isfinite(mag)):
         raise InputError(_loc(name), "the frame contains NaN or infinite values")
@@ -116,12 +116,9 @@ def _npz_arrays(data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE) -> lis
                     _loc(name), f"the .npz archive unpacks to {total} bytes, over {4 * MAX_NPZ_MEMBER_BYTES}"
                 )
             return [(m.filename.removesuffix(".npy"), _npy(zf.read(m), name, max_side)) for m in members]
-    except (zipfile.BadZipFile, zipfile.LargeZipFile, NotImplementedError, EOFError, OSError, RuntimeError) as exc:
-        if isinstance(exc, InputError):
-            raise
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, NotImplementedError, EOFError, OSError, RuntimeError,
+            zlib.error) as exc:  # fmt: skip
         raise InputError(_loc(name), f"not a readable .npz archive: {exc}") from None
-    except zlib.error:
-        raise InputError(_loc(name), "not a readable .npz archive") from None
 
 
 def _image(data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE) -> NDArray[Any]:
@@ -165,13 +162,11 @@ def decode(data: bytes, name: str, allow_stack: bool = True, max_side: int = DEF
                     f"a frame must be a 2-D array; this one has shape {list(arr.shape)} "
                     "(send stacks [N, H, W] to /v1/estimates/batch)",
                 )
-            _check_array(arr, name, max_side)  # raises with the shape
+            _check_array(arr, name)  # raises with the shape
             continue
         for k, frame in enumerate(stack):
             frame_name = name if len(stack) == 1 and len(arrays) == 1 else f"{name}:{label}[{k}]"
-            out.append(
-                Upload(frame_name, digest, tuple(frame.shape), str(arr.dtype), _check_array(frame, name, max_side))
-            )
+            out.append(Upload(frame_name, digest, tuple(frame.shape), str(arr.dtype), _check_array(frame, name)))
     return out
 
 
@@ -223,16 +218,12 @@ def sweep_blobs(*, session: Any, data_dir: Path, grace_s: float = 0.0) -> int:
     """
     import time
 
-    from sqlalchemy import select
-
-    from app.db.models import Estimate
+    from app import crud
 
     root = Path(data_dir) / "images"
     if not root.is_dir():
         return 0
-    used: set[str] = set()
-    for orig, enh in session.execute(select(Estimate.original_sha256, Estimate.enhanced_sha256)):
-        used.update((orig, enh))
+    used = crud.blob_digests(session=session)
     cutoff = time.time() - grace_s
     removed = 0
     for path in root.glob("*/*"):
