@@ -56,8 +56,11 @@ def _batches(idx: np.ndarray, batch: int, rng: np.random.Generator | None) -> li
     return [order[k : k + batch] for k in range(0, len(order), batch)]
 
 
-def _tensors(data: dict[str, np.ndarray], sel: np.ndarray, device: torch.device) -> tuple[torch.Tensor, ...]:
-    x = torch.from_numpy(data["image"][sel].astype(np.float32)).unsqueeze(1).to(device)
+def _tensors(
+    images: np.ndarray, data: dict[str, np.ndarray], sel: np.ndarray, device: torch.device
+) -> tuple[torch.Tensor, ...]:
+    """Return the frames (``images``: the data set's, or the cached enhanced ones), labels and scaled angles."""
+    x = torch.from_numpy(images[sel].astype(np.float32)).unsqueeze(1).to(device)
     y = torch.from_numpy(data["label"][sel].astype(np.float32)).unsqueeze(1).to(device)
     a = torch.from_numpy(data["angles_deg"][sel].astype(np.float32) / ANGLE_SCALE_DEG).to(device)
     return x, y, a
@@ -132,7 +135,9 @@ def train(
     if mode not in ("joint", "two-stage"):
         raise InferenceError(f"mode {mode!r} must be 'joint' or 'two-stage'", field="mode")
     if unet_epochs is not None and not 0 <= unet_epochs <= cfg.epochs:
-        raise InferenceError(f"unet_epochs {unet_epochs} must be between 0 and epochs ({cfg.epochs})", field="unet_epochs")
+        raise InferenceError(
+            f"unet_epochs {unet_epochs} must be between 0 and epochs ({cfg.epochs})", field="unet_epochs"
+        )
     if unet_from is not None and not Path(unet_from).is_file():
         raise InferenceError(f"{unet_from} does not exist; give an earlier run's unetpp.pt", field="unet_from")
     if threads:
@@ -204,16 +209,13 @@ def train(
         batches = _batches(train_idx, cfg.batch_size, rng)
         t_epoch = time.perf_counter()
         for step, sel in enumerate(batches):
-            x, y, a = _tensors(data, np.sort(sel), dev)
+            x, y, a = _tensors(data["image"] if cache is None else cache, data, np.sort(sel), dev)
             with amp:
-                if cache is not None:
-                    loss_u = torch.zeros((), device=dev)
-                    swin_in = torch.from_numpy(cache[np.sort(sel)].astype(np.float32)).unsqueeze(1).to(dev)
-                elif enhance:
+                if enhance and cache is None:
                     enhanced = run_u(x) if train_unet else run_u(x).detach()
                     loss_u = relative_frobenius_loss(enhanced.float(), y)
                     swin_in = enhanced.detach()
-                else:
+                else:  # raw frames (no enhancement), or frames the frozen UNet++ already enhanced
                     loss_u = torch.zeros((), device=dev)
                     swin_in = x
                 loss_s = angle_loss(run_s(swin_in).float(), a)
