@@ -10,7 +10,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench.run import machine  # noqa: E402
+from bench.common import machine  # noqa: E402
 from bench.sections import replace_section  # noqa: E402
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench.run import machine  # noqa: E402
+from bench.common import machine  # noqa: E402
 from bench.sections import replace_section  # noqa: E402
 from inference.runtime import DEFAULT_MODEL_DIR  # noqa: E402
 from tests.utils.databases import database_url  # noqa: E402
@@ -66,7 +66,9 @@ def main() -> None:
                       f"{r['locked']} 'database is locked' seen by a client; {len(res.errors)} client-side errors.", "",
                       "| request | n | p50 | p95 | p99 | max |", "|---|---|---|---|---|---|"]  # fmt: skip
             for op, p in res.percentiles().items():
-                lines.append(f"| {op} | {p['n']} | {p['p50_ms']:.0f} ms | {p['p95_ms']:.0f} ms | {p['p99_ms']:.0f} ms | {p['max_ms']:.0f} ms |")
+                lines.append(
+                    f"| {op} | {p['n']} | {p['p50_ms']:.0f} ms | {p['p95_ms']:.0f} ms | {p['p99_ms']:.0f} ms | {p['max_ms']:.0f} ms |"
+                )
             lines.append("")
     replace_section("Load", lines)
     print("\n".join(lines))

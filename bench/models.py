@@ -3,26 +3,15 @@
 from __future__ import annotations
 
 import os
-import statistics
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from bench.common import median_time
 from inference.export import export_onnx
 from inference.models.build import build_models, get_config
-
-
-def _median(fn, repeat: int) -> float:  # type: ignore[no-untyped-def]
-    fn()
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 def bench_models(configs: tuple[str, ...] = ("paper", "compact", "cpu")) -> list[str]:
@@ -56,9 +45,9 @@ def bench_models(configs: tuple[str, ...] = ("paper", "compact", "cpu")) -> list
             x32 = np.repeat(x1, 32, axis=0)
             t1 = torch.from_numpy(x1)
             with torch.no_grad():
-                eager = _median(lambda m=model, t=t1: m(t), 5)
-            onnx1 = _median(lambda s=sess, x=x1: s.run(None, {"frame": x}), 5)
-            onnx32 = _median(lambda s=sess, x=x32: s.run(None, {"frame": x}), 2)
+                eager = median_time(lambda m=model, t=t1: m(t), 5)
+            onnx1 = median_time(lambda s=sess, x=x1: s.run(None, {"frame": x}), 5)
+            onnx32 = median_time(lambda s=sess, x=x32: s.run(None, {"frame": x}), 2)
             params = sum(p.numel() for p in model.parameters()) / 1e6
             lines.append(
                 f"| {name} | {role} | {params:.2f} M | {eager * 1000:.0f} ms | {onnx1 * 1000:.0f} ms | "

@@ -8,9 +8,6 @@ slice and scaled to the full problem size; the report says so.
 from __future__ import annotations
 
 import math
-import os
-import platform
-import statistics
 import subprocess
 import sys
 import time
@@ -21,6 +18,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bench.common import machine, median_time  # noqa: E402
 from planner.access import access_windows  # noqa: E402
 from planner.alignment import HeightBox, ObserverPlaneModel, node_miss_km  # noqa: E402
 from planner.plan import Orbit, PlanOptions, make_plan  # noqa: E402
@@ -35,28 +33,6 @@ from tests.utils.orbits import (  # noqa: E402
     PAPER_STATION,
     PAPER_TARGET,
 )
-
-
-def median_time(fn, repeat: int = 5) -> float:
-    fn()
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
-
-
-def machine() -> str:
-    cpu = platform.processor() or "unknown CPU"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, numpy {np.__version__}"
 
 
 def bench_plan() -> dict[str, float]:

@@ -3,10 +3,7 @@
 from __future__ import annotations
 
 import io
-import os
-import socket
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -15,20 +12,17 @@ from pathlib import Path
 
 import numpy as np
 
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
 def bench_service(model_dir: Path, clients: int = 8, per_client: int = 12) -> list[str]:
     import httpx
 
-    from app.core.db import upgrade_database
+    from bench.common import median_time
     from inference.isar import Imager, Radar, normalise_frame, simulate
     from inference.runtime import Estimator
     from inference.targets import tiangong_like
+    from tests.utils.server import Server
 
     est = Estimator.load(model_dir)
     size = est.img_size
@@ -37,46 +31,19 @@ def bench_service(model_dir: Path, clients: int = 8, per_client: int = 12) -> li
     np.save(buf, np.abs(frame).astype(np.float32))
     npy = buf.getvalue()
     norm = normalise_frame(np.abs(frame))[None]
-    est.estimate(norm)
-    raw = []
-    for _ in range(20):
-        t0 = time.perf_counter()
-        est.estimate(norm)
-        raw.append(time.perf_counter() - t0)
-    raw_ms = statistics.median(raw) * 1000
+    raw_ms = median_time(lambda: est.estimate(norm), 20) * 1000
 
     tmp = Path(tempfile.mkdtemp())
-    env = dict(
-        os.environ,
-        GSA_DATA_DIR=str(tmp),
-        GSA_API_KEYS="bench-key",
-        GSA_MODEL_DIR=str(model_dir),
-        GSA_MAX_UPLOAD_BYTES=str(32 * 1024 * 1024),
-    )  # a 32-frame float32 stack is 8.4 MB
-    upgrade_database(f"sqlite:///{tmp / 'gsa.db'}")
-    port = _free_port()
-    server = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "uvicorn",
-            "app.main:create_app",
-            "--factory",
-            "--port",
-            str(port),
-            "--log-level",
-            "warning",
-        ],
-        env=env,
-    )
-    url = f"http://127.0.0.1:{port}"
+    env = {
+        "GSA_DATA_DIR": str(tmp),
+        "GSA_API_KEYS": "bench-key",
+        "GSA_MODEL_DIR": str(model_dir),
+        "GSA_MAX_UPLOAD_BYTES": str(32 * 1024 * 1024),
+        "GSA_LOG_LEVEL": "warning",
+    }  # a 32-frame float32 stack is 8.4 MB
+    server = Server(env, workers=1).start()
+    url = server.url
     try:
-        for _ in range(100):
-            try:
-                if httpx.get(url + "/healthz", timeout=1).status_code == 200:
-                    break
-            except httpx.HTTPError:
-                time.sleep(0.2)
         headers = {"X-API-Key": "bench-key"}
 
         def one(_: int) -> list[float]:
@@ -109,12 +76,11 @@ def bench_service(model_dir: Path, clients: int = 8, per_client: int = 12) -> li
                 assert r.status_code == 201, r.text
             batch_fps = 96 / (time.perf_counter() - t0)
     finally:
-        server.terminate()
-        server.wait(10)
+        server.stop()
     return [
         "## Estimation service",
         "",
-        f"A real uvicorn server (1 worker) on SQLite with the models in `{model_dir.name}`, {size} x {size} .npy uploads.",
+        f"A real `gsa serve` (1 worker) on SQLite with the models in `{model_dir.name}`, {size} x {size} .npy uploads.",
         "",
         "| what | figure |",
         "|---|---|",

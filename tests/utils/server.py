@@ -58,8 +58,7 @@ class Server:
                 raise RuntimeError(f"gsa serve exited with {self.proc.returncode}; see {self.log_path}")
             try:
                 if httpx.get(self.url + "/readyz", timeout=2.0).status_code == 200:
-                    # every worker must be up: ask until two answers come from different pids is not visible,
-                    # so give the other workers a moment to finish loading their models
+                    # One worker answered; which one is not visible, so give the others a moment for their models.
                     time.sleep(0.5 * (self.workers - 1))
                     return self
             except httpx.HTTPError:
