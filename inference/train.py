@@ -123,23 +123,34 @@ def train(
     unet_epochs: int | None = None,
     unet_from: str | Path | None = None,
     threads: int | None = None,
+    swin_from: str | Path | None = None,
+    lr_decay: float | None = None,
 ) -> dict[str, Any]:
     """Train both networks (or Swin alone with ``enhance=False``) and return the training record.
 
     ``mode="two-stage"`` trains UNet++ for ``unet_epochs`` (default half the epochs),
     then freezes it, runs it once over every frame and trains Swin on those cached
-    enhanced frames, which is what makes Swin epochs cheap on a CPU. ``unet_from``
-    starts UNet++ from the weights of an earlier run's ``unetpp.pt``.
+    enhanced frames, which is what makes Swin epochs cheap on a CPU. ``unet_from`` and
+    ``swin_from`` start a network from the weights of an earlier run's ``unetpp.pt`` or
+    ``swin.pt``: with a fresh learning-rate schedule this continues training that the
+    earlier run's decayed schedule had slowed down.
     """
-    cfg = config if isinstance(config, ModelConfig) else get_config(config, epochs=epochs, batch_size=batch_size, lr=lr)
+    cfg = (
+        config
+        if isinstance(config, ModelConfig)
+        else get_config(config, epochs=epochs, batch_size=batch_size, lr=lr, lr_decay=lr_decay)
+    )
+    if not 0.0 < cfg.lr_decay <= 1.0:
+        raise InferenceError(f"lr_decay {cfg.lr_decay} must be in (0, 1]", field="lr_decay")
     if mode not in ("joint", "two-stage"):
         raise InferenceError(f"mode {mode!r} must be 'joint' or 'two-stage'", field="mode")
     if unet_epochs is not None and not 0 <= unet_epochs <= cfg.epochs:
         raise InferenceError(
             f"unet_epochs {unet_epochs} must be between 0 and epochs ({cfg.epochs})", field="unet_epochs"
         )
-    if unet_from is not None and not Path(unet_from).is_file():
-        raise InferenceError(f"{unet_from} does not exist; give an earlier run's unetpp.pt", field="unet_from")
+    for field, given, name in (("unet_from", unet_from, "unetpp.pt"), ("swin_from", swin_from, "swin.pt")):
+        if given is not None and not Path(given).is_file():
+            raise InferenceError(f"{given} does not exist; give an earlier run's {name}", field=field)
     if threads:
         torch.set_num_threads(threads)
     manifest = load_manifest(data_dir, verify=True)  # fails before any work on a bad data set
@@ -160,12 +171,13 @@ def train(
     torch.manual_seed(seed)
     dev = _device(device)
     unet, swin = build_models(cfg)
-    if unet_from is not None:
-        ck0 = torch.load(unet_from, map_location="cpu", weights_only=False)
-        try:
-            unet.load_state_dict({k: v.float() for k, v in ck0["state_dict"].items()})
-        except (RuntimeError, KeyError) as exc:
-            raise InferenceError(f"{unet_from} does not fit config {cfg.name!r}: {exc}", field="unet_from") from None
+    for field, given, net in (("unet_from", unet_from, unet), ("swin_from", swin_from, swin)):
+        if given is not None:
+            ck0 = torch.load(given, map_location="cpu", weights_only=False)
+            try:
+                net.load_state_dict({k: v.float() for k, v in ck0["state_dict"].items()})
+            except (RuntimeError, KeyError, TypeError) as exc:
+                raise InferenceError(f"{given} does not fit config {cfg.name!r}: {exc}", field=field) from None
     unet.to(dev)
     swin.to(dev)
     opt_u = torch.optim.Adam(unet.parameters(), lr=cfg.lr)
@@ -237,8 +249,10 @@ def train(
                     file=sys.stderr,
                     flush=True,
                 )
-        sch_u.step()
-        sch_s.step()
+        if train_unet:  # a frozen network's schedule stands still, so Swin starts stage two at its full rate
+            sch_u.step()
+        if train_swin:
+            sch_s.step()
         if not len(test_idx):
             pred = None
         elif cache is not None:
@@ -279,6 +293,7 @@ def train(
         "mode": mode,
         "unet_epochs": stage_split if mode == "two-stage" else None,
         "unet_from": str(unet_from) if unet_from is not None else None,
+        "swin_from": str(swin_from) if swin_from is not None else None,
         "enhance": enhance,
         "seed": seed,
         "complete": done,
@@ -328,9 +343,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--epochs", type=int)
     p.add_argument("--batch-size", type=int)
     p.add_argument("--lr", type=float)
+    p.add_argument("--lr-decay", type=float, help="learning-rate factor per epoch (default: the config's)")
     p.add_argument("--mode", default="joint", choices=["joint", "two-stage"])
     p.add_argument("--unet-epochs", type=int, help="two-stage: epochs of UNet++ before Swin (default half)")
     p.add_argument("--unet-from", help="start UNet++ from an earlier run's unetpp.pt")
+    p.add_argument("--swin-from", help="start Swin from an earlier run's swin.pt (fine-tuning with a fresh schedule)")
     p.add_argument("--threads", type=int, help="torch CPU threads (default: all cores)")
     p.add_argument("--no-enhance", action="store_true", help="train Swin on raw frames (no UNet++)")
     p.add_argument("--seed", type=int, default=0)
@@ -345,7 +362,8 @@ def run(args: argparse.Namespace) -> int:
     rec = train(
         args.data, args.out, args.config, args.epochs, args.batch_size, args.lr, args.mode, not args.no_enhance,
         args.seed, args.device, args.resume, args.max_minutes, args.max_train_frames, compile_models=args.compile,
-        unet_epochs=args.unet_epochs, unet_from=args.unet_from, threads=args.threads,
+        unet_epochs=args.unet_epochs, unet_from=args.unet_from, threads=args.threads, swin_from=args.swin_from,
+        lr_decay=args.lr_decay,
     )  # fmt: skip
     last = rec["history"][-1] if rec["history"] else None
     if last:

@@ -98,6 +98,30 @@ def test_two_stage_from_a_trained_unet_freezes_it_and_trains_swin(smoke_data, sm
         train(smoke_data, tmp_path / "bad", "smoke", unet_from=tmp_path / "missing.pt")
 
 
+def test_swin_from_starts_swin_from_earlier_weights_with_a_fresh_schedule(smoke_data, smoke_run, tmp_path):
+    out, _ = smoke_run
+    swin_before = torch.load(out / "swin.pt", weights_only=False)["state_dict"]
+    record = train(smoke_data, tmp_path / "ft", "smoke", epochs=1, lr=1e-12, lr_decay=0.5, mode="two-stage",
+                   unet_epochs=0, unet_from=out / "unetpp.pt", swin_from=out / "swin.pt", log_every=0)  # fmt: skip
+    swin_after = torch.load(tmp_path / "ft" / "swin.pt", weights_only=False)["state_dict"]
+    # a vanishing learning rate leaves the loaded weights where the earlier run left them
+    assert all(torch.allclose(swin_before[k], swin_after[k], atol=1e-6) for k in swin_before)
+    assert record["swin_from"] == str(out / "swin.pt") and record["config"]["lr_decay"] == 0.5
+    fresh = torch.load(_train_fresh(smoke_data, tmp_path / "fresh"), weights_only=False)["state_dict"]
+    assert any(not torch.allclose(swin_before[k], fresh[k], atol=1e-6) for k in swin_before)
+    with pytest.raises(InferenceError, match="swin.pt"):
+        train(smoke_data, tmp_path / "bad", "smoke", swin_from=tmp_path / "missing.pt")
+    with pytest.raises(InferenceError, match="swin_from|does not fit"):
+        train(smoke_data, tmp_path / "bad", "smoke", swin_from=out / "unetpp.pt", log_every=0)
+    with pytest.raises(InferenceError, match="lr_decay"):
+        train(smoke_data, tmp_path / "bad", "smoke", lr_decay=1.5)
+
+
+def _train_fresh(data, out):
+    train(data, out, "smoke", epochs=1, lr=1e-12, mode="two-stage", unet_epochs=0, log_every=0)
+    return out / "swin.pt"
+
+
 def test_export_parity_and_runtime(smoke_run, smoke_data, tmp_path):
     out, _ = smoke_run
     from inference.dataset import load_arrays
