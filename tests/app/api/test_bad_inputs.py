@@ -175,6 +175,7 @@ CASES = [
     # listings
     Case("page_size_over_limit", "GET", PLANS + "?limit=10", lambda: {}, 422, "limit"),
     Case("page_size_zero", "GET", EST + "?limit=0", lambda: {}, 422, "limit"),
+    Case("scenes_page_size_over_limit", "GET", "/v1/scenes?limit=6", lambda: {}, 422, "GSA_MAX_PAGE_SIZE"),
     Case("unknown_query_parameter", "GET", PLANS + "?limt=5", lambda: {}, 422, "limt"),
     Case("offset_negative", "GET", PLANS + "?offset=-1", lambda: {}, 422, "offset"),
     Case("filter_not_a_date", "GET", EST + "?created_after=tuesday", lambda: {}, 422, "created_after"),

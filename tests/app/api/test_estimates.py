@@ -113,6 +113,24 @@ def test_plan_ties_attitude_to_lvlh_and_j2000(client, frame):
     assert listed["count"] == 1
 
 
+def test_scenes_page_through_plans_each_with_its_own_estimates(client, frame):
+    before = client.get("/v1/scenes", headers=A).json()["count"]  # the module's client is shared
+    first = client.post("/v1/plans", json=PAPER_EXAMPLE, headers=A).json()
+    second = client.post("/v1/plans", json=PAPER_EXAMPLE, headers=A).json()
+    t = first["chosen"]["t_access"]
+    ids = {p["id"]: [_post(client, _npy(frame), plan_id=p["id"], observed_at=t).json()["id"] for _ in range(2)]
+           for p in (first, second)}  # fmt: skip
+    _post(client, _npy(frame))  # an estimate tied to no plan belongs to no scene
+    pages = [client.get("/v1/scenes", params={"limit": 1, "offset": k}, headers=A).json() for k in (0, 1)]
+    assert [p["count"] for p in pages] == [before + 2] * 2
+    assert [p["data"][0]["plan_id"] for p in pages] == [second["id"], first["id"]]  # newest first
+    for page in pages:
+        scene = page["data"][0]
+        assert [e["id"] for e in scene["estimates"]] == ids[scene["plan_id"]]  # in upload order
+    other = client.get("/v1/scenes", params={"limit": 100}, headers=B).json()["data"]
+    assert not {s["plan_id"] for s in other} & set(ids)
+
+
 def test_other_operator_cannot_see_or_delete(client, frame):
     eid = _post(client, _npy(frame)).json()["id"]
     assert client.get(f"/v1/estimates/{eid}", headers=B).status_code == 404
