@@ -84,7 +84,8 @@ def check_page_size(limit: int | None, settings: Settings) -> int:
         return min(DEFAULT_PAGE_SIZE, settings.max_page_size)
     if limit > settings.max_page_size:
         raise InputError(
-            ["limit"], f"limit {limit} is over the page size limit {settings.max_page_size} (GSA_MAX_PAGE_SIZE)",
+            ["limit"],
+            f"limit {limit} is over the page size limit {settings.max_page_size} (GSA_MAX_PAGE_SIZE)",
             where="query",
         )
     return limit

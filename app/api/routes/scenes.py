@@ -37,7 +37,7 @@ def list_scenes(
             .where(Estimate.plan_id.in_(list(by_plan)), Estimate.operator_id == operator.id)
             .order_by(Estimate.created_at, Estimate.id)
         ):
-            by_plan[e.plan_id].append(e)
+            by_plan[str(e.plan_id)].append(e)
     data = [{"plan_id": p.id, "target_name": p.target_name, "t_access": as_utc(p.t_access), "miss_km": p.miss_km,
              "estimates": [public(e) for e in by_plan[p.id]]} for p in plans]  # fmt: skip
     return {"data": data, "count": total}
