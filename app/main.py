@@ -27,7 +27,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # The models load once, here: a missing or corrupt file stops the service, naming the file.
     from inference.runtime import Estimator
 
-    app.state.estimator = Estimator.load(settings.model_dir, threads=settings.ort_threads or None)
+    app.state.estimator = Estimator.load(
+        settings.model_dir, threads=settings.ort_threads or None, run_batch=settings.ort_run_batch
+    )
     app.state.settings = settings
     app.state.key_secret = load_key_secret(settings.key_secret, settings.data_dir)
     app.state.engine = engine

@@ -142,6 +142,12 @@ def test_export_parity_and_runtime(smoke_run, smoke_data, tmp_path):
     with torch.no_grad():
         ref = swin(unet(torch.from_numpy(frames[:, None]))).numpy() * 45.0
     np.testing.assert_allclose(res.angles_deg, ref, rtol=1e-3, atol=1e-3)
+    # A stack split into runs of 3 + 1 frames gives the frames' own answers, in order.
+    split = Estimator.load(tmp_path / "models", run_batch=3).estimate(frames)
+    np.testing.assert_allclose(split.angles_deg, res.angles_deg, rtol=1e-4, atol=1e-4)
+    np.testing.assert_allclose(split.enhanced, res.enhanced, rtol=1e-4, atol=1e-5)
+    with pytest.raises(ValueError, match="run_batch"):
+        Estimator.load(tmp_path / "models", run_batch=0)
 
 
 def test_runtime_refuses_bad_model_files(smoke_run, tmp_path):
