@@ -8,6 +8,11 @@ frames runs through the models in runs of at most ``run_batch`` frames: on a CPU
 UNet++ costs less per frame at batch 4 than at batch 1 (the weights are read once
 for four frames) or at batch 32 (whose activations no longer fit the caches); the
 figures are in BENCHMARKS.md.
+
+``Estimator.estimate`` is safe to call from many threads at once, and gathers their
+frames: one caller at a time runs the models, on every frame waiting when it starts
+(up to ``run_batch``, whole requests), so a busy service runs batches of 4 instead
+of eight competing batches of 1, and an idle one adds no wait at all.
 """
 
 from __future__ import annotations
@@ -15,6 +20,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -70,6 +76,16 @@ class Estimate:
     timings_s: dict[str, float]
 
 
+@dataclass(eq=False)  # jobs are told apart by identity, never by comparing their frames
+class _Job:
+    """One caller's frames waiting for a run, and what the run gave them."""
+
+    frames: NDArray[np.float32]
+    done: bool = False
+    result: Estimate | None = None
+    error: BaseException | None = None
+
+
 class Estimator:
     """UNet++ then Swin in ONNX Runtime."""
 
@@ -82,6 +98,9 @@ class Estimator:
         self.card = card
         self._sessions = sessions
         self.run_batch = run_batch
+        self._cv = threading.Condition()
+        self._pending: list[_Job] = []
+        self._running = False  # one caller at a time runs the models for everyone waiting
         self.angle_scale_deg = float(card.get("angle_scale_deg", 45.0))
         self.img_size = int(card["config"]["img_size"])
 
@@ -134,13 +153,68 @@ class Estimator:
         return np.asarray(self._run("swin", frames) * self.angle_scale_deg, np.float32)
 
     def estimate(self, frames: NDArray[np.float32]) -> Estimate:
-        """Estimate attitudes of normalised frames [N, H, W] (``inference.isar.normalise_frame`` output)."""
-        t0 = time.perf_counter()
-        enhanced = self.enhance(frames)
-        t1 = time.perf_counter()
-        angles = self.attitude(enhanced)
-        t2 = time.perf_counter()
-        return Estimate(angles, enhanced, {"unetpp": t1 - t0, "swin": t2 - t1})
+        """Estimate attitudes of normalised frames [N, H, W] (``inference.isar.normalise_frame`` output).
+
+        Thread-safe. Concurrent callers' frames share runs; each caller gets its own
+        frames' results, with the stage times of the runs it was in shared out per frame.
+        """
+        job = _Job(np.asarray(frames, np.float32))
+        with self._cv:
+            self._pending.append(job)
+            while self._running and not job.done:
+                self._cv.wait()
+            if not job.done:
+                self._running = True
+        if not job.done:
+            try:  # this caller runs the models, for itself and whoever waits, until its own frames are done
+                while not job.done:
+                    self._run_jobs(self._take())
+            finally:
+                with self._cv:
+                    self._running = False
+                    self._cv.notify_all()
+        if job.error is not None:
+            raise job.error
+        assert job.result is not None
+        return job.result
+
+    def _take(self) -> list[_Job]:
+        """Take waiting requests in order, whole, up to ``run_batch`` frames (at least one request)."""
+        with self._cv:
+            shape = self._pending[0].frames.shape[1:]
+            take: list[_Job] = []
+            n = 0
+            for job in self._pending:
+                if job.frames.shape[1:] == shape and (not take or n + len(job.frames) <= self.run_batch):
+                    take.append(job)
+                    n += len(job.frames)
+            self._pending = [job for job in self._pending if all(job is not t for t in take)]
+            return take
+
+    def _run_jobs(self, jobs: list[_Job]) -> None:
+        frames = np.concatenate([j.frames for j in jobs]) if len(jobs) > 1 else jobs[0].frames
+        res: Estimate | None = None
+        error: BaseException | None = None
+        try:
+            t0 = time.perf_counter()
+            enhanced = self.enhance(frames)
+            t1 = time.perf_counter()
+            angles = self.attitude(enhanced)
+            res = Estimate(angles, enhanced, {"unetpp": t1 - t0, "swin": time.perf_counter() - t1})
+        except Exception as exc:  # every request in the run gets the error; the estimator stays usable
+            error = exc
+        with self._cv:
+            k = 0
+            for j in jobs:
+                n = len(j.frames)
+                if res is not None:
+                    share = n / max(len(frames), 1)
+                    j.result = Estimate(res.angles_deg[k : k + n], res.enhanced[k : k + n],
+                                        {stage: t * share for stage, t in res.timings_s.items()})  # fmt: skip
+                j.error = error
+                j.done = True
+                k += n
+            self._cv.notify_all()
 
 
 def euler_to_quaternion(z_deg: float, y_deg: float, x_deg: float) -> tuple[float, float, float, float]:

@@ -9,6 +9,7 @@ from typing import Annotated, Any
 
 import numpy as np
 from fastapi import APIRouter, File, Form, HTTPException, Query, UploadFile
+from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse, Response
 
 from app import crud
@@ -129,11 +130,15 @@ async def create_estimate(
 ) -> dict[str, Any]:
     """Estimate the attitude of one ISAR frame; the result is stored."""
     data = await _read(file, settings.max_upload_bytes)
-    uploads = svc.decode(data, file.filename or "upload", allow_stack=False, max_side=settings.max_image_side)
+    # Decoding, the models and the database run in a worker thread, so the event loop keeps serving meanwhile.
+    uploads = await run_in_threadpool(
+        svc.decode, data, file.filename or "upload", allow_stack=False, max_side=settings.max_image_side
+    )
     if len(uploads) != 1:
         raise InputError(["file"], f"the file holds {len(uploads)} frames; send stacks to /v1/estimates/batch")
-    rows = _estimate(session=session, operator_id=operator.id, settings=settings, est=est, uploads=uploads,
-                     resample=resample, plan_id=plan_id, observed_at=as_utc(observed_at), snr_db=snr_db)  # fmt: skip
+    rows = await run_in_threadpool(_estimate, session=session, operator_id=operator.id, settings=settings, est=est,
+                                   uploads=uploads, resample=resample, plan_id=plan_id,
+                                   observed_at=as_utc(observed_at), snr_db=snr_db)  # fmt: skip
     return public(rows[0])
 
 
@@ -154,9 +159,10 @@ async def create_estimates_batch(
     uploads: list[svc.Upload] = []
     for f in files:
         data = await _read(f, settings.max_upload_bytes)
-        uploads += svc.decode(data, f.filename or "upload", max_side=settings.max_image_side)
-    rows = _estimate(session=session, operator_id=operator.id, settings=settings, est=est, uploads=uploads,
-                     resample=resample, plan_id=plan_id, observed_at=as_utc(observed_at), snr_db=None)  # fmt: skip
+        uploads += await run_in_threadpool(svc.decode, data, f.filename or "upload", max_side=settings.max_image_side)
+    rows = await run_in_threadpool(_estimate, session=session, operator_id=operator.id, settings=settings, est=est,
+                                   uploads=uploads, resample=resample, plan_id=plan_id,
+                                   observed_at=as_utc(observed_at), snr_db=None)  # fmt: skip
     return {"data": [public(r) for r in rows], "count": len(rows)}
 
 

@@ -131,6 +131,26 @@ def test_scenes_page_through_plans_each_with_its_own_estimates(client, frame):
     assert not {s["plan_id"] for s in other} & set(ids)
 
 
+def test_other_requests_are_served_while_the_models_run(client, frame, monkeypatch):
+    est = client.app.state.estimator
+    running, answered, seen = threading.Event(), threading.Event(), []
+    real = est.estimate
+
+    def slow(frames):
+        running.set()
+        seen.append(answered.wait(10))  # a model run on the event loop would hold /healthz until this times out
+        return real(frames)
+
+    monkeypatch.setattr(est, "estimate", slow)
+    with ThreadPoolExecutor(1) as pool:
+        posted = pool.submit(_post, client, _npy(frame))
+        assert running.wait(10)
+        assert client.get("/healthz").status_code == 200
+        answered.set()
+        assert posted.result().status_code == 201
+    assert seen == [True]
+
+
 def test_other_operator_cannot_see_or_delete(client, frame):
     eid = _post(client, _npy(frame)).json()["id"]
     assert client.get(f"/v1/estimates/{eid}", headers=B).status_code == 404
