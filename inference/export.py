@@ -106,7 +106,8 @@ def export(
         "angle_scale_deg": ANGLE_SCALE_DEG,
         "config": cfg,
         "files": {k: report[k] for k in ("unetpp", "swin")},
-        "training": {k: training.get(k) for k in ("mode", "enhance", "seed", "complete", "data", "hardware", "train_seconds")},
+        "training": {k: training.get(k) for k in ("mode", "unet_epochs", "unet_from", "swin_from", "enhance", "seed", "complete", "data",
+                                                  "hardware", "train_seconds")},
         "final_epoch": (training.get("history") or [{}])[-1],
         **(extra or {}),
     }  # fmt: skip
