@@ -12,6 +12,7 @@ import torch
 from bench.common import median_time
 from inference.export import export_onnx
 from inference.models.build import build_models, get_config
+from inference.runtime import session_options
 
 
 def bench_models(configs: tuple[str, ...] = ("paper", "compact", "cpu")) -> list[str]:
@@ -22,16 +23,13 @@ def bench_models(configs: tuple[str, ...] = ("paper", "compact", "cpu")) -> list
         "## Networks on the CPU",
         "",
         f"One 256 x 256 frame (batch 1) and batch 32, {os.cpu_count()} threads. ONNX Runtime with graph",
-        "optimisation ALL and sequential execution (the service's options) against torch eager under",
+        "optimisation ALL, sequential execution and no spin-waiting (the service's options) against torch eager under",
         "no_grad. Random weights: latency does not depend on them. Median of 5 runs (batch 32: of 2).",
         "",
         "| config | network | params | torch eager, batch 1 | ORT, batch 1 | speed-up | ORT batch 32, frames/s | ONNX size |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    opts = ort.SessionOptions()
-    opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-    opts.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
-    opts.intra_op_num_threads = os.cpu_count() or 1
+    opts = session_options()
     tmp = Path(tempfile.mkdtemp())
     for name in configs:
         cfg = get_config(name)

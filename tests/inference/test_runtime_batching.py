@@ -99,3 +99,12 @@ def test_a_failed_run_raises_in_its_callers_and_the_estimator_goes_on():
     with pytest.raises(RuntimeError, match="failed on this frame"):
         est.estimate(_frame(-1.0))
     np.testing.assert_allclose(est.estimate(_frame(3.0)).angles_deg, 6.0)  # not stuck waiting on the failed run
+
+
+def test_sessions_do_not_spin_wait():
+    from inference.runtime import session_options
+
+    opts = session_options(2)
+    # Two sessions share 2 cores; a spinning pool steals them from the other network (BENCHMARKS.md).
+    assert opts.get_session_config_entry("session.intra_op.allow_spinning") == "0"
+    assert opts.intra_op_num_threads == 2 and opts.inter_op_num_threads == 1
