@@ -20,7 +20,7 @@ def bench_service(model_dir: Path, clients: int = 8, per_client: int = 12) -> li
 
     from bench.common import median_time
     from inference.isar import Imager, Radar, normalise_frame, simulate
-    from inference.runtime import DEFAULT_RUN_BATCH, Estimator
+    from inference.runtime import Estimator
     from inference.targets import tiangong_like
     from tests.utils.server import Server
 
@@ -35,10 +35,11 @@ def bench_service(model_dir: Path, clients: int = 8, per_client: int = 12) -> li
     # The models alone on a 32-frame stack, run in pieces of 1 ... 32 frames: the ceiling of any batch gain.
     stack32 = np.repeat(norm, 32, axis=0)
     per_frame_ms = {}
+    default_run_batch = est.run_batch
     for run_batch in (1, 2, 4, 8, 32):
         est.run_batch = run_batch
         per_frame_ms[run_batch] = median_time(lambda: est.estimate(stack32), 3) * 1000 / 32
-    est.run_batch = DEFAULT_RUN_BATCH
+    est.run_batch = default_run_batch
 
     tmp = Path(tempfile.mkdtemp())
     env = {

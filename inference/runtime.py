@@ -3,11 +3,11 @@
 ``Estimator.load(model_dir)`` reads ``model_card.json``, checks every ONNX file
 against its sha256 (a missing, truncated or altered file raises ModelFileError
 naming it), and opens one session per network with tuned options: full graph
-optimisation, a fixed intra-op thread count, sequential execution. A stack of
-frames runs through the models in runs of at most ``run_batch`` frames: on a CPU,
-UNet++ costs less per frame at batch 4 than at batch 1 (the weights are read once
-for four frames) or at batch 32 (whose activations no longer fit the caches); the
-figures are in BENCHMARKS.md.
+optimisation, a fixed intra-op thread count, sequential execution, no spin-waiting.
+A stack of frames runs through the models in runs of at most ``run_batch`` frames.
+On this 2-core machine the cost per frame barely depends on the run size (0.8-1.3x
+that of single frames, run to run; BENCHMARKS.md), so the default of 4 is a choice
+that bounds the memory of a run rather than a measured optimum.
 
 ``Estimator.estimate`` is safe to call from many threads at once, and gathers their
 frames: one caller at a time runs the models, on every frame waiting when it starts
@@ -179,9 +179,9 @@ class Estimator:
             self._pending.append(job)
             while self._running and not job.done:
                 self._cv.wait()
-            if not job.done:
-                self._running = True
-        if not job.done:
+            lead = not job.done
+            self._running = self._running or lead
+        if lead:
             try:  # this caller runs the models, for itself and whoever waits, until its own frames are done
                 while not job.done:
                     self._run_jobs(self._take())
@@ -199,12 +199,15 @@ class Estimator:
         with self._cv:
             shape = self._pending[0].frames.shape[1:]
             take: list[_Job] = []
+            rest: list[_Job] = []
             n = 0
             for job in self._pending:
                 if job.frames.shape[1:] == shape and (not take or n + len(job.frames) <= self.run_batch):
                     take.append(job)
                     n += len(job.frames)
-            self._pending = [job for job in self._pending if all(job is not t for t in take)]
+                else:
+                    rest.append(job)
+            self._pending = rest
             return take
 
     def _run_jobs(self, jobs: list[_Job]) -> None:

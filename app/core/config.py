@@ -7,8 +7,7 @@ from pathlib import Path
 from pydantic import Field, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-# The shipped models: inference/models/shipped (see its model_card.json).
-DEFAULT_MODEL_DIR = Path(__file__).resolve().parents[2] / "inference" / "models" / "shipped"
+from inference.runtime import DEFAULT_MODEL_DIR, DEFAULT_RUN_BATCH  # the shipped models and their run size
 
 
 class Settings(BaseSettings):
@@ -39,7 +38,7 @@ class Settings(BaseSettings):
     max_batch_frames: int = Field(default=64, ge=1, le=4096)
     model_dir: Path = DEFAULT_MODEL_DIR
     ort_threads: int = Field(default=0, ge=0, le=256, description="0: all cores")
-    ort_run_batch: int = Field(default=4, ge=1, le=256, description="frames per ONNX Runtime run")
+    ort_run_batch: int = Field(default=DEFAULT_RUN_BATCH, ge=1, le=256, description="frames per ONNX Runtime run")
     key_secret: str = ""
     orphan_grace_s: float = Field(default=0.0, ge=0.0)
     log_level: str = Field(default="info", pattern="^(debug|info|warning|error)$")
