@@ -11,6 +11,7 @@ import argparse
 import json
 import math
 import sys
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +30,34 @@ PAPER = {
     "5 dB": (0.619, 0.805, 0.815),
     "10 dB": (0.616, 0.805, 0.805),
 }
+
+
+SNR_DB = (0.0, 5.0, 10.0)  # Table 7
+SNR_SEED = 10_000  # the fresh SNR test sets: seed SNR_SEED + dB, never a training set's seed
+
+
+def snr_spec(snr_db: float, n: int, seed: int = SNR_SEED) -> DatasetSpec:
+    """The fresh test set of Table 7 at one SNR (the same frames whoever simulates them)."""
+    return DatasetSpec(n=n, seed=seed + int(snr_db), snr_min_db=snr_db, snr_max_db=snr_db)
+
+
+def score(
+    predict: Callable[[NDArray[Any]], NDArray[Any]],
+    sets: Iterable[tuple[str, NDArray[Any], NDArray[Any]]],
+    progress: bool = True,
+) -> tuple[dict[str, Any], dict[str, NDArray[np.float64]]]:
+    """Run ``predict`` (frames [N, H, W] -> angles [N, 3] deg) over named sets; return the rows and the errors."""
+    rows: dict[str, Any] = {}
+    errors: dict[str, NDArray[np.float64]] = {}
+    for name, images, angles in sets:
+        pred = np.concatenate([predict(images[k : k + 16].astype(np.float32)) for k in range(0, len(images), 16)])
+        rows[name] = summarise(pred, angles)
+        errors[name] = pred - angles
+        if progress:
+            r = rows[name]
+            print(f"evaluate: {name}: MAE z/y/x {r['mae_deg']} deg, geodesic p95 {r['geodesic_p95_deg']} deg",
+                  file=sys.stderr, flush=True)  # fmt: skip
+    return rows, errors
 
 
 def geodesic_deg(pred: NDArray[np.floating], true: NDArray[np.floating]) -> NDArray[np.float64]:
@@ -52,7 +81,7 @@ def summarise(pred: NDArray[np.floating], true: NDArray[np.floating]) -> dict[st
 
 
 def evaluate(
-    model_dir: str | Path, data_dir: str | Path | None = None, n_snr: int = 1000, seed: int = 10_000,
+    model_dir: str | Path, data_dir: str | Path | None = None, n_snr: int = 1000, seed: int = SNR_SEED,
     out_dir: str | Path = "results", radar: Radar | None = None, progress: bool = True, record: bool = False,
 ) -> dict[str, Any]:  # fmt: skip
     """Evaluate the ONNX models in ``model_dir``; return and write the results (and, with ``record``, into the card)."""
@@ -60,32 +89,16 @@ def evaluate(
     manifest = load_manifest(data_dir) if data_dir is not None else None
     # The SNR test sets use the data set's radar (or Table 3's).
     radar = radar or (Radar(**manifest["radar"]) if manifest else Radar())
-    results: dict[str, Any] = {"model": est.identity, "paper_mae_deg": PAPER, "rows": {}}
-    errors: dict[str, NDArray[np.float64]] = {}
+    results: dict[str, Any] = {"model": est.identity, "paper_mae_deg": PAPER}
 
-    def run(name: str, images: NDArray[Any], angles: NDArray[Any]) -> None:
-        pred = np.concatenate(
-            [est.estimate(images[k : k + 16].astype(np.float32)).angles_deg for k in range(0, len(images), 16)]
-        )
-        results["rows"][name] = summarise(pred, angles)
-        errors[name] = pred - angles
-        if progress:
-            r = results["rows"][name]
-            print(
-                f"evaluate: {name}: MAE z/y/x {r['mae_deg']} deg, geodesic p95 {r['geodesic_p95_deg']} deg",
-                file=sys.stderr,
-                flush=True,
-            )
+    def sets() -> Iterator[tuple[str, NDArray[Any], NDArray[Any]]]:
+        if data_dir is not None and manifest is not None:
+            yield ("with enhancement", *held_out(data_dir, manifest))
+        for snr in SNR_DB:
+            arrays = render_frames(snr_spec(snr, n_snr, seed), radar, 0, n_snr)
+            yield f"{snr:g} dB", arrays["image"], arrays["angles_deg"]
 
-    if data_dir is not None and manifest is not None:
-        data = load_arrays(data_dir, verify=False)
-        split = manifest.get("split")
-        lo, hi = split["test"] if split else (int(0.8 * len(data["image"])), len(data["image"]))
-        run("with enhancement", data["image"][lo:hi], data["angles_deg"][lo:hi])
-    for snr in (0.0, 5.0, 10.0):
-        spec = DatasetSpec(n=n_snr, seed=seed + int(snr), snr_min_db=snr, snr_max_db=snr)
-        arrays = render_frames(spec, radar, 0, n_snr)
-        run(f"{snr:g} dB", arrays["image"], arrays["angles_deg"])
+    results["rows"], errors = score(lambda f: est.estimate(f).angles_deg, sets(), progress)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     (out / "results.json").write_text(json.dumps(results, indent=2))
@@ -97,6 +110,14 @@ def evaluate(
         card["evaluation"] = {"rows": results["rows"], "n_per_snr": n_snr, "data": str(data_dir) if data_dir else None}
         card_path.write_text(json.dumps(card, indent=2))
     return results
+
+
+def held_out(data_dir: str | Path, manifest: dict[str, Any]) -> tuple[NDArray[Any], NDArray[Any]]:
+    """Return a data set's test frames and angles (its manifest's split, or the last 20 %)."""
+    data = load_arrays(data_dir, verify=False)
+    split = manifest.get("split")
+    lo, hi = split["test"] if split else (int(0.8 * len(data["image"])), len(data["image"]))
+    return data["image"][lo:hi], data["angles_deg"][lo:hi]
 
 
 def table(results: dict[str, Any]) -> str:

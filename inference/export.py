@@ -19,6 +19,8 @@ from inference.train import ANGLE_SCALE_DEG
 
 OPSET = 17
 PARITY_RTOL = 1e-4  # relative difference, float32, ORT against torch
+HALF_RTOL = 1e-2  # relative difference once the weights are stored in float16 (bf16/fp16 rounding is ~1e-3)
+HALF_MIN_ELEMENTS = 1024  # smaller tensors (biases, norms) stay float32: they cost nothing
 
 
 def load_trained(run_dir: str | Path) -> tuple[torch.nn.Module, torch.nn.Module, dict[str, Any]]:
@@ -57,6 +59,37 @@ def export_onnx(model: torch.nn.Module, path: Path, img_size: int) -> None:
     onnx.checker.check_model(onnx.load(str(path)), full_check=True)
 
 
+def store_half(path: Path, min_elements: int = HALF_MIN_ELEMENTS) -> int:
+    """Store a float32 ONNX model's large weights as float16, each followed by a Cast back to float32.
+
+    The graph still computes in float32: ONNX Runtime folds the Casts when it loads the model,
+    so only the file halves. Returns the number of tensors converted.
+    """
+    import onnx
+    from onnx import TensorProto, helper, numpy_helper
+
+    model = onnx.load(str(path))
+    graph = model.graph
+    kept, casts = [], []
+    for init in graph.initializer:
+        if init.data_type == TensorProto.FLOAT and int(np.prod(init.dims)) >= min_elements:
+            half = numpy_helper.from_array(numpy_helper.to_array(init).astype(np.float16), f"{init.name}__fp16")
+            kept.append(half)
+            casts.append(
+                helper.make_node("Cast", [half.name], [init.name], name=f"{init.name}__cast", to=TensorProto.FLOAT)
+            )
+        else:
+            kept.append(init)
+    del graph.initializer[:]
+    graph.initializer.extend(kept)
+    nodes = casts + list(graph.node)
+    del graph.node[:]
+    graph.node.extend(nodes)
+    onnx.checker.check_model(model, full_check=True)
+    onnx.save(model, str(path))
+    return len(casts)
+
+
 def parity(model: torch.nn.Module, path: Path, frames: np.ndarray) -> float:
     """Return the largest relative difference between ONNX Runtime and torch on ``frames`` [N, 1, H, W]."""
     import onnxruntime as ort
@@ -69,12 +102,15 @@ def parity(model: torch.nn.Module, path: Path, frames: np.ndarray) -> float:
 
 
 def export(
-    run_dir: str | Path, out_dir: str | Path, frames: np.ndarray | None = None, extra: dict[str, Any] | None = None
-) -> dict[str, Any]:
+    run_dir: str | Path, out_dir: str | Path, frames: np.ndarray | None = None, extra: dict[str, Any] | None = None,
+    half: bool = False,
+) -> dict[str, Any]:  # fmt: skip
     """Export a training run's networks to ``out_dir`` with a model card; return the card.
 
     Parity is checked on random frames and on ``frames`` (real ones, [N, H, W], if given):
-    ORT must match torch within PARITY_RTOL.
+    ORT must match torch within PARITY_RTOL. With ``half`` the large weights are then stored
+    in float16 (``store_half``), which halves the files; ORT must still match torch within
+    HALF_RTOL, and the card records both differences.
     """
     unet, swin, cfg = load_trained(run_dir)
     out = Path(out_dir)
@@ -93,8 +129,15 @@ def export(
         worst = max(parity(model, path, t) for t in inputs)
         if worst > PARITY_RTOL:
             raise InferenceError(f"{path}: ONNX Runtime differs from torch by {worst:.2e} (> {PARITY_RTOL})")
-        report[role] = {"file": path.name, "sha256": sha256_file(path), "bytes": path.stat().st_size,
-                        "parity_max_rel_diff": worst}  # fmt: skip
+        entry: dict[str, Any] = {"weights": "float32", "parity_max_rel_diff": worst}
+        if half:
+            entry["float16_tensors"] = store_half(path)
+            entry["half_max_rel_diff"] = max(parity(model, path, t) for t in inputs)
+            entry["weights"] = "float16 (computed in float32)"
+            if entry["half_max_rel_diff"] > HALF_RTOL:
+                raise InferenceError(f"{path}: float16 weights change the output by {entry['half_max_rel_diff']:.2e} "
+                                     f"(> {HALF_RTOL}); export without --half")  # fmt: skip
+        report[role] = {"file": path.name, "sha256": sha256_file(path), "bytes": path.stat().st_size, **entry}
     training_path = Path(run_dir) / "training.json"
     training = json.loads(training_path.read_text()) if training_path.is_file() else {}
     card = {
@@ -119,9 +162,10 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m inference.export")
     p.add_argument("--run", required=True, help="training run directory (unetpp.pt, swin.pt)")
     p.add_argument("--out", required=True)
+    p.add_argument("--half", action="store_true", help="store the large weights in float16 (half the size)")
     args = p.parse_args(argv)
     try:
-        card = export(args.run, args.out)
+        card = export(args.run, args.out, half=args.half)
     except InferenceError as exc:
         print(f"export: error: {exc}", file=sys.stderr)
         return 2

@@ -1,13 +1,19 @@
-"""One command for a GPU machine: simulate the data, train, and hand back half-precision weights in pieces.
+"""Commands for a GPU machine: simulate the data, train, evaluate, and hand back float16 weights in pieces.
 
-On the GPU machine (numpy, scipy, torch only)::
+On the GPU machine (numpy, scipy, torch and onnxruntime only)::
 
-    python -m inference.pipeline run --config paper --n 5000 --work runs/gpu --out "$OUT" --max-minutes 8
+    python -m inference.pipeline prepare --work W --n 13000 --n-train 12000 --n-snr 300
+    python -m inference.pipeline run --work W --name compact --config compact --max-minutes 20 --out OUT
 
-generates the data set into ``WORK/data`` (once), trains with ``--resume`` until the
-time is up (call it again to continue; the work folder survives while the machine
-stays warm), and writes ``unetpp``/``swin`` state dicts in float16, split into pieces
-under 15 MB, plus ``pieces.json`` and ``training.json``, into ``OUT``. Back home::
+``prepare`` simulates the data set into ``W/data`` and Table 7's fresh SNR sets into
+``W/snr-0``, ``W/snr-5``, ``W/snr-10`` (each once, on every core). ``run`` trains
+``W/NAME`` with ``--resume`` until its epochs are done or the time is up (call it
+again to continue while the machine keeps ``W``), evaluates the torch weights on the
+test split and the SNR sets (``evaluation.json``), and writes the ``unetpp``/``swin``
+state dicts in float16, split into pieces under 15 MB, plus ``pieces.json``, the
+training record and the plots into ``OUT``. ``pack --run W/NAME --out OUT`` does the
+last step alone, from the newest epoch's checkpoint, while a run is still going.
+Back home::
 
     python -m inference.pipeline join --pieces DIR --run runs/gpu
     gsa export --run runs/gpu
@@ -28,17 +34,19 @@ from typing import Any
 
 import torch
 
-from inference.dataset import DatasetSpec, generate
+from inference.dataset import DatasetSpec, generate, load_arrays, load_manifest
 from inference.errors import InferenceError, ModelFileError
-from inference.train import train
+from inference.evaluate import PAPER, SNR_DB, held_out, plot_errors, score, snr_spec, table
+from inference.export import load_trained
+from inference.train import predict, train
 
 PIECE_BYTES = 15 * 1024 * 1024
 
 
-def _split(name: str, state: dict[str, Any], config: dict[str, Any], out: Path) -> list[dict[str, Any]]:
+def _split(name: str, state: dict[str, Any], config: dict[str, Any], out: Path, **extra: Any) -> list[dict[str, Any]]:
     half = {k: (v.half() if v.is_floating_point() else v) for k, v in state.items()}
     buf = io.BytesIO()
-    torch.save({"state_dict": half, "config": config}, buf)
+    torch.save({"state_dict": half, "config": config, **extra}, buf)
     blob = buf.getvalue()
     pieces = []
     for k in range(0, len(blob), PIECE_BYTES):
@@ -49,25 +57,79 @@ def _split(name: str, state: dict[str, Any], config: dict[str, Any], out: Path) 
     return pieces
 
 
-def run(config: str, n: int, work: Path, out: Path, max_minutes: float, seed: int = 0, compile_models: bool = False,
-        epochs: int | None = None, radar: Any = None) -> dict[str, Any]:  # fmt: skip
-    """Generate (once), train (resuming), and write the weights in pieces into ``out``."""
+def prepare(work: Path, n: int, n_train: int | None = None, n_snr: int = 0, seed: int = 0, radar: Any = None,
+            workers: int | None = None) -> None:  # fmt: skip
+    """Simulate the data set into ``WORK/data`` and Table 7's fresh SNR sets into ``WORK/snr-DB`` (each once)."""
     data = work / "data"
     if not (data / "manifest.json").exists():
         shutil.rmtree(data, ignore_errors=True)
-        generate(DatasetSpec(n=n, seed=seed, n_train=int(round(0.8 * n))), data, radar)
-    record = train(data, work / "run", config, epochs=epochs, seed=seed, resume=True, max_minutes=max_minutes,
-                   compile_models=compile_models)  # fmt: skip
+        n_train = int(round(0.8 * n)) if n_train is None else n_train
+        generate(DatasetSpec(n=n, seed=seed, n_train=n_train), data, radar, workers=workers)
+    for snr in SNR_DB if n_snr else ():
+        d = work / f"snr-{snr:g}"
+        if not (d / "manifest.json").exists():
+            shutil.rmtree(d, ignore_errors=True)
+            generate(snr_spec(snr, n_snr), d, radar, workers=workers, progress=False)
+
+
+def evaluate_run(work: Path, name: str, device: str | None = None) -> dict[str, Any]:
+    """Evaluate a run's torch weights on the test split and the SNR sets in ``work``; write ``evaluation.json``.
+
+    The same rows as ``gsa evaluate`` (which runs the exported ONNX models), for runs whose
+    weights are too large to bring back, such as the paper's Swin-T.
+    """
+    run_dir = work / name
+    unet, swin, _ = load_trained(run_dir)
+    dev = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
+    unet.to(dev)
+    swin.to(dev)
+
+    def sets() -> Any:
+        yield ("with enhancement", *held_out(work / "data", load_manifest(work / "data")))
+        for snr in SNR_DB:
+            d = work / f"snr-{snr:g}"
+            if (d / "manifest.json").exists():
+                arrays = load_arrays(d, verify=False)
+                yield f"{snr:g} dB", arrays["image"], arrays["angles_deg"]
+
+    rows, errors = score(lambda f: predict(unet, swin, f, dev)[0], sets())
+    results = {"run": name, "paper_mae_deg": PAPER, "rows": rows}
+    (run_dir / "evaluation.json").write_text(json.dumps(results, indent=2))
+    (run_dir / "evaluation.md").write_text(table(results))
+    plot_errors(errors, run_dir / "errors.png")
+    return results
+
+
+def pack(run_dir: Path, out: Path) -> dict[str, Any]:
+    """Write a run's latest weights (its last epoch's checkpoint) in float16 pieces, with its records, into ``out``."""
+    ckpt = run_dir / "checkpoint.pt"
+    if not ckpt.is_file():
+        raise ModelFileError(f"{ckpt} is missing: the run has not finished an epoch", field="run")
+    ck = torch.load(ckpt, map_location="cpu", weights_only=False)
     out.mkdir(parents=True, exist_ok=True)
-    manifest: dict[str, Any] = {"complete": record["complete"], "epochs": len(record["history"])}
-    for name in ("unetpp", "swin"):
-        ck = torch.load(work / "run" / f"{name}.pt", map_location="cpu", weights_only=False)
-        manifest[name] = _split(name, ck["state_dict"], ck["config"], out)
+    manifest: dict[str, Any] = {"epochs": ck["epoch"], "complete": ck["epoch"] >= ck["config"]["epochs"]}
+    manifest["unetpp"] = _split("unetpp", ck["unet"], ck["config"], out)
+    manifest["swin"] = _split("swin", ck["swin"], ck["config"], out, enhance=ck.get("enhance", True))
     (out / "pieces.json").write_text(json.dumps(manifest, indent=2))
-    shutil.copy(work / "run" / "training.json", out / "training.json")
-    if (work / "run" / "loss.png").exists():
-        shutil.copy(work / "run" / "loss.png", out / "loss.png")
+    for extra in ("training.json", "loss.png", "evaluation.json", "evaluation.md", "errors.png"):
+        if (run_dir / extra).exists():
+            shutil.copy(run_dir / extra, out / extra)
     return manifest
+
+
+def run(config: str, n: int, work: Path, out: Path | None, max_minutes: float, seed: int = 0,
+        compile_models: bool = False, epochs: int | None = None, radar: Any = None, name: str = "run",
+        n_train: int | None = None, n_snr: int = 0, batch_size: int | None = None, lr_decay: float | None = None,
+        max_train_frames: int | None = None, evaluate: bool = True) -> dict[str, Any]:  # fmt: skip
+    """Simulate (once), train ``WORK/NAME`` (resuming), evaluate when done, and pack the weights into ``out``."""
+    prepare(work, n, n_train, n_snr, seed, radar)
+    record = train(work / "data", work / name, config, epochs=epochs, seed=seed, resume=True, max_minutes=max_minutes,
+                   compile_models=compile_models, batch_size=batch_size, lr_decay=lr_decay,
+                   max_train_frames=max_train_frames)  # fmt: skip
+    if evaluate:
+        evaluate_run(work, name)
+    manifest = pack(work / name, out) if out is not None else {}
+    return {"complete": record["complete"], "epochs": len(record["history"]), **manifest}
 
 
 def join(pieces: Path, run_dir: Path) -> None:
@@ -84,37 +146,50 @@ def join(pieces: Path, run_dir: Path) -> None:
         ck = torch.load(io.BytesIO(blob), map_location="cpu", weights_only=False)
         ck["state_dict"] = {k: (v.float() if v.is_floating_point() else v) for k, v in ck["state_dict"].items()}
         torch.save(ck, run_dir / f"{name}.pt")
-    shutil.copy(pieces / "training.json", run_dir / "training.json")
+    for extra in ("training.json", "loss.png", "evaluation.json", "evaluation.md", "errors.png"):
+        if (pieces / extra).exists():
+            shutil.copy(pieces / extra, run_dir / extra)
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m inference.pipeline")
     sub = p.add_subparsers(dest="cmd", required=True)
-    r = sub.add_parser("run")
+    g = sub.add_parser("prepare", help="simulate the data set and the SNR test sets into WORK")
+    r = sub.add_parser("run", help="prepare, train WORK/NAME (resuming), evaluate, pack into OUT")
+    for q in (g, r):
+        q.add_argument("--work", default="runs/gpu")
+        q.add_argument("--n", type=int, default=5000)
+        q.add_argument("--n-train", type=int, help="training frames of the set (default 80 %%)")
+        q.add_argument("--n-snr", type=int, default=0, help="frames per SNR in Table 7's fresh test sets")
+        q.add_argument("--seed", type=int, default=0)
+    r.add_argument("--name", default="run", help="run folder inside WORK")
     r.add_argument("--config", default="paper")
-    r.add_argument("--n", type=int, default=5000)
-    r.add_argument("--work", default="runs/gpu")
-    r.add_argument("--out", required=True)
+    r.add_argument("--out", help="where the float16 pieces go (default: none)")
     r.add_argument("--max-minutes", type=float, default=8.0)
     r.add_argument("--epochs", type=int)
-    r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--batch-size", type=int)
+    r.add_argument("--lr-decay", type=float)
+    r.add_argument("--max-train-frames", type=int, help="train on the first N training frames only")
     r.add_argument("--compile", action="store_true")
+    k = sub.add_parser("pack", help="write a run's latest weights in float16 pieces into OUT")
+    k.add_argument("--run", required=True)
+    k.add_argument("--out", required=True)
     j = sub.add_parser("join")
     j.add_argument("--pieces", required=True)
     j.add_argument("--run", required=True)
     args = p.parse_args(argv)
     try:
-        if args.cmd == "run":
-            m = run(
-                args.config,
-                args.n,
-                Path(args.work),
-                Path(args.out),
-                args.max_minutes,
-                args.seed,
-                args.compile,
-                args.epochs,
-            )
+        if args.cmd == "prepare":
+            prepare(Path(args.work), args.n, args.n_train, args.n_snr, args.seed)
+            print(f"data sets ready in {args.work}")
+        elif args.cmd == "run":
+            m = run(args.config, args.n, Path(args.work), Path(args.out) if args.out else None, args.max_minutes,
+                    args.seed, args.compile, args.epochs, name=args.name, n_train=args.n_train, n_snr=args.n_snr,
+                    batch_size=args.batch_size, lr_decay=args.lr_decay,
+                    max_train_frames=args.max_train_frames)  # fmt: skip
+            print(json.dumps({k: v for k, v in m.items() if k in ("complete", "epochs")}))
+        elif args.cmd == "pack":
+            m = pack(Path(args.run), Path(args.out))
             print(json.dumps({k: v for k, v in m.items() if k in ("complete", "epochs")}))
         else:
             join(Path(args.pieces), Path(args.run))

@@ -56,14 +56,40 @@ def _batches(idx: np.ndarray, batch: int, rng: np.random.Generator | None) -> li
     return [order[k : k + batch] for k in range(0, len(order), batch)]
 
 
+def _rows(arr: np.ndarray | torch.Tensor, sel: np.ndarray, device: torch.device) -> torch.Tensor:
+    """Return rows ``sel`` of a numpy array or of a tensor already on the device, as float32 on ``device``."""
+    if isinstance(arr, torch.Tensor):
+        return arr[torch.from_numpy(sel).to(arr.device)].to(device=device, dtype=torch.float32)
+    return torch.from_numpy(arr[sel].astype(np.float32)).to(device)
+
+
 def _tensors(
-    images: np.ndarray, data: dict[str, np.ndarray], sel: np.ndarray, device: torch.device
+    images: np.ndarray | torch.Tensor,
+    data: dict[str, np.ndarray | torch.Tensor],
+    sel: np.ndarray,
+    device: torch.device,
 ) -> tuple[torch.Tensor, ...]:
     """Return the frames (``images``: the data set's, or the cached enhanced ones), labels and scaled angles."""
-    x = torch.from_numpy(images[sel].astype(np.float32)).unsqueeze(1).to(device)
-    y = torch.from_numpy(data["label"][sel].astype(np.float32)).unsqueeze(1).to(device)
-    a = torch.from_numpy(data["angles_deg"][sel].astype(np.float32) / ANGLE_SCALE_DEG).to(device)
+    x = _rows(images, sel, device).unsqueeze(1)
+    y = _rows(data["label"], sel, device).unsqueeze(1)
+    a = _rows(data["angles_deg"], sel, device) / ANGLE_SCALE_DEG
     return x, y, a
+
+
+def on_device(data: dict[str, np.ndarray], device: torch.device) -> dict[str, np.ndarray | torch.Tensor]:
+    """Move the arrays training reads (frames, labels, angles) onto a GPU once; on a CPU keep numpy."""
+    if device.type != "cuda":
+        return dict(data)
+    return {
+        k: (torch.from_numpy(v).to(device) if k in ("image", "label", "angles_deg") else v) for k, v in data.items()
+    }
+
+
+def _save(obj: Any, path: Path) -> None:
+    """Save atomically, so a reader (or a cut-off run) never sees half a file."""
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(obj, tmp)
+    tmp.replace(path)
 
 
 @torch.no_grad()
@@ -180,6 +206,12 @@ def train(
                 raise InferenceError(f"{given} does not fit config {cfg.name!r}: {exc}", field=field) from None
     unet.to(dev)
     swin.to(dev)
+    if dev.type == "cuda":  # NHWC convolutions are what the tensor cores run natively
+        torch.backends.cudnn.benchmark = True
+        torch.backends.cuda.matmul.allow_tf32 = True
+        torch.backends.cudnn.allow_tf32 = True
+        unet.to(memory_format=torch.channels_last)  # type: ignore[call-overload]
+    dev_data = on_device(data, dev)
     opt_u = torch.optim.Adam(unet.parameters(), lr=cfg.lr)
     opt_s = torch.optim.Adam(swin.parameters(), lr=cfg.lr)
     sch_u = torch.optim.lr_scheduler.ExponentialLR(opt_u, cfg.lr_decay)
@@ -210,6 +242,11 @@ def train(
     t_start = time.perf_counter()
     stage_split = (cfg.epochs // 2 if unet_epochs is None else unet_epochs) if mode == "two-stage" else 0
     cache: np.ndarray | None = None  # UNet++ output for every frame once UNet++ is frozen
+
+    def training_record() -> dict[str, Any]:
+        return _record(cfg, mode, stage_split, unet_from, swin_from, enhance, seed, history, data_dir, manifest,
+                       n, len(train_idx), len(test_idx), dev)  # fmt: skip
+
     for epoch in range(start_epoch, cfg.epochs):
         unet.train()
         swin.train()
@@ -217,11 +254,13 @@ def train(
         train_swin = mode == "joint" or epoch >= stage_split or not enhance
         if enhance and mode == "two-stage" and not train_unet and cache is None:
             cache = enhance_all(unet, data["image"], dev)
-        sums = {"unet_loss": 0.0, "swin_loss": 0.0}
+        sums = {"unet_loss": torch.zeros((), device=dev), "swin_loss": torch.zeros((), device=dev)}
         batches = _batches(train_idx, cfg.batch_size, rng)
         t_epoch = time.perf_counter()
         for step, sel in enumerate(batches):
-            x, y, a = _tensors(data["image"] if cache is None else cache, data, np.sort(sel), dev)
+            x, y, a = _tensors(dev_data["image"] if cache is None else cache, dev_data, np.sort(sel), dev)
+            if dev.type == "cuda":
+                x = x.contiguous(memory_format=torch.channels_last)
             with amp:
                 if enhance and cache is None:
                     enhanced = run_u(x) if train_unet else run_u(x).detach()
@@ -239,12 +278,12 @@ def train(
                 opt_u.zero_grad(set_to_none=True)
                 loss_u.backward()  # type: ignore[no-untyped-call]
                 opt_u.step()
-            sums["unet_loss"] += float(loss_u.detach())
-            sums["swin_loss"] += float(loss_s.detach())
+            sums["unet_loss"] += loss_u.detach().float()  # summed on the device: no sync per step
+            sums["swin_loss"] += loss_s.detach().float()
             if log_every and (step + 1) % log_every == 0:
                 print(
                     f"train: epoch {epoch + 1}/{cfg.epochs} step {step + 1}/{len(batches)} "
-                    f"unet {sums['unet_loss'] / (step + 1):.4f} swin {sums['swin_loss'] / (step + 1):.4f} "
+                    f"unet {float(sums['unet_loss']) / (step + 1):.4f} swin {float(sums['swin_loss']) / (step + 1):.4f} "
                     f"({(time.perf_counter() - t_epoch) / (step + 1):.2f} s/step)",
                     file=sys.stderr,
                     flush=True,
@@ -262,8 +301,8 @@ def train(
         mae = np.abs(pred - data["angles_deg"][test_idx]).mean(axis=0).tolist() if pred is not None else [math.nan] * 3
         record = {
             "epoch": epoch + 1,
-            "unet_loss": sums["unet_loss"] / len(batches),
-            "swin_loss": sums["swin_loss"] / len(batches),
+            "unet_loss": float(sums["unet_loss"]) / len(batches),
+            "swin_loss": float(sums["swin_loss"]) / len(batches),
             "test_mae_deg": mae,
             "seconds": time.perf_counter() - t_epoch,
         }
@@ -274,21 +313,34 @@ def train(
             file=sys.stderr,
             flush=True,
         )
-        torch.save(
+        _save(
             {"unet": unet.state_dict(), "swin": swin.state_dict(), "opt_u": opt_u.state_dict(),
              "opt_s": opt_s.state_dict(), "sch_u": sch_u.state_dict(), "sch_s": sch_s.state_dict(),
-             "history": history, "epoch": epoch + 1, "config": cfg.as_dict()},
+             "history": history, "epoch": epoch + 1, "config": cfg.as_dict(), "enhance": enhance},
             ckpt_path,
         )  # fmt: skip
+        (out / "training.json").write_text(json.dumps(training_record(), indent=2))
         if max_minutes is not None and (time.perf_counter() - t_start) / 60.0 > max_minutes:
             print(
                 f"train: stopping after epoch {epoch + 1}: {max_minutes} min used; --resume continues", file=sys.stderr
             )
             break
+    _save({"state_dict": unet.state_dict(), "config": cfg.as_dict()}, out / "unetpp.pt")
+    _save({"state_dict": swin.state_dict(), "config": cfg.as_dict(), "enhance": enhance}, out / "swin.pt")
+    record_all = training_record()
+    (out / "training.json").write_text(json.dumps(record_all, indent=2))
+    plot_history(history, out / "loss.png")
+    return record_all
+
+
+def _record(
+    cfg: ModelConfig, mode: str, stage_split: int, unet_from: str | Path | None, swin_from: str | Path | None,
+    enhance: bool, seed: int, history: list[dict[str, Any]], data_dir: str | Path, manifest: dict[str, Any],
+    n: int, n_train: int, n_test: int, dev: torch.device,
+) -> dict[str, Any]:  # fmt: skip
+    """The training record (``training.json``), written after every epoch and at the end."""
     done = bool(history) and history[-1]["epoch"] >= cfg.epochs
-    torch.save({"state_dict": unet.state_dict(), "config": cfg.as_dict()}, out / "unetpp.pt")
-    torch.save({"state_dict": swin.state_dict(), "config": cfg.as_dict(), "enhance": enhance}, out / "swin.pt")
-    record_all = {
+    return {
         "config": cfg.as_dict(),
         "mode": mode,
         "unet_epochs": stage_split if mode == "two-stage" else None,
@@ -298,15 +350,12 @@ def train(
         "seed": seed,
         "complete": done,
         "data": {"dir": str(data_dir), "content_sha256": manifest["content_sha256"], "frames": int(n),
-                 "train": int(len(train_idx)), "test": int(len(test_idx))},
+                 "train": int(n_train), "test": int(n_test)},
         "hardware": {"device": str(dev), "name": torch.cuda.get_device_name(0) if dev.type == "cuda" else platform.processor()
                      or platform.machine(), "torch": torch.__version__, "threads": torch.get_num_threads()},
         "train_seconds": sum(h["seconds"] for h in history),
         "history": history,
     }  # fmt: skip
-    (out / "training.json").write_text(json.dumps(record_all, indent=2))
-    plot_history(history, out / "loss.png")
-    return record_all
 
 
 def plot_history(history: list[dict[str, Any]], path: Path) -> None:

@@ -148,6 +148,20 @@ def test_export_parity_and_runtime(smoke_run, smoke_data, tmp_path):
     np.testing.assert_allclose(split.enhanced, res.enhanced, rtol=1e-4, atol=1e-5)
     with pytest.raises(ValueError, match="run_batch"):
         Estimator.load(tmp_path / "models", run_batch=0)
+    # --half stores the large weights in float16 behind Casts: the files shrink, the graph still computes in float32.
+    import onnx
+
+    half = export(out, tmp_path / "f16", frames=frames, half=True)
+    for role in ("unetpp", "swin"):
+        f = half["files"][role]
+        assert f["bytes"] < 0.6 * card["files"][role]["bytes"]
+        assert f["float16_tensors"] > 0 and f["parity_max_rel_diff"] < 1e-4 and f["half_max_rel_diff"] < 1e-2
+        graph = onnx.load(str(tmp_path / "f16" / f["file"])).graph
+        assert graph.output[0].type.tensor_type.elem_type == onnx.TensorProto.FLOAT
+        assert sum(i.data_type == onnx.TensorProto.FLOAT16 for i in graph.initializer) == f["float16_tensors"]
+    b = Estimator.load(tmp_path / "f16").estimate(frames)
+    assert b.angles_deg.dtype == np.float32
+    np.testing.assert_allclose(b.angles_deg, res.angles_deg, atol=0.05)  # degrees
 
 
 def test_runtime_refuses_bad_model_files(smoke_run, tmp_path):
@@ -193,18 +207,59 @@ def test_quaternion_matches_rotation_matrix():
     np.testing.assert_allclose(r, rotation_matrix(z, y, x), atol=1e-12)
 
 
+def test_training_batches_are_the_same_from_numpy_and_from_device_tensors():
+    """On a GPU the data set lives on the device as tensors; a batch must not depend on where it came from."""
+    from inference.train import _tensors
+
+    rng = np.random.default_rng(0)
+    data = {"image": rng.random((10, 8, 8)).astype(np.float16), "label": rng.random((10, 8, 8)) > 0.5,
+            "angles_deg": rng.uniform(-45, 45, (10, 3)).astype(np.float32)}  # fmt: skip
+    tensors = {k: torch.from_numpy(v) for k, v in data.items()}
+    sel = np.array([1, 4, 7])
+    for a, b in zip(_tensors(data["image"], data, sel, torch.device("cpu")),
+                    _tensors(tensors["image"], tensors, sel, torch.device("cpu")), strict=True):  # fmt: skip
+        assert a.dtype == b.dtype == torch.float32
+        torch.testing.assert_close(a, b)
+    x, y, a = _tensors(tensors["image"], tensors, sel, torch.device("cpu"))
+    assert x.shape == (3, 1, 8, 8) and y.shape == (3, 1, 8, 8)
+    np.testing.assert_allclose(a.numpy() * 45.0, data["angles_deg"][sel], rtol=1e-6)
+
+
 def test_gpu_pipeline_at_toy_size(tmp_path):
-    """The GPU command end to end on a CPU: simulate, train, pieces out, join back, export."""
-    from inference.pipeline import join
+    """The GPU commands end to end on a CPU: simulate, train, evaluate, pieces out, join back, export."""
+    from inference.pipeline import join, pack
     from inference.pipeline import run as pipeline_run
 
-    manifest = pipeline_run("smoke", 12, tmp_path / "work", tmp_path / "out", max_minutes=5, epochs=1, radar=SMALL)
+    work = tmp_path / "work"
+    manifest = pipeline_run("smoke", 12, work, tmp_path / "out", max_minutes=5, epochs=1, radar=SMALL, name="a",
+                            n_train=8, n_snr=4)  # fmt: skip
     assert manifest["complete"] and manifest["swin"]
+    assert json.loads((work / "data" / "manifest.json").read_text())["split"] == {"train": [0, 8], "test": [8, 12]}
     for f in (tmp_path / "out").iterdir():
         assert f.stat().st_size < 16 * 1024 * 1024
+    # The torch weights were scored on the test split and on each fresh SNR set.
+    rows = json.loads((tmp_path / "out" / "evaluation.json").read_text())["rows"]
+    assert set(rows) == {"with enhancement", "0 dB", "5 dB", "10 dB"}
+    assert rows["with enhancement"]["n"] == 4 and rows["0 dB"]["n"] == 4
     join(tmp_path / "out", tmp_path / "run")
+    assert (tmp_path / "run" / "evaluation.json").exists()
     card = export(tmp_path / "run", tmp_path / "models")
     assert card["files"]["swin"]["parity_max_rel_diff"] < 1e-4
-    # A second call resumes instead of starting again.
-    again = pipeline_run("smoke", 12, tmp_path / "work", tmp_path / "out2", max_minutes=5, epochs=2, radar=SMALL)
+    # The float16 pieces hold the trained weights to float16 precision.
+    ck = torch.load(work / "a" / "swin.pt", weights_only=False)
+    back = torch.load(tmp_path / "run" / "swin.pt", weights_only=False)
+    for k, v in ck["state_dict"].items():
+        if v.is_floating_point():
+            torch.testing.assert_close(back["state_dict"][k], v.half().float())
+    # A second call resumes instead of starting again; a second run shares the data.
+    again = pipeline_run("smoke", 12, work, None, max_minutes=5, epochs=2, radar=SMALL, name="a", evaluate=False)
     assert again["epochs"] == 2
+    other = pipeline_run("smoke", 12, work, None, max_minutes=5, epochs=1, radar=SMALL, name="b", evaluate=False,
+                         max_train_frames=4)  # fmt: skip
+    assert other["epochs"] == 1
+    assert json.loads((work / "b" / "training.json").read_text())["data"]["train"] == 4
+    # pack takes the newest epoch from the checkpoint, even while no final weights exist.
+    (work / "b" / "swin.pt").unlink()
+    assert pack(work / "b", tmp_path / "out3")["epochs"] == 1
+    with pytest.raises(ModelFileError, match="checkpoint.pt is missing"):
+        pack(tmp_path / "nowhere", tmp_path / "out4")

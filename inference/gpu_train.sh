@@ -1,0 +1,82 @@
+#!/usr/bin/env bash
+# The GPU step in three short commands (each under the device's 10-minute limit), run from the repo root:
+#
+#   inference/gpu_train.sh launch       simulate the data, start both trainings in the background, watch ~9 min
+#   inference/gpu_train.sh watch SECS   watch the runs; pack the compact run's newest weights into $OUT
+#   inference/gpu_train.sh collect      wait for both runs, pack the compact weights and every record into $OUT
+#
+# Two runs share one simulated set (GSA_GPU_N frames, the last 1000 held out):
+#   compact  the shipped configuration, trained on every training frame;
+#   paper    the paper's protocol exactly: UNet++ 32-512 and Swin-T on 4000 training frames, 100 epochs.
+# Both stop cleanly after GSA_GPU_MINUTES of training and are evaluated on the 1000 test frames and
+# on 300 fresh frames at each of 0, 5 and 10 dB. Only numpy, scipy, torch and onnxruntime are needed.
+# Back home: tar xzf records.tgz; python -m inference.pipeline join --pieces DIR --run runs/gpu-compact
+set -u
+W=${GSA_GPU_WORK:-/root/gsa-work}
+N=${GSA_GPU_N:-25000}
+MINUTES=${GSA_GPU_MINUTES:-19.5}
+OUT=${OUT:-$W/out}
+export OMP_NUM_THREADS=1 PYTHONUNBUFFERED=1
+T0=$(date +%s)
+
+status() {  # one line per run: alive or not, its newest epoch line
+    for r in compact paper; do
+        alive=dead; kill -0 "$(cat "$W/$r.pid" 2>/dev/null)" 2>/dev/null && alive=alive
+        echo "[$(( $(date +%s) - T0 )) s] $r $alive: $(grep -E 'done:|error|Error' "$W/$r.log" | tail -1)"
+    done
+}
+
+watch() {  # until $1 seconds have passed or both runs have ended; stops early if a run died with an error
+    while (( $(date +%s) - T0 < $1 )); do
+        sleep 30
+        status
+        if grep -qE 'Traceback|error:' "$W"/compact.log "$W"/paper.log; then echo "a run failed"; return 1; fi
+        n=0; for r in compact paper; do kill -0 "$(cat "$W/$r.pid")" 2>/dev/null && n=$((n + 1)); done
+        (( n == 0 )) && return 0
+    done
+}
+
+records() {  # every small record of both runs, and the logs, in one archive
+    mkdir -p "$OUT"
+    (cd "$W" && tar czf "$OUT/records.tgz" --ignore-failed-read ./*.log data/manifest.json \
+        compact/training.json compact/loss.png compact/evaluation.* compact/errors.png \
+        paper/training.json paper/loss.png paper/evaluation.* paper/errors.png 2>/dev/null)
+}
+
+pieces() {  # the compact run's newest weights: float16 pieces and pieces.json (its records go in records.tgz)
+    rm -rf "$W/pack"; mkdir -p "$OUT"
+    python3 -m inference.pipeline pack --run "$W/compact" --out "$W/pack" && mv "$W"/pack/*.part* "$W/pack/pieces.json" "$OUT"/
+}
+
+case "${1:-}" in
+launch)
+    nvidia-smi --query-gpu=name,memory.total,memory.used,clocks.max.sm --format=csv
+    python3 -c "import torch, onnxruntime, scipy, numpy; print('torch', torch.__version__, 'ort', onnxruntime.__version__, 'cuda', torch.cuda.is_available())"
+    mkdir -p "$W"
+    python3 -m inference.pipeline prepare --work "$W" --n "$N" --n-train "$((N - 1000))" --n-snr 300 2>&1 | grep -E '000/|error' | tail -4
+    echo "[$(( $(date +%s) - T0 )) s] data ready"
+    setsid nohup python3 -m inference.pipeline run --work "$W" --name compact --config compact --n "$N" \
+        --batch-size 32 --epochs "${GSA_GPU_COMPACT_EPOCHS:-20}" --lr-decay "${GSA_GPU_COMPACT_DECAY:-0.9}" --max-minutes "$MINUTES" >"$W/compact.log" 2>&1 </dev/null &
+    echo $! >"$W/compact.pid"
+    setsid nohup python3 -m inference.pipeline run --work "$W" --name paper --config paper --n "$N" \
+        --max-train-frames 4000 --max-minutes "$MINUTES" >"$W/paper.log" 2>&1 </dev/null &
+    echo $! >"$W/paper.pid"
+    sleep 90; grep -E 's/step' "$W/compact.log" | tail -2; grep -E 's/step' "$W/paper.log" | tail -2
+    watch "${2:-560}"; rc=$?
+    nvidia-smi --query-gpu=utilization.gpu,memory.used --format=csv
+    records; tail -n 5 "$W"/compact.log "$W"/paper.log; exit $rc
+    ;;
+watch)
+    watch "${2:-560}"; rc=$?
+    grep -E 'step (100|200|300)/' "$W/compact.log" | tail -1; grep -E 'step 100/' "$W/paper.log" | tail -1
+    pieces; records; exit $rc
+    ;;
+collect)
+    watch "${2:-560}"
+    status
+    pieces; records; ls -la "$OUT"; tail -n 3 "$W"/compact.log "$W"/paper.log
+    ;;
+*)
+    echo "usage: inference/gpu_train.sh launch|watch SECONDS|collect [SECONDS]" >&2; exit 2
+    ;;
+esac
