@@ -279,6 +279,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--snr-db", default="-3:15", help="SNR range LOW:HIGH in dB, or 'none' (default -3:15)")
     p.add_argument("--max-angle-deg", type=float, default=45.0)
     p.add_argument("--split", action="store_true", help="the paper's split: first 80%% train, last 20%% test")
+    p.add_argument("--n-train", type=int, help="split after this many training frames (the rest are the test set)")
     p.add_argument("--shard-size", type=int, default=250)
     p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     p.add_argument("--model", help="an OBJ or PLY target model (default: the built-in Tiangong-like station)")
@@ -297,7 +298,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run the simulate command from parsed arguments; raises InferenceError on bad input."""
     lo, hi = parse_snr(args.snr_db)
-    n_train = int(round(0.8 * args.n)) if args.split else None
+    if args.split and args.n_train is not None:
+        raise DatasetError("give --split (80 % train) or --n-train N, not both", field="n_train")
+    n_train = int(round(0.8 * args.n)) if args.split else args.n_train
     spec = DatasetSpec(
         args.n, args.seed, lo, hi, args.max_angle_deg, args.shard_size, n_train, args.model, args.model_scale
     )

@@ -79,6 +79,13 @@ def test_simulate_command(tmp_path):
     assert "4/4 frames" in out.stderr
     manifest = json.loads((tmp_path / "set" / "manifest.json").read_text())
     assert manifest["frames"] == 4 and manifest["split"]["train"] == [0, 3]
+    # --n-train N: the first N frames train, the rest test (the shipped models' 24,000 of 25,000).
+    other = _simulate("--n", "3", "--seed", "1", "--n-train", "1", "--n-range", "64", "--n-azimuth", "64",
+                      "--bandwidth-hz", "0.4e9", "--aperture-deg", "1.275", "--workers", "1",
+                      "--out", str(tmp_path / "set2"), cwd=tmp_path)  # fmt: skip
+    assert other.returncode == 0, other.stderr
+    split = json.loads((tmp_path / "set2" / "manifest.json").read_text())["split"]
+    assert split == {"train": [0, 1], "test": [1, 3]}
     prev = _simulate("--preview", str(tmp_path / "p.png"), "--n", "3", "--n-range", "64", "--n-azimuth", "64",
                      "--bandwidth-hz", "0.4e9", "--aperture-deg", "1.275", cwd=tmp_path)  # fmt: skip
     assert prev.returncode == 0 and (tmp_path / "p.png").stat().st_size > 5000
@@ -92,6 +99,8 @@ def test_simulate_command(tmp_path):
         (["--n", "3", "--bandwidth-hz", "0"], "bandwidth_hz"),
         (["--n", "3", "--n-range", "0"], "n_range"),
         (["--n", "3", "--model", "missing.obj"], "does not exist"),
+        (["--n", "3", "--n-train", "4"], "n_train 4 must be within [0, n=3]"),
+        (["--n", "3", "--n-train", "2", "--split"], "not both"),
     ],
 )
 def test_simulate_bad_input_is_one_line_and_leaves_nothing(tmp_path, args, message):
