@@ -294,7 +294,8 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         try:
             r = httpx.post(
                 args.server.rstrip("/") + "/v1/estimates", files={"file": (Path(args.file).name, data)},
-                data={"resample": str(args.resample).lower()}, headers={"X-API-Key": args.api_key or ""}, timeout=60,
+                data={"resample": str(args.resample).lower(), "normalised": str(args.normalised).lower()},
+                headers={"X-API-Key": args.api_key or ""}, timeout=60,
             )  # fmt: skip
         except httpx.HTTPError as exc:
             raise CliError(f"cannot reach {args.server}: {exc}") from None
@@ -310,7 +311,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     try:
         est = Estimator.load(args.models or _settings().model_dir)
         (up,) = svc.decode(data, Path(args.file).name, allow_stack=False)
-        frame = svc.prepare(up, est.img_size, args.resample)
+        frame = svc.prepare(up, est.img_size, args.resample, args.normalised)
         res = est.estimate(frame[None])
     except InputError as exc:
         raise CliError(exc.message) from None
@@ -399,6 +400,8 @@ def build_parser() -> argparse.ArgumentParser:
     es.add_argument("file")
     es.add_argument("--models", help="model directory (default: GSA_MODEL_DIR or the shipped models)")
     es.add_argument("--resample", action="store_true", help="resample a frame of another size")
+    es.add_argument("--normalised", action="store_true",
+                    help="the frame is already normalised (a frame of a gsa simulate data set): take it as sent")  # fmt: skip
     es.add_argument("--server", help="send it to a running service instead, e.g. http://127.0.0.1:8000")
     es.add_argument("--api-key")
     es.add_argument("--plot", metavar="PNG", help="draw the input beside the enhanced frame")

@@ -274,6 +274,9 @@ class EstimatePublic(BaseModel):
     attitude_j2000: AttitudePublic | None = None
     model: dict[str, Any]
     timings_s: dict[str, float]
+    input_normalised: bool = Field(
+        False, description="true when the frame was sent already normalised (normalised=true) and taken as sent"
+    )
     links: dict[str, str]
 
 

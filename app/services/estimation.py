@@ -170,9 +170,22 @@ def decode(data: bytes, name: str, allow_stack: bool = True, max_side: int = DEF
     return out
 
 
-def prepare(upload: Upload, size: int, resample: bool) -> NDArray[np.float32]:
-    """Return the normalised frame the models take: the training normalisation, resampled if asked."""
+def prepare(upload: Upload, size: int, resample: bool, normalised: bool = False) -> NDArray[np.float32]:
+    """Return the normalised frame the models take: the training normalisation, resampled if asked.
+
+    ``normalised`` says the frame already is the models' input (``normalise_frame``'s output,
+    as ``gsa simulate`` data sets store it): it is then taken as sent, since normalising twice
+    would change it.
+    """
     mag = upload.magnitude
+    if normalised:
+        lo, hi = float(mag.min()), float(mag.max())
+        if lo < 0.0 or hi > 1.0:
+            raise InputError(
+                _loc(upload.name),
+                f"normalised=true needs values in [0, 1] (inference.isar.normalise_frame output); "
+                f"this frame spans [{lo:.3g}, {hi:.3g}]: send it without normalised=true",
+            )
     if mag.shape != (size, size):
         if not resample:
             raise InputError(
@@ -186,6 +199,8 @@ def prepare(upload: Upload, size: int, resample: bool) -> NDArray[np.float32]:
         from scipy.ndimage import zoom
 
         mag = zoom(mag, (size / mag.shape[0], size / mag.shape[1]), order=1)
+    if normalised:
+        return np.clip(mag, 0.0, 1.0).astype(np.float32)
     return normalise_frame(mag)
 
 

@@ -75,3 +75,12 @@ def test_estimate_locally_with_plot(tmp_path, smoke_models):
     np.save(tmp_path / "bad.npy", np.zeros((3, 3, 3)))
     bad = _gsa("estimate", str(tmp_path / "bad.npy"), "--models", str(smoke_models), cwd=tmp_path)
     assert bad.returncode == 2 and "2-D" in bad.stderr and bad.stderr.count("\n") == 1
+    # --normalised takes a data set's (already normalised) frame as sent, and refuses one that is not.
+    from inference.isar import normalise_frame
+
+    np.save(tmp_path / "n.npy", normalise_frame(np.abs(frame)))
+    ok = _gsa("estimate", str(tmp_path / "n.npy"), "--normalised", "--models", str(smoke_models), cwd=tmp_path)
+    assert ok.returncode == 0 and "quaternion" in ok.stdout, ok.stderr
+    np.save(tmp_path / "raw.npy", np.abs(frame))
+    raw = _gsa("estimate", str(tmp_path / "raw.npy"), "--normalised", "--models", str(smoke_models), cwd=tmp_path)
+    assert raw.returncode == 2 and "values in [0, 1]" in raw.stderr and raw.stderr.count("\n") == 1

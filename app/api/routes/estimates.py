@@ -24,6 +24,12 @@ router = APIRouter(prefix="/estimates", tags=["estimates"])
 NOT_FOUND: dict[int | str, dict[str, Any]] = {404: {"description": "no estimate with this id belongs to the caller"}}
 
 
+NORMALISED = (
+    "the frame already is the models' input (inference.isar.normalise_frame output in [0, 1], as gsa simulate "
+    "data sets store it): take it as sent instead of normalising it again"
+)
+
+
 def public(e: Estimate) -> dict[str, Any]:
     r = e.result
     return {
@@ -41,6 +47,7 @@ def public(e: Estimate) -> dict[str, Any]:
         "attitude_j2000": r.get("attitude_j2000"),
         "model": r["model"],
         "timings_s": r["timings_s"],
+        "input_normalised": r.get("input_normalised", False),
         "links": {
             "self": f"/v1/estimates/{e.id}",
             "enhanced_png": f"/v1/estimates/{e.id}/enhanced.png",
@@ -60,7 +67,7 @@ async def _read(upload: UploadFile, limit: int) -> bytes:
 
 def _estimate(
     *, session: Any, operator_id: str, settings: Any, est: Any, uploads: list[svc.Upload], resample: bool,
-    plan_id: str | None, observed_at: datetime | None, snr_db: float | None,
+    plan_id: str | None, observed_at: datetime | None, snr_db: float | None, normalised: bool = False,
 ) -> list[Estimate]:  # fmt: skip
     """Validate everything, run the models on one batch, store the images, then the rows in one transaction."""
     if not uploads:
@@ -75,7 +82,7 @@ def _estimate(
         if plan is None:
             raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
     t0 = time.perf_counter()
-    frames = np.stack([svc.prepare(u, est.img_size, resample) for u in uploads])
+    frames = np.stack([svc.prepare(u, est.img_size, resample, normalised) for u in uploads])
     t_prep = time.perf_counter() - t0
     angles, enhanced, timings = svc.run_models(est, frames)
     per_frame = {"preprocess": t_prep / len(uploads), **{k: v / len(uploads) for k, v in timings.items()}}
@@ -89,7 +96,8 @@ def _estimate(
         original = svc.store_blob(settings.data_dir, blobs[-2])
         enh = svc.store_blob(settings.data_dir, blobs[-1])
         result: dict[str, Any] = {"attitude": svc.attitude_json(angles[k]), "model": est.identity,
-                                  "timings_s": {**per_frame, "batch_size": len(uploads)}}  # fmt: skip
+                                  "timings_s": {**per_frame, "batch_size": len(uploads)},
+                                  "input_normalised": normalised}  # fmt: skip
         placed = in_frames[k]
         if placed is not None:
             result["attitude_lvlh"] = placed["lvlh"]
@@ -127,6 +135,7 @@ async def create_estimate(
     plan_id: Annotated[str | None, Form(max_length=36)] = None,
     observed_at: Annotated[IsoDateTime | None, Form()] = None,
     snr_db: Annotated[float | None, Form(ge=-100, le=200)] = None,
+    normalised: Annotated[bool, Form(description=NORMALISED)] = False,
 ) -> dict[str, Any]:
     """Estimate the attitude of one ISAR frame; the result is stored."""
     data = await _read(file, settings.max_upload_bytes)
@@ -138,7 +147,7 @@ async def create_estimate(
         raise InputError(["file"], f"the file holds {len(uploads)} frames; send stacks to /v1/estimates/batch")
     rows = await run_in_threadpool(_estimate, session=session, operator_id=operator.id, settings=settings, est=est,
                                    uploads=uploads, resample=resample, plan_id=plan_id,
-                                   observed_at=as_utc(observed_at), snr_db=snr_db)  # fmt: skip
+                                   observed_at=as_utc(observed_at), snr_db=snr_db, normalised=normalised)  # fmt: skip
     return public(rows[0])
 
 
@@ -154,6 +163,7 @@ async def create_estimates_batch(
     resample: Annotated[bool, Form()] = False,
     plan_id: Annotated[str | None, Form(max_length=36)] = None,
     observed_at: Annotated[IsoDateTime | None, Form()] = None,
+    normalised: Annotated[bool, Form(description=NORMALISED)] = False,
 ) -> dict[str, Any]:
     """Estimate several frames as one batch through the models; one stored row each."""
     uploads: list[svc.Upload] = []
@@ -162,7 +172,7 @@ async def create_estimates_batch(
         uploads += await run_in_threadpool(svc.decode, data, f.filename or "upload", max_side=settings.max_image_side)
     rows = await run_in_threadpool(_estimate, session=session, operator_id=operator.id, settings=settings, est=est,
                                    uploads=uploads, resample=resample, plan_id=plan_id,
-                                   observed_at=as_utc(observed_at), snr_db=None)  # fmt: skip
+                                   observed_at=as_utc(observed_at), snr_db=None, normalised=normalised)  # fmt: skip
     return {"data": [public(r) for r in rows], "count": len(rows)}
 
 

@@ -219,6 +219,30 @@ def test_resample_on_request(client):
     assert r.status_code == 201, r.text
 
 
+def test_already_normalised_frames_are_taken_as_sent(client, settings, frame):
+    """A data set's frames are stored normalised; normalising them again would feed the models another image."""
+    norm = normalise_frame(np.abs(frame))
+    raw = _post(client, _npy(frame)).json()
+    (up,) = decode(_npy(norm), "n.npy", allow_stack=False)
+    assert np.abs(prepare(up, 64, False) - norm).max() > 0.1  # normalised twice: another image
+    np.testing.assert_array_equal(prepare(up, 64, False, normalised=True), norm)
+    sent = _post(client, _npy(norm.astype(np.float16)), normalised="true")
+    assert sent.status_code == 201, sent.text
+    body = sent.json()
+    assert body["input_normalised"] is True and raw["input_normalised"] is False
+    np.testing.assert_allclose(body["attitude"]["euler_zyx_deg"], raw["attitude"]["euler_zyx_deg"], atol=0.05)
+    assert client.get(f"/v1/estimates/{body['id']}", headers=A).json()["input_normalised"] is True
+    # Values outside [0, 1] cannot be a normalised frame: 422, nothing stored.
+    before = _count(settings)
+    r = _post(client, _npy(np.abs(frame)), normalised="true")
+    assert r.status_code == 422 and "normalised=true needs values in [0, 1]" in r.json()["detail"][0]["msg"]
+    assert _count(settings) == before
+    batch = client.post("/v1/estimates/batch", files=[("files", ("s.npy", _npy(np.stack([norm, norm]))))],
+                        data={"normalised": "true"}, headers=A)  # fmt: skip
+    assert batch.status_code == 201, batch.text
+    assert all(e["input_normalised"] for e in batch.json()["data"])
+
+
 def test_sixteen_concurrent_clients_lose_nothing(client, settings, frame):
     before = _count(settings)
     data = _npy(frame)
