@@ -11,6 +11,11 @@
 # Both stop cleanly after GSA_GPU_MINUTES of training and are evaluated on the 1000 test frames and
 # on 300 fresh frames at each of 0, 5 and 10 dB. Only numpy, scipy, torch and onnxruntime are needed.
 # Back home: tar xzf records.tgz; python -m inference.pipeline join --pieces DIR --run runs/gpu-compact
+#
+# To continue the shipped compact weights instead of starting afresh, point GSA_GPU_FROM at their
+# float16 pieces (inference/models/checkpoints/compact-h100-e15) and give the schedule to go on with,
+# e.g. GSA_GPU_FROM=inference/models/checkpoints/compact-h100-e15 GSA_GPU_COMPACT_EPOCHS=6
+# GSA_GPU_COMPACT_LR=4e-5 (epoch 15's rate was 2e-4 x 0.9^15 = 4.1e-5). GSA_GPU_PAPER=0 skips the paper run.
 set -u
 W=${GSA_GPU_WORK:-/root/gsa-work}
 N=${GSA_GPU_N:-25000}
@@ -55,12 +60,23 @@ launch)
     mkdir -p "$W"
     python3 -m inference.pipeline prepare --work "$W" --n "$N" --n-train "$((N - 1000))" --n-snr 300 2>&1 | grep -E '000/|error' | tail -4
     echo "[$(( $(date +%s) - T0 )) s] data ready"
+    extra=()
+    if [ -n "${GSA_GPU_FROM:-}" ]; then
+        python3 -m inference.pipeline join --pieces "$GSA_GPU_FROM" --run "$W/from" || exit 2
+        extra+=(--from "$W/from")
+    fi
+    [ -n "${GSA_GPU_COMPACT_LR:-}" ] && extra+=(--lr "$GSA_GPU_COMPACT_LR")
     setsid nohup python3 -m inference.pipeline run --work "$W" --name compact --config compact --n "$N" \
-        --batch-size 32 --epochs "${GSA_GPU_COMPACT_EPOCHS:-20}" --lr-decay "${GSA_GPU_COMPACT_DECAY:-0.9}" --max-minutes "$MINUTES" >"$W/compact.log" 2>&1 </dev/null &
+        --batch-size 32 --epochs "${GSA_GPU_COMPACT_EPOCHS:-20}" --lr-decay "${GSA_GPU_COMPACT_DECAY:-0.9}" \
+        --max-minutes "$MINUTES" "${extra[@]}" >"$W/compact.log" 2>&1 </dev/null &
     echo $! >"$W/compact.pid"
-    setsid nohup python3 -m inference.pipeline run --work "$W" --name paper --config paper --n "$N" \
-        --max-train-frames 4000 --max-minutes "$MINUTES" >"$W/paper.log" 2>&1 </dev/null &
-    echo $! >"$W/paper.pid"
+    if [ "${GSA_GPU_PAPER:-1}" != 0 ]; then
+        setsid nohup python3 -m inference.pipeline run --work "$W" --name paper --config paper --n "$N" \
+            --max-train-frames 4000 --max-minutes "$MINUTES" >"$W/paper.log" 2>&1 </dev/null &
+        echo $! >"$W/paper.pid"
+    else
+        : >"$W/paper.log"; echo none >"$W/paper.pid"
+    fi
     sleep 90; grep -E 's/step' "$W/compact.log" | tail -2; grep -E 's/step' "$W/paper.log" | tail -2
     watch "${2:-560}"; rc=$?
     nvidia-smi --query-gpu=utilization.gpu,memory.used --format=csv

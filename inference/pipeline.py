@@ -120,12 +120,13 @@ def pack(run_dir: Path, out: Path) -> dict[str, Any]:
 def run(config: str, n: int, work: Path, out: Path | None, max_minutes: float, seed: int = 0,
         compile_models: bool = False, epochs: int | None = None, radar: Any = None, name: str = "run",
         n_train: int | None = None, n_snr: int = 0, batch_size: int | None = None, lr_decay: float | None = None,
-        max_train_frames: int | None = None, evaluate: bool = True) -> dict[str, Any]:  # fmt: skip
+        max_train_frames: int | None = None, evaluate: bool = True, lr: float | None = None,
+        unet_from: Path | None = None, swin_from: Path | None = None) -> dict[str, Any]:  # fmt: skip
     """Simulate (once), train ``WORK/NAME`` (resuming), evaluate when done, and pack the weights into ``out``."""
     prepare(work, n, n_train, n_snr, seed, radar)
     record = train(work / "data", work / name, config, epochs=epochs, seed=seed, resume=True, max_minutes=max_minutes,
-                   compile_models=compile_models, batch_size=batch_size, lr_decay=lr_decay,
-                   max_train_frames=max_train_frames)  # fmt: skip
+                   compile_models=compile_models, batch_size=batch_size, lr=lr, lr_decay=lr_decay,
+                   max_train_frames=max_train_frames, unet_from=unet_from, swin_from=swin_from)  # fmt: skip
     if evaluate:
         evaluate_run(work, name)
     manifest = pack(work / name, out) if out is not None else {}
@@ -168,7 +169,9 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--max-minutes", type=float, default=8.0)
     r.add_argument("--epochs", type=int)
     r.add_argument("--batch-size", type=int)
+    r.add_argument("--lr", type=float)
     r.add_argument("--lr-decay", type=float)
+    r.add_argument("--from", dest="start_from", help="start both networks from a run folder's unetpp.pt and swin.pt")
     r.add_argument("--max-train-frames", type=int, help="train on the first N training frames only")
     r.add_argument("--compile", action="store_true")
     k = sub.add_parser("pack", help="write a run's latest weights in float16 pieces into OUT")
@@ -185,8 +188,10 @@ def main(argv: list[str] | None = None) -> int:
         elif args.cmd == "run":
             m = run(args.config, args.n, Path(args.work), Path(args.out) if args.out else None, args.max_minutes,
                     args.seed, args.compile, args.epochs, name=args.name, n_train=args.n_train, n_snr=args.n_snr,
-                    batch_size=args.batch_size, lr_decay=args.lr_decay,
-                    max_train_frames=args.max_train_frames)  # fmt: skip
+                    batch_size=args.batch_size, lr_decay=args.lr_decay, lr=args.lr,
+                    max_train_frames=args.max_train_frames,
+                    unet_from=Path(args.start_from) / "unetpp.pt" if args.start_from else None,
+                    swin_from=Path(args.start_from) / "swin.pt" if args.start_from else None)  # fmt: skip
             print(json.dumps({k: v for k, v in m.items() if k in ("complete", "epochs")}))
         elif args.cmd == "pack":
             m = pack(Path(args.run), Path(args.out))

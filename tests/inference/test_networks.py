@@ -258,6 +258,14 @@ def test_gpu_pipeline_at_toy_size(tmp_path):
                          max_train_frames=4)  # fmt: skip
     assert other["epochs"] == 1
     assert json.loads((work / "b" / "training.json").read_text())["data"]["train"] == 4
+    # A run can start from joined pieces (how a later GPU session continues the shipped weights).
+    cont = pipeline_run("smoke", 12, work, None, max_minutes=5, epochs=1, radar=SMALL, name="c", evaluate=False,
+                        lr=1e-12, unet_from=tmp_path / "run" / "unetpp.pt", swin_from=tmp_path / "run" / "swin.pt")  # fmt: skip
+    assert cont["epochs"] == 1
+    rec = json.loads((work / "c" / "training.json").read_text())
+    assert rec["swin_from"].endswith("swin.pt") and rec["config"]["lr"] == 1e-12
+    torch.testing.assert_close(torch.load(work / "c" / "swin.pt", weights_only=False)["state_dict"]["head.weight"],
+                               back["state_dict"]["head.weight"])  # fmt: skip
     # pack takes the newest epoch from the checkpoint, even while no final weights exist.
     (work / "b" / "swin.pt").unlink()
     assert pack(work / "b", tmp_path / "out3")["epochs"] == 1
