@@ -170,6 +170,9 @@ def decode(data: bytes, name: str, allow_stack: bool = True, max_side: int = DEF
     return out
 
 
+NORMALISED_MIN_TOP_SHARE = 0.004  # normalise_frame clips the top 0.5 % of pixels to 1.0 (a margin for ties)
+
+
 def prepare(upload: Upload, size: int, resample: bool, normalised: bool = False) -> NDArray[np.float32]:
     """Return the normalised frame the models take: the training normalisation, resampled if asked.
 
@@ -185,6 +188,15 @@ def prepare(upload: Upload, size: int, resample: bool, normalised: bool = False)
                 _loc(upload.name),
                 f"normalised=true needs values in [0, 1] (inference.isar.normalise_frame output); "
                 f"this frame spans [{lo:.3g}, {hi:.3g}]: send it without normalised=true",
+            )
+        # normalise_frame maps its 99.5th percentile and everything above it to 1.0, so at least
+        # 0.5 % of a normalised frame's pixels are 1.0; a raw frame that merely lies in [0, 1] is not.
+        at_top = float(np.mean(mag >= 0.999))
+        if at_top < NORMALISED_MIN_TOP_SHARE:
+            raise InputError(
+                _loc(upload.name),
+                f"normalised=true, but only {100 * at_top:.2g} % of the pixels are at 1.0, where "
+                "inference.isar.normalise_frame puts 0.5 %: this is a raw frame; send it without normalised=true",
             )
     if mag.shape != (size, size):
         if not resample:

@@ -236,6 +236,9 @@ def test_already_normalised_frames_are_taken_as_sent(client, settings, frame):
     before = _count(settings)
     r = _post(client, _npy(np.abs(frame)), normalised="true")
     assert r.status_code == 422 and "normalised=true needs values in [0, 1]" in r.json()["detail"][0]["msg"]
+    mag = np.abs(frame)
+    r = _post(client, _npy(mag / mag.max()), normalised="true")  # in [0, 1], but raw: one pixel at 1.0
+    assert r.status_code == 422 and "this is a raw frame" in r.json()["detail"][0]["msg"]
     assert _count(settings) == before
     batch = client.post("/v1/estimates/batch", files=[("files", ("s.npy", _npy(np.stack([norm, norm]))))],
                         data={"normalised": "true"}, headers=A)  # fmt: skip
