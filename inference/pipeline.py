@@ -41,6 +41,8 @@ from inference.export import load_trained
 from inference.train import predict, train
 
 PIECE_BYTES = 15 * 1024 * 1024
+# A run's records, carried beside its pieces.
+RECORDS = ("training.json", "loss.png", "evaluation.json", "evaluation.md", "errors.png")
 
 
 def _split(name: str, state: dict[str, Any], config: dict[str, Any], out: Path, **extra: Any) -> list[dict[str, Any]]:
@@ -111,7 +113,7 @@ def pack(run_dir: Path, out: Path) -> dict[str, Any]:
     manifest["unetpp"] = _split("unetpp", ck["unet"], ck["config"], out)
     manifest["swin"] = _split("swin", ck["swin"], ck["config"], out, enhance=ck.get("enhance", True))
     (out / "pieces.json").write_text(json.dumps(manifest, indent=2))
-    for extra in ("training.json", "loss.png", "evaluation.json", "evaluation.md", "errors.png"):
+    for extra in RECORDS:
         if (run_dir / extra).exists():
             shutil.copy(run_dir / extra, out / extra)
     return manifest
@@ -147,7 +149,7 @@ def join(pieces: Path, run_dir: Path) -> None:
         ck = torch.load(io.BytesIO(blob), map_location="cpu", weights_only=False)
         ck["state_dict"] = {k: (v.float() if v.is_floating_point() else v) for k, v in ck["state_dict"].items()}
         torch.save(ck, run_dir / f"{name}.pt")
-    for extra in ("training.json", "loss.png", "evaluation.json", "evaluation.md", "errors.png"):
+    for extra in RECORDS:
         if (pieces / extra).exists():
             shutil.copy(pieces / extra, run_dir / extra)
 

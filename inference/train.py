@@ -244,8 +244,24 @@ def train(
     cache: np.ndarray | None = None  # UNet++ output for every frame once UNet++ is frozen
 
     def training_record() -> dict[str, Any]:
-        return _record(cfg, mode, stage_split, unet_from, swin_from, enhance, seed, history, data_dir, manifest,
-                       n, len(train_idx), len(test_idx), dev)  # fmt: skip
+        """The training record (``training.json``), written after every epoch and at the end."""
+        done = bool(history) and history[-1]["epoch"] >= cfg.epochs
+        return {
+            "config": cfg.as_dict(),
+            "mode": mode,
+            "unet_epochs": stage_split if mode == "two-stage" else None,
+            "unet_from": str(unet_from) if unet_from is not None else None,
+            "swin_from": str(swin_from) if swin_from is not None else None,
+            "enhance": enhance,
+            "seed": seed,
+            "complete": done,
+            "data": {"dir": str(data_dir), "content_sha256": manifest["content_sha256"], "frames": int(n),
+                     "train": int(len(train_idx)), "test": int(len(test_idx))},
+            "hardware": {"device": str(dev), "name": torch.cuda.get_device_name(0) if dev.type == "cuda" else platform.processor()
+                         or platform.machine(), "torch": torch.__version__, "threads": torch.get_num_threads()},
+            "train_seconds": sum(h["seconds"] for h in history),
+            "history": history,
+        }  # fmt: skip
 
     for epoch in range(start_epoch, cfg.epochs):
         unet.train()
@@ -331,31 +347,6 @@ def train(
     (out / "training.json").write_text(json.dumps(record_all, indent=2))
     plot_history(history, out / "loss.png")
     return record_all
-
-
-def _record(
-    cfg: ModelConfig, mode: str, stage_split: int, unet_from: str | Path | None, swin_from: str | Path | None,
-    enhance: bool, seed: int, history: list[dict[str, Any]], data_dir: str | Path, manifest: dict[str, Any],
-    n: int, n_train: int, n_test: int, dev: torch.device,
-) -> dict[str, Any]:  # fmt: skip
-    """The training record (``training.json``), written after every epoch and at the end."""
-    done = bool(history) and history[-1]["epoch"] >= cfg.epochs
-    return {
-        "config": cfg.as_dict(),
-        "mode": mode,
-        "unet_epochs": stage_split if mode == "two-stage" else None,
-        "unet_from": str(unet_from) if unet_from is not None else None,
-        "swin_from": str(swin_from) if swin_from is not None else None,
-        "enhance": enhance,
-        "seed": seed,
-        "complete": done,
-        "data": {"dir": str(data_dir), "content_sha256": manifest["content_sha256"], "frames": int(n),
-                 "train": int(n_train), "test": int(n_test)},
-        "hardware": {"device": str(dev), "name": torch.cuda.get_device_name(0) if dev.type == "cuda" else platform.processor()
-                     or platform.machine(), "torch": torch.__version__, "threads": torch.get_num_threads()},
-        "train_seconds": sum(h["seconds"] for h in history),
-        "history": history,
-    }  # fmt: skip
 
 
 def plot_history(history: list[dict[str, Any]], path: Path) -> None:
