@@ -248,20 +248,12 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def cmd_export(args: argparse.Namespace) -> int:
     from inference.errors import InferenceError
-    from inference.export import export
-    from inference.runtime import DEFAULT_MODEL_DIR
+    from inference.export import run
 
     try:
-        card = export(args.run, args.out or DEFAULT_MODEL_DIR, half=args.half)
+        return run(args)
     except InferenceError as exc:
         raise CliError(str(exc)) from None
-    for role, f in card["files"].items():
-        half = f" (float16 weights: {f['half_max_rel_diff']:.1e})" if "half_max_rel_diff" in f else ""
-        print(
-            f"{role}: {f['file']} {f['bytes'] / 1e6:.1f} MB sha256 {f['sha256'][:16]} "
-            f"parity {f['parity_max_rel_diff']:.1e}{half}"
-        )
-    return 0
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
@@ -384,10 +376,9 @@ def build_parser() -> argparse.ArgumentParser:
     train_arguments(tr)
     tr.set_defaults(func=cmd_train)
     ex = sub.add_parser("export", help="export a training run to ONNX with a model card")
-    ex.add_argument("--run", required=True, help="training run directory")
-    ex.add_argument("--out", help="output directory (default: the package's shipped models)")
-    ex.add_argument("--half", action="store_true",
-                    help="store the large weights in float16, computed in float32 (half the file size)")  # fmt: skip
+    from inference.export import add_arguments as export_arguments
+
+    export_arguments(ex)
     ex.set_defaults(func=cmd_export)
     ev = sub.add_parser("evaluate", help="the paper's Tables 4 and 7 for the ONNX models")
     ev.add_argument("--models", help="directory with model_card.json (default: the shipped models)")

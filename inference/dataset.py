@@ -230,6 +230,25 @@ def load_arrays(data_dir: str | Path, verify: bool = True) -> dict[str, NDArray[
     return out
 
 
+def load_range(data_dir: str | Path, start: int, stop: int, keys: tuple[str, ...] = ("image", "angles_deg"),
+               verify: bool = True) -> dict[str, NDArray[Any]]:  # fmt: skip
+    """Load frames ``start``..``stop - 1`` of a data set, reading only the shards that hold them."""
+    d = Path(data_dir)
+    manifest = load_manifest(d, verify)
+    parts: dict[str, list[NDArray[Any]]] = {k: [] for k in keys}
+    first = 0
+    for shard in manifest["shards"]:
+        lo, hi = max(start, first), min(stop, first + shard["frames"])
+        if lo < hi:
+            with np.load(d / shard["file"]) as z:
+                for key in keys:
+                    parts[key].append(z[key][lo - first : hi - first])
+        first += shard["frames"]
+    if not parts[keys[0]]:
+        raise DatasetError(f"{d} holds {first} frames; frames {start}..{stop - 1} are not in it", field="data")
+    return {k: np.concatenate(v) for k, v in parts.items()}
+
+
 def preview(spec: DatasetSpec, path: str | Path, radar: Radar | None = None, count: int = 6) -> None:
     """Draw ``count`` frames of the set beside their labels (like the paper's Figure 9) to a PNG."""
     import matplotlib

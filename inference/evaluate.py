@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from inference.dataset import DatasetSpec, load_arrays, load_manifest, render_frames
+from inference.dataset import DatasetSpec, load_manifest, load_range, render_frames
 from inference.errors import InferenceError
 from inference.isar import Radar, rotation_matrix
 from inference.runtime import Estimator
@@ -50,7 +50,12 @@ def score(
     rows: dict[str, Any] = {}
     errors: dict[str, NDArray[np.float64]] = {}
     for name, images, angles in sets:
-        pred = np.concatenate([predict(images[k : k + 16].astype(np.float32)) for k in range(0, len(images), 16)])
+        parts = []
+        for k in range(0, len(images), 16):
+            parts.append(predict(images[k : k + 16].astype(np.float32)))
+            if progress and (k // 16) % 16 == 15:
+                print(f"evaluate: {name}: {k + 16}/{len(images)} frames", file=sys.stderr, flush=True)
+        pred = np.concatenate(parts)
         rows[name] = summarise(pred, angles)
         errors[name] = pred - angles
         if progress:
@@ -114,10 +119,10 @@ def evaluate(
 
 def held_out(data_dir: str | Path, manifest: dict[str, Any]) -> tuple[NDArray[Any], NDArray[Any]]:
     """Return a data set's test frames and angles (its manifest's split, or the last 20 %)."""
-    data = load_arrays(data_dir, verify=False)
     split = manifest.get("split")
-    lo, hi = split["test"] if split else (int(0.8 * len(data["image"])), len(data["image"]))
-    return data["image"][lo:hi], data["angles_deg"][lo:hi]
+    lo, hi = split["test"] if split else (int(0.8 * manifest["frames"]), manifest["frames"])
+    data = load_range(data_dir, lo, hi, verify=False)
+    return data["image"], data["angles_deg"]
 
 
 def table(results: dict[str, Any]) -> str:

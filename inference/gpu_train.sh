@@ -6,8 +6,12 @@
 #   inference/gpu_train.sh collect      wait for both runs, pack the compact weights and every record into $OUT
 #
 # Two runs share one simulated set (GSA_GPU_N frames, the last 1000 held out):
-#   compact  the shipped configuration, trained on every training frame;
-#   paper    the paper's protocol exactly: UNet++ 32-512 and Swin-T on 4000 training frames, 100 epochs.
+#   compact    the shipped configuration, trained on every training frame;
+#   and a second one, chosen by GSA_GPU_SECOND:
+#   paper      (default) the paper's protocol exactly: UNet++ 32-512 and Swin-T on 4000 training frames, 100 epochs;
+#   noenhance  the compact Swin trained on raw frames, no UNet++, on every training frame (Table 4's
+#              "without enhancement" row, to set beside compact's history epoch by epoch);
+#   none       no second run (GSA_GPU_PAPER=0 means the same).
 # Both stop cleanly after GSA_GPU_MINUTES of training and are evaluated on the 1000 test frames and
 # on 300 fresh frames at each of 0, 5 and 10 dB. Only numpy, scipy, torch and onnxruntime are needed.
 # Back home: tar xzf records.tgz; python -m inference.pipeline join --pieces DIR --run runs/gpu-compact
@@ -15,17 +19,21 @@
 # To continue the shipped compact weights instead of starting afresh, point GSA_GPU_FROM at their
 # float16 pieces (inference/models/checkpoints/compact-h100-e15) and give the schedule to go on with,
 # e.g. GSA_GPU_FROM=inference/models/checkpoints/compact-h100-e15 GSA_GPU_COMPACT_EPOCHS=6
-# GSA_GPU_COMPACT_LR=4e-5 (epoch 15's rate was 2e-4 x 0.9^15 = 4.1e-5). GSA_GPU_PAPER=0 skips the paper run.
+# GSA_GPU_COMPACT_LR=4e-5 (epoch 15's rate was 2e-4 x 0.9^15 = 4.1e-5).
 set -u
 W=${GSA_GPU_WORK:-/root/gsa-work}
 N=${GSA_GPU_N:-25000}
 MINUTES=${GSA_GPU_MINUTES:-19.5}
 OUT=${OUT:-$W/out}
+SECOND=${GSA_GPU_SECOND:-paper}
+[ "${GSA_GPU_PAPER:-1}" = 0 ] && SECOND=none
+RUNS="compact paper noenhance"
 export OMP_NUM_THREADS=1 PYTHONUNBUFFERED=1
 T0=$(date +%s)
 
 status() {  # one line per run: alive or not, its newest epoch line
-    for r in compact paper; do
+    for r in $RUNS; do
+        [ -s "$W/$r.log" ] || continue
         alive=dead; kill -0 "$(cat "$W/$r.pid" 2>/dev/null)" 2>/dev/null && alive=alive
         echo "[$(( $(date +%s) - T0 )) s] $r $alive: $(grep -E 'done:|error|Error' "$W/$r.log" | tail -1)"
     done
@@ -35,8 +43,10 @@ watch() {  # until $1 seconds have passed or both runs have ended; stops early i
     while (( $(date +%s) - T0 < $1 )); do
         sleep 30
         status
-        if grep -qE 'Traceback|error:' "$W"/compact.log "$W"/paper.log; then echo "a run failed"; return 1; fi
-        n=0; for r in compact paper; do kill -0 "$(cat "$W/$r.pid")" 2>/dev/null && n=$((n + 1)); done
+        if grep -qE 'Traceback|error:' "$W"/compact.log "$W"/paper.log "$W"/noenhance.log 2>/dev/null; then
+            echo "a run failed"; return 1
+        fi
+        n=0; for r in $RUNS; do kill -0 "$(cat "$W/$r.pid" 2>/dev/null)" 2>/dev/null && n=$((n + 1)); done
         (( n == 0 )) && return 0
     done
 }
@@ -45,7 +55,8 @@ records() {  # every small record of both runs, and the logs, in one archive
     mkdir -p "$OUT"
     (cd "$W" && tar czf "$OUT/records.tgz" --ignore-failed-read ./*.log data/manifest.json \
         compact/training.json compact/loss.png compact/evaluation.* compact/errors.png \
-        paper/training.json paper/loss.png paper/evaluation.* paper/errors.png 2>/dev/null)
+        paper/training.json paper/loss.png paper/evaluation.* paper/errors.png \
+        noenhance/training.json noenhance/loss.png noenhance/evaluation.* noenhance/errors.png 2>/dev/null)
 }
 
 pieces() {  # the compact run's newest weights: float16 pieces and pieces.json (its records go in records.tgz)
@@ -53,6 +64,9 @@ pieces() {  # the compact run's newest weights: float16 pieces and pieces.json (
     python3 -m inference.pipeline pack --run "$W/compact" --out "$W/pack" && mv "$W"/pack/*.part* "$W/pack/pieces.json" "$OUT"/
 }
 
+case "$SECOND" in paper | noenhance | none) ;; *)
+    echo "GSA_GPU_SECOND=$SECOND: give paper, noenhance or none" >&2; exit 2 ;;
+esac
 case "${1:-}" in
 launch)
     nvidia-smi --query-gpu=name,memory.total,memory.used,clocks.max.sm --format=csv
@@ -70,27 +84,30 @@ launch)
         --batch-size 32 --epochs "${GSA_GPU_COMPACT_EPOCHS:-20}" --lr-decay "${GSA_GPU_COMPACT_DECAY:-0.9}" \
         --max-minutes "$MINUTES" "${extra[@]}" >"$W/compact.log" 2>&1 </dev/null &
     echo $! >"$W/compact.pid"
-    if [ "${GSA_GPU_PAPER:-1}" != 0 ]; then
+    if [ "$SECOND" = paper ]; then
         setsid nohup python3 -m inference.pipeline run --work "$W" --name paper --config paper --n "$N" \
             --max-train-frames 4000 --max-minutes "$MINUTES" >"$W/paper.log" 2>&1 </dev/null &
         echo $! >"$W/paper.pid"
-    else
-        : >"$W/paper.log"; echo none >"$W/paper.pid"
+    elif [ "$SECOND" = noenhance ]; then
+        setsid nohup python3 -m inference.pipeline run --work "$W" --name noenhance --config compact --n "$N" \
+            --no-enhance --batch-size 32 --epochs "${GSA_GPU_NOENHANCE_EPOCHS:-20}" --lr-decay 0.9 \
+            --max-minutes "$MINUTES" >"$W/noenhance.log" 2>&1 </dev/null &
+        echo $! >"$W/noenhance.pid"
     fi
-    sleep 90; grep -E 's/step' "$W/compact.log" | tail -2; grep -E 's/step' "$W/paper.log" | tail -2
+    sleep 90; for r in $RUNS; do grep -sE 's/step' "$W/$r.log" | tail -2; done
     watch "${2:-560}"; rc=$?
     nvidia-smi --query-gpu=utilization.gpu,memory.used --format=csv
-    records; tail -n 5 "$W"/compact.log "$W"/paper.log; exit $rc
+    records; tail -n 5 "$W"/*.log; exit $rc
     ;;
 watch)
     watch "${2:-560}"; rc=$?
-    grep -E 'step (100|200|300)/' "$W/compact.log" | tail -1; grep -E 'step 100/' "$W/paper.log" | tail -1
+    for r in $RUNS; do grep -sE 'step (100|200|300)/' "$W/$r.log" | tail -1; done
     pieces; records; exit $rc
     ;;
 collect)
     watch "${2:-560}"
     status
-    pieces; records; ls -la "$OUT"; tail -n 3 "$W"/compact.log "$W"/paper.log
+    pieces; records; ls -la "$OUT"; tail -n 3 "$W"/*.log
     ;;
 *)
     echo "usage: inference/gpu_train.sh launch|watch SECONDS|collect [SECONDS]" >&2; exit 2

@@ -82,19 +82,22 @@ def evaluate_run(work: Path, name: str, device: str | None = None) -> dict[str, 
     """
     run_dir = work / name
     unet, swin, _ = load_trained(run_dir)
+    # A Swin trained on raw frames (--no-enhance) is scored without UNet++: Table 4's other row.
+    enhance = torch.load(run_dir / "swin.pt", map_location="cpu", weights_only=False).get("enhance", True)
     dev = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
     unet.to(dev)
     swin.to(dev)
 
     def sets() -> Any:
-        yield ("with enhancement", *held_out(work / "data", load_manifest(work / "data")))
+        row = "with enhancement" if enhance else "without enhancement"
+        yield (row, *held_out(work / "data", load_manifest(work / "data")))
         for snr in SNR_DB:
             d = work / f"snr-{snr:g}"
             if (d / "manifest.json").exists():
                 arrays = load_arrays(d, verify=False)
                 yield f"{snr:g} dB", arrays["image"], arrays["angles_deg"]
 
-    rows, errors = score(lambda f: predict(unet, swin, f, dev)[0], sets())
+    rows, errors = score(lambda f: predict(unet if enhance else None, swin, f, dev)[0], sets())
     results = {"run": name, "paper_mae_deg": PAPER, "rows": rows}
     (run_dir / "evaluation.json").write_text(json.dumps(results, indent=2))
     (run_dir / "evaluation.md").write_text(table(results))
@@ -123,12 +126,13 @@ def run(config: str, n: int, work: Path, out: Path | None, max_minutes: float, s
         compile_models: bool = False, epochs: int | None = None, radar: Any = None, name: str = "run",
         n_train: int | None = None, n_snr: int = 0, batch_size: int | None = None, lr_decay: float | None = None,
         max_train_frames: int | None = None, evaluate: bool = True, lr: float | None = None,
-        unet_from: Path | None = None, swin_from: Path | None = None) -> dict[str, Any]:  # fmt: skip
+        unet_from: Path | None = None, swin_from: Path | None = None, enhance: bool = True) -> dict[str, Any]:  # fmt: skip
     """Simulate (once), train ``WORK/NAME`` (resuming), evaluate when done, and pack the weights into ``out``."""
     prepare(work, n, n_train, n_snr, seed, radar)
     record = train(work / "data", work / name, config, epochs=epochs, seed=seed, resume=True, max_minutes=max_minutes,
                    compile_models=compile_models, batch_size=batch_size, lr=lr, lr_decay=lr_decay,
-                   max_train_frames=max_train_frames, unet_from=unet_from, swin_from=swin_from)  # fmt: skip
+                   max_train_frames=max_train_frames, unet_from=unet_from, swin_from=swin_from,
+                   enhance=enhance)  # fmt: skip
     if evaluate:
         evaluate_run(work, name)
     manifest = pack(work / name, out) if out is not None else {}
@@ -176,6 +180,8 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--from", dest="start_from", help="start both networks from a run folder's unetpp.pt and swin.pt")
     r.add_argument("--max-train-frames", type=int, help="train on the first N training frames only")
     r.add_argument("--compile", action="store_true")
+    r.add_argument("--no-enhance", action="store_true",
+                   help="train Swin on raw frames, no UNet++ (Table 4's 'without enhancement' row)")  # fmt: skip
     k = sub.add_parser("pack", help="write a run's latest weights in float16 pieces into OUT")
     k.add_argument("--run", required=True)
     k.add_argument("--out", required=True)
@@ -191,7 +197,7 @@ def main(argv: list[str] | None = None) -> int:
             m = run(args.config, args.n, Path(args.work), Path(args.out) if args.out else None, args.max_minutes,
                     args.seed, args.compile, args.epochs, name=args.name, n_train=args.n_train, n_snr=args.n_snr,
                     batch_size=args.batch_size, lr_decay=args.lr_decay, lr=args.lr,
-                    max_train_frames=args.max_train_frames,
+                    max_train_frames=args.max_train_frames, enhance=not args.no_enhance,
                     unet_from=Path(args.start_from) / "unetpp.pt" if args.start_from else None,
                     swin_from=Path(args.start_from) / "swin.pt" if args.start_from else None)  # fmt: skip
             print(json.dumps({k: v for k, v in m.items() if k in ("complete", "epochs")}))

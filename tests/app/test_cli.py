@@ -33,6 +33,8 @@ def test_bad_request_is_one_line_and_nonzero(tmp_path):
     assert out.stderr.count("\n") == 1 and "latitude_deg" in out.stderr
     missing = _gsa("plan", str(tmp_path / "nope.json"), cwd=tmp_path)
     assert missing.returncode == 2 and "cannot read" in missing.stderr
+    int8 = _gsa("export", "--run", str(tmp_path / "run"), "--int8", "--out", str(tmp_path / "m"), cwd=tmp_path)
+    assert int8.returncode == 2 and int8.stderr.count("\n") == 1 and "--int8 needs --frames DATA" in int8.stderr
 
 
 def test_keys_create_list_revoke(tmp_path):

@@ -164,6 +164,53 @@ def test_export_parity_and_runtime(smoke_run, smoke_data, tmp_path):
     np.testing.assert_allclose(b.angles_deg, res.angles_deg, atol=0.05)  # degrees
 
 
+def test_int8_export_quantises_unet_and_keeps_the_angles(smoke_run, smoke_data, tmp_path, capsys):
+    import onnx
+
+    from inference.dataset import load_arrays
+    from inference.export import INT8_ANGLE_TOL_DEG, main
+
+    out, _ = smoke_run
+    # The command line: UNet++ calibrated on the data set's 16 training frames (8 calibrate, 8 check).
+    assert main(["--run", str(out), "--out", str(tmp_path / "i8"), "--int8", "--half", "--frames", str(smoke_data),
+                 "--n-frames", "100"]) == 0  # fmt: skip
+    assert "int8: angles change by" in capsys.readouterr().out
+    card = json.loads((tmp_path / "i8" / "model_card.json").read_text())
+    u, s = card["files"]["unetpp"], card["files"]["swin"]
+    assert u["weights"].startswith("int8") and u["int8_calibration_frames"] == 8 and u["int8_check_frames"] == 8
+    assert max(u["int8_angle_change_deg"]["mean"]) <= INT8_ANGLE_TOL_DEG
+    assert "float16_tensors" not in u and s["float16_tensors"] > 0  # --half still applies to Swin
+    assert card["export_options"]["frames"]["first_training_frames"] == 16  # the card says what calibrated it
+    graph = onnx.load(str(tmp_path / "i8" / "unetpp.onnx")).graph
+    ops = {n.op_type for n in graph.node}
+    assert {"QuantizeLinear", "DequantizeLinear"} <= ops
+    assert sum(n.op_type == "QuantizeLinear" for n in graph.node) == u["int8_quantized_activations"] > 0
+    assert any(i.data_type == onnx.TensorProto.INT8 for i in graph.initializer)
+    float_card = export(out, tmp_path / "f32")
+    assert u["bytes"] < 0.5 * float_card["files"]["unetpp"]["bytes"]
+    # The service runs it, and its angles stay near the float models' on frames it did not calibrate on.
+    frames = load_arrays(smoke_data)["image"][16:].astype(np.float32)
+    got = Estimator.load(tmp_path / "i8").estimate(frames)
+    ref = Estimator.load(tmp_path / "f32").estimate(frames)
+    assert got.enhanced.dtype == np.float32
+    assert np.abs(got.angles_deg - ref.angles_deg).mean() < 4 * INT8_ANGLE_TOL_DEG
+    assert np.abs(got.enhanced - ref.enhanced).mean() < 0.05 * np.abs(ref.enhanced).mean() + 1e-3
+
+
+def test_int8_export_refuses_without_enough_real_frames(smoke_run, smoke_data, tmp_path, capsys):
+    from inference.export import main
+
+    out, _ = smoke_run
+    with pytest.raises(InferenceError, match="needs at least 8 real frames"):
+        export(out, tmp_path / "m", int8=True)
+    assert main(["--run", str(out), "--out", str(tmp_path / "m"), "--int8"]) == 2
+    assert "--int8 needs --frames DATA" in capsys.readouterr().err
+    assert main(["--run", str(out), "--out", str(tmp_path / "m"), "--int8", "--frames", str(smoke_data),
+                 "--n-frames", "4"]) == 2  # fmt: skip
+    assert "--n-frames 4 is too few" in capsys.readouterr().err
+    assert not (tmp_path / "m").exists()  # refused before anything was written
+
+
 def test_runtime_refuses_bad_model_files(smoke_run, tmp_path):
     out, _ = smoke_run
     export(out, tmp_path / "m")
@@ -258,6 +305,12 @@ def test_gpu_pipeline_at_toy_size(tmp_path):
                          max_train_frames=4)  # fmt: skip
     assert other["epochs"] == 1
     assert json.loads((work / "b" / "training.json").read_text())["data"]["train"] == 4
+    # A Swin on raw frames (gsa_train.sh's noenhance run) is scored without UNet++: Table 4's other row.
+    raw = pipeline_run("smoke", 12, work, None, max_minutes=5, epochs=1, radar=SMALL, name="raw", enhance=False)
+    assert raw["epochs"] == 1
+    raw_rows = json.loads((work / "raw" / "evaluation.json").read_text())["rows"]
+    assert set(raw_rows) == {"without enhancement", "0 dB", "5 dB", "10 dB"}
+    assert json.loads((work / "raw" / "training.json").read_text())["enhance"] is False
     # A run can start from joined pieces (how a later GPU session continues the shipped weights).
     cont = pipeline_run("smoke", 12, work, None, max_minutes=5, epochs=1, radar=SMALL, name="c", evaluate=False,
                         lr=1e-12, unet_from=tmp_path / "run" / "unetpp.pt", swin_from=tmp_path / "run" / "swin.pt")  # fmt: skip
