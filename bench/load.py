@@ -53,8 +53,8 @@ def main() -> None:
              f"`gsa serve --workers 2`, shipped models, 256 x 256 frames, {CLIENTS} concurrent clients x {EACH} mixed requests",
              "(15 % one-day plans, 30 % single estimates, 5 % 4-frame batches, 15 % plan listings, 15 % estimate listings,",
              "15 % reads of the client's own records, 5 % scenes). Every acknowledged write is read back afterwards.",
-             "On 2 cores the model and planner work saturates the machine, so writes queue (one estimate alone takes about",
-             "0.27 s with the shipped compact models); uploads run in worker threads, so reads and listings are still answered meanwhile.", ""]  # fmt: skip
+             "On 2 cores the model and planner work saturates the machine, so writes queue (one estimate alone: the raw two-model time",
+             "under 'Estimation service'); uploads run in worker threads, so reads and listings are still answered meanwhile.", ""]  # fmt: skip
     with tempfile.TemporaryDirectory() as tmp:
         for backend in ("sqlite", "postgresql"):
             print(f"load: {backend} ...", flush=True)
