@@ -38,7 +38,7 @@ from inference.dataset import DatasetSpec, generate, load_arrays, load_manifest
 from inference.errors import InferenceError, ModelFileError
 from inference.evaluate import PAPER, SNR_DB, held_out, plot_errors, score, snr_spec, table
 from inference.export import load_trained
-from inference.train import predict, train
+from inference.train import averaged_weights, predict, train
 
 PIECE_BYTES = 15 * 1024 * 1024
 # A run's records, carried beside its pieces.
@@ -113,8 +113,12 @@ def pack(run_dir: Path, out: Path) -> dict[str, Any]:
     ck = torch.load(ckpt, map_location="cpu", weights_only=False)
     out.mkdir(parents=True, exist_ok=True)
     manifest: dict[str, Any] = {"epochs": ck["epoch"], "complete": ck["epoch"] >= ck["config"]["epochs"]}
-    manifest["unetpp"] = _split("unetpp", ck["unet"], ck["config"], out)
-    manifest["swin"] = _split("swin", ck["swin"], ck["config"], out, enhance=ck.get("enhance", True))
+    ema = ck.get("ema") or {}  # a run with --ema hands back its averaged weights, as its unetpp.pt/swin.pt hold
+    unet = averaged_weights(ema["unet"]) if "unet" in ema else ck["unet"]
+    swin = averaged_weights(ema["swin"]) if "swin" in ema else ck["swin"]
+    manifest["averaged_weights"] = bool(ema)
+    manifest["unetpp"] = _split("unetpp", unet, ck["config"], out)
+    manifest["swin"] = _split("swin", swin, ck["config"], out, enhance=ck.get("enhance", True))
     (out / "pieces.json").write_text(json.dumps(manifest, indent=2))
     for extra in RECORDS:
         if (run_dir / extra).exists():
@@ -126,13 +130,14 @@ def run(config: str, n: int, work: Path, out: Path | None, max_minutes: float, s
         compile_models: bool = False, epochs: int | None = None, radar: Any = None, name: str = "run",
         n_train: int | None = None, n_snr: int = 0, batch_size: int | None = None, lr_decay: float | None = None,
         max_train_frames: int | None = None, evaluate: bool = True, lr: float | None = None,
-        unet_from: Path | None = None, swin_from: Path | None = None, enhance: bool = True) -> dict[str, Any]:  # fmt: skip
+        unet_from: Path | None = None, swin_from: Path | None = None, enhance: bool = True,
+        ema: float | None = None) -> dict[str, Any]:  # fmt: skip
     """Simulate (once), train ``WORK/NAME`` (resuming), evaluate when done, and pack the weights into ``out``."""
     prepare(work, n, n_train, n_snr, seed, radar)
     record = train(work / "data", work / name, config, epochs=epochs, seed=seed, resume=True, max_minutes=max_minutes,
                    compile_models=compile_models, batch_size=batch_size, lr=lr, lr_decay=lr_decay,
                    max_train_frames=max_train_frames, unet_from=unet_from, swin_from=swin_from,
-                   enhance=enhance)  # fmt: skip
+                   enhance=enhance, ema=ema)  # fmt: skip
     if evaluate:
         evaluate_run(work, name)
     manifest = pack(work / name, out) if out is not None else {}
@@ -180,6 +185,7 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--from", dest="start_from", help="start both networks from a run folder's unetpp.pt and swin.pt")
     r.add_argument("--max-train-frames", type=int, help="train on the first N training frames only")
     r.add_argument("--compile", action="store_true")
+    r.add_argument("--ema", type=float, help="average the weights (decay per step, e.g. 0.999); the result")
     r.add_argument("--no-enhance", action="store_true",
                    help="train Swin on raw frames, no UNet++ (Table 4's 'without enhancement' row)")  # fmt: skip
     k = sub.add_parser("pack", help="write a run's latest weights in float16 pieces into OUT")
@@ -197,7 +203,7 @@ def main(argv: list[str] | None = None) -> int:
             m = run(args.config, args.n, Path(args.work), Path(args.out) if args.out else None, args.max_minutes,
                     args.seed, args.compile, args.epochs, name=args.name, n_train=args.n_train, n_snr=args.n_snr,
                     batch_size=args.batch_size, lr_decay=args.lr_decay, lr=args.lr,
-                    max_train_frames=args.max_train_frames, enhance=not args.no_enhance,
+                    max_train_frames=args.max_train_frames, enhance=not args.no_enhance, ema=args.ema,
                     unet_from=Path(args.start_from) / "unetpp.pt" if args.start_from else None,
                     swin_from=Path(args.start_from) / "swin.pt" if args.start_from else None)  # fmt: skip
             print(json.dumps({k: v for k, v in m.items() if k in ("complete", "epochs")}))

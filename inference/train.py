@@ -7,6 +7,13 @@ UNet++ first and then Swin on its frozen output; ``enhance=False`` trains Swin o
 raw frames (the paper's "without enhancement" row). Angles are regressed scaled by
 ``ANGLE_SCALE_DEG`` to [-1, 1].
 
+``ema`` also keeps an exponential moving average of both networks' weights (and batch-norm
+statistics), updated after every optimiser step; each epoch scores both, and the averaged
+weights are the ones written to ``unetpp.pt`` and ``swin.pt``. Per-epoch test errors of the
+raw weights jitter by 0.1-0.5 deg late in training (the H100 run of 2026-11-23), so which
+epoch a run stops at decides too much; the average smooths that, chosen beforehand rather
+than by peeking at the test set.
+
 Needs numpy, scipy and torch only. Resumable (``checkpoint.pt`` each epoch), seeded,
 bf16 autocast on a GPU, and it stops cleanly after the epoch in which
 ``max_minutes`` runs out, so long runs fit in short commands.
@@ -85,6 +92,11 @@ def on_device(data: dict[str, np.ndarray], device: torch.device) -> dict[str, np
     }
 
 
+def averaged_weights(state: dict[str, Any]) -> dict[str, Any]:
+    """Return the network weights inside an ``AveragedModel`` state dict (without its ``module.`` prefix)."""
+    return {k[len("module.") :]: v for k, v in state.items() if k.startswith("module.")}
+
+
 def _save(obj: Any, path: Path) -> None:
     """Save atomically, so a reader (or a cut-off run) never sees half a file."""
     tmp = path.with_name(path.name + ".tmp")
@@ -151,6 +163,7 @@ def train(
     threads: int | None = None,
     swin_from: str | Path | None = None,
     lr_decay: float | None = None,
+    ema: float | None = None,
 ) -> dict[str, Any]:
     """Train both networks (or Swin alone with ``enhance=False``) and return the training record.
 
@@ -170,6 +183,10 @@ def train(
         raise InferenceError(f"lr_decay {cfg.lr_decay} must be in (0, 1]", field="lr_decay")
     if mode not in ("joint", "two-stage"):
         raise InferenceError(f"mode {mode!r} must be 'joint' or 'two-stage'", field="mode")
+    if ema is not None and not 0.0 < ema < 1.0:
+        raise InferenceError(f"ema {ema} must be in (0, 1), e.g. 0.999", field="ema")
+    if ema is not None and mode == "two-stage":
+        raise InferenceError("ema averages jointly trained networks; use it with mode 'joint'", field="ema")
     if unet_epochs is not None and not 0 <= unet_epochs <= cfg.epochs:
         raise InferenceError(
             f"unet_epochs {unet_epochs} must be between 0 and epochs ({cfg.epochs})", field="unet_epochs"
@@ -216,6 +233,12 @@ def train(
     opt_s = torch.optim.Adam(swin.parameters(), lr=cfg.lr)
     sch_u = torch.optim.lr_scheduler.ExponentialLR(opt_u, cfg.lr_decay)
     sch_s = torch.optim.lr_scheduler.ExponentialLR(opt_s, cfg.lr_decay)
+    averaged: dict[str, torch.optim.swa_utils.AveragedModel] = {}
+    if ema is not None:
+        from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
+
+        averaged = {k: AveragedModel(net, multi_avg_fn=get_ema_multi_avg_fn(ema), use_buffers=True)  # type: ignore[no-untyped-call]
+                    for k, net in (("unet", unet), ("swin", swin))}  # fmt: skip
     history: list[dict[str, Any]] = []
     start_epoch = 0
     ckpt_path = out / "checkpoint.pt"
@@ -228,6 +251,9 @@ def train(
         sch_u.load_state_dict(ck["sch_u"])
         sch_s.load_state_dict(ck["sch_s"])
         history, start_epoch = ck["history"], ck["epoch"]
+        for k, avg in averaged.items():
+            if k in ck.get("ema", {}):
+                avg.load_state_dict(ck["ema"][k])
         print(f"train: resumed at epoch {start_epoch}", file=sys.stderr, flush=True)
     run_u: Callable[[torch.Tensor], torch.Tensor] = unet
     run_s: Callable[[torch.Tensor], torch.Tensor] = swin
@@ -253,6 +279,7 @@ def train(
             "unet_from": str(unet_from) if unet_from is not None else None,
             "swin_from": str(swin_from) if swin_from is not None else None,
             "enhance": enhance,
+            "ema": ema,
             "seed": seed,
             "complete": done,
             "data": {"dir": str(data_dir), "content_sha256": manifest["content_sha256"], "frames": int(n),
@@ -290,10 +317,14 @@ def train(
                 opt_s.zero_grad(set_to_none=True)
                 loss_s.backward()  # type: ignore[no-untyped-call]
                 opt_s.step()
+                if averaged:
+                    averaged["swin"].update_parameters(swin)
             if train_unet:
                 opt_u.zero_grad(set_to_none=True)
                 loss_u.backward()  # type: ignore[no-untyped-call]
                 opt_u.step()
+                if averaged:
+                    averaged["unet"].update_parameters(unet)
             sums["unet_loss"] += loss_u.detach().float()  # summed on the device: no sync per step
             sums["swin_loss"] += loss_s.detach().float()
             if log_every and (step + 1) % log_every == 0:
@@ -308,13 +339,18 @@ def train(
             sch_u.step()
         if train_swin:
             sch_s.step()
-        if not len(test_idx):
-            pred = None
-        elif cache is not None:
-            pred, _ = predict(None, swin, cache[test_idx], dev)
-        else:
-            pred, _ = predict(unet if enhance else None, swin, data["image"][test_idx], dev)
-        mae = np.abs(pred - data["angles_deg"][test_idx]).mean(axis=0).tolist() if pred is not None else [math.nan] * 3
+        # Swin reads the frames UNet++ already enhanced (two-stage), or raw frames through UNet++ (or not).
+        src, through_unet = (cache, False) if cache is not None else (data["image"], enhance)
+
+        def test_mae(
+            u: torch.nn.Module, s: torch.nn.Module, src: np.ndarray = src, through: bool = through_unet
+        ) -> list[float]:
+            if not len(test_idx):
+                return [math.nan] * 3
+            pred, _ = predict(u if through else None, s, src[test_idx], dev)
+            return [float(v) for v in np.abs(pred - data["angles_deg"][test_idx]).mean(axis=0)]
+
+        mae = test_mae(unet, swin)
         record = {
             "epoch": epoch + 1,
             "unet_loss": float(sums["unet_loss"]) / len(batches),
@@ -322,17 +358,23 @@ def train(
             "test_mae_deg": mae,
             "seconds": time.perf_counter() - t_epoch,
         }
+        ema_mae = test_mae(averaged["unet"].module, averaged["swin"].module) if averaged else []
+        if averaged:
+            record["ema_test_mae_deg"] = ema_mae
         history.append(record)
         print(
             f"train: epoch {epoch + 1}/{cfg.epochs} done: unet {record['unet_loss']:.4f} swin {record['swin_loss']:.4f} "
-            f"test MAE z/y/x {mae[0]:.2f}/{mae[1]:.2f}/{mae[2]:.2f} deg ({record['seconds']:.0f} s)",
+            f"test MAE z/y/x {mae[0]:.2f}/{mae[1]:.2f}/{mae[2]:.2f} deg"
+            + (" (averaged weights {:.2f}/{:.2f}/{:.2f})".format(*ema_mae) if averaged else "")
+            + f" ({record['seconds']:.0f} s)",
             file=sys.stderr,
             flush=True,
         )
         _save(
             {"unet": unet.state_dict(), "swin": swin.state_dict(), "opt_u": opt_u.state_dict(),
              "opt_s": opt_s.state_dict(), "sch_u": sch_u.state_dict(), "sch_s": sch_s.state_dict(),
-             "history": history, "epoch": epoch + 1, "config": cfg.as_dict(), "enhance": enhance},
+             "history": history, "epoch": epoch + 1, "config": cfg.as_dict(), "enhance": enhance,
+             "ema": {k: avg.state_dict() for k, avg in averaged.items()}},
             ckpt_path,
         )  # fmt: skip
         (out / "training.json").write_text(json.dumps(training_record(), indent=2))
@@ -341,8 +383,11 @@ def train(
                 f"train: stopping after epoch {epoch + 1}: {max_minutes} min used; --resume continues", file=sys.stderr
             )
             break
-    _save({"state_dict": unet.state_dict(), "config": cfg.as_dict()}, out / "unetpp.pt")
-    _save({"state_dict": swin.state_dict(), "config": cfg.as_dict(), "enhance": enhance}, out / "swin.pt")
+    final_u, final_s = (averaged["unet"].module, averaged["swin"].module) if averaged else (unet, swin)
+    _save({"state_dict": final_u.state_dict(), "config": cfg.as_dict(), "ema": ema}, out / "unetpp.pt")
+    _save(
+        {"state_dict": final_s.state_dict(), "config": cfg.as_dict(), "enhance": enhance, "ema": ema}, out / "swin.pt"
+    )
     record_all = training_record()
     (out / "training.json").write_text(json.dumps(record_all, indent=2))
     plot_history(history, out / "loss.png")
@@ -368,7 +413,10 @@ def plot_history(history: list[dict[str, Any]], path: Path) -> None:
     ax[0].legend()
     mae = np.array([h["test_mae_deg"] for h in history])
     for k, name in enumerate("zyx"):
-        ax[1].plot(ep, mae[:, k], label=name)
+        line = ax[1].plot(ep, mae[:, k], label=name)[0]
+        if all("ema_test_mae_deg" in h for h in history):
+            ema = np.array([h["ema_test_mae_deg"] for h in history])
+            ax[1].plot(ep, ema[:, k], "--", color=line.get_color(), label=f"{name}, averaged weights")
     ax[1].set(xlabel="epoch", ylabel="test MAE (deg)")
     ax[1].legend()
     fig.tight_layout()
@@ -390,6 +438,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--swin-from", help="start Swin from an earlier run's swin.pt (fine-tuning with a fresh schedule)")
     p.add_argument("--threads", type=int, help="torch CPU threads (default: all cores)")
     p.add_argument("--no-enhance", action="store_true", help="train Swin on raw frames (no UNet++)")
+    p.add_argument(
+        "--ema", type=float, help="also average the weights (decay per step, e.g. 0.999); saved as the result"
+    )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device")
     p.add_argument("--resume", action="store_true")
@@ -403,7 +454,7 @@ def run(args: argparse.Namespace) -> int:
         args.data, args.out, args.config, args.epochs, args.batch_size, args.lr, args.mode, not args.no_enhance,
         args.seed, args.device, args.resume, args.max_minutes, args.max_train_frames, compile_models=args.compile,
         unet_epochs=args.unet_epochs, unet_from=args.unet_from, threads=args.threads, swin_from=args.swin_from,
-        lr_decay=args.lr_decay,
+        lr_decay=args.lr_decay, ema=args.ema,
     )  # fmt: skip
     last = rec["history"][-1] if rec["history"] else None
     if last:

@@ -81,6 +81,32 @@ def test_resume_continues_from_the_checkpoint(smoke_data, smoke_run, tmp_path):
     assert [h["epoch"] for h in record["history"]] == [1, 2, 3]
 
 
+def test_averaged_weights_are_scored_saved_resumed_and_packed(smoke_data, tmp_path):
+    from inference.pipeline import pack
+    from inference.train import averaged_weights
+
+    out = tmp_path / "ema"
+    rec = train(smoke_data, out, "smoke", epochs=2, ema=0.5, log_every=0)
+    assert rec["ema"] == 0.5 and all(len(h["ema_test_mae_deg"]) == 3 for h in rec["history"])
+    ck = torch.load(out / "checkpoint.pt", weights_only=False)
+    saved = torch.load(out / "swin.pt", weights_only=False)["state_dict"]
+    avg = averaged_weights(ck["ema"]["swin"])
+    assert set(avg) == set(saved) == set(ck["swin"])
+    torch.testing.assert_close(saved["head.weight"], avg["head.weight"])
+    assert not torch.equal(saved["head.weight"], ck["swin"]["head.weight"])  # the average, not the last step
+    # The average carries over a resume, and pack hands back the averaged weights.
+    again = train(smoke_data, out, "smoke", epochs=3, ema=0.5, resume=True, log_every=0)
+    assert len(again["history"]) == 3 and "ema_test_mae_deg" in again["history"][-1]
+    ck3 = torch.load(out / "checkpoint.pt", weights_only=False)
+    assert int(ck3["ema"]["swin"]["n_averaged"]) == 3 * int(ck["ema"]["swin"]["n_averaged"]) // 2
+    manifest = pack(out, tmp_path / "pieces")
+    assert manifest["averaged_weights"] is True
+    with pytest.raises(InferenceError, match="ema 1.5 must be in"):
+        train(smoke_data, tmp_path / "bad", "smoke", ema=1.5)
+    with pytest.raises(InferenceError, match="use it with mode 'joint'"):
+        train(smoke_data, tmp_path / "bad", "smoke", ema=0.9, mode="two-stage")
+
+
 def test_two_stage_from_a_trained_unet_freezes_it_and_trains_swin(smoke_data, smoke_run, tmp_path):
     out, _ = smoke_run
     unet_before = torch.load(out / "unetpp.pt", weights_only=False)["state_dict"]
