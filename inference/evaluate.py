@@ -41,6 +41,16 @@ def snr_spec(snr_db: float, n: int, seed: int = SNR_SEED) -> DatasetSpec:
     return DatasetSpec(n=n, seed=seed + int(snr_db), snr_min_db=snr_db, snr_max_db=snr_db)
 
 
+def row_name(snr_db: float | None, enhance: bool = True) -> str:
+    """The table row of a test split (``snr_db`` None) or of a fresh SNR set, for models with or without UNet++.
+
+    The paper's Table 7 holds enhanced frames only, so a raw-frame model's SNR rows are named apart.
+    """
+    if snr_db is None:
+        return "with enhancement" if enhance else "without enhancement"
+    return f"{snr_db:g} dB" + ("" if enhance else ", without enhancement")
+
+
 def score(
     predict: Callable[[NDArray[Any]], NDArray[Any]],
     sets: Iterable[tuple[str, NDArray[Any], NDArray[Any]]],
@@ -98,10 +108,10 @@ def evaluate(
 
     def sets() -> Iterator[tuple[str, NDArray[Any], NDArray[Any]]]:
         if data_dir is not None and manifest is not None:
-            yield ("with enhancement", *held_out(data_dir, manifest))
+            yield (row_name(None, est.enhances), *held_out(data_dir, manifest))
         for snr in SNR_DB:
             arrays = render_frames(snr_spec(snr, n_snr, seed), radar, 0, n_snr)
-            yield f"{snr:g} dB", arrays["image"], arrays["angles_deg"]
+            yield row_name(snr, est.enhances), arrays["image"], arrays["angles_deg"]
 
     results["rows"], errors = score(lambda f: est.estimate(f).angles_deg, sets(), progress)
     out = Path(out_dir)

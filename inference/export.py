@@ -163,6 +163,10 @@ def export(
             "give --frames DATA (a data set from gsa simulate)"
         )
     unet, swin, cfg = load_trained(run_dir)
+    # Whether Swin reads UNet++'s output (the default) or raw frames (gsa train --no-enhance).
+    enhance = torch.load(Path(run_dir) / "swin.pt", map_location="cpu", weights_only=False).get("enhance", True)
+    if int8 and not enhance:
+        raise InferenceError("--int8 quantises UNet++, which this run's Swin (trained on raw frames) does not use")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     size = cfg["img_size"]
@@ -199,6 +203,7 @@ def export(
         "input": "frame [batch, 1, H, W] float32: inference.isar.normalise_frame output",
         "outputs": {"unetpp": "enhanced frame [batch, 1, H, W]", "swin": f"Euler z, y, x / {ANGLE_SCALE_DEG} deg"},
         "angle_scale_deg": ANGLE_SCALE_DEG,
+        "enhance": bool(enhance),
         "config": cfg,
         "files": {k: report[k] for k in ("unetpp", "swin")},
         "training": {k: training.get(k) for k in ("mode", "unet_epochs", "unet_from", "swin_from", "enhance", "seed", "complete", "data",

@@ -36,7 +36,7 @@ import torch
 
 from inference.dataset import DatasetSpec, generate, load_arrays, load_manifest
 from inference.errors import InferenceError, ModelFileError
-from inference.evaluate import PAPER, SNR_DB, held_out, plot_errors, score, snr_spec, table
+from inference.evaluate import PAPER, SNR_DB, held_out, plot_errors, row_name, score, snr_spec, table
 from inference.export import load_trained
 from inference.train import averaged_weights, predict, train
 
@@ -89,13 +89,12 @@ def evaluate_run(work: Path, name: str, device: str | None = None) -> dict[str, 
     swin.to(dev)
 
     def sets() -> Any:
-        row = "with enhancement" if enhance else "without enhancement"
-        yield (row, *held_out(work / "data", load_manifest(work / "data")))
+        yield (row_name(None, enhance), *held_out(work / "data", load_manifest(work / "data")))
         for snr in SNR_DB:
             d = work / f"snr-{snr:g}"
             if (d / "manifest.json").exists():
                 arrays = load_arrays(d, verify=False)
-                yield f"{snr:g} dB", arrays["image"], arrays["angles_deg"]
+                yield row_name(snr, enhance), arrays["image"], arrays["angles_deg"]
 
     rows, errors = score(lambda f: predict(unet if enhance else None, swin, f, dev)[0], sets())
     results = {"run": name, "paper_mae_deg": PAPER, "rows": rows}

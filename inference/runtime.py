@@ -124,6 +124,8 @@ class Estimator:
         self._pending: list[_Job] = []
         self._running = False  # one caller at a time runs the models for everyone waiting
         self.angle_scale_deg = float(card.get("angle_scale_deg", 45.0))
+        # A Swin trained on raw frames (gsa train --no-enhance) reads the frames as they come.
+        self.enhances = card.get("enhance", True) is not False
         self.img_size = int(card["config"]["img_size"])
 
     @classmethod
@@ -161,7 +163,10 @@ class Estimator:
         return np.concatenate(outs) if len(outs) > 1 else np.asarray(outs[0])
 
     def enhance(self, frames: NDArray[np.float32]) -> NDArray[np.float32]:
-        """Run UNet++ on normalised frames [N, H, W]; return enhanced frames [N, H, W]."""
+        """Run UNet++ on normalised frames [N, H, W]; return enhanced frames [N, H, W].
+
+        ``estimate`` skips this for models whose card says their Swin was trained on raw frames.
+        """
         return np.asarray(self._run("unetpp", frames)[:, 0], np.float32)
 
     def attitude(self, frames: NDArray[np.float32]) -> NDArray[np.float32]:
@@ -216,7 +221,7 @@ class Estimator:
         error: BaseException | None = None
         try:
             t0 = time.perf_counter()
-            enhanced = self.enhance(frames)
+            enhanced = self.enhance(frames) if self.enhances else frames
             t1 = time.perf_counter()
             angles = self.attitude(enhanced)
             res = Estimate(angles, enhanced, {"unetpp": t1 - t0, "swin": time.perf_counter() - t1})

@@ -237,6 +237,37 @@ def test_int8_export_refuses_without_enough_real_frames(smoke_run, smoke_data, t
     assert not (tmp_path / "m").exists()  # refused before anything was written
 
 
+def test_evaluate_writes_the_tables_and_skips_unet_for_a_raw_frame_model(smoke_run, smoke_data, tmp_path):
+    from inference.dataset import load_arrays
+    from inference.evaluate import evaluate
+
+    out, _ = smoke_run
+    export(out, tmp_path / "m")
+    res = evaluate(tmp_path / "m", smoke_data, n_snr=3, out_dir=tmp_path / "res", progress=False, record=True)
+    assert set(res["rows"]) == {"with enhancement", "0 dB", "5 dB", "10 dB"}
+    assert res["rows"]["with enhancement"]["n"] == 8 and res["rows"]["0 dB"]["n"] == 3  # test split 16..23
+    assert "0.730 / 0.705 / 0.958" in (tmp_path / "res" / "results.md").read_text()  # beside the paper's figures
+    assert (tmp_path / "res" / "errors.png").stat().st_size > 5000
+    assert json.loads((tmp_path / "m" / "model_card.json").read_text())["evaluation"]["rows"] == res["rows"]
+    # A Swin trained on raw frames (Table 4's other row): the runtime skips UNet++ and the rows say so.
+    train(smoke_data, tmp_path / "raw", "smoke", epochs=1, enhance=False, log_every=0)
+    assert export(tmp_path / "raw", tmp_path / "mraw")["enhance"] is False
+    est = Estimator.load(tmp_path / "mraw")
+    frames = load_arrays(smoke_data)["image"][:3].astype(np.float32)
+    got = est.estimate(frames)
+    assert not est.enhances and Estimator.load(tmp_path / "m").enhances
+    np.testing.assert_array_equal(got.enhanced, frames)
+    _, swin = build_models(get_config("smoke"))
+    swin.load_state_dict(torch.load(tmp_path / "raw" / "swin.pt", weights_only=False)["state_dict"])
+    with torch.no_grad():
+        ref = swin.eval()(torch.from_numpy(frames[:, None])).numpy() * 45.0
+    np.testing.assert_allclose(got.angles_deg, ref, rtol=1e-3, atol=1e-3)
+    raw = evaluate(tmp_path / "mraw", smoke_data, n_snr=3, out_dir=tmp_path / "res2", progress=False)
+    assert set(raw["rows"]) == {"without enhancement"} | {f"{d} dB, without enhancement" for d in (0, 5, 10)}
+    with pytest.raises(InferenceError, match="does not use"):
+        export(tmp_path / "raw", tmp_path / "x", frames=frames.repeat(4, axis=0), int8=True)
+
+
 def test_runtime_refuses_bad_model_files(smoke_run, tmp_path):
     out, _ = smoke_run
     export(out, tmp_path / "m")
@@ -335,7 +366,7 @@ def test_gpu_pipeline_at_toy_size(tmp_path):
     raw = pipeline_run("smoke", 12, work, None, max_minutes=5, epochs=1, radar=SMALL, name="raw", enhance=False)
     assert raw["epochs"] == 1
     raw_rows = json.loads((work / "raw" / "evaluation.json").read_text())["rows"]
-    assert set(raw_rows) == {"without enhancement", "0 dB", "5 dB", "10 dB"}
+    assert set(raw_rows) == {"without enhancement"} | {f"{d} dB, without enhancement" for d in (0, 5, 10)}
     assert json.loads((work / "raw" / "training.json").read_text())["enhance"] is False
     # A run can start from joined pieces (how a later GPU session continues the shipped weights).
     cont = pipeline_run("smoke", 12, work, None, max_minutes=5, epochs=1, radar=SMALL, name="c", evaluate=False,
