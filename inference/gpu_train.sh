@@ -5,15 +5,16 @@
 #   inference/gpu_train.sh watch SECS   watch the runs; pack the compact run's newest weights into $OUT
 #   inference/gpu_train.sh collect      wait for both runs, pack the compact weights and every record into $OUT
 #
-# Two runs share one simulated set (GSA_GPU_N frames, the last 1000 held out):
+# Two runs share one simulated set (GSA_GPU_N frames, the last GSA_GPU_TEST (1000) held out):
 #   compact    the shipped configuration, trained on every training frame;
 #   and a second one, chosen by GSA_GPU_SECOND:
 #   paper      (default) the paper's protocol exactly: UNet++ 32-512 and Swin-T on 4000 training frames, 100 epochs;
 #   noenhance  the compact Swin trained on raw frames, no UNet++, on every training frame (Table 4's
 #              "without enhancement" row, to set beside compact's history epoch by epoch);
 #   none       no second run (GSA_GPU_PAPER=0 means the same).
-# Both stop cleanly after GSA_GPU_MINUTES of training and are evaluated on the 1000 test frames and
-# on 300 fresh frames at each of 0, 5 and 10 dB. Only numpy, scipy, torch and onnxruntime are needed.
+# Both stop cleanly after GSA_GPU_MINUTES of training and are evaluated on the test frames and on
+# GSA_GPU_SNR (300) fresh frames at each of 0, 5 and 10 dB. compact and noenhance also average their
+# weights (--ema GSA_GPU_EMA, default 0.999; 0 turns it off) and hand back the averaged weights. Only numpy, scipy, torch and onnxruntime are needed.
 # Back home: tar xzf records.tgz; python -m inference.pipeline join --pieces DIR --run runs/gpu-compact
 #
 # To continue the shipped compact weights instead of starting afresh, point GSA_GPU_FROM at their
@@ -24,6 +25,10 @@ set -u
 W=${GSA_GPU_WORK:-/root/gsa-work}
 N=${GSA_GPU_N:-25000}
 MINUTES=${GSA_GPU_MINUTES:-19.5}
+TEST=${GSA_GPU_TEST:-1000}
+SNR_N=${GSA_GPU_SNR:-300}
+EMA=()
+[ "${GSA_GPU_EMA:-0.999}" != 0 ] && EMA=(--ema "${GSA_GPU_EMA:-0.999}")
 OUT=${OUT:-$W/out}
 SECOND=${GSA_GPU_SECOND:-paper}
 [ "${GSA_GPU_PAPER:-1}" = 0 ] && SECOND=none
@@ -72,7 +77,7 @@ launch)
     nvidia-smi --query-gpu=name,memory.total,memory.used,clocks.max.sm --format=csv
     python3 -c "import torch, onnxruntime, scipy, numpy; print('torch', torch.__version__, 'ort', onnxruntime.__version__, 'cuda', torch.cuda.is_available())"
     mkdir -p "$W"
-    python3 -m inference.pipeline prepare --work "$W" --n "$N" --n-train "$((N - 1000))" --n-snr 300 2>&1 | grep -E '000/|error' | tail -4
+    python3 -m inference.pipeline prepare --work "$W" --n "$N" --n-train "$((N - TEST))" --n-snr "$SNR_N" 2>&1 | grep -E '000/|error' | tail -4
     echo "[$(( $(date +%s) - T0 )) s] data ready"
     extra=()
     if [ -n "${GSA_GPU_FROM:-}" ]; then
@@ -82,7 +87,7 @@ launch)
     [ -n "${GSA_GPU_COMPACT_LR:-}" ] && extra+=(--lr "$GSA_GPU_COMPACT_LR")
     setsid nohup python3 -m inference.pipeline run --work "$W" --name compact --config compact --n "$N" \
         --batch-size 32 --epochs "${GSA_GPU_COMPACT_EPOCHS:-20}" --lr-decay "${GSA_GPU_COMPACT_DECAY:-0.9}" \
-        --max-minutes "$MINUTES" "${extra[@]}" >"$W/compact.log" 2>&1 </dev/null &
+        --max-minutes "$MINUTES" "${EMA[@]}" "${extra[@]}" >"$W/compact.log" 2>&1 </dev/null &
     echo $! >"$W/compact.pid"
     if [ "$SECOND" = paper ]; then
         setsid nohup python3 -m inference.pipeline run --work "$W" --name paper --config paper --n "$N" \
@@ -91,7 +96,7 @@ launch)
     elif [ "$SECOND" = noenhance ]; then
         setsid nohup python3 -m inference.pipeline run --work "$W" --name noenhance --config compact --n "$N" \
             --no-enhance --batch-size 32 --epochs "${GSA_GPU_NOENHANCE_EPOCHS:-20}" --lr-decay 0.9 \
-            --max-minutes "$MINUTES" >"$W/noenhance.log" 2>&1 </dev/null &
+            --max-minutes "$MINUTES" "${EMA[@]}" >"$W/noenhance.log" 2>&1 </dev/null &
         echo $! >"$W/noenhance.pid"
     fi
     sleep 90; for r in $RUNS; do grep -sE 's/step' "$W/$r.log" | tail -2; done
