@@ -127,17 +127,25 @@ def predict(
 
 
 @torch.no_grad()
-def enhance_all(unet: torch.nn.Module, images: np.ndarray, device: torch.device, batch: int = 16) -> np.ndarray:
-    """Run a frozen UNet++ over every frame once and return the enhanced frames as float16 [N, H, W]."""
+def enhance_all(
+    unet: torch.nn.Module, images: np.ndarray, device: torch.device, batch: int = 16, rows: np.ndarray | None = None
+) -> np.ndarray:
+    """Run a frozen UNet++ over the frames once; return the enhanced frames as float16 [N, H, W].
+
+    With ``rows``, only those frames are enhanced (the others stay zero): training on
+    ``max_train_frames`` of a large set then costs what those frames and the test split cost.
+    """
     unet.eval()
-    out = np.empty(images.shape, np.float16)
+    out = np.zeros(images.shape, np.float16)
+    todo = np.arange(len(images)) if rows is None else np.unique(rows)
     t0 = time.perf_counter()
-    for k in range(0, len(images), batch):
-        x = torch.from_numpy(images[k : k + batch].astype(np.float32)).unsqueeze(1).to(device)
-        out[k : k + batch] = unet(x)[:, 0].float().cpu().numpy()
-        done = min(k + batch, len(images))
-        if done % (batch * 20) == 0 or done == len(images):
-            print(f"train: enhancing frames with the frozen UNet++ {done}/{len(images)} "
+    for k in range(0, len(todo), batch):
+        sel = todo[k : k + batch]
+        x = torch.from_numpy(images[sel].astype(np.float32)).unsqueeze(1).to(device)
+        out[sel] = unet(x)[:, 0].float().cpu().numpy()
+        done = min(k + batch, len(todo))
+        if done % (batch * 20) == 0 or done == len(todo):
+            print(f"train: enhancing frames with the frozen UNet++ {done}/{len(todo)} "
                   f"({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)  # fmt: skip
     return out
 
@@ -296,7 +304,7 @@ def train(
         train_unet = enhance and (mode == "joint" or epoch < stage_split)
         train_swin = mode == "joint" or epoch >= stage_split or not enhance
         if enhance and mode == "two-stage" and not train_unet and cache is None:
-            cache = enhance_all(unet, data["image"], dev)
+            cache = enhance_all(unet, data["image"], dev, rows=np.concatenate([train_idx, test_idx]))
         sums = {"unet_loss": torch.zeros((), device=dev), "swin_loss": torch.zeros((), device=dev)}
         batches = _batches(train_idx, cfg.batch_size, rng)
         t_epoch = time.perf_counter()

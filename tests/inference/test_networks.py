@@ -107,6 +107,17 @@ def test_averaged_weights_are_scored_saved_resumed_and_packed(smoke_data, tmp_pa
         train(smoke_data, tmp_path / "bad", "smoke", ema=0.9, mode="two-stage")
 
 
+def test_enhance_all_enhances_only_the_rows_asked_for():
+    from inference.train import enhance_all
+
+    unet, _ = build_models(get_config("smoke"))
+    images = np.random.default_rng(0).random((6, 64, 64)).astype(np.float16)
+    every = enhance_all(unet, images, torch.device("cpu"), batch=4)
+    some = enhance_all(unet, images, torch.device("cpu"), batch=4, rows=np.array([5, 0, 2, 2]))
+    np.testing.assert_array_equal(some[[0, 2, 5]], every[[0, 2, 5]])
+    assert not some[[1, 3, 4]].any() and every[[1, 3, 4]].any()
+
+
 def test_two_stage_from_a_trained_unet_freezes_it_and_trains_swin(smoke_data, smoke_run, tmp_path):
     out, _ = smoke_run
     unet_before = torch.load(out / "unetpp.pt", weights_only=False)["state_dict"]
