@@ -14,16 +14,23 @@ from torch import nn
 __all__ = ["SwinTransformer"]
 
 
-def window_partition(x: torch.Tensor, window: int) -> torch.Tensor:
-    """Split x [B, H, W, C] into windows [B * nW, window * window, C]."""
-    _, h, w, c = x.shape
+def window_partition(x: torch.Tensor, window: int, hwc: tuple[int, int, int] | None = None) -> torch.Tensor:
+    """Split x [B, H, W, C] into windows [B * nW, window * window, C].
+
+    ``hwc``: H, W and C as plain ints when the caller knows them, so an ONNX export holds
+    constants instead of computing them from the tensor's shape at run time.
+    """
+    if hwc is None:
+        _, h, w, c = x.shape
+    else:
+        h, w, c = hwc
     x = x.reshape(-1, h // window, window, w // window, window, c)
     return x.permute(0, 1, 3, 2, 4, 5).reshape(-1, window * window, c)
 
 
-def window_reverse(windows: torch.Tensor, window: int, h: int, w: int) -> torch.Tensor:
+def window_reverse(windows: torch.Tensor, window: int, h: int, w: int, c: int | None = None) -> torch.Tensor:
     """Join windows [B * nW, window * window, C] back into [B, H, W, C]."""
-    c = windows.shape[-1]
+    c = c or windows.shape[-1]
     x = windows.reshape(-1, h // window, w // window, window, window, c)
     return x.permute(0, 1, 3, 2, 4, 5).reshape(-1, h, w, c)
 
@@ -43,6 +50,7 @@ class WindowAttention(nn.Module):
     def __init__(self, dim: int, num_heads: int, window: int) -> None:
         super().__init__()
         self.num_heads = num_heads
+        self.dim = dim
         self.scale = (dim // num_heads) ** -0.5
         self.qkv = nn.Linear(dim, 3 * dim)
         self.proj = nn.Linear(dim, dim)
@@ -53,7 +61,7 @@ class WindowAttention(nn.Module):
 
     def forward(self, x: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
         """x: [B * nW, N, C]; mask: [nW, N, N] of 0 / -100 or None."""
-        n, c = self.n, x.shape[-1]
+        n, c = self.n, self.dim
         qkv = self.qkv(x).reshape(-1, n, 3, self.num_heads, c // self.num_heads).permute(2, 0, 3, 1, 4)
         q, k, v = qkv[0], qkv[1], qkv[2]
         attn = (q * self.scale) @ k.transpose(-2, -1)
@@ -84,6 +92,7 @@ class SwinBlock(nn.Module):
         hidden = int(dim * mlp_ratio)
         self.mlp = nn.Sequential(nn.Linear(dim, hidden), nn.GELU(), nn.Linear(hidden, dim))
         self.register_buffer("attn_mask", self._mask() if shift else None, persistent=False)
+        self.dim = dim
 
     def _mask(self) -> torch.Tensor:
         r, w, s = self.resolution, self.window, self.shift
@@ -99,11 +108,12 @@ class SwinBlock(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """x: [B, H, W, C] -> [B, H, W, C]."""
-        _, h, w, c = x.shape
+        r, c = self.resolution, self.dim  # plain ints: no shape arithmetic in the exported graph
         y = self.norm1(x)
         if self.shift:
             y = torch.roll(y, shifts=(-self.shift, -self.shift), dims=(1, 2))
-        y = window_reverse(self.attn(window_partition(y, self.window), self.attn_mask), self.window, h, w)
+        windows = self.attn(window_partition(y, self.window, (r, r, c)), self.attn_mask)
+        y = window_reverse(windows, self.window, r, r, c)
         if self.shift:
             y = torch.roll(y, shifts=(self.shift, self.shift), dims=(1, 2))
         x = x + y
