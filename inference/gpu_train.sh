@@ -11,6 +11,8 @@
 #   paper      (default) the paper's protocol exactly: UNet++ 32-512 and Swin-T on 4000 training frames, 100 epochs;
 #   noenhance  the compact Swin trained on raw frames, no UNet++, on every training frame (Table 4's
 #              "without enhancement" row, to set beside compact's history epoch by epoch);
+#   twostage   the compact networks trained in two stages (UNet++ for half the epochs, then Swin on its
+#              frozen output), against compact's joint training: the issue's joint-or-two-stage question;
 #   none       no second run (GSA_GPU_PAPER=0 means the same).
 # Both stop cleanly after GSA_GPU_MINUTES of training and are evaluated on the test frames and on
 # GSA_GPU_SNR (300) fresh frames at each of 0, 5 and 10 dB. compact and noenhance also average their
@@ -32,7 +34,7 @@ EMA=()
 OUT=${OUT:-$W/out}
 SECOND=${GSA_GPU_SECOND:-paper}
 [ "${GSA_GPU_PAPER:-1}" = 0 ] && SECOND=none
-RUNS="compact paper noenhance"
+RUNS="compact paper noenhance twostage"
 export OMP_NUM_THREADS=1 PYTHONUNBUFFERED=1
 T0=$(date +%s)
 
@@ -48,7 +50,7 @@ watch() {  # until $1 seconds have passed or both runs have ended; stops early i
     while (( $(date +%s) - T0 < $1 )); do
         sleep 30
         status
-        if grep -qE 'Traceback|error:' "$W"/compact.log "$W"/paper.log "$W"/noenhance.log 2>/dev/null; then
+        if grep -qE 'Traceback|error:' "$W"/compact.log "$W"/paper.log "$W"/noenhance.log "$W"/twostage.log 2>/dev/null; then
             echo "a run failed"; return 1
         fi
         n=0; for r in $RUNS; do kill -0 "$(cat "$W/$r.pid" 2>/dev/null)" 2>/dev/null && n=$((n + 1)); done
@@ -61,7 +63,8 @@ records() {  # every small record of both runs, and the logs, in one archive
     (cd "$W" && tar czf "$OUT/records.tgz" --ignore-failed-read ./*.log data/manifest.json \
         compact/training.json compact/loss.png compact/evaluation.* compact/errors.png \
         paper/training.json paper/loss.png paper/evaluation.* paper/errors.png \
-        noenhance/training.json noenhance/loss.png noenhance/evaluation.* noenhance/errors.png 2>/dev/null)
+        noenhance/training.json noenhance/loss.png noenhance/evaluation.* noenhance/errors.png \
+        twostage/training.json twostage/loss.png twostage/evaluation.* twostage/errors.png 2>/dev/null)
 }
 
 pieces() {  # the compact run's newest weights: float16 pieces and pieces.json (its records go in records.tgz)
@@ -69,8 +72,8 @@ pieces() {  # the compact run's newest weights: float16 pieces and pieces.json (
     python3 -m inference.pipeline pack --run "$W/compact" --out "$W/pack" && mv "$W"/pack/*.part* "$W/pack/pieces.json" "$OUT"/
 }
 
-case "$SECOND" in paper | noenhance | none) ;; *)
-    echo "GSA_GPU_SECOND=$SECOND: give paper, noenhance or none" >&2; exit 2 ;;
+case "$SECOND" in paper | noenhance | twostage | none) ;; *)
+    echo "GSA_GPU_SECOND=$SECOND: give paper, noenhance, twostage or none" >&2; exit 2 ;;
 esac
 case "${1:-}" in
 launch)
@@ -98,6 +101,11 @@ launch)
             --no-enhance --batch-size 32 --epochs "${GSA_GPU_NOENHANCE_EPOCHS:-20}" --lr-decay 0.9 \
             --max-minutes "$MINUTES" "${EMA[@]}" >"$W/noenhance.log" 2>&1 </dev/null &
         echo $! >"$W/noenhance.pid"
+    elif [ "$SECOND" = twostage ]; then
+        setsid nohup python3 -m inference.pipeline run --work "$W" --name twostage --config compact --n "$N" \
+            --mode two-stage --batch-size 32 --epochs "${GSA_GPU_TWOSTAGE_EPOCHS:-20}" --lr-decay 0.9 \
+            --max-minutes "$MINUTES" >"$W/twostage.log" 2>&1 </dev/null &
+        echo $! >"$W/twostage.pid"
     fi
     sleep 90; for r in $RUNS; do grep -sE 's/step' "$W/$r.log" | tail -2; done
     watch "${2:-560}"; rc=$?

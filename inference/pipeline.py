@@ -130,13 +130,13 @@ def run(config: str, n: int, work: Path, out: Path | None, max_minutes: float, s
         n_train: int | None = None, n_snr: int = 0, batch_size: int | None = None, lr_decay: float | None = None,
         max_train_frames: int | None = None, evaluate: bool = True, lr: float | None = None,
         unet_from: Path | None = None, swin_from: Path | None = None, enhance: bool = True,
-        ema: float | None = None) -> dict[str, Any]:  # fmt: skip
+        ema: float | None = None, mode: str = "joint", unet_epochs: int | None = None) -> dict[str, Any]:  # fmt: skip
     """Simulate (once), train ``WORK/NAME`` (resuming), evaluate when done, and pack the weights into ``out``."""
     prepare(work, n, n_train, n_snr, seed, radar)
     record = train(work / "data", work / name, config, epochs=epochs, seed=seed, resume=True, max_minutes=max_minutes,
                    compile_models=compile_models, batch_size=batch_size, lr=lr, lr_decay=lr_decay,
                    max_train_frames=max_train_frames, unet_from=unet_from, swin_from=swin_from,
-                   enhance=enhance, ema=ema)  # fmt: skip
+                   enhance=enhance, ema=ema, mode=mode, unet_epochs=unet_epochs)  # fmt: skip
     if evaluate:
         evaluate_run(work, name)
     manifest = pack(work / name, out) if out is not None else {}
@@ -184,6 +184,8 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--from", dest="start_from", help="start both networks from a run folder's unetpp.pt and swin.pt")
     r.add_argument("--max-train-frames", type=int, help="train on the first N training frames only")
     r.add_argument("--compile", action="store_true")
+    r.add_argument("--mode", default="joint", choices=["joint", "two-stage"])
+    r.add_argument("--unet-epochs", type=int, help="two-stage: epochs of UNet++ before Swin (default half)")
     r.add_argument("--ema", type=float, help="average the weights (decay per step, e.g. 0.999); the result")
     r.add_argument("--no-enhance", action="store_true",
                    help="train Swin on raw frames, no UNet++ (Table 4's 'without enhancement' row)")  # fmt: skip
@@ -203,6 +205,7 @@ def main(argv: list[str] | None = None) -> int:
                     args.seed, args.compile, args.epochs, name=args.name, n_train=args.n_train, n_snr=args.n_snr,
                     batch_size=args.batch_size, lr_decay=args.lr_decay, lr=args.lr,
                     max_train_frames=args.max_train_frames, enhance=not args.no_enhance, ema=args.ema,
+                    mode=args.mode, unet_epochs=args.unet_epochs,
                     unet_from=Path(args.start_from) / "unetpp.pt" if args.start_from else None,
                     swin_from=Path(args.start_from) / "swin.pt" if args.start_from else None)  # fmt: skip
             print(json.dumps({k: v for k, v in m.items() if k in ("complete", "epochs")}))

@@ -382,6 +382,12 @@ def test_gpu_pipeline_at_toy_size(tmp_path):
     raw_rows = json.loads((work / "raw" / "evaluation.json").read_text())["rows"]
     assert set(raw_rows) == {"without enhancement"} | {f"{d} dB, without enhancement" for d in (0, 5, 10)}
     assert json.loads((work / "raw" / "training.json").read_text())["enhance"] is False
+    # Two stages (gpu_train.sh's twostage run): UNet++ for one epoch, then Swin on its frozen output.
+    two = pipeline_run("smoke", 12, work, None, max_minutes=5, epochs=2, radar=SMALL, name="two", evaluate=False,
+                       mode="two-stage", unet_epochs=1)  # fmt: skip
+    assert two["epochs"] == 2
+    staged = json.loads((work / "two" / "training.json").read_text())
+    assert staged["mode"] == "two-stage" and staged["unet_epochs"] == 1 and staged["history"][1]["unet_loss"] == 0.0
     # A run can start from joined pieces (how a later GPU session continues the shipped weights).
     cont = pipeline_run("smoke", 12, work, None, max_minutes=5, epochs=1, radar=SMALL, name="c", evaluate=False,
                         lr=1e-12, unet_from=tmp_path / "run" / "unetpp.pt", swin_from=tmp_path / "run" / "swin.pt")  # fmt: skip
