@@ -12,7 +12,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import shutil
 import sys
+import tempfile
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -109,8 +112,6 @@ def quantize_int8(src: Path, dst: Path, frames: np.ndarray) -> int:
     ``frames`` is [N, 1, H, W]: real inputs, whose activation ranges (min/max) fix the
     activation scales. Returns the number of QuantizeLinear nodes (activations quantised).
     """
-    import tempfile
-
     import onnx
     from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
     from onnxruntime.quantization.shape_inference import quant_pre_process
@@ -168,7 +169,26 @@ def export(
     if int8 and not enhance:
         raise InferenceError("--int8 quantises UNet++, which this run's Swin (trained on raw frames) does not use")
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    # Everything is written and checked in a folder beside ``out`` and moved in only once it all
+    # passed, so a failed export leaves the models already in ``out`` (the shipped ones, by default)
+    # as they were.
+    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}-export-", dir=out.parent))
+    try:
+        card = _export_into(stage, unet, swin, cfg, enhance, Path(run_dir), frames, extra, half, int8)
+        out.mkdir(exist_ok=True)
+        for name in ("unetpp.onnx", "swin.onnx", "model_card.json"):  # the card last, naming the new files
+            os.replace(stage / name, out / name)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+    return card
+
+
+def _export_into(
+    out: Path, unet: torch.nn.Module, swin: torch.nn.Module, cfg: dict[str, Any], enhance: bool, run_dir: Path,
+    frames: np.ndarray | None, extra: dict[str, Any] | None, half: bool, int8: bool,
+) -> dict[str, Any]:  # fmt: skip
+    """Write both ONNX files and the model card into ``out``, checking each step; return the card."""
     size = cfg["img_size"]
     rng = np.random.default_rng(0)
     tests = [rng.random((2, 1, size, size), dtype=np.float32)]
@@ -182,7 +202,7 @@ def export(
         export_onnx(model, path, size)
         worst = max(parity(model, path, t) for t in inputs)
         if worst > PARITY_RTOL:
-            raise InferenceError(f"{path}: ONNX Runtime differs from torch by {worst:.2e} (> {PARITY_RTOL})")
+            raise InferenceError(f"{path.name}: ONNX Runtime differs from torch by {worst:.2e} (> {PARITY_RTOL})")
         entry: dict[str, Any] = {"weights": "float32", "parity_max_rel_diff": worst}
         if int8 and role == "unetpp" and frames is not None:
             entry.update(int8_unet(path, swin, unet, frames))
@@ -191,7 +211,7 @@ def export(
             entry["half_max_rel_diff"] = max(parity(model, path, t) for t in inputs)
             entry["weights"] = "float16 (computed in float32)"
             if entry["half_max_rel_diff"] > HALF_RTOL:
-                raise InferenceError(f"{path}: float16 weights change the output by {entry['half_max_rel_diff']:.2e} "
+                raise InferenceError(f"{path.name}: float16 weights change the output by {entry['half_max_rel_diff']:.2e} "
                                      f"(> {HALF_RTOL}); export without --half")  # fmt: skip
         report[role] = {"file": path.name, "sha256": sha256_file(path), "bytes": path.stat().st_size, **entry}
     training_path = Path(run_dir) / "training.json"
@@ -236,7 +256,7 @@ def int8_unet(path: Path, swin: torch.nn.Module, unet: torch.nn.Module, frames: 
     mean = change.mean(axis=0)
     if mean.max() > INT8_ANGLE_TOL_DEG:
         raise InferenceError(
-            f"{path}: int8 UNet++ moves the angles by {mean.max():.2f} deg on average (> {INT8_ANGLE_TOL_DEG}); "
+            f"{path.name}: int8 UNet++ moves the angles by {mean.max():.2f} deg on average (> {INT8_ANGLE_TOL_DEG}); "
             "export without --int8, or calibrate on more frames"
         )
     return {

@@ -237,6 +237,23 @@ def test_int8_export_quantises_unet_and_keeps_the_angles(smoke_run, smoke_data, 
     assert np.abs(got.enhanced - ref.enhanced).mean() < 0.05 * np.abs(ref.enhanced).mean() + 1e-3
 
 
+def test_a_failed_export_leaves_the_models_in_place(smoke_run, smoke_data, tmp_path, monkeypatch):
+    import inference.export as ex
+    from inference.dataset import load_arrays
+    from inference.runtime import sha256_file
+
+    out, _ = smoke_run
+    frames = load_arrays(smoke_data)["image"][:16].astype(np.float32)
+    export(out, tmp_path / "models")
+    before = {f.name: sha256_file(f) for f in (tmp_path / "models").iterdir()}
+    monkeypatch.setattr(ex, "INT8_ANGLE_TOL_DEG", -1.0)  # no quantised model can pass
+    with pytest.raises(InferenceError, match="unetpp.onnx: int8 UNet\\+\\+ moves the angles"):
+        export(out, tmp_path / "models", frames=frames, int8=True)
+    assert {f.name: sha256_file(f) for f in (tmp_path / "models").iterdir()} == before
+    assert Estimator.load(tmp_path / "models").estimate(frames[:2]).angles_deg.shape == (2, 3)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["models"]  # no staging folder left behind
+
+
 def test_int8_export_refuses_without_enough_real_frames(smoke_run, smoke_data, tmp_path, capsys):
     from inference.export import main
 
