@@ -62,8 +62,22 @@ def test_estimate_complex_npy(client, frame):
     assert set(body["timings_s"]) >= {"preprocess", "unetpp", "swin"}
     png = client.get(body["links"]["enhanced_png"], headers=A)
     assert png.status_code == 200 and png.content.startswith(b"\x89PNG")
-    assert client.get(body["links"]["original_png"], headers=A).status_code == 200
+    original = client.get(body["links"]["original_png"], headers=A)
+    assert original.status_code == 200
+    # Any PNG reader reads the stored images: the original is the normalised frame in 8 bits.
+    pixels = np.asarray(Image.open(io.BytesIO(original.content)))
+    expected = (normalise_frame(np.abs(frame)) * 255.0 + 0.5).astype(np.uint8)
+    np.testing.assert_array_equal(pixels, expected)
     assert client.get(body["links"]["self"], headers=A).json()["id"] == body["id"]
+
+
+def test_png_bytes_round_trips_any_shape_and_clips():
+    from app.services.estimation import png_bytes
+
+    frame = np.linspace(-0.5, 1.5, 15).reshape(3, 5)
+    img = Image.open(io.BytesIO(png_bytes(frame)))
+    assert img.mode == "L" and img.size == (5, 3)
+    np.testing.assert_array_equal(np.asarray(img), (np.clip(frame, 0, 1) * 255 + 0.5).astype(np.uint8))
 
 
 def test_upload_uses_the_training_normalisation(frame):
