@@ -39,11 +39,16 @@ INT8_MIN_FRAMES = 8  # real frames needed: half calibrate, half check
 PARITY_FRAMES = 16  # real frames for the float parity checks (each runs through torch and ORT)
 
 
-def load_trained(run_dir: str | Path) -> tuple[torch.nn.Module, torch.nn.Module, dict[str, Any]]:
-    """Load ``unetpp.pt`` and ``swin.pt`` from a training run; raise ModelFileError naming a bad file."""
+def load_trained(run_dir: str | Path) -> tuple[torch.nn.Module, torch.nn.Module, dict[str, Any], bool]:
+    """Load ``unetpp.pt`` and ``swin.pt`` from a training run; raise ModelFileError naming a bad file.
+
+    Returns the networks, the configuration, and whether Swin reads UNet++'s output (the
+    default) or raw frames (``gsa train --no-enhance``), as swin.pt records.
+    """
     d = Path(run_dir)
     models = []
     cfg_dict: dict[str, Any] = {}
+    enhance = True
     for name in ("unetpp.pt", "swin.pt"):
         path = d / name
         if not path.is_file():
@@ -54,13 +59,15 @@ def load_trained(run_dir: str | Path) -> tuple[torch.nn.Module, torch.nn.Module,
             raise ModelFileError(f"checkpoint {path} cannot be read: {exc}", field="model") from None
         cfg_dict = ck["config"]
         models.append(ck["state_dict"])
+        if name == "swin.pt":
+            enhance = bool(ck.get("enhance", True))
     cfg = get_config(cfg_dict["name"], **{k: v for k, v in cfg_dict.items() if k != "name"})
     unet, swin = build_models(cfg)
     unet.load_state_dict(models[0])
     swin.load_state_dict(models[1])
     unet.eval()
     swin.eval()
-    return unet, swin, cfg.as_dict()
+    return unet, swin, cfg.as_dict(), enhance
 
 
 def export_onnx(model: torch.nn.Module, path: Path, img_size: int) -> None:
@@ -163,9 +170,7 @@ def export(
             f"int8 quantisation needs at least {INT8_MIN_FRAMES} real frames to calibrate and check on; "
             "give --frames DATA (a data set from gsa simulate)"
         )
-    unet, swin, cfg = load_trained(run_dir)
-    # Whether Swin reads UNet++'s output (the default) or raw frames (gsa train --no-enhance).
-    enhance = torch.load(Path(run_dir) / "swin.pt", map_location="cpu", weights_only=False).get("enhance", True)
+    unet, swin, cfg, enhance = load_trained(run_dir)
     if int8 and not enhance:
         raise InferenceError("--int8 quantises UNet++, which this run's Swin (trained on raw frames) does not use")
     out = Path(out_dir)
@@ -271,8 +276,11 @@ def int8_unet(path: Path, swin: torch.nn.Module, unet: torch.nn.Module, frames: 
     }  # fmt: skip
 
 
-def calibration_frames(data_dir: str | Path, n: int) -> np.ndarray:
-    """Return the first ``n`` training frames of a data set [n, H, W] (its manifest's split, or the first 80 %)."""
+def calibration_frames(data_dir: str | Path, n: int) -> tuple[np.ndarray, str]:
+    """Return the first ``n`` training frames of a data set [n, H, W] (its manifest's split, or the first 80 %).
+
+    Also returns the data set's content sha256, for the model card.
+    """
     from inference.dataset import load_manifest, load_range
 
     if n < INT8_MIN_FRAMES:
@@ -282,7 +290,8 @@ def calibration_frames(data_dir: str | Path, n: int) -> np.ndarray:
     train_end = split["train"][1] if split else int(0.8 * manifest["frames"])
     if train_end < INT8_MIN_FRAMES:
         raise InferenceError(f"{data_dir} has {train_end} training frames: too few to calibrate on")
-    return load_range(data_dir, 0, min(n, train_end), ("image",), verify=False)["image"].astype(np.float32)
+    frames = load_range(data_dir, 0, min(n, train_end), ("image",), verify=False)["image"].astype(np.float32)
+    return frames, str(manifest["content_sha256"])
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -303,12 +312,10 @@ def run(args: argparse.Namespace) -> int:
 
     if args.int8 and not args.frames:
         raise InferenceError("--int8 needs --frames DATA: real frames to calibrate on (a data set from gsa simulate)")
-    frames = calibration_frames(args.frames, args.n_frames) if args.frames else None
+    frames = None
     options: dict[str, Any] = {"half": args.half, "int8": args.int8, "frames": None}
-    if args.frames and frames is not None:
-        from inference.dataset import load_manifest
-
-        sha = load_manifest(args.frames, verify=False)["content_sha256"]
+    if args.frames:
+        frames, sha = calibration_frames(args.frames, args.n_frames)
         options["frames"] = {"data": str(args.frames), "content_sha256": sha, "first_training_frames": len(frames)}
     card = export(args.run, args.out or DEFAULT_MODEL_DIR, frames=frames, half=args.half, int8=args.int8,
                   extra={"export_options": options})  # fmt: skip

@@ -81,9 +81,8 @@ def evaluate_run(work: Path, name: str, device: str | None = None) -> dict[str, 
     weights are too large to bring back, such as the paper's Swin-T.
     """
     run_dir = work / name
-    unet, swin, _ = load_trained(run_dir)
     # A Swin trained on raw frames (--no-enhance) is scored without UNet++: Table 4's other row.
-    enhance = torch.load(run_dir / "swin.pt", map_location="cpu", weights_only=False).get("enhance", True)
+    unet, swin, _, enhance = load_trained(run_dir)
     dev = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
     unet.to(dev)
     swin.to(dev)
