@@ -52,7 +52,7 @@ watch() {  # until $1 seconds have passed or both runs have ended; stops early i
     while (( $(date +%s) - T0 < $1 )); do
         sleep 30
         status
-        if grep -qE 'Traceback|error:' "$W"/compact.log "$W"/paper.log "$W"/noenhance.log "$W"/twostage.log 2>/dev/null; then
+        if grep -qsE 'Traceback|error:' "$W"/*.log; then
             echo "a run failed"; return 1
         fi
         n=0; for r in $RUNS; do kill -0 "$(cat "$W/$r.pid" 2>/dev/null)" 2>/dev/null && n=$((n + 1)); done
@@ -60,13 +60,15 @@ watch() {  # until $1 seconds have passed or both runs have ended; stops early i
     done
 }
 
-records() {  # every small record of both runs, and the logs, in one archive
+records() {  # every run's small records (inference.pipeline.RECORDS), the logs and the data manifest, in one archive
     mkdir -p "$OUT"
-    (cd "$W" && tar czf "$OUT/records.tgz" --ignore-failed-read ./*.log data/manifest.json \
-        compact/training.json compact/loss.png compact/evaluation.* compact/errors.png \
-        paper/training.json paper/loss.png paper/evaluation.* paper/errors.png \
-        noenhance/training.json noenhance/loss.png noenhance/evaluation.* noenhance/errors.png \
-        twostage/training.json twostage/loss.png twostage/evaluation.* twostage/errors.png 2>/dev/null)
+    local files=() r f
+    for r in $RUNS; do
+        for f in training.json loss.png evaluation.json evaluation.md errors.png; do
+            [ -e "$W/$r/$f" ] && files+=("$r/$f")
+        done
+    done
+    (cd "$W" && tar czf "$OUT/records.tgz" --ignore-failed-read ./*.log data/manifest.json "${files[@]}" 2>/dev/null)
 }
 
 pieces() {  # the compact run's newest weights: float16 pieces and pieces.json (its records go in records.tgz)
