@@ -256,6 +256,16 @@ def cmd_export(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from None
 
 
+def cmd_finetune(args: argparse.Namespace) -> int:
+    from inference.errors import InferenceError
+    from inference.finetune import run
+
+    try:
+        return run(args)
+    except InferenceError as exc:
+        raise CliError(str(exc)) from None
+
+
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from inference.errors import InferenceError
     from inference.evaluate import evaluate, table
@@ -375,6 +385,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     train_arguments(tr)
     tr.set_defaults(func=cmd_train)
+    ft = sub.add_parser("finetune", help="fine-tune Swin's last stage of a trained run on cached features (CPU)")
+    from inference.finetune import add_arguments as finetune_arguments
+
+    finetune_arguments(ft)
+    ft.set_defaults(func=cmd_finetune)
     ex = sub.add_parser("export", help="export a training run to ONNX with a model card")
     from inference.export import add_arguments as export_arguments
 

@@ -233,6 +233,7 @@ def _export_into(
         "files": {k: report[k] for k in ("unetpp", "swin")},
         "training": {k: training.get(k) for k in ("mode", "unet_epochs", "unet_from", "swin_from", "enhance", "seed", "complete", "data",
                                                   "hardware", "train_seconds")},
+        **({"finetune": training["finetune"]} if "finetune" in training else {}),
         "final_epoch": (training.get("history") or [{}])[-1],
         **(extra or {}),
     }  # fmt: skip
