@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import hashlib
 import json
 import platform
 import shutil
@@ -61,6 +62,17 @@ def tail(swin: SwinTransformer, f: torch.Tensor, train_stages: int) -> torch.Ten
 
 def tail_modules(swin: SwinTransformer, train_stages: int) -> torch.nn.ModuleList:
     return torch.nn.ModuleList([*list(swin.stages.children())[len(swin.stages) - train_stages :], swin.norm, swin.head])
+
+
+def front_sha256(swin: SwinTransformer, train_stages: int) -> str:
+    """Hash of the frozen front's weights: what the cached features depend on, besides the frames."""
+    frozen = [swin.patch_embed, swin.embed_norm, *list(swin.stages.children())[: len(swin.stages) - train_stages]]
+    h = hashlib.sha256()
+    for k, module in enumerate(frozen):
+        for name, t in module.state_dict().items():
+            h.update(f"{k}.{name}".encode())
+            h.update(t.detach().float().contiguous().numpy().tobytes())
+    return h.hexdigest()
 
 
 def validation_spec(manifest: dict[str, Any], n: int, seed: int = VAL_SEED) -> DatasetSpec:
@@ -134,8 +146,13 @@ def finetune(
     max_train_frames: int | None = None,
     seed: int = 0,
     threads: int | None = None,
+    cache_dir: str | Path | None = None,
 ) -> dict[str, Any]:
-    """Fine-tune ``run_dir``'s Swin tail into ``out_dir`` (a run directory); return the fine-tuning record."""
+    """Fine-tune ``run_dir``'s Swin tail into ``out_dir`` (a run directory); return the fine-tuning record.
+
+    The feature cache lives in ``cache_dir`` (default ``out_dir``); point a second round of
+    fine-tuning (``run_dir`` an earlier round's output) at the first round's cache to skip caching.
+    """
     if epochs < 1:
         raise InferenceError(f"epochs {epochs} must be at least 1", field="epochs")
     if not 0.0 < lr_decay <= 1.0:
@@ -180,21 +197,23 @@ def finetune(
             x = est.enhance(x) if est is not None else unet(torch.from_numpy(x)[:, None])[:, 0].numpy()
         return front(swin, torch.from_numpy(np.ascontiguousarray(x))[:, None], train_stages).numpy().astype(np.float16)
 
+    for rows in (train_idx, test_idx):
+        if np.any(np.diff(rows) != 1):
+            raise DatasetError(f"{data_dir}'s split is not contiguous", field="data")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    cache = out if cache_dir is None else Path(cache_dir)
+    cache.mkdir(parents=True, exist_ok=True)
     probe = features(np.zeros((1, cfg["img_size"], cfg["img_size"]), np.float32))
+    # What the features depend on: a run fine-tuned before has the same front, so its cache serves again.
     identity = {
-        "swin_sha256": sha256_file(Path(run_dir) / "swin.pt"),
-        "unetpp_sha256": sha256_file(Path(run_dir) / "unetpp.pt"),
-        "enhancer": None if est is None else est.identity["unetpp_sha256"],
+        "front_sha256": front_sha256(swin, train_stages),
+        "enhancer": est.identity["unetpp_sha256"] if est is not None else None,
+        "unetpp_sha256": sha256_file(Path(run_dir) / "unetpp.pt") if enhance and est is None else None,
         "enhance": enhance,
         "train_stages": train_stages,
     }
     t_start = time.perf_counter()
-
-    for rows in (train_idx, test_idx):
-        if np.any(np.diff(rows) != 1):
-            raise DatasetError(f"{data_dir}'s split is not contiguous", field="data")
 
     def data_rows(rows: NDArray[np.int64]) -> Callable[[int, int], NDArray[np.float16]]:
         lo = int(rows[0])  # the split's rows are contiguous: read them shard by shard
@@ -205,11 +224,11 @@ def finetune(
     shape = probe.shape[1:]
     data_id = {**identity, "data": manifest["content_sha256"]}
     feats = {
-        "train": FeatureCache(out, "train", len(train_idx), shape, {**data_id, "rows": list(_span(train_idx))})
+        "train": FeatureCache(cache, "train", len(train_idx), shape, {**data_id, "rows": list(_span(train_idx))})
         .fill(data_rows(train_idx), "training frames"),
-        "val": FeatureCache(out, "val", n_val, shape, {**identity, "val": asdict(val_spec)})
+        "val": FeatureCache(cache, "val", n_val, shape, {**identity, "val": asdict(val_spec)})
         .fill(lambda a, b: features(render_frames(val_spec, radar, a, b)["image"]), f"fresh validation frames (seed {val_seed})"),
-        "test": FeatureCache(out, "test", len(test_idx), shape, {**data_id, "rows": list(_span(test_idx))})
+        "test": FeatureCache(cache, "test", len(test_idx), shape, {**data_id, "rows": list(_span(test_idx))})
         .fill(data_rows(test_idx), "test frames"),
     }  # fmt: skip
     angles = {
@@ -369,12 +388,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-train-frames", type=int)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, help="torch CPU threads (default: all cores)")
+    p.add_argument("--cache", help="where the feature cache lives (default: --out); an earlier round's --out reuses it")
 
 
 def run(args: argparse.Namespace) -> int:
     rec = finetune(args.run, args.data, args.out, args.enhancer, args.epochs, args.lr, args.lr_decay, args.batch_size,
                    args.ema or None, args.train_stages, args.n_val, args.val_seed, args.max_train_frames, args.seed,
-                   args.threads)  # fmt: skip
+                   args.threads, args.cache)  # fmt: skip
     c = rec["chosen"]
     print(f"fine-tuned into {args.out}: kept epoch {c['epoch']} ({c['weights']} weights), validation MAE z/y/x "
           f"{_fmt(c['val_mae_deg'])} deg; test MAE {_fmt(rec['test_mae_deg_before'])} -> {_fmt(rec['test_mae_deg_after'])} deg")  # fmt: skip

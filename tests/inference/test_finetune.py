@@ -91,6 +91,10 @@ def test_the_feature_cache_is_reused_only_for_the_same_inputs(run, capsys):
     err = capsys.readouterr().err
     assert "caching training frames 32/32" in err and "caching training frames 20/" not in err
     assert "caching test" not in err
+    # A second round, from the first round's output, reads the first round's cache: the front is the same.
+    finetune(out, run / "data", run / "round2", epochs=1, batch_size=8, n_val=16, cache_dir=out)
+    assert "caching" not in capsys.readouterr().err
+    assert not (run / "round2" / "features-train.npy").exists()
     # Training two stages needs other features: everything is cached again.
     finetune(run / "run", run / "data", out, epochs=1, batch_size=8, n_val=16, train_stages=2)
     err = capsys.readouterr().err
