@@ -321,6 +321,8 @@ def finetune(
     shutil.copy(Path(run_dir) / "unetpp.pt", out / "unetpp.pt")
     base_path = Path(run_dir) / "training.json"
     training = json.loads(base_path.read_text()) if base_path.is_file() else {"config": cfg}
+    if "finetune" in training:  # a second round keeps the first round's record inside its own
+        record["previous_round"] = training["finetune"]
     training["finetune"] = record
     (out / "training.json").write_text(json.dumps(training, indent=2))
     plot_finetune(record, out / "finetune.png")

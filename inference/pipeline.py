@@ -27,6 +27,7 @@ import argparse
 import hashlib
 import io
 import json
+import os
 import shutil
 import sys
 from pathlib import Path
@@ -103,20 +104,58 @@ def evaluate_run(work: Path, name: str, device: str | None = None) -> dict[str, 
     return results
 
 
-def pack(run_dir: Path, out: Path) -> dict[str, Any]:
-    """Write a run's latest weights (its last epoch's checkpoint) in float16 pieces, with its records, into ``out``."""
+def _joined(pieces: Path, name: str, manifest: dict[str, Any]) -> dict[str, Any]:
+    """One network's checkpoint rebuilt from its pieces (each checked against its sha256)."""
+    blob = b""
+    for p in manifest[name]:
+        part = (pieces / p["file"]).read_bytes()
+        if hashlib.sha256(part).hexdigest() != p["sha256"]:
+            raise ModelFileError(f"piece {pieces / p['file']} does not match its sha256", field="model")
+        blob += part
+    ck: dict[str, Any] = torch.load(io.BytesIO(blob), map_location="cpu", weights_only=False)
+    return ck
+
+
+def _same_half(a: dict[str, Any], b: dict[str, Any]) -> bool:
+    return a.keys() == b.keys() and all(
+        torch.equal(v.half() if v.is_floating_point() else v, b[k].half() if b[k].is_floating_point() else b[k])
+        for k, v in a.items()
+    )
+
+
+def pack(run_dir: Path, out: Path, reuse: Path | None = None) -> dict[str, Any]:
+    """Write a run's latest weights in float16 pieces, with its records, into ``out``.
+
+    A training run's latest weights are its last epoch's checkpoint; a run without one (a
+    ``gsa finetune`` output) gives its ``unetpp.pt``/``swin.pt``. With ``reuse`` (another
+    pieces folder), a network whose float16 weights equal that folder's is not written again:
+    ``pieces.json`` names that folder's pieces by relative path.
+    """
     ckpt = run_dir / "checkpoint.pt"
-    if not ckpt.is_file():
+    if ckpt.is_file():
+        ck = torch.load(ckpt, map_location="cpu", weights_only=False)
+        ema = ck.get("ema") or {}  # a run with --ema hands back its averaged weights, as its unetpp.pt/swin.pt hold
+        states = {"unetpp": averaged_weights(ema["unet"]) if "unet" in ema else ck["unet"],
+                  "swin": averaged_weights(ema["swin"]) if "swin" in ema else ck["swin"]}  # fmt: skip
+        manifest: dict[str, Any] = {"epochs": ck["epoch"], "complete": ck["epoch"] >= ck["config"]["epochs"],
+                                    "averaged_weights": bool(ema)}  # fmt: skip
+        config, enhance = ck["config"], ck.get("enhance", True)
+    elif (run_dir / "swin.pt").is_file() and (run_dir / "unetpp.pt").is_file():
+        cks = {n: torch.load(run_dir / f"{n}.pt", map_location="cpu", weights_only=False) for n in ("unetpp", "swin")}
+        states = {n: ck["state_dict"] for n, ck in cks.items()}
+        training = json.loads((run_dir / "training.json").read_text()) if (run_dir / "training.json").is_file() else {}
+        manifest = {"epochs": len(training.get("history", [])), "complete": bool(training.get("complete")),
+                    "finetuned": "finetune" in training}  # fmt: skip
+        config, enhance = cks["swin"]["config"], cks["swin"].get("enhance", True)
+    else:
         raise ModelFileError(f"{ckpt} is missing: the run has not finished an epoch", field="run")
-    ck = torch.load(ckpt, map_location="cpu", weights_only=False)
     out.mkdir(parents=True, exist_ok=True)
-    manifest: dict[str, Any] = {"epochs": ck["epoch"], "complete": ck["epoch"] >= ck["config"]["epochs"]}
-    ema = ck.get("ema") or {}  # a run with --ema hands back its averaged weights, as its unetpp.pt/swin.pt hold
-    unet = averaged_weights(ema["unet"]) if "unet" in ema else ck["unet"]
-    swin = averaged_weights(ema["swin"]) if "swin" in ema else ck["swin"]
-    manifest["averaged_weights"] = bool(ema)
-    manifest["unetpp"] = _split("unetpp", unet, ck["config"], out)
-    manifest["swin"] = _split("swin", swin, ck["config"], out, enhance=ck.get("enhance", True))
+    prior = json.loads((reuse / "pieces.json").read_text()) if reuse is not None else {}
+    for name, state in states.items():
+        if reuse is not None and _same_half(state, _joined(reuse, name, prior)["state_dict"]):
+            manifest[name] = [{**p, "file": os.path.relpath(reuse / p["file"], out)} for p in prior[name]]
+        else:
+            manifest[name] = _split(name, state, config, out, **({"enhance": enhance} if name == "swin" else {}))
     (out / "pieces.json").write_text(json.dumps(manifest, indent=2))
     for extra in RECORDS:
         if (run_dir / extra).exists():
@@ -147,13 +186,7 @@ def join(pieces: Path, run_dir: Path) -> None:
     manifest = json.loads((pieces / "pieces.json").read_text())
     run_dir.mkdir(parents=True, exist_ok=True)
     for name in ("unetpp", "swin"):
-        blob = b""
-        for p in manifest[name]:
-            part = (pieces / p["file"]).read_bytes()
-            if hashlib.sha256(part).hexdigest() != p["sha256"]:
-                raise ModelFileError(f"piece {pieces / p['file']} does not match its sha256", field="model")
-            blob += part
-        ck = torch.load(io.BytesIO(blob), map_location="cpu", weights_only=False)
+        ck = _joined(pieces, name, manifest)
         ck["state_dict"] = {k: (v.float() if v.is_floating_point() else v) for k, v in ck["state_dict"].items()}
         torch.save(ck, run_dir / f"{name}.pt")
     for extra in RECORDS:
@@ -191,6 +224,7 @@ def main(argv: list[str] | None = None) -> int:
     k = sub.add_parser("pack", help="write a run's latest weights in float16 pieces into OUT")
     k.add_argument("--run", required=True)
     k.add_argument("--out", required=True)
+    k.add_argument("--reuse", help="a pieces folder whose pieces serve again where a network's weights equal them")
     j = sub.add_parser("join")
     j.add_argument("--pieces", required=True)
     j.add_argument("--run", required=True)
@@ -209,7 +243,7 @@ def main(argv: list[str] | None = None) -> int:
                     swin_from=Path(args.start_from) / "swin.pt" if args.start_from else None)  # fmt: skip
             print(json.dumps({k: v for k, v in m.items() if k in ("complete", "epochs")}))
         elif args.cmd == "pack":
-            m = pack(Path(args.run), Path(args.out))
+            m = pack(Path(args.run), Path(args.out), Path(args.reuse) if args.reuse else None)
             print(json.dumps({k: v for k, v in m.items() if k in ("complete", "epochs")}))
         else:
             join(Path(args.pieces), Path(args.run))

@@ -92,8 +92,10 @@ def test_the_feature_cache_is_reused_only_for_the_same_inputs(run, capsys):
     assert "caching training frames 32/32" in err and "caching training frames 20/" not in err
     assert "caching test" not in err
     # A second round, from the first round's output, reads the first round's cache: the front is the same.
-    finetune(out, run / "data", run / "round2", epochs=1, batch_size=8, n_val=16, cache_dir=out)
+    rec2 = finetune(out, run / "data", run / "round2", epochs=1, batch_size=8, n_val=16, cache_dir=out)
     assert "caching" not in capsys.readouterr().err
+    first = json.loads((out / "training.json").read_text())["finetune"]
+    assert rec2["previous_round"] == first and rec2["start_val_mae_deg"] == first["chosen"]["val_mae_deg"]
     assert not (run / "round2" / "features-train.npy").exists()
     # Training two stages needs other features: everything is cached again.
     finetune(run / "run", run / "data", out, epochs=1, batch_size=8, n_val=16, train_stages=2)
@@ -122,3 +124,25 @@ def test_finetune_refuses_bad_input(run, tmp_path, capsys):
     assert gsa(["finetune", "--run", str(run / "run"), "--data", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "manifest.json" in err[0]
+
+
+def test_a_finetuned_run_packs_into_pieces_that_reuse_the_unchanged_unet(run, tmp_path):
+    from inference.pipeline import join, pack
+
+    ft = run / "ft2"
+    finetune(run / "run", run / "data", ft, epochs=1, lr=3e-3, batch_size=8, n_val=16)
+    base = pack(run / "run", tmp_path / "base")  # a training run: from its checkpoint
+    m = pack(ft, tmp_path / "ft", reuse=tmp_path / "base")  # a fine-tuned run has no checkpoint: its .pt files
+    assert m["finetuned"] and m["epochs"] == 1
+    assert [p["file"] for p in m["unetpp"]] == [f"../base/{p['file']}" for p in base["unetpp"]]
+    assert m["swin"][0]["file"] == "swin.part00" and (tmp_path / "ft" / "swin.part00").is_file()
+    assert not (tmp_path / "ft" / "unetpp.part00").exists()
+    join(tmp_path / "ft", tmp_path / "back")
+    for name in ("unetpp", "swin"):
+        want = torch.load(ft / f"{name}.pt", weights_only=False)["state_dict"]
+        got = torch.load(tmp_path / "back" / f"{name}.pt", weights_only=False)["state_dict"]
+        for k, v in want.items():
+            torch.testing.assert_close(got[k], v.half().float() if v.is_floating_point() else v, rtol=0, atol=0)
+    assert "finetune" in json.loads((tmp_path / "back" / "training.json").read_text())
+    # Without reuse both networks are written.
+    assert pack(ft, tmp_path / "all")["unetpp"][0]["file"] == "unetpp.part00"
