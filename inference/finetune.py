@@ -39,34 +39,40 @@ from inference.export import load_trained
 from inference.isar import Radar
 from inference.models.swin import SwinTransformer
 from inference.runtime import sha256_file
-from inference.train import ANGLE_SCALE_DEG, _save, split_indices
+from inference.train import ANGLE_SCALE_DEG, _save, averaged_weights, check_schedule, split_indices
 
 VAL_SEED = 20_000  # the fresh validation set: no training set (seed 0..) or SNR test set (10,000 + dB) uses it
 CHUNK = 64  # frames per cached chunk (and per progress line)
 
 
+def split_stages(swin: SwinTransformer, train_stages: int) -> tuple[list[torch.nn.Module], list[torch.nn.Module]]:
+    """Swin's stages as (frozen, trained): the trained ones are the last ``train_stages``."""
+    stages = list(swin.stages.children())
+    return stages[: len(stages) - train_stages], stages[len(stages) - train_stages :]
+
+
 def front(swin: SwinTransformer, x: torch.Tensor, train_stages: int) -> torch.Tensor:
     """Swin's frozen part: frames [B, 1, H, W] -> the last frozen stage's tokens [B, h, w, C]."""
-    y = swin.embed_norm(swin.patch_embed(x).permute(0, 2, 3, 1))
-    for stage in list(swin.stages.children())[: len(swin.stages) - train_stages]:
+    y = swin.embed(x)
+    for stage in split_stages(swin, train_stages)[0]:
         y = stage(y)
     return y
 
 
 def tail(swin: SwinTransformer, f: torch.Tensor, train_stages: int) -> torch.Tensor:
     """Swin's trained part: cached tokens -> scaled angles [B, 3]; ``front`` then ``tail`` is ``swin``."""
-    for stage in list(swin.stages.children())[len(swin.stages) - train_stages :]:
+    for stage in split_stages(swin, train_stages)[1]:
         f = stage(f)
-    return swin.forward_head(swin.norm(f).mean(dim=(1, 2)))
+    return swin.forward_head(swin.pool(f))
 
 
 def tail_modules(swin: SwinTransformer, train_stages: int) -> torch.nn.ModuleList:
-    return torch.nn.ModuleList([*list(swin.stages.children())[len(swin.stages) - train_stages :], swin.norm, swin.head])
+    return torch.nn.ModuleList([*split_stages(swin, train_stages)[1], swin.norm, swin.head])
 
 
 def front_sha256(swin: SwinTransformer, train_stages: int) -> str:
     """Hash of the frozen front's weights: what the cached features depend on, besides the frames."""
-    frozen = [swin.patch_embed, swin.embed_norm, *list(swin.stages.children())[: len(swin.stages) - train_stages]]
+    frozen = [swin.patch_embed, swin.embed_norm, *split_stages(swin, train_stages)[0]]
     h = hashlib.sha256()
     for k, module in enumerate(frozen):
         for name, t in module.state_dict().items():
@@ -155,10 +161,7 @@ def finetune(
     """
     if epochs < 1:
         raise InferenceError(f"epochs {epochs} must be at least 1", field="epochs")
-    if not 0.0 < lr_decay <= 1.0:
-        raise InferenceError(f"lr_decay {lr_decay} must be in (0, 1]", field="lr_decay")
-    if ema is not None and not 0.0 < ema < 1.0:
-        raise InferenceError(f"ema {ema} must be in (0, 1), e.g. 0.999", field="ema")
+    check_schedule(lr_decay, ema)
     if n_val < 16:
         raise InferenceError(f"n_val {n_val} is too few to choose weights by; give at least 16", field="n_val")
     if Path(out_dir).resolve() == Path(run_dir).resolve():
@@ -283,7 +286,7 @@ def finetune(
         rec: dict[str, Any] = {"epoch": epoch, "swin_loss": total / len(batches), "val_mae_deg": score()}
         candidates = [("trained", rec["val_mae_deg"], modules.state_dict())]
         if averaged is not None:
-            avg_state = {k[len("module.") :]: v for k, v in averaged.state_dict().items() if k.startswith("module.")}
+            avg_state = averaged_weights(averaged.state_dict())
             rec["ema_val_mae_deg"] = score(avg_state)
             candidates.append(("averaged", rec["ema_val_mae_deg"], avg_state))
         rec["seconds"] = time.perf_counter() - t_epoch

@@ -97,6 +97,14 @@ def averaged_weights(state: dict[str, Any]) -> dict[str, Any]:
     return {k[len("module.") :]: v for k, v in state.items() if k.startswith("module.")}
 
 
+def check_schedule(lr_decay: float, ema: float | None) -> None:
+    """Refuse a learning-rate decay outside (0, 1] or a weight-averaging decay outside (0, 1)."""
+    if not 0.0 < lr_decay <= 1.0:
+        raise InferenceError(f"lr_decay {lr_decay} must be in (0, 1]", field="lr_decay")
+    if ema is not None and not 0.0 < ema < 1.0:
+        raise InferenceError(f"ema {ema} must be in (0, 1), e.g. 0.999", field="ema")
+
+
 def _save(obj: Any, path: Path) -> None:
     """Save atomically, so a reader (or a cut-off run) never sees half a file."""
     tmp = path.with_name(path.name + ".tmp")
@@ -187,12 +195,9 @@ def train(
         if isinstance(config, ModelConfig)
         else get_config(config, epochs=epochs, batch_size=batch_size, lr=lr, lr_decay=lr_decay)
     )
-    if not 0.0 < cfg.lr_decay <= 1.0:
-        raise InferenceError(f"lr_decay {cfg.lr_decay} must be in (0, 1]", field="lr_decay")
+    check_schedule(cfg.lr_decay, ema)
     if mode not in ("joint", "two-stage"):
         raise InferenceError(f"mode {mode!r} must be 'joint' or 'two-stage'", field="mode")
-    if ema is not None and not 0.0 < ema < 1.0:
-        raise InferenceError(f"ema {ema} must be in (0, 1), e.g. 0.999", field="ema")
     if ema is not None and mode == "two-stage":
         raise InferenceError("ema averages jointly trained networks; use it with mode 'joint'", field="ema")
     if unet_epochs is not None and not 0 <= unet_epochs <= cfg.epochs:

@@ -181,11 +181,17 @@ class SwinTransformer(nn.Module):
             if m.bias is not None:
                 nn.init.zeros_(m.bias)
 
+    def embed(self, x: torch.Tensor) -> torch.Tensor:
+        """x: [B, 1, H, W] -> patch tokens [B, H/4, W/4, C], the first stage's input."""
+        return self.embed_norm(self.patch_embed(x).permute(0, 2, 3, 1))
+
+    def pool(self, x: torch.Tensor) -> torch.Tensor:
+        """The last stage's tokens [B, h, w, C'] -> pooled features [B, num_features]."""
+        return self.norm(x).mean(dim=(1, 2))
+
     def forward_features(self, x: torch.Tensor) -> torch.Tensor:
         """x: [B, 1, H, W] -> pooled features [B, num_features]."""
-        x = self.embed_norm(self.patch_embed(x).permute(0, 2, 3, 1))
-        x = self.norm(self.stages(x))
-        return x.mean(dim=(1, 2))
+        return self.pool(self.stages(self.embed(x)))
 
     def forward_head(self, x: torch.Tensor) -> torch.Tensor:
         return self.head(x)
