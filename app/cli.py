@@ -6,6 +6,7 @@ Bad input prints one line on stderr and exits with status 2.
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import os
 import sys
@@ -226,44 +227,24 @@ def format_plan(r: dict[str, Any]) -> str:
     return "\n".join(out)
 
 
-def cmd_simulate(args: argparse.Namespace) -> int:
-    from inference.dataset import run
-    from inference.errors import InferenceError
+def add_inference_command(sub: Any, name: str, module: str, help: str) -> None:
+    """Register ``gsa NAME``, whose arguments and ``run`` live in ``inference.MODULE``.
 
-    try:
-        return run(args)
-    except InferenceError as exc:
-        raise CliError(str(exc)) from None
+    Its InferenceError (bad input) becomes the one-line error and exit 2 of every command.
+    """
+    mod = importlib.import_module(f"inference.{module}")
+    p = sub.add_parser(name, help=help)
+    mod.add_arguments(p)
 
+    def command(args: argparse.Namespace) -> int:
+        from inference.errors import InferenceError
 
-def cmd_train(args: argparse.Namespace) -> int:
-    from inference.errors import InferenceError
-    from inference.train import run
+        try:
+            return int(mod.run(args))
+        except InferenceError as exc:
+            raise CliError(str(exc)) from None
 
-    try:
-        return run(args)
-    except InferenceError as exc:
-        raise CliError(str(exc)) from None
-
-
-def cmd_export(args: argparse.Namespace) -> int:
-    from inference.errors import InferenceError
-    from inference.export import run
-
-    try:
-        return run(args)
-    except InferenceError as exc:
-        raise CliError(str(exc)) from None
-
-
-def cmd_finetune(args: argparse.Namespace) -> int:
-    from inference.errors import InferenceError
-    from inference.finetune import run
-
-    try:
-        return run(args)
-    except InferenceError as exc:
-        raise CliError(str(exc)) from None
+    p.set_defaults(func=command)
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
@@ -375,26 +356,11 @@ def build_parser() -> argparse.ArgumentParser:
     ac.add_argument("file")
     ac.add_argument("--json", action="store_true")
     ac.set_defaults(func=cmd_access)
-    sim = sub.add_parser("simulate", help="simulate a labelled ISAR data set (or --preview a few frames)")
-    from inference.dataset import add_arguments
-
-    add_arguments(sim)
-    sim.set_defaults(func=cmd_simulate)
-    tr = sub.add_parser("train", help="train UNet++ and Swin on a simulated data set")
-    from inference.train import add_arguments as train_arguments
-
-    train_arguments(tr)
-    tr.set_defaults(func=cmd_train)
-    ft = sub.add_parser("finetune", help="fine-tune Swin's last stage of a trained run on cached features (CPU)")
-    from inference.finetune import add_arguments as finetune_arguments
-
-    finetune_arguments(ft)
-    ft.set_defaults(func=cmd_finetune)
-    ex = sub.add_parser("export", help="export a training run to ONNX with a model card")
-    from inference.export import add_arguments as export_arguments
-
-    export_arguments(ex)
-    ex.set_defaults(func=cmd_export)
+    add_inference_command(sub, "simulate", "dataset", "simulate a labelled ISAR data set (or --preview a few frames)")
+    add_inference_command(sub, "train", "train", "train UNet++ and Swin on a simulated data set")
+    add_inference_command(sub, "finetune", "finetune",
+                          "fine-tune Swin's last stage of a trained run on cached features (CPU)")  # fmt: skip
+    add_inference_command(sub, "export", "export", "export a training run to ONNX with a model card")
     ev = sub.add_parser("evaluate", help="the paper's Tables 4 and 7 for the ONNX models")
     ev.add_argument("--models", help="directory with model_card.json (default: the shipped models)")
     ev.add_argument("--data", help="data set whose test split gives the 'with enhancement' row")
