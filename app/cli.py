@@ -253,7 +253,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from inference.runtime import DEFAULT_MODEL_DIR
 
     try:
-        res = evaluate(args.models or DEFAULT_MODEL_DIR, args.data, args.n_snr, out_dir=args.out, record=args.record)
+        res = evaluate(args.models or DEFAULT_MODEL_DIR, args.data, args.n_snr, out_dir=args.out, record=args.record,
+                       without=args.without)  # fmt: skip
     except InferenceError as exc:
         raise CliError(str(exc)) from None
     print(table(res))
@@ -367,6 +368,8 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--n-snr", type=int, default=1000)
     ev.add_argument("--out", default="results")
     ev.add_argument("--record", action="store_true", help="also write the results into the model card")
+    ev.add_argument("--without", help="models trained on raw frames (--no-enhance), scored on the same frames: "
+                    "Table 4's 'without enhancement' row")  # fmt: skip
     ev.set_defaults(func=cmd_evaluate)
     es = sub.add_parser("estimate", help="estimate the attitude in one ISAR frame (.npy, .npz, PNG, TIFF)")
     es.add_argument("file")

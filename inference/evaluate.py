@@ -11,7 +11,7 @@ import argparse
 import json
 import math
 import sys
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -98,31 +98,61 @@ def summarise(pred: NDArray[np.floating], true: NDArray[np.floating]) -> dict[st
 def evaluate(
     model_dir: str | Path, data_dir: str | Path | None = None, n_snr: int = 1000, seed: int = SNR_SEED,
     out_dir: str | Path = "results", radar: Radar | None = None, progress: bool = True, record: bool = False,
+    without: str | Path | None = None,
 ) -> dict[str, Any]:  # fmt: skip
-    """Evaluate the ONNX models in ``model_dir``; return and write the results (and, with ``record``, into the card)."""
+    """Evaluate the ONNX models in ``model_dir``; return and write the results (and, with ``record``, into the card).
+
+    ``without`` names a second model folder, trained on raw frames (``gsa train --no-enhance``):
+    it is scored on the same frames, which gives Table 4's "without enhancement" row beside the
+    "with enhancement" one.
+    """
     est = Estimator.load(model_dir)
+    models = [est]
+    if without is not None:
+        raw = Estimator.load(without)
+        if raw.enhances:
+            raise InferenceError(
+                f"{without} runs UNet++ first; --without takes models trained on raw frames (gsa train --no-enhance)",
+                field="without",
+            )
+        if not est.enhances:
+            raise InferenceError(
+                f"{model_dir} reads raw frames too; beside --without give enhancing models", field="models"
+            )
+        models.append(raw)
     manifest = load_manifest(data_dir) if data_dir is not None else None
     # The SNR test sets use the data set's radar (or Table 3's).
     radar = radar or (Radar(**manifest["radar"]) if manifest else Radar())
     results: dict[str, Any] = {"model": est.identity, "paper_mae_deg": PAPER}
+    if without is not None:
+        results["without_model"] = models[1].identity
+    frames: list[tuple[float | None, NDArray[Any], NDArray[Any]]] = []  # simulated once, scored by every model
+    if data_dir is not None and manifest is not None:
+        frames.append((None, *held_out(data_dir, manifest)))
+    for snr in SNR_DB:
+        arrays = render_frames(snr_spec(snr, n_snr, seed), radar, 0, n_snr)
+        frames.append((snr, arrays["image"], arrays["angles_deg"]))
+    results["rows"], errors = {}, {}
+    for m in models:
 
-    def sets() -> Iterator[tuple[str, NDArray[Any], NDArray[Any]]]:
-        if data_dir is not None and manifest is not None:
-            yield (row_name(None, est.enhances), *held_out(data_dir, manifest))
-        for snr in SNR_DB:
-            arrays = render_frames(snr_spec(snr, n_snr, seed), radar, 0, n_snr)
-            yield row_name(snr, est.enhances), arrays["image"], arrays["angles_deg"]
+        def predict(f: NDArray[Any], m: Estimator = m) -> NDArray[Any]:
+            return m.estimate(f).angles_deg
 
-    results["rows"], errors = score(lambda f: est.estimate(f).angles_deg, sets(), progress)
+        rows, errs = score(
+            predict, ((row_name(snr, m.enhances), images, angles) for snr, images, angles in frames), progress
+        )
+        results["rows"].update(rows)
+        errors.update(errs)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     (out / "results.json").write_text(json.dumps(results, indent=2))
     (out / "results.md").write_text(table(results))
     plot_errors(errors, out / "errors.png")
-    if record:
+    if record:  # the card records its own models' rows only
+        own = {k: v for k, v in results["rows"].items() if ("without" in k) != est.enhances}
         card_path = Path(model_dir) / "model_card.json"
         card = json.loads(card_path.read_text())
-        card["evaluation"] = {"rows": results["rows"], "n_per_snr": n_snr, "data": str(data_dir) if data_dir else None}
+        card["evaluation"] = {"rows": own, "n_per_snr": n_snr, "data": str(data_dir) if data_dir else None}
         card_path.write_text(json.dumps(card, indent=2))
     return results
 
@@ -173,11 +203,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--data", help="data set whose test split gives Table 4's row")
     p.add_argument("--n-snr", type=int, default=1000, help="frames per SNR for Table 7 (default 1000)")
     p.add_argument("--out", default="results")
+    p.add_argument("--without", help="models trained on raw frames, scored beside --models (Table 4's other row)")
     args = p.parse_args(argv)
     try:
         from inference.runtime import DEFAULT_MODEL_DIR
 
-        res = evaluate(args.models or DEFAULT_MODEL_DIR, args.data, args.n_snr, out_dir=args.out)
+        res = evaluate(args.models or DEFAULT_MODEL_DIR, args.data, args.n_snr, out_dir=args.out, without=args.without)
     except InferenceError as exc:
         print(f"evaluate: error: {exc}", file=sys.stderr)
         return 2

@@ -180,6 +180,7 @@ def train(
     swin_from: str | Path | None = None,
     lr_decay: float | None = None,
     ema: float | None = None,
+    shape: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Train both networks (or Swin alone with ``enhance=False``) and return the training record.
 
@@ -188,12 +189,14 @@ def train(
     enhanced frames, which is what makes Swin epochs cheap on a CPU. ``unet_from`` and
     ``swin_from`` start a network from the weights of an earlier run's ``unetpp.pt`` or
     ``swin.pt``: with a fresh learning-rate schedule this continues training that the
-    earlier run's decayed schedule had slowed down.
+    earlier run's decayed schedule had slowed down. ``shape`` overrides the named config's
+    network shape (``unet_filters``, ``swin_embed_dim``, ``swin_depths``, ``swin_heads``),
+    e.g. to train a small Swin behind a larger, already trained UNet++.
     """
     cfg = (
         config
         if isinstance(config, ModelConfig)
-        else get_config(config, epochs=epochs, batch_size=batch_size, lr=lr, lr_decay=lr_decay)
+        else get_config(config, epochs=epochs, batch_size=batch_size, lr=lr, lr_decay=lr_decay, **(shape or {}))
     )
     check_schedule(cfg.lr_decay, ema)
     if mode not in ("joint", "two-stage"):
@@ -437,6 +440,14 @@ def plot_history(history: list[dict[str, Any]], path: Path) -> None:
     plt.close(fig)
 
 
+def _ints(text: str) -> tuple[int, ...]:
+    """argparse type for a comma-separated list of integers ("2,2,6,2")."""
+    try:
+        return tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of integers") from None
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", required=True, help="data set directory (from `gsa simulate`)")
     p.add_argument("--config", default="compact", help="paper, compact, cpu or smoke")
@@ -454,6 +465,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--ema", type=float, help="also average the weights (decay per step, e.g. 0.999); saved as the result"
     )
+    p.add_argument("--unet-filters", type=_ints, help="override the config's UNet++ filters, e.g. 16,32,64,128,256")
+    p.add_argument("--swin-dim", type=int, help="override the config's Swin embedding dimension C")
+    p.add_argument("--swin-depths", type=_ints, help="override the config's Swin depths, e.g. 2,2,2,2")
+    p.add_argument("--swin-heads", type=_ints, help="override the config's Swin heads per stage, e.g. 1,2,4,8")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device")
     p.add_argument("--resume", action="store_true")
@@ -468,6 +483,8 @@ def run(args: argparse.Namespace) -> int:
         args.seed, args.device, args.resume, args.max_minutes, args.max_train_frames, compile_models=args.compile,
         unet_epochs=args.unet_epochs, unet_from=args.unet_from, threads=args.threads, swin_from=args.swin_from,
         lr_decay=args.lr_decay, ema=args.ema,
+        shape={"unet_filters": args.unet_filters, "swin_embed_dim": args.swin_dim, "swin_depths": args.swin_depths,
+               "swin_heads": args.swin_heads},
     )  # fmt: skip
     last = rec["history"][-1] if rec["history"] else None
     if last:

@@ -71,10 +71,45 @@ def get_config(name: str, **overrides: Any) -> ModelConfig:
     if name not in CONFIGS:
         raise InferenceError(f"unknown config {name!r}; choose one of {', '.join(CONFIGS)}", field="config")
     base = CONFIGS[name].as_dict()
+    unknown = sorted(set(overrides) - set(base))
+    if unknown:
+        raise InferenceError(f"unknown config field(s) {', '.join(unknown)}", field="config")
     base.update({k: v for k, v in overrides.items() if v is not None})
     for key in ("unet_filters", "swin_depths", "swin_heads"):
-        base[key] = tuple(base[key])
-    return ModelConfig(**base)
+        base[key] = tuple(int(v) for v in base[key])
+    cfg = ModelConfig(**base)
+    check_shape(cfg)
+    return cfg
+
+
+def check_shape(cfg: ModelConfig) -> None:
+    """Refuse network shapes the models cannot be built with, naming the field to fix."""
+    if len(cfg.unet_filters) != 5 or min(cfg.unet_filters) < 1:
+        raise InferenceError(
+            f"unet_filters {cfg.unet_filters} must be five positive channel counts", field="unet_filters"
+        )
+    if cfg.swin_embed_dim < 1:
+        raise InferenceError(f"swin_embed_dim {cfg.swin_embed_dim} must be positive", field="swin_embed_dim")
+    if not cfg.swin_depths or min(cfg.swin_depths) < 1:
+        raise InferenceError(f"swin_depths {cfg.swin_depths} must be positive block counts", field="swin_depths")
+    if len(cfg.swin_heads) != len(cfg.swin_depths):
+        raise InferenceError(
+            f"swin_heads {cfg.swin_heads} needs one head count per stage of swin_depths {cfg.swin_depths}",
+            field="swin_heads",
+        )
+    for k, heads in enumerate(cfg.swin_heads):
+        dim = cfg.swin_embed_dim * 2**k
+        if heads < 1 or dim % heads:
+            raise InferenceError(
+                f"stage {k + 1} has {dim} channels (swin_embed_dim x 2^{k}), which {heads} heads do not divide",
+                field="swin_heads",
+            )
+    side = cfg.img_size // 4
+    if cfg.img_size % 4 or side % 2 ** (len(cfg.swin_depths) - 1):
+        raise InferenceError(
+            f"{len(cfg.swin_depths)} Swin stages halve {side}x{side} patches too often for img_size {cfg.img_size}",
+            field="swin_depths",
+        )
 
 
 def build_models(cfg: ModelConfig) -> tuple[UNetPlusPlus, SwinTransformer]:

@@ -154,6 +154,42 @@ def test_swin_from_starts_swin_from_earlier_weights_with_a_fresh_schedule(smoke_
         train(smoke_data, tmp_path / "bad", "smoke", lr_decay=1.5)
 
 
+def test_a_smaller_swin_behind_a_trained_unet_trains_exports_and_runs(smoke_data, smoke_run, tmp_path):
+    out, _ = smoke_run
+    shape = {"swin_embed_dim": 8, "swin_depths": (1, 1, 1, 1), "swin_heads": (1, 1, 2, 2)}
+    record = train(smoke_data, tmp_path / "small", "smoke", epochs=1, mode="two-stage", unet_epochs=0,
+                   unet_from=out / "unetpp.pt", shape=shape, log_every=0)  # fmt: skip
+    assert record["config"]["swin_embed_dim"] == 8 and tuple(record["config"]["swin_heads"]) == (1, 1, 2, 2)
+    swin = torch.load(tmp_path / "small" / "swin.pt", weights_only=False)
+    assert swin["state_dict"]["patch_embed.weight"].shape[0] == 8
+    card = export(tmp_path / "small", tmp_path / "models")  # export rebuilds the overridden shape from the record
+    assert card["config"]["swin_embed_dim"] == 8
+    assert card["files"]["swin"]["parity_max_rel_diff"] < 1e-4
+    angles = Estimator.load(tmp_path / "models").estimate(np.zeros((2, 64, 64), np.float32)).angles_deg
+    assert angles.shape == (2, 3) and np.isfinite(angles).all()
+    with pytest.raises(InferenceError, match="which 5 heads do not divide"):
+        train(smoke_data, tmp_path / "bad", "smoke", shape={"swin_heads": (5, 1, 2, 2)})
+    with pytest.raises(InferenceError, match="one head count per stage"):
+        train(smoke_data, tmp_path / "bad", "smoke", shape={"swin_depths": (1, 1, 1)})
+    with pytest.raises(InferenceError, match="unknown config field"):
+        get_config("smoke", swin_width=3)
+    assert not (tmp_path / "bad").exists()
+
+
+def test_train_command_shape_flags(smoke_data, tmp_path):
+    from inference.train import main
+
+    assert main(["--data", str(smoke_data), "--config", "smoke", "--out", str(tmp_path / "r"), "--epochs", "1",
+                 "--swin-dim", "8", "--swin-heads", "1,1,2,2", "--unet-filters", "2,4,8,16,32"]) == 0  # fmt: skip
+    cfg = json.loads((tmp_path / "r" / "training.json").read_text())["config"]
+    assert (cfg["swin_embed_dim"], cfg["unet_filters"]) == (8, [2, 4, 8, 16, 32])
+    with pytest.raises(SystemExit):
+        main(["--data", str(smoke_data), "--out", str(tmp_path / "x"), "--swin-depths", "2,two"])
+    assert (
+        main(["--data", str(smoke_data), "--config", "smoke", "--out", str(tmp_path / "y"), "--swin-heads", "1,1"]) == 2
+    )
+
+
 def _train_fresh(data, out):
     train(data, out, "smoke", epochs=1, lr=1e-12, mode="two-stage", unet_epochs=0, log_every=0)
     return out / "swin.pt"
@@ -297,6 +333,20 @@ def test_evaluate_writes_the_tables_and_skips_unet_for_a_raw_frame_model(smoke_r
     assert set(raw["rows"]) == {"without enhancement"} | {f"{d} dB, without enhancement" for d in (0, 5, 10)}
     with pytest.raises(InferenceError, match="does not use"):
         export(tmp_path / "raw", tmp_path / "x", frames=frames.repeat(4, axis=0), int8=True)
+    # Both rows of Table 4 in one table: each model scored on the same frames as when scored alone.
+    card_before = (tmp_path / "m" / "model_card.json").read_text()
+    both = evaluate(tmp_path / "m", smoke_data, n_snr=3, out_dir=tmp_path / "res3", progress=False,
+                    without=tmp_path / "mraw", record=True)  # fmt: skip
+    assert both["rows"] == res["rows"] | raw["rows"]
+    assert both["without_model"]["swin_sha256"] == est.identity["swin_sha256"]
+    md = (tmp_path / "res3" / "results.md").read_text()
+    assert "| without enhancement (n=8) |" in md and "1.387 / 1.223 / 1.797" in md
+    assert (tmp_path / "m" / "model_card.json").read_text() == card_before  # the card keeps its own rows only
+    with pytest.raises(InferenceError, match="--without takes models trained on raw frames"):
+        evaluate(tmp_path / "m", smoke_data, n_snr=3, out_dir=tmp_path / "res4", without=tmp_path / "m")
+    with pytest.raises(InferenceError, match="reads raw frames too"):
+        evaluate(tmp_path / "mraw", smoke_data, n_snr=3, out_dir=tmp_path / "res4", without=tmp_path / "mraw")
+    assert not (tmp_path / "res4").exists()
 
 
 def test_runtime_refuses_bad_model_files(smoke_run, tmp_path):
