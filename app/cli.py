@@ -362,6 +362,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_inference_command(sub, "finetune", "finetune",
                           "fine-tune Swin's last stage of a trained run on cached features (CPU)")  # fmt: skip
     add_inference_command(sub, "export", "export", "export a training run to ONNX with a model card")
+    add_inference_command(sub, "compare", "compare", "set training runs side by side: Swin's test error per epoch")
     ev = sub.add_parser("evaluate", help="the paper's Tables 4 and 7 for the ONNX models")
     ev.add_argument("--models", help="directory with model_card.json (default: the shipped models)")
     ev.add_argument("--data", help="data set whose test split gives the 'with enhancement' row")
