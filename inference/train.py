@@ -260,8 +260,15 @@ def train(
     ckpt_path = out / "checkpoint.pt"
     if resume and ckpt_path.exists():
         ck = torch.load(ckpt_path, map_location=dev, weights_only=False)
-        unet.load_state_dict(ck["unet"])
-        swin.load_state_dict(ck["swin"])
+        try:
+            unet.load_state_dict(ck["unet"])
+            swin.load_state_dict(ck["swin"])
+        except (RuntimeError, KeyError) as exc:
+            raise InferenceError(
+                f"{ckpt_path} was trained with another network shape than config {cfg.name!r} with these "
+                f"overrides; resume with the run's own settings (its training.json) ({str(exc).splitlines()[0]})",
+                field="resume",
+            ) from None
         opt_u.load_state_dict(ck["opt_u"])
         opt_s.load_state_dict(ck["opt_s"])
         sch_u.load_state_dict(ck["sch_u"])

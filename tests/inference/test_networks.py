@@ -173,6 +173,8 @@ def test_a_smaller_swin_behind_a_trained_unet_trains_exports_and_runs(smoke_data
         train(smoke_data, tmp_path / "bad", "smoke", shape={"swin_depths": (1, 1, 1)})
     with pytest.raises(InferenceError, match="unknown config field"):
         get_config("smoke", swin_width=3)
+    with pytest.raises(InferenceError, match="another network shape"):  # resuming with a different shape
+        train(smoke_data, tmp_path / "small", "smoke", epochs=2, resume=True, log_every=0)
     assert not (tmp_path / "bad").exists()
 
 
