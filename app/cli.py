@@ -247,21 +247,6 @@ def add_inference_command(sub: Any, name: str, module: str, help: str) -> None:
     p.set_defaults(func=command)
 
 
-def cmd_evaluate(args: argparse.Namespace) -> int:
-    from inference.errors import InferenceError
-    from inference.evaluate import evaluate, table
-    from inference.runtime import DEFAULT_MODEL_DIR
-
-    try:
-        res = evaluate(args.models or DEFAULT_MODEL_DIR, args.data, args.n_snr, out_dir=args.out, record=args.record,
-                       without=args.without)  # fmt: skip
-    except InferenceError as exc:
-        raise CliError(str(exc)) from None
-    print(table(res))
-    print(f"written to {args.out}/results.json, results.md and errors.png")
-    return 0
-
-
 def cmd_estimate(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -363,15 +348,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "fine-tune Swin's last stage of a trained run on cached features (CPU)")  # fmt: skip
     add_inference_command(sub, "export", "export", "export a training run to ONNX with a model card")
     add_inference_command(sub, "compare", "compare", "set training runs side by side: Swin's test error per epoch")
-    ev = sub.add_parser("evaluate", help="the paper's Tables 4 and 7 for the ONNX models")
-    ev.add_argument("--models", help="directory with model_card.json (default: the shipped models)")
-    ev.add_argument("--data", help="data set whose test split gives the 'with enhancement' row")
-    ev.add_argument("--n-snr", type=int, default=1000)
-    ev.add_argument("--out", default="results")
-    ev.add_argument("--record", action="store_true", help="also write the results into the model card")
-    ev.add_argument("--without", help="models trained on raw frames (--no-enhance), scored on the same frames: "
-                    "Table 4's 'without enhancement' row")  # fmt: skip
-    ev.set_defaults(func=cmd_evaluate)
+    add_inference_command(sub, "evaluate", "evaluate", "the paper's Tables 4 and 7 for the ONNX models")
     es = sub.add_parser("estimate", help="estimate the attitude in one ISAR frame (.npy, .npz, PNG, TIFF)")
     es.add_argument("file")
     es.add_argument("--models", help="model directory (default: GSA_MODEL_DIR or the shipped models)")

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from inference.errors import InferenceError
+from inference.errors import InferenceError, module_main
 
 
 def load_run(run_dir: str | Path) -> dict[str, Any]:
@@ -140,13 +140,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m inference.compare")
-    add_arguments(p)
-    try:
-        return run(p.parse_args(argv))
-    except InferenceError as exc:
-        print(f"compare: error: {exc}", file=sys.stderr)
-        return 2
+    return module_main("compare", "compare", add_arguments, run, argv)
 
 
 if __name__ == "__main__":

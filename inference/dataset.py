@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from inference.errors import DatasetError, InferenceError
+from inference.errors import DatasetError, module_main
 from inference.isar import Imager, Radar, check_fits, normalise_frame, simulate
 from inference.runtime import sha256_file
 from inference.targets import TargetModel, load_model, tiangong_like
@@ -339,13 +339,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m inference.dataset", description="simulate a labelled ISAR data set")
-    add_arguments(p)
-    try:
-        return run(p.parse_args(argv))
-    except InferenceError as exc:
-        print(f"simulate: error: {exc}", file=sys.stderr)
-        return 2
+    return module_main("dataset", "simulate", add_arguments, run, argv, description="simulate a labelled ISAR data set")
 
 
 if __name__ == "__main__":

@@ -1,5 +1,11 @@
 """Domain errors of the attitude-estimation half: bad input raises one of these, each a ValueError."""
 
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable
+
 
 class InferenceError(ValueError):
     """Base class; ``field`` names the offending parameter or file."""
@@ -19,3 +25,21 @@ class ModelFileError(InferenceError):
 
 class DatasetError(InferenceError):
     """A data set request or directory that cannot be used."""
+
+
+def module_main(
+    module: str,
+    name: str,
+    add_arguments: Callable[[argparse.ArgumentParser], None],
+    run: Callable[[argparse.Namespace], int],
+    argv: list[str] | None = None,
+    description: str | None = None,
+) -> int:
+    """``python -m inference.MODULE``: parse, run, and turn bad input into one line ("NAME: error: ...") and exit 2."""
+    p = argparse.ArgumentParser(prog=f"python -m inference.{module}", description=description)
+    add_arguments(p)
+    try:
+        return run(p.parse_args(argv))
+    except InferenceError as exc:
+        print(f"{name}: error: {exc}", file=sys.stderr)
+        return 2

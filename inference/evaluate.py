@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from inference.dataset import DatasetSpec, load_manifest, load_range, render_frames
-from inference.errors import InferenceError
+from inference.errors import InferenceError, module_main
 from inference.isar import Radar, rotation_matrix
 from inference.runtime import Estimator
 
@@ -197,23 +197,28 @@ def plot_errors(errors: dict[str, NDArray[np.float64]], path: Path) -> None:
     plt.close(fig)
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m inference.evaluate")
-    p.add_argument("--models", default=None, help="directory with model_card.json (default: the shipped models)")
-    p.add_argument("--data", help="data set whose test split gives Table 4's row")
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--models", help="directory with model_card.json (default: the shipped models)")
+    p.add_argument("--data", help="data set whose test split gives the 'with enhancement' row")
     p.add_argument("--n-snr", type=int, default=1000, help="frames per SNR for Table 7 (default 1000)")
     p.add_argument("--out", default="results")
-    p.add_argument("--without", help="models trained on raw frames, scored beside --models (Table 4's other row)")
-    args = p.parse_args(argv)
-    try:
-        from inference.runtime import DEFAULT_MODEL_DIR
+    p.add_argument("--record", action="store_true", help="also write the results into the model card")
+    p.add_argument("--without", help="models trained on raw frames (--no-enhance), scored on the same frames: "
+                   "Table 4's 'without enhancement' row")  # fmt: skip
 
-        res = evaluate(args.models or DEFAULT_MODEL_DIR, args.data, args.n_snr, out_dir=args.out, without=args.without)
-    except InferenceError as exc:
-        print(f"evaluate: error: {exc}", file=sys.stderr)
-        return 2
+
+def run(args: argparse.Namespace) -> int:
+    from inference.runtime import DEFAULT_MODEL_DIR
+
+    res = evaluate(args.models or DEFAULT_MODEL_DIR, args.data, args.n_snr, out_dir=args.out, record=args.record,
+                   without=args.without)  # fmt: skip
     print(table(res))
+    print(f"written to {args.out}/results.json, results.md and errors.png")
     return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    return module_main("evaluate", "evaluate", add_arguments, run, argv)
 
 
 if __name__ == "__main__":

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from inference.errors import InferenceError, ModelFileError
+from inference.errors import InferenceError, ModelFileError, module_main
 from inference.models.build import build_models, get_config
 from inference.runtime import sha256_file
 from inference.train import ANGLE_SCALE_DEG
@@ -332,13 +332,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m inference.export")
-    add_arguments(p)
-    try:
-        return run(p.parse_args(argv))
-    except InferenceError as exc:
-        print(f"export: error: {exc}", file=sys.stderr)
-        return 2
+    return module_main("export", "export", add_arguments, run, argv)
 
 
 if __name__ == "__main__":

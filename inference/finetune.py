@@ -34,7 +34,7 @@ import torch
 from numpy.typing import NDArray
 
 from inference.dataset import DatasetSpec, frame_truth, load_manifest, load_range, render_frames
-from inference.errors import DatasetError, InferenceError
+from inference.errors import DatasetError, InferenceError, module_main
 from inference.export import load_trained
 from inference.isar import Radar
 from inference.models.swin import SwinTransformer
@@ -407,13 +407,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m inference.finetune")
-    add_arguments(p)
-    try:
-        return run(p.parse_args(argv))
-    except InferenceError as exc:
-        print(f"finetune: error: {exc}", file=sys.stderr)
-        return 2
+    return module_main("finetune", "finetune", add_arguments, run, argv)
 
 
 if __name__ == "__main__":

@@ -35,7 +35,7 @@ import numpy as np
 import torch
 
 from inference.dataset import load_arrays, load_manifest
-from inference.errors import DatasetError, InferenceError
+from inference.errors import DatasetError, InferenceError, module_main
 from inference.models.build import ModelConfig, build_models, get_config
 from inference.models.swin import angle_loss
 from inference.models.unetpp import relative_frobenius_loss
@@ -501,13 +501,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m inference.train")
-    add_arguments(p)
-    try:
-        return run(p.parse_args(argv))
-    except InferenceError as exc:
-        print(f"train: error: {exc}", file=sys.stderr)
-        return 2
+    return module_main("train", "train", add_arguments, run, argv)
 
 
 if __name__ == "__main__":
