@@ -28,12 +28,14 @@ def load_run(run_dir: str | Path) -> dict[str, Any]:
         raise InferenceError(f"{path} does not exist; give a folder written by gsa train", field="runs")
     try:
         record = json.loads(path.read_text())
-        record["history"], record["mode"], record["enhance"]  # noqa: B018 - the fields every record has
-    except (ValueError, KeyError, TypeError) as exc:
+    except ValueError as exc:
         raise InferenceError(f"{path} is not a gsa train record ({exc})", field="runs") from None
+    missing = [k for k in ("history", "mode", "enhance") if not isinstance(record, dict) or k not in record]
+    if missing:
+        raise InferenceError(f"{path} is not a gsa train record (no {', '.join(missing)})", field="runs")
     if not record["history"]:
         raise InferenceError(f"{path} has no finished epoch yet", field="runs")
-    return dict(record)
+    return record  # type: ignore[no-any-return]
 
 
 def describe(record: dict[str, Any]) -> str:
@@ -60,9 +62,8 @@ def swin_curve(record: dict[str, Any]) -> list[dict[str, Any]]:
     return out
 
 
-def table(runs: dict[str, dict[str, Any]]) -> str:
-    """A summary row per run, then the test MAE of every run at each Swin epoch."""
-    curves = {name: swin_curve(r) for name, r in runs.items()}
+def table(runs: dict[str, dict[str, Any]], curves: dict[str, list[dict[str, Any]]]) -> str:
+    """A summary row per run, then the test MAE of every run at each Swin epoch (``curves``: their ``swin_curve``)."""
     lines = [
         "| run | how it trained | Swin epochs | training time (min) | last test MAE z / y / x (deg) | best mean (Swin epoch) |",
         "|---|---|---|---|---|---|",
@@ -86,16 +87,15 @@ def table(runs: dict[str, dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plot(runs: dict[str, dict[str, Any]], path: Path) -> None:
-    """Test MAE per axis against Swin epochs, one line per run."""
+def plot(curves: dict[str, list[dict[str, Any]]], path: Path) -> None:
+    """Test MAE per axis against Swin epochs, one line per run (``curves``: their ``swin_curve``)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.8), sharey=True)
-    for name, r in runs.items():
-        c = swin_curve(r)
+    for name, c in curves.items():
         if not c:
             continue
         mae = np.array([e["test_mae_deg"] for e in c])
@@ -120,11 +120,12 @@ def compare(run_dirs: list[str | Path], out_dir: str | Path) -> str:
         if name in runs:
             raise InferenceError(f"two runs are named {name!r}; give folders with different names", field="runs")
         runs[name] = load_run(d)
-    text = table(runs)
+    curves = {name: swin_curve(r) for name, r in runs.items()}
+    text = table(runs, curves)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     (out / "compare.md").write_text(text)
-    plot(runs, out / "compare.png")
+    plot(curves, out / "compare.png")
     return text
 
 

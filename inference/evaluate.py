@@ -133,6 +133,7 @@ def evaluate(
         arrays = render_frames(snr_spec(snr, n_snr, seed), radar, 0, n_snr)
         frames.append((snr, arrays["image"], arrays["angles_deg"]))
     results["rows"], errors = {}, {}
+    rows_of: list[dict[str, Any]] = []  # each model's own rows, --models first
     for m in models:
 
         def predict(f: NDArray[Any], m: Estimator = m) -> NDArray[Any]:
@@ -141,6 +142,7 @@ def evaluate(
         rows, errs = score(
             predict, ((row_name(snr, m.enhances), images, angles) for snr, images, angles in frames), progress
         )
+        rows_of.append(rows)
         results["rows"].update(rows)
         errors.update(errs)
     out = Path(out_dir)
@@ -149,10 +151,9 @@ def evaluate(
     (out / "results.md").write_text(table(results))
     plot_errors(errors, out / "errors.png")
     if record:  # the card records its own models' rows only
-        own = {k: v for k, v in results["rows"].items() if ("without" in k) != est.enhances}
         card_path = Path(model_dir) / "model_card.json"
         card = json.loads(card_path.read_text())
-        card["evaluation"] = {"rows": own, "n_per_snr": n_snr, "data": str(data_dir) if data_dir else None}
+        card["evaluation"] = {"rows": rows_of[0], "n_per_snr": n_snr, "data": str(data_dir) if data_dir else None}
         card_path.write_text(json.dumps(card, indent=2))
     return results
 
