@@ -1,11 +1,12 @@
 """Access windows of a satellite to a ground station: rise, culmination and set.
 
-The elevation of the satellite above the station's mask is sampled on a grid,
-its local maxima are refined (culminations), and every culmination above the
-mask is bracketed by the grid minima on either side, inside which elevation is
-monotonic, so rise and set are single sign changes refined by bisection. This
-finds grazing passes shorter than the grid step, which a plain sign-change scan
-misses, and times rise and set to ``tol_s`` (default 0.1 ms).
+Elevation (and, with a range limit, slant range) is sampled on a grid; the
+extrema between samples that could cross the mask unseen are refined and merged
+into the samples, so each function is monotonic between neighbours and every
+rise and set is one sign change, refined by vectorised regula falsi to ``tol_s``
+(default 0.1 ms). This finds grazing passes shorter than the grid step, which a
+plain sign-change scan misses, and passes that enter and leave range inside one
+elevation pass (tests/planner/test_access.py checks both against a 1-s skyfield scan).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from numpy.typing import NDArray
 
 from planner.errors import SearchRangeError, StationError
 from planner.propagation import EarthFrames, Station, Trajectory
-from planner.search import _find_maxima_core, bisect_roots, time_grid
+from planner.search import TimeFunction, bisect_maxima, bisect_roots, time_grid
 
 Vec = NDArray[np.float64]
 
@@ -83,30 +84,124 @@ def look_angles(r_sat_km: Vec, t_s: Vec, station: Station, frames: EarthFrames) 
     return LookAngles(az, el, rng)
 
 
-def elevation_function(traj: Trajectory, station: Station, frames: EarthFrames):  # type: ignore[no-untyped-def]
-    """Return ``f(t_s)``: elevation above the station's mask, in degrees (the access g-function)."""
+def look_function(traj: Trajectory, station: Station, frames: EarthFrames):  # type: ignore[no-untyped-def]
+    """Return ``f(t_s) -> (elevation above the mask in deg, slant range in km)``, both shape (N,)."""
     up = station.enu_itrs()[2]
     site = station.itrs_km()
     mask = station.min_elevation_deg
 
-    def f(t_s: Vec) -> Vec:
+    def f(t_s: Vec) -> tuple[Vec, Vec]:
         r, _ = traj.state(t_s)
         rho = frames.to_itrs(t_s, r) - site[:, None]
-        return np.degrees(np.arcsin(np.clip(up @ rho / np.linalg.norm(rho, axis=0), -1.0, 1.0))) - mask
+        rng = np.linalg.norm(rho, axis=0)
+        return np.degrees(np.arcsin(np.clip(up @ rho / rng, -1.0, 1.0))) - mask, rng
 
     return f
+
+
+def elevation_function(traj: Trajectory, station: Station, frames: EarthFrames):  # type: ignore[no-untyped-def]
+    """Return ``f(t_s)``: elevation above the station's mask, in degrees (the access g-function)."""
+    look = look_function(traj, station, frames)
+    return lambda t_s: look(t_s)[0]
 
 
 def range_function(traj: Trajectory, station: Station, frames: EarthFrames, max_range_km: float):  # type: ignore[no-untyped-def]
     """Return ``f(t_s)``: ``max_range_km`` minus the slant range (positive when close enough)."""
-    site = station.itrs_km()
+    look = look_function(traj, station, frames)
+    return lambda t_s: max_range_km - look(t_s)[1]
 
-    def f(t_s: Vec) -> Vec:
-        r, _ = traj.state(t_s)
-        rho = frames.to_itrs(t_s, r) - site[:, None]
-        return max_range_km - np.linalg.norm(rho, axis=0)
 
-    return f
+@dataclass(frozen=True, slots=True)
+class Intervals:
+    """Where a function of time is positive: ``start``/``end`` (N,), and whether each lies on the span's edge."""
+
+    start: Vec
+    end: Vec
+    start_clipped: NDArray[np.bool_]
+    end_clipped: NDArray[np.bool_]
+
+
+def grid_extrema(f: TimeFunction, t: Vec, g: Vec, select: NDArray[np.bool_], tol_s: float) -> tuple[Vec, Vec]:
+    """Refine the grid's local maxima of ``f`` where ``select`` (per grid point) holds, ends of the span included.
+
+    An interior maximum is bracketed by its grid neighbours. At either end of the
+    span a maximum can hide inside the first (last) step while the grid falls away
+    from it; it is found from the one-sided slope there. Returns ``(t, f(t))``.
+    """
+    if t.size < 2:
+        return np.empty(0), np.empty(0)
+    lo: list[Vec] = []
+    hi: list[Vec] = []
+    if t.size >= 3:
+        peak = (g[1:-1] >= g[:-2]) & (g[1:-1] > g[2:]) & select[1:-1]
+        i = np.flatnonzero(peak) + 1
+        lo.append(t[i - 1])
+        hi.append(t[i + 1])
+    h = 1e-3
+    if g[0] > g[1] and select[0]:
+        s = f(np.array([t[0], t[0] + 2.0 * h]))
+        if s[1] > s[0]:
+            lo.append(np.array([t[0] + h]))
+            hi.append(np.array([t[1]]))
+    if g[-1] > g[-2] and select[-1]:
+        s = f(np.array([t[-1] - 2.0 * h, t[-1]]))
+        if s[0] > s[1]:
+            lo.append(np.array([t[-2]]))
+            hi.append(np.array([t[-1] - h]))
+    t_max = bisect_maxima(f, np.concatenate(lo), np.concatenate(hi), tol_s, h_s=h)
+    return t_max, f(t_max) if t_max.size else np.empty(0)
+
+
+def positive_intervals(f: TimeFunction, t: Vec, g: Vec, extrema_t: Vec, extrema_g: Vec, tol_s: float) -> Intervals:
+    """Return the intervals of ``[t[0], t[-1]]`` where ``f > 0``.
+
+    ``g`` is ``f`` on the grid ``t``; ``extrema_t`` / ``extrema_g`` are the refined
+    extrema between grid points that could cross zero unseen (a grazing maximum, a
+    shallow minimum). Merged into the grid, they leave ``f`` monotonic between
+    neighbouring samples, so every crossing is one sign change, refined to ``tol_s``.
+    """
+    tt = np.concatenate([t, extrema_t])
+    gg = np.concatenate([g, extrema_g])
+    order = np.argsort(tt, kind="stable")
+    tt, gg = tt[order], gg[order]
+    keep = np.concatenate([[True], np.diff(tt) > 0.0])
+    tt, gg = tt[keep], gg[keep]
+    positive = gg > 0.0
+    idx = np.flatnonzero(positive[1:] != positive[:-1])
+    roots = bisect_roots(f, tt[idx], tt[idx + 1], tol_s)
+    rising = ~positive[idx]
+    start, end = roots[rising], roots[~rising]
+    start_clipped = np.zeros(start.size, bool)
+    end_clipped = np.zeros(end.size, bool)
+    if positive[0]:
+        start = np.concatenate([[tt[0]], start])
+        start_clipped = np.concatenate([[True], start_clipped])
+    if positive[-1]:
+        end = np.concatenate([end, [tt[-1]]])
+        end_clipped = np.concatenate([end_clipped, [True]])
+    return Intervals(start, end, start_clipped, end_clipped)
+
+
+def intersect(a: Intervals, b: Intervals) -> Intervals:
+    """Return the intervals where both ``a`` and ``b`` hold (each sorted and disjoint)."""
+    start: list[float] = []
+    end: list[float] = []
+    sc: list[bool] = []
+    ec: list[bool] = []
+    i = j = 0
+    while i < a.start.size and j < b.start.size:
+        lo = max(a.start[i], b.start[j])
+        hi = min(a.end[i], b.end[j])
+        if lo < hi:
+            start.append(float(lo))
+            end.append(float(hi))
+            sc.append(bool((a.start_clipped[i] and lo == a.start[i]) or (b.start_clipped[j] and lo == b.start[j])))
+            ec.append(bool((a.end_clipped[i] and hi == a.end[i]) or (b.end_clipped[j] and hi == b.end[j])))
+        if a.end[i] < b.end[j]:
+            i += 1
+        else:
+            j += 1
+    return Intervals(np.array(start), np.array(end), np.array(sc, bool), np.array(ec, bool))
 
 
 def access_windows(
@@ -120,105 +215,92 @@ def access_windows(
 ) -> AccessWindows:
     """Find every pass of ``traj`` above the station's elevation mask in ``[t0_s, t1_s]``.
 
-    ``step_s`` must be shorter than half the time between a culmination and the
-    next elevation minimum (over ten minutes for any Earth orbit), which 120 s is.
-    With ``station.max_range_km`` set, each window is narrowed to where the slant
-    range is within it (passes never inside it are dropped).
+    A window is where the elevation is above the mask and, with
+    ``station.max_range_km`` set, the slant range is within it: a highly eccentric
+    pass can enter and leave range inside one elevation pass. Elevation and range
+    are sampled every ``step_s``; their extrema between samples are refined and
+    merged into the samples, so each function is monotonic between neighbours and
+    every crossing (a grazing pass shorter than the step included) is one sign
+    change, refined to ``tol_s``. ``step_s`` must be shorter than half the time
+    between a culmination and the next elevation minimum (over ten minutes for any
+    Earth orbit), which 120 s is. The culmination is the highest point and
+    ``min_range_km`` the least range inside each window.
     """
     validate_station(station)
     if t1_s - t0_s > MAX_SPAN_S:
         raise SearchRangeError(f"span of {(t1_s - t0_s) / 86400.0:.2f} days is over the 30-day limit", field="end")
-    f = elevation_function(traj, station, frames)
+    look = look_function(traj, station, frames)
+
+    def f_el(t_s: Vec) -> Vec:
+        return look(t_s)[0]
+
+    def f_near(t_s: Vec) -> Vec:
+        return -look(t_s)[1]
+
     t = time_grid(t0_s, t1_s, step_s)
-    g = f(t)
-    # Only culminations that can reach the mask are refined. Near a culmination an Earth
-    # satellite's elevation curves by at most ~2.5 deg within 60 s (a 200-km orbit seen
-    # at the horizon: (v / range)^2 t^2 / 2), so 15 deg below the mask at a 120-s step is safe.
-    margin_deg = max(5.0, 15.0 * (step_s / 120.0) ** 2)
-    # Culminations to 1 ms: elevation is flat there, so a finer time buys nothing.
-    t_max, g_max = _find_maxima_core(f, t, g, max(tol_s, 1e-3), floor=-margin_deg)
-    # Maxima at the ends of the span (a pass in progress at the start or end).
-    edges_t, edges_g = [], []
-    if g.size > 1 and g[0] > g[1]:
-        edges_t.append(t[0])
-        edges_g.append(g[0])
-    if g.size > 1 and g[-1] > g[-2]:
-        edges_t.append(t[-1])
-        edges_g.append(g[-1])
-    t_max = np.concatenate([t_max, edges_t])
-    g_max = np.concatenate([g_max, edges_g])
-    keep = g_max > 0.0
-    t_max, g_max = t_max[keep], g_max[keep]
-    order = np.argsort(t_max)
-    t_max, g_max = t_max[order], g_max[order]
+    g, rng = look(t)
+    # Every sampled maximum is refined (one or two an orbit, so cheap): near a high
+    # culmination elevation curves by tens of degrees within one step, so no margin
+    # below the mask is safe. A sampled minimum only matters if it is above the mask.
+    # Extrema to 1 ms: the function is flat there, so a finer time buys nothing.
+    ext_tol = max(tol_s, 1e-3)
+    every = np.ones(t.size, bool)
+    t_max, g_max = grid_extrema(f_el, t, g, every, ext_tol)
+    t_min, g_min = grid_extrema(lambda x: -f_el(x), t, -g, g > 0.0, ext_tol)
+    windows = positive_intervals(f_el, t, g, np.concatenate([t_max, t_min]), np.concatenate([g_max, -g_min]), tol_s)
+    # Range minima: for the least range in each window and for a range limit.
+    t_near, near = grid_extrema(f_near, t, -rng, every, ext_tol)
+    if station.max_range_km is not None and windows.start.size:
+        limit = station.max_range_km
 
-    # Grid minima bound each culmination; elevation is monotonic in between.
-    i_max = np.clip(np.searchsorted(t, t_max), 0, t.size - 1)
-    minima = np.flatnonzero((g[1:-1] <= g[:-2]) & (g[1:-1] < g[2:])) + 1
-    bounds = np.concatenate([[0], minima, [t.size - 1]])
-    k = np.searchsorted(minima, i_max)
-    lo_t, hi_t = t[bounds[k]], t[bounds[k + 1]]
-    n = t_max.size
-    ends = f(np.concatenate([lo_t, hi_t])) > 0.0 if n else np.zeros(0, bool)
-    rise_clipped, set_clipped = ends[:n], ends[n:]
-    # Narrow each bracket to the grid step where the elevation crosses the mask (for a
-    # grazing pass with no grid crossing, to the step beside the culmination), then refine
-    # rise and set of every pass together in one vectorised root search. An end still above
-    # the mask at the span's edge (clipped) has no crossing to refine.
-    idx = np.arange(t.size)
-    last_below = np.maximum.accumulate(np.where(g <= 0.0, idx, 0))
-    next_below = np.minimum.accumulate(np.where(g <= 0.0, idx, t.size - 1)[::-1])[::-1]
-    i_lo = np.maximum(last_below[i_max], bounds[k])
-    i_hi = np.minimum(next_below[np.minimum(i_max + 1, t.size - 1)], bounds[k + 1])
-    lo_all = np.concatenate([t[i_lo], np.maximum(t_max, t[np.maximum(i_hi - 1, 0)])])
-    hi_all = np.concatenate([np.minimum(t_max, t[np.minimum(i_lo + 1, t.size - 1)]), t[i_hi]])
-    lo_all = np.minimum(lo_all, hi_all)
-    open_end = ~ends if n else np.zeros(0, bool)
-    crossing = np.concatenate([lo_t, hi_t])
-    crossing[open_end] = bisect_roots(f, lo_all[open_end], hi_all[open_end], tol_s)
-    rise, sets = crossing[:n], crossing[n:]
+        def f_in(t_s: Vec) -> Vec:
+            return limit - look(t_s)[1]
 
-    if station.max_range_km is not None and rise.size:
-        rf = range_function(traj, station, frames, station.max_range_km)
-        inside = rf(t_max) > 0.0
-        rise, sets, t_max = rise[inside], sets[inside], t_max[inside]
-        rise_clipped, set_clipped = rise_clipped[inside], set_clipped[inside]
-        far_rise = rf(rise) < 0.0
-        far_set = rf(sets) < 0.0
-        rise = np.where(far_rise, bisect_roots(rf, rise, t_max, tol_s) if rise.size else rise, rise)
-        sets = np.where(far_set, bisect_roots(rf, t_max, sets, tol_s) if sets.size else sets, sets)
+        t_far, far = grid_extrema(lambda x: -f_in(x), t, rng - limit, limit - rng > 0.0, ext_tol)
+        in_range = positive_intervals(
+            f_in, t, limit - rng, np.concatenate([t_near, t_far]), np.concatenate([limit + near, -far]), tol_s
+        )
+        windows = intersect(windows, in_range)
+    return _describe(traj, station, frames, windows, t_max[g_max > 0.0], t_near)
 
-    return _describe(traj, station, frames, rise, t_max, sets, rise_clipped, set_clipped)
+
+def _inside(times: Vec, start: float, end: float) -> Vec:
+    return times[(times >= start) & (times <= end)]
 
 
 def _describe(
-    traj: Trajectory,
-    station: Station,
-    frames: EarthFrames,
-    rise: Vec,
-    culm: Vec,
-    sets: Vec,
-    rise_clipped: NDArray[np.bool_],
-    set_clipped: NDArray[np.bool_],
+    traj: Trajectory, station: Station, frames: EarthFrames, w: Intervals, t_peaks: Vec, t_near: Vec
 ) -> AccessWindows:
-    n = rise.size
+    n = w.start.size
     if n == 0:
         empty = np.empty(0)
         return AccessWindows(
             empty, empty, empty, empty, empty, empty, empty, empty, np.zeros(0, bool), np.zeros(0, bool)
         )
-    t_all = np.concatenate([rise, culm, sets])
+    # Each window's highest point and least range lie at an interior extremum or at an end.
+    look = look_function(traj, station, frames)
+    culm = np.empty(n)
+    nearest = np.empty(n)
+    for k in range(n):
+        s, e = float(w.start[k]), float(w.end[k])
+        cand = np.concatenate([[s, e], _inside(t_peaks, s, e)])
+        el, _ = look(cand)
+        culm[k] = cand[int(np.argmax(el))]
+        cand = np.concatenate([[s, e], _inside(t_near, s, e)])
+        _, rg = look(cand)
+        nearest[k] = float(rg.min())
+    t_all = np.concatenate([w.start, culm, w.end])
     r, _ = traj.state(t_all)
-    look = look_angles(r, t_all, station, frames)
+    angles = look_angles(r, t_all, station, frames)
     return AccessWindows(
-        rise_s=rise,
+        rise_s=w.start,
         culmination_s=culm,
-        set_s=sets,
-        max_elevation_deg=look.elevation_deg[n : 2 * n],
-        rise_azimuth_deg=look.azimuth_deg[:n],
-        culmination_azimuth_deg=look.azimuth_deg[n : 2 * n],
-        set_azimuth_deg=look.azimuth_deg[2 * n :],
-        min_range_km=look.range_km[n : 2 * n],
-        rise_clipped=np.asarray(rise_clipped, bool),
-        set_clipped=np.asarray(set_clipped, bool),
+        set_s=w.end,
+        max_elevation_deg=angles.elevation_deg[n : 2 * n],
+        rise_azimuth_deg=angles.azimuth_deg[:n],
+        culmination_azimuth_deg=angles.azimuth_deg[n : 2 * n],
+        set_azimuth_deg=angles.azimuth_deg[2 * n :],
+        min_range_km=nearest,
+        rise_clipped=np.asarray(w.start_clipped, bool),
+        set_clipped=np.asarray(w.end_clipped, bool),
     )
