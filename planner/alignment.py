@@ -93,6 +93,7 @@ class ObserverPlaneModel:
     e: float
     inclination_rad: float
     t_ref_s: float
+    pole: Vec | None = None  # the axis the node regresses about (GCRS unit vector); GCRS z if None
 
     def rate_change(self, dha_km: Vec | float, dhp_km: Vec | float) -> Vec:
         return raan_rate_change_rad_s(self.a_km, self.e, self.inclination_rad, dha_km, dhp_km)
@@ -104,7 +105,11 @@ class ObserverPlaneModel:
         n /= np.linalg.norm(n, axis=0)
         turn = np.asarray(rate_change_rad_s) * (np.atleast_1d(t_s) - self.t_ref_s)
         c, s = np.cos(turn), np.sin(turn)
-        return np.array([c * n[0] - s * n[1], s * n[0] + c * n[1], n[2]])
+        if self.pole is None:
+            return np.array([c * n[0] - s * n[1], s * n[0] + c * n[1], n[2]])
+        # Rodrigues' rotation of n about the pole by the extra nodal turn.
+        p = np.asarray(self.pole, float)[:, None]
+        return c * n + s * np.cross(p, n, axis=0) + (1.0 - c) * p * (p * n).sum(axis=0)
 
 
 @dataclass(frozen=True, slots=True)

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from planner.constants import MU_EARTH_KM3_S2
 from planner.errors import LambertError, PlannerError
 from planner.lambert import lambert, max_revolutions
-from planner.propagation import Trajectory, propagate_j2
+from planner.propagation import Pole, Trajectory, propagate_j2
 
 Vec = NDArray[np.float64]
 
@@ -89,8 +89,12 @@ def phase(
     t_earliest_burn_s: float = 0.0,
     tol_km: float = 1e-3,
     max_corrections: int = 8,
+    pole: Pole | None = None,
 ) -> Phasing:
     """Plan the phasing burn for the cheapest of ``revolutions_before`` and verify it numerically.
+
+    The verification integrates two-body + J2 about ``pole`` (the Earth's axis of date;
+    GCRS z if None) from the burn to ``t_access_s``.
 
     Raises PlannerError if every option would burn before ``t_earliest_burn_s``.
     """
@@ -116,14 +120,14 @@ def phase(
     _, k, t_burn, r1, v1, v_dep, m, low = min(options, key=lambda o: o[0])
     tof = t_access_s - t_burn
     aim = r2.copy()
-    r_end, v_end = propagate_j2(r1, v_dep, tof)
+    r_end, v_end = propagate_j2(r1, v_dep, t_burn, t_access_s, pole)
     two_body_miss = float(np.linalg.norm(r_end - r2))
     corrections = 0
     h = np.cross(r1, v1)
     while np.linalg.norm(r_end - r2) > tol_km and corrections < max_corrections:
         aim = aim + (r2 - r_end)
         v_dep = lambert(r1, aim, tof, m, low, prograde_normal=h).v1_km_s
-        r_end, v_end = propagate_j2(r1, v_dep, tof)
+        r_end, v_end = propagate_j2(r1, v_dep, t_burn, t_access_s, pole)
         corrections += 1
     dv = v_dep - v1
     return Phasing(

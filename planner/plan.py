@@ -25,11 +25,13 @@ from planner.manoeuvre import Phasing, phase
 from planner.propagation import (
     EarthFrames,
     NumericalJ2Trajectory,
+    Pole,
     SecularJ2Trajectory,
     SGP4Trajectory,
     Station,
     Trajectory,
     as_utc,
+    pole_of_date,
     seconds_between,
 )
 from planner.search import bisect_roots
@@ -140,13 +142,16 @@ class Plan:
     station: Station | None = None
 
 
-def _target_trajectory(orbit: Orbit, epoch: datetime, frames: EarthFrames, t1_s: float, reading: Reading) -> Trajectory:
+def _target_trajectory(
+    orbit: Orbit, epoch: datetime, frames: EarthFrames, t1_s: float, reading: Reading, pole: Pole | None = None
+) -> Trajectory:
     if orbit.tle is not None:
         return SGP4Trajectory(orbit.tle, epoch, frames)
     assert orbit.elements is not None
+    pole = pole or pole_of_date(epoch, min(0.0, seconds_between(epoch, orbit.epoch)), t1_s)
     if reading == "mean":
-        return SecularJ2Trajectory(orbit.elements, epoch)
-    return NumericalJ2Trajectory.from_elements(orbit.elements, epoch, 0.0, t1_s)
+        return SecularJ2Trajectory(orbit.elements, epoch, pole)
+    return NumericalJ2Trajectory.from_elements(orbit.elements, epoch, 0.0, t1_s, pole)
 
 
 def _observer_elements(orbit: Orbit, epoch: datetime, frames: EarthFrames) -> Elements:
@@ -168,11 +173,12 @@ def _observer_elements(orbit: Orbit, epoch: datetime, frames: EarthFrames) -> El
 
 
 def _observer_trajectory(
-    elements: Elements, epoch: datetime, t1_s: float, reading: Reading, tle_based: bool
+    elements: Elements, epoch: datetime, t1_s: float, reading: Reading, tle_based: bool, pole: Pole | None = None
 ) -> Trajectory:
+    pole = pole or pole_of_date(epoch, min(0.0, seconds_between(epoch, elements.epoch)), t1_s)
     if reading == "mean" and not tle_based:
-        return SecularJ2Trajectory(elements, epoch)
-    return NumericalJ2Trajectory.from_elements(elements, epoch, 0.0, t1_s)
+        return SecularJ2Trajectory(elements, epoch, pole)
+    return NumericalJ2Trajectory.from_elements(elements, epoch, 0.0, t1_s, pole)
 
 
 def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOptions | None = None) -> Plan:
@@ -195,10 +201,13 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
     epoch = as_utc(opts.start) if opts.start is not None else target.epoch
     t1 = opts.duration_s
     frames = EarthFrames(epoch, -3600.0, t1 + 3600.0)
-    tgt = _target_trajectory(target, epoch, frames, t1, opts.reading)
     obs_el = _observer_elements(observer, epoch, frames)
+    # One pole of date for the plan: J2 acts about it in every propagation and verification.
+    t_first = min(0.0, seconds_between(epoch, obs_el.epoch), seconds_between(epoch, target.epoch))
+    pole = pole_of_date(epoch, t_first, t1)
+    tgt = _target_trajectory(target, epoch, frames, t1, opts.reading, pole)
     tle_obs = observer.tle is not None
-    obs_base = _observer_trajectory(obs_el, epoch, t1, opts.reading, tle_obs)
+    obs_base = _observer_trajectory(obs_el, epoch, t1, opts.reading, tle_obs, pole)
     t_ref = 0.0 if tle_obs else seconds_between(epoch, obs_el.epoch)
     timings["propagation"] = time.perf_counter() - clock
 
@@ -208,7 +217,7 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
 
     clock = time.perf_counter()
     a, e, i = obs_el.a_km, obs_el.e, math.radians(obs_el.inclination_deg)
-    model = ObserverPlaneModel(obs_base, a, e, i, t_ref)
+    model = ObserverPlaneModel(obs_base, a, e, i, t_ref, pole.at(max(0.0, t_ref)))
     candidates = align_nodes(tgt, model, windows, opts.box, opts.sample_s, opts.max_miss_km)
     timings["alignment"] = time.perf_counter() - clock
 
@@ -238,16 +247,16 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
         cache: dict[tuple[float, float], Trajectory] = {}
         pool = [k for k in order if lit[k]] or order
         costs = {
-            k: _phasing_cost_km_s(candidates[k], obs_el, epoch, t1, opts, tgt, tle_obs, model, cache) for k in pool
+            k: _phasing_cost_km_s(candidates[k], obs_el, epoch, t1, opts, tgt, tle_obs, model, cache, pole) for k in pool
         }
         order = sorted(pool, key=lambda k: costs[k]) + [k for k in order if k not in costs]
     for k in order:
         cand = candidates[k]
         changed = obs_el.with_heights(cand.delta_ha_km, cand.delta_hp_km)
-        obs_new = _observer_trajectory(changed, epoch, t1, opts.reading, tle_obs)
+        obs_new = _observer_trajectory(changed, epoch, t1, opts.reading, tle_obs, pole)
         t_access, miss1 = _refine_crossing(tgt, obs_new, windows, cand)
         try:
-            ph = phase(obs_new, tgt, t_access, opts.revolutions_before, t_earliest_burn_s=max(0.0, t_ref))
+            ph = phase(obs_new, tgt, t_access, opts.revolutions_before, t_earliest_burn_s=max(0.0, t_ref), pole=pole)
         except PlannerError as exc:
             notes.append(f"candidate {k} skipped: {exc}")
             continue
@@ -332,15 +341,22 @@ def _phasing_cost_km_s(
     tle_obs: bool,
     model: ObserverPlaneModel,
     cache: dict[tuple[float, float], Trajectory],
+    pole: Pole,
 ) -> float:
     """Return the two-body estimate of a candidate's total Delta-v (height change + phasing), km/s."""
     key = (cand.delta_ha_km, cand.delta_hp_km)
     if key not in cache:
         changed = obs_el.with_heights(*key)
-        cache[key] = _observer_trajectory(changed, epoch, t1, opts.reading, tle_obs)
+        cache[key] = _observer_trajectory(changed, epoch, t1, opts.reading, tle_obs, pole)
     try:
         ph = phase(
-            cache[key], tgt, cand.t_access_s, opts.revolutions_before, max(0.0, model.t_ref_s), max_corrections=0
+            cache[key],
+            tgt,
+            cand.t_access_s,
+            opts.revolutions_before,
+            max(0.0, model.t_ref_s),
+            max_corrections=0,
+            pole=pole,
         )
     except PlannerError:
         return math.inf

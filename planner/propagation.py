@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from planner.constants import DAY_S, F_EARTH, J2, MU_EARTH_KM3_S2, OMEGA_EARTH_RAD_S, R_EARTH_KM
-from planner.elements import Elements, elements_to_state, secular_state
+from planner.elements import Elements, elements_to_state, secular_state, state_to_elements
 from planner.errors import PlannerError
 from planner.tle import TLE
 
@@ -99,6 +99,39 @@ def _rot_z(angle: Vec) -> Vec:
 def mxv(m: Vec, v: Vec) -> Vec:
     """Multiply matrices (3, 3, ...) by vectors (3, ...), broadcasting over the trailing axes."""
     return np.einsum("ij...,j...->i...", m, v)
+
+
+@dataclass(frozen=True, slots=True)
+class Pole:
+    """The Earth's rotation pole (CIP) in GCRS, a unit vector as a quadratic in time.
+
+    ``p(t) = c[:, 0] + c[:, 1] dt + c[:, 2] dt^2`` with ``dt = t_s - t_mid_s``. The
+    pole moves by precession (~20 arcsec a year) and nutation (9 arcsec over 18.6
+    years, 0.6 arcsec semi-annual, 0.1 arcsec fortnightly); a quadratic over a span
+    of up to 40 days leaves the fortnightly terms, under 1e-6 rad
+    (tests/planner/test_propagation.py). J2 is applied about this axis: the GCRS z
+    axis is 0.1355 deg from it in 2024, which moves a planned burn by 20-37 km.
+    """
+
+    t_mid_s: float
+    c: Vec
+
+    def at(self, t_s: ArrayLike) -> Vec:
+        """Return the pole's GCRS unit vector, shape (3,) for a scalar time or (3, N)."""
+        dt = np.asarray(t_s, float) - self.t_mid_s
+        p = self.c[:, 0, None] + dt.reshape(-1) * (self.c[:, 1, None] + dt.reshape(-1) * self.c[:, 2, None])
+        p = p / np.linalg.norm(p, axis=0)
+        return p[:, 0] if np.ndim(t_s) == 0 else p
+
+
+def pole_of_date(epoch: datetime, t0_s: float, t1_s: float) -> Pole:
+    """Fit the CIP's GCRS direction over ``[t0_s, t1_s]`` seconds after ``epoch`` (skyfield's IAU 2000A M)."""
+    t_mid = 0.5 * (t0_s + t1_s)
+    half = max(0.5 * (t1_s - t0_s), 3600.0)
+    grid = t_mid + half * np.cos(np.linspace(math.pi, 0.0, 25))  # Chebyshev nodes: a uniform error
+    pole = skyfield_times(epoch, grid).M[2]  # third row of GCRS-to-true-of-date: the pole in GCRS
+    coeffs = np.array([np.polyfit(grid - t_mid, pole[k], 2)[::-1] for k in range(3)])
+    return Pole(t_mid, coeffs)
 
 
 class EarthFrames:
@@ -198,43 +231,88 @@ class Station:
         return np.array([[-so, co, 0.0], [-sl * co, -sl * so, cl], [cl * co, cl * so, sl]])
 
 
-class SecularJ2Trajectory:
-    """Mean elements propagated with the J2 secular rates; ``t_s`` counts from ``plan_epoch``."""
+def pole_frame(pole: Vec) -> Vec:
+    """Return a rotation (3, 3) whose rows are GCRS axes x', y', z' with z' along ``pole``."""
+    z = np.asarray(pole, float) / np.linalg.norm(pole)
+    x = np.cross([0.0, 1.0, 0.0], z)
+    x /= np.linalg.norm(x)
+    return np.array([x, np.cross(z, x), z])
 
-    def __init__(self, elements: Elements, plan_epoch: datetime) -> None:
+
+class SecularJ2Trajectory:
+    """Mean elements propagated with the J2 secular rates; ``t_s`` counts from ``plan_epoch``.
+
+    The node and perigee drift about ``pole`` (the Earth's axis, fixed at the middle of
+    its fit; GCRS z if None): the elements, given in GCRS, are re-expressed about it,
+    which rotates the conic and leaves a, e and M as they are.
+    """
+
+    def __init__(self, elements: Elements, plan_epoch: datetime, pole: Pole | None = None) -> None:
         self.elements = elements
         self.offset_s = seconds_between(elements.epoch, plan_epoch)
-        self._rad = elements.radians()
+        self._rot = None if pole is None else pole_frame(pole.at(pole.t_mid_s))
+        rad = elements.radians()
+        if self._rot is not None:
+            r0, v0 = elements_to_state(*rad)
+            rad = tuple(float(x) for x in state_to_elements(self._rot @ r0, self._rot @ v0))  # type: ignore[assignment]
+        self._rad = rad
 
     def state(self, t_s: ArrayLike) -> tuple[Vec, Vec]:
         t = np.atleast_1d(np.asarray(t_s, float)) + self.offset_s
-        return secular_state(self._rad, t)
+        r, v = secular_state(self._rad, t)
+        if self._rot is None:
+            return r, v
+        return self._rot.T @ r, self._rot.T @ v
 
 
-def j2_acceleration(r_km: Vec) -> Vec:
-    """Return two-body plus J2 acceleration (km/s^2) at positions of shape (3,) or (3, N)."""
-    x, y, z = r_km
-    r2 = x * x + y * y + z * z
+def j2_acceleration(r_km: Vec, pole: Vec | None = None) -> Vec:
+    """Return two-body plus J2 acceleration (km/s^2) at positions of shape (3,) or (3, N).
+
+    J2 acts about ``pole`` (a unit vector, (3,) or (3, N), GCRS): the Earth's axis of
+    date. Without it, about the GCRS z axis. In vector form the J2 term is
+    ``f [(5 z^2 / r^2 - 1) r - 2 z p]`` with ``z = p . r``.
+    """
+    r_km = np.asarray(r_km, float)
+    p = np.array([0.0, 0.0, 1.0]) if pole is None else np.asarray(pole, float)
+    if r_km.ndim == 2 and p.ndim == 1:
+        p = p[:, None]
+    r2 = (r_km * r_km).sum(axis=0)
     r = np.sqrt(r2)
     k = -MU_EARTH_KM3_S2 / (r2 * r)
     f = 1.5 * J2 * MU_EARTH_KM3_S2 * R_EARTH_KM**2 / (r2 * r2 * r)
-    zr = 5.0 * z * z / r2
-    return np.array([k * x + f * x * (zr - 1.0), k * y + f * y * (zr - 1.0), k * z + f * z * (zr - 3.0)])
+    z = (p * r_km).sum(axis=0)
+    return k * r_km + f * ((5.0 * z * z / r2 - 1.0) * r_km - 2.0 * z * p)
 
 
 _F = 1.5 * J2 * MU_EARTH_KM3_S2 * R_EARTH_KM**2
 
 
-def _j2_rhs(_t: float, y: list[float]) -> tuple[float, ...]:
+def _j2_rhs(pole: Pole | None):  # type: ignore[no-untyped-def]
+    """Return the right-hand side ``f(t, y)`` of two-body + J2 about ``pole`` (GCRS z if None)."""
     # Scalar maths on purpose: for a 6-vector, math beats numpy by ~5x per call, and the
-    # call count (~10^5 for 10 days) dominates the run time (design/propagator_speed.md).
-    x, yy, z, vx, vy, vz = y
-    r2 = x * x + yy * yy + z * z
-    r = math.sqrt(r2)
-    k = -MU_EARTH_KM3_S2 / (r2 * r)
-    f = _F / (r2 * r2 * r)
-    zr = 5.0 * z * z / r2
-    return (vx, vy, vz, k * x + f * x * (zr - 1.0), k * yy + f * yy * (zr - 1.0), k * z + f * z * (zr - 3.0))
+    # call count (~10^5 for 10 days) dominates the run time.
+    if pole is None:
+        (a0, b0, c0), (a1, b1, c1), (a2, b2, c2), tm = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (1.0, 0.0, 0.0), 0.0
+    else:
+        (a0, b0, c0), (a1, b1, c1), (a2, b2, c2) = (tuple(float(x) for x in row) for row in pole.c)
+        tm = pole.t_mid_s
+
+    def rhs(t: float, y: list[float]) -> tuple[float, ...]:
+        x, yy, z, vx, vy, vz = y
+        dt = t - tm
+        px, py, pz = a0 + dt * (b0 + dt * c0), a1 + dt * (b1 + dt * c1), a2 + dt * (b2 + dt * c2)
+        r2 = x * x + yy * yy + z * z
+        r = math.sqrt(r2)
+        k = -MU_EARTH_KM3_S2 / (r2 * r)
+        f = _F / (r2 * r2 * r)
+        inv = 1.0 / math.sqrt(px * px + py * py + pz * pz)
+        px, py, pz = px * inv, py * inv, pz * inv
+        zp = px * x + py * yy + pz * z
+        q = 5.0 * zp * zp / r2 - 1.0
+        n = 2.0 * zp
+        return (vx, vy, vz, k * x + f * (q * x - n * px), k * yy + f * (q * yy - n * py), k * z + f * (q * z - n * pz))
+
+    return rhs
 
 
 class NumericalJ2Trajectory:
@@ -248,7 +326,15 @@ class NumericalJ2Trajectory:
     velocity and acceleration, accurate to well under a metre.
     """
 
-    def __init__(self, r0_km: ArrayLike, v0_km_s: ArrayLike, t0_s: float, t1_s: float, rtol: float = 1e-10) -> None:
+    def __init__(
+        self,
+        r0_km: ArrayLike,
+        v0_km_s: ArrayLike,
+        t0_s: float,
+        t1_s: float,
+        rtol: float = 1e-10,
+        pole: Pole | None = None,
+    ) -> None:
         from scipy.integrate import ode
 
         if not (math.isfinite(t0_s) and math.isfinite(t1_s)):
@@ -266,7 +352,7 @@ class NumericalJ2Trajectory:
         if t1_s == t0_s:
             steps_t, steps_y = [t0_s, t0_s + 1e-9], [y0, y0]
         else:
-            solver = ode(_j2_rhs).set_integrator("dop853", rtol=rtol, atol=rtol * 1e-2, nsteps=10**7)
+            solver = ode(_j2_rhs(pole)).set_integrator("dop853", rtol=rtol, atol=rtol * 1e-2, nsteps=10**7)
             solver.set_solout(solout)
             solver.set_initial_value(y0, t0_s)
             solver.integrate(t1_s)
@@ -278,19 +364,27 @@ class NumericalJ2Trajectory:
         self._t = t[order]
         self._r = y[:3, order]
         self._v = y[3:, order]
-        self._a = j2_acceleration(self._r)
+        self.pole = pole
+        self._a = j2_acceleration(self._r, None if pole is None else pole.at(self._t))
 
     @classmethod
-    def from_elements(cls, elements: Elements, plan_epoch: datetime, t0_s: float, t1_s: float) -> NumericalJ2Trajectory:
-        """Integrate osculating ``elements`` over ``[t0_s, t1_s]`` seconds after ``plan_epoch``."""
+    def from_elements(
+        cls, elements: Elements, plan_epoch: datetime, t0_s: float, t1_s: float, pole: Pole | None = None
+    ) -> NumericalJ2Trajectory:
+        """Integrate osculating ``elements`` over ``[t0_s, t1_s]`` seconds after ``plan_epoch``.
+
+        J2 acts about ``pole``; by default the pole of date fitted over the integrated span.
+        """
         r0, v0 = elements_to_state(*elements.radians())
         offset = seconds_between(plan_epoch, elements.epoch)
         lo, hi = min(t0_s, offset), max(t1_s, offset)
+        if pole is None:
+            pole = pole_of_date(plan_epoch, lo, hi)
         # Integrate forward and backward from the element epoch to cover the span.
-        fwd = cls(r0, v0, offset, hi) if hi > offset else None
-        bwd = cls(r0, v0, offset, lo) if lo < offset else None
+        fwd = cls(r0, v0, offset, hi, pole=pole) if hi > offset else None
+        bwd = cls(r0, v0, offset, lo, pole=pole) if lo < offset else None
         if fwd is None and bwd is None:
-            return cls(r0, v0, offset, offset)
+            return cls(r0, v0, offset, offset, pole=pole)
         if bwd is None:
             assert fwd is not None
             return fwd
@@ -308,6 +402,7 @@ class NumericalJ2Trajectory:
         joined._r = np.concatenate([other._r, self._r], axis=1)[:, idx]
         joined._v = np.concatenate([other._v, self._v], axis=1)[:, idx]
         joined._a = np.concatenate([other._a, self._a], axis=1)[:, idx]
+        joined.pole = self.pole
         joined.t0_s, joined.t1_s = float(joined._t[0]), float(joined._t[-1])
         return joined
 
@@ -344,10 +439,12 @@ class NumericalJ2Trajectory:
         return r, v
 
 
-def propagate_j2(r0_km: ArrayLike, v0_km_s: ArrayLike, dt_s: float) -> tuple[Vec, Vec]:
-    """Return the two-body + J2 state ``dt_s`` seconds after ``(r0, v0)`` (shape (3,))."""
-    traj = NumericalJ2Trajectory(r0_km, v0_km_s, 0.0, dt_s)
-    r, v = traj.state(dt_s)
+def propagate_j2(
+    r0_km: ArrayLike, v0_km_s: ArrayLike, t0_s: float, t1_s: float, pole: Pole | None = None
+) -> tuple[Vec, Vec]:
+    """Return the two-body + J2 state at ``t1_s`` from ``(r0, v0)`` at ``t0_s`` (shape (3,)); J2 about ``pole``."""
+    traj = NumericalJ2Trajectory(r0_km, v0_km_s, t0_s, t1_s, pole=pole)
+    r, v = traj.state(t1_s)
     return r[:, 0], v[:, 0]
 
 

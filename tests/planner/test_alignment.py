@@ -15,7 +15,13 @@ from planner.alignment import (
     plane_crossing_function,
 )
 from planner.errors import SearchRangeError
-from planner.propagation import EarthFrames, NumericalJ2Trajectory, SecularJ2Trajectory, seconds_between
+from planner.propagation import (
+    EarthFrames,
+    NumericalJ2Trajectory,
+    SecularJ2Trajectory,
+    pole_of_date,
+    seconds_between,
+)
 from planner.search import bisect_roots
 from tests.utils.orbits import PAPER_EPOCH, PAPER_OBSERVER, PAPER_STATION, PAPER_TARGET
 
@@ -33,7 +39,8 @@ def _scene(reading):
     else:
         tgt = SecularJ2Trajectory(PAPER_TARGET, PAPER_EPOCH)
         obs = SecularJ2Trajectory(PAPER_OBSERVER, PAPER_EPOCH)
-    model = ObserverPlaneModel(obs, PAPER_OBSERVER.a_km, PAPER_OBSERVER.e, math.radians(99.0), 0.0)
+    pole = pole_of_date(PAPER_EPOCH, 0.0, SPAN_S).at(0.0)
+    model = ObserverPlaneModel(obs, PAPER_OBSERVER.a_km, PAPER_OBSERVER.e, math.radians(99.0), 0.0, pole)
     windows = access_windows(tgt, PAPER_STATION, frames, 0.0, SPAN_S)
     return tgt, model, windows
 
@@ -54,14 +61,15 @@ def _crossing_near(g, t_s, half_width_s=120.0):
 
 
 def test_paper_example_3_3(osculating):
-    """Table 1 as osculating elements, numerical J2, 0 deg mask: the paper's (19, 29.3) km aligns
-    the node line on the target in the paper's pass, 6.5 s after its 11:28:29."""
+    """Table 1 as osculating elements, numerical J2 about the pole of date, 0 deg mask: the paper's
+    (19, 29.3) km aligns the node line on the target in the paper's pass, 11.1 s after its 11:28:29
+    (6.5 s with J2 about the GCRS z axis, 0.1355 deg from the pole)."""
     tgt, model, windows, candidates = osculating
     t_paper = seconds_between(PAPER_EPOCH, PAPER_T_ACCESS)
     k = int(np.flatnonzero((windows.rise_s <= t_paper) & (windows.set_s >= t_paper))[0])
     q = float(model.rate_change(PAPER_DHA_KM, PAPER_DHP_KM))
     t_model = _crossing_near(plane_crossing_function(tgt, model, q), t_paper)
-    assert 5.0 < t_model - t_paper < 8.0
+    assert 10.0 < t_model - t_paper < 12.5
 
     # The same with the changed observer propagated on its own (no sensitivity model).
     changed = NumericalJ2Trajectory.from_elements(
@@ -75,7 +83,7 @@ def test_paper_example_3_3(osculating):
 
     t_true = _crossing_near(g, t_paper)
     assert abs(t_true - t_model) < 0.5
-    assert abs(t_true - t_paper) < 10.0
+    assert abs(t_true - t_paper) < 15.0
 
     # The search offers this pass, and the paper's moment of alignment lies in its reachable span.
     ours = [c for c in candidates if c.pass_index == k]
