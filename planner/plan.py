@@ -31,6 +31,7 @@ from planner.propagation import (
     Station,
     Trajectory,
     as_utc,
+    earth_orientation_note,
     pole_of_date,
     seconds_between,
 )
@@ -201,6 +202,9 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
     epoch = as_utc(opts.start) if opts.start is not None else target.epoch
     t1 = opts.duration_s
     frames = EarthFrames(epoch, -3600.0, t1 + 3600.0)
+    eop_note = earth_orientation_note(epoch, 0.0, t1)
+    if eop_note:
+        notes.append(eop_note)
     obs_el = _observer_elements(observer, epoch, frames)
     # One pole of date for the plan: J2 acts about it in every propagation and verification.
     t_first = min(0.0, seconds_between(epoch, obs_el.epoch), seconds_between(epoch, target.epoch))
@@ -247,7 +251,8 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
         cache: dict[tuple[float, float], Trajectory] = {}
         pool = [k for k in order if lit[k]] or order
         costs = {
-            k: _phasing_cost_km_s(candidates[k], obs_el, epoch, t1, opts, tgt, tle_obs, model, cache, pole) for k in pool
+            k: _phasing_cost_km_s(candidates[k], obs_el, epoch, t1, opts, tgt, tle_obs, model, cache, pole)
+            for k in pool
         }
         order = sorted(pool, key=lambda k: costs[k]) + [k for k in order if k not in costs]
     for k in order:

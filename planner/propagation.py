@@ -19,7 +19,7 @@ import math
 import os
 import warnings
 from dataclasses import dataclass
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 from functools import lru_cache
 from typing import Any, Protocol
 
@@ -42,21 +42,60 @@ class Trajectory(Protocol):
     def state(self, t_s: ArrayLike) -> tuple[Vec, Vec]: ...
 
 
+def _skyfield_data_path(name: str) -> str:
+    import skyfield_data
+
+    return os.path.join(os.path.dirname(skyfield_data.__file__), "data", name)
+
+
 @lru_cache(maxsize=1)
 def timescale() -> Any:
-    """Return skyfield's timescale with its built-in leap-second and Delta-T tables (no download)."""
-    from skyfield.api import load
+    """Return skyfield's timescale with its built-in tables and IERS polar motion (no download).
 
-    return load.timescale(builtin=True)
+    UT1-UTC and leap seconds are skyfield's built-in tables (daily from 1973 to its
+    predictions' end, 2027-01-23 for skyfield 1.55; beyond that skyfield's long-term
+    Delta-T model). Polar motion comes from the IERS ``finals2000A.all`` that the
+    skyfield-data package ships (1973-01-02 to its predictions' end, 2026-08-29 for
+    skyfield-data 7.0.0); outside those dates skyfield holds the nearest tabulated
+    pole (an error of up to ~0.5 arcsec, ~15 m at the surface), and a plan says so in
+    its notes (``earth_orientation_note``).
+    """
+    from skyfield.api import load
+    from skyfield.data import iers
+
+    ts = load.timescale(builtin=True)
+    with open(_skyfield_data_path("finals2000A.all"), "rb") as f:
+        finals = iers.parse_x_y_dut1_from_finals_all(f)
+    iers.install_polar_motion_table(ts, finals)
+    return ts
+
+
+def polar_motion_coverage() -> tuple[datetime, datetime]:
+    """Return the first and last UTC moments of the polar-motion table (IERS finals2000A.all)."""
+    tt = timescale().polar_motion_table[0]
+    first, last = timescale().tt_jd(np.array([tt[0], tt[-1]])).utc_datetime()
+    return first, last
+
+
+def earth_orientation_note(epoch: datetime, t0_s: float, t1_s: float) -> str | None:
+    """Return a note when ``[t0_s, t1_s]`` after ``epoch`` leaves the polar-motion table, else None."""
+    first, last = polar_motion_coverage()
+    lo, hi = as_utc(epoch) + timedelta(seconds=t0_s), as_utc(epoch) + timedelta(seconds=t1_s)
+    if first <= lo and hi <= last:
+        return None
+    return (
+        f"polar motion is tabulated from {first:%Y-%m-%d} to {last:%Y-%m-%d} (IERS finals2000A.all in "
+        "skyfield-data); outside that the nearest tabulated pole is held, worth up to ~15 m at the station "
+        "and ~15 ms on the times of grazing passes"
+    )
 
 
 @lru_cache(maxsize=1)
 def ephemeris() -> Any:
     """Return the de421 ephemeris shipped by the skyfield-data package (no download)."""
-    import skyfield_data
     from skyfield.api import Loader
 
-    path = os.path.join(os.path.dirname(skyfield_data.__file__), "data")
+    path = os.path.dirname(_skyfield_data_path("de421.bsp"))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         return Loader(path, verbose=False)("de421.bsp")
@@ -141,8 +180,9 @@ class EarthFrames:
     changes slowly, so it is sampled every 6 hours and interpolated by cubic splines;
     GAST is Earth rotation plus a slowly varying part, which is interpolated the same
     way (within 1e-9 rad of skyfield, tests/planner/test_propagation.py). Sampling is
-    what costs: skyfield's IAU 2000A nutation is ~50 us a time. Polar motion is not
-    modelled (skyfield's built-in timescale has no table): <= 15 m at the surface.
+    what costs: skyfield's IAU 2000A nutation is ~50 us a time. Polar motion W (IERS
+    x, y and the TIO locator s') is applied last, ITRS = W Rz(-GAST) M, as skyfield's
+    own ``itrs`` frame does; it changes by milliarcseconds a day, so the same spline serves.
     """
 
     def __init__(self, epoch: datetime, t0_s: float, t1_s: float) -> None:
@@ -156,8 +196,10 @@ class EarthFrames:
         gast_rad = np.unwrap(t.gast * (2.0 * math.pi / 24.0))
         self._gast0 = float(gast_rad[0])
         residual = gast_rad - self._gast0 - OMEGA_EARTH_RAD_S * (self.grid_s - self.grid_s[0])
-        # Columns 0-8: precession-nutation M (GCRS to true of date); 9: the GAST residual.
-        self._earth = CubicSpline(self.grid_s, np.vstack([t.M.reshape(9, n), residual]).T)
+        # Columns 0-8: precession-nutation M (GCRS to true of date); 9: the GAST residual;
+        # 10-18: polar motion W (true of date, rotated by GAST, to ITRS).
+        w = t.polar_motion_matrix().reshape(9, n)
+        self._earth = CubicSpline(self.grid_s, np.vstack([t.M.reshape(9, n), residual, w]).T)
         self._teme = CubicSpline(self.grid_s, TEME.rotation_at(t).reshape(9, n).T)  # GCRS to TEME
 
     def _check(self, t_s: ArrayLike) -> Vec:
@@ -166,20 +208,17 @@ class EarthFrames:
             raise PlannerError(f"time {t.min()}..{t.max()} s is outside the frame span", field="t_s")
         return t
 
-    def _m_and_gast(self, t: Vec) -> tuple[Vec, Vec]:
+    def _m_gast_w(self, t: Vec) -> tuple[Vec, Vec, Vec]:
         cols = self._earth(t)
         gast = self._gast0 + OMEGA_EARTH_RAD_S * (t - self.grid_s[0]) + cols[:, 9]
-        return cols[:, :9].T.reshape(3, 3, t.size), gast
-
-    def gast_rad(self, t_s: ArrayLike) -> Vec:
-        """Return Greenwich apparent sidereal time (rad, unwrapped) at ``t_s``."""
-        return self._m_and_gast(self._check(t_s))[1]
+        return cols[:, :9].T.reshape(3, 3, t.size), gast, cols[:, 10:].T.reshape(3, 3, t.size)
 
     def gcrs_to_itrs(self, t_s: ArrayLike) -> Vec:
         """Return rotation matrices (3, 3, N) taking GCRS vectors to ITRS."""
         t = self._check(t_s)
-        m, gast = self._m_and_gast(t)
-        return np.einsum("ij...,jk...->ik...", _rot_z(-gast), m)
+        m, gast, w = self._m_gast_w(t)
+        r = np.einsum("ij...,jk...->ik...", _rot_z(-gast), m)
+        return np.einsum("ij...,jk...->ik...", w, r)
 
     def to_itrs(self, t_s: ArrayLike, r_gcrs_km: Vec) -> Vec:
         """Rotate GCRS vectors (3, N) at ``t_s`` into ITRS.
@@ -189,10 +228,10 @@ class EarthFrames:
         search calls this thousands of times a plan).
         """
         t = self._check(t_s)
-        m, gast = self._m_and_gast(t)
+        m, gast, w = self._m_gast_w(t)
         tod = mxv(m, r_gcrs_km)
         c, s = np.cos(gast), np.sin(gast)
-        return np.array([c * tod[0] + s * tod[1], c * tod[1] - s * tod[0], tod[2]])
+        return mxv(w, np.array([c * tod[0] + s * tod[1], c * tod[1] - s * tod[0], tod[2]]))
 
     def teme_to_gcrs(self, t_s: ArrayLike) -> Vec:
         """Return rotation matrices (3, 3, N) taking TEME vectors to GCRS."""

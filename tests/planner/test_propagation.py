@@ -10,6 +10,7 @@ from planner.propagation import (
     EarthFrames,
     NumericalJ2Trajectory,
     SGP4Trajectory,
+    earth_orientation_note,
     j2_acceleration,
     pole_frame,
     pole_of_date,
@@ -122,3 +123,46 @@ def test_j2_acceleration_about_a_pole_is_the_rotated_z_formula():
     ours = j2_acceleration(r, rot[2])
     ref = rot.T @ j2_acceleration(rot @ r)
     np.testing.assert_allclose(ours, ref, rtol=1e-12, atol=1e-18)
+
+
+def test_polar_motion_from_the_iers_table():
+    """ITRS includes polar motion: our rotation equals skyfield's rotation without it, times W built here
+    from x, y read straight from the IERS file (IERS Conventions 2010, eq. 5.3, s' neglected: 0.05 mas)."""
+    import os
+
+    import skyfield_data
+
+    path = os.path.join(os.path.dirname(skyfield_data.__file__), "data", "finals2000A.all")
+    mjd, x_as, y_as = [], [], []
+    with open(path) as f:
+        for line in f:
+            # Columns 8-15 MJD, 19-27 x (arcsec), 38-46 y (arcsec); the IERS readme's fixed format.
+            if len(line) > 46 and line[18:27].strip() and line[37:46].strip():
+                mjd.append(float(line[7:15]))
+                x_as.append(float(line[18:27]))
+                y_as.append(float(line[37:46]))
+    t = np.linspace(0.0, 7 * 86400.0, 15)
+    frames = EarthFrames(ISS_EPOCH, 0.0, 7 * 86400.0)
+    times = skyfield_times(ISS_EPOCH, t)
+    utc_mjd = times.ut1 - 2400000.5  # UT1 and UTC differ by < 1 s: nothing at a daily table's scale
+    asec = np.pi / 180.0 / 3600.0
+    xp = np.interp(utc_mjd, mjd, x_as) * asec
+    yp = np.interp(utc_mjd, mjd, y_as) * asec
+    no_pm = np.einsum("ij...,jk...->ik...", _rot_z_test(-times.gast * np.pi / 12.0), times.M)
+    for k in range(t.size):
+        w = np.array([[1.0, 0.0, xp[k]], [0.0, 1.0, -yp[k]], [-xp[k], yp[k], 1.0]])  # small angles
+        expected = w @ no_pm[:, :, k]
+        assert np.abs(frames.gcrs_to_itrs(t[k : k + 1])[:, :, 0] - expected).max() < 2e-9
+    # Polar motion is on: without it a site would be metres off.
+    assert np.abs(frames.gcrs_to_itrs(t) - no_pm).max() * 6378e3 > 3.0
+
+
+def _rot_z_test(angle):
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s, 0 * c], [s, c, 0 * c], [0 * c, 0 * c, 1 + 0 * c]])
+
+
+def test_plans_outside_the_polar_motion_table_say_so():
+    assert earth_orientation_note(ISS_EPOCH, 0.0, 86400.0) is None
+    note = earth_orientation_note(datetime(2026, 12, 1, tzinfo=UTC), 0.0, 86400.0)
+    assert note is not None and "polar motion" in note
