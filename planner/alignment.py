@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from planner.access import AccessWindows
 from planner.elements import raan_rate_change_rad_s
 from planner.errors import SearchRangeError
-from planner.propagation import Trajectory
+from planner.propagation import Trajectory, pole_frame
 from planner.search import bisect_roots
 
 Vec = NDArray[np.float64]
@@ -255,7 +255,9 @@ def align_nodes(
     n_b = observer.normal(t)
     dt = t - observer.t_ref_s
     safe_dt = np.where(np.abs(dt) > 1.0, dt, np.copysign(1.0, dt) + (dt == 0))
-    turns = _required_turns(u, n_b)
+    # The extra nodal turn is about the pole: solve for it in a frame whose z is the pole.
+    rot = np.eye(3) if observer.pole is None else pole_frame(observer.pole)
+    turns = _required_turns(rot @ u, rot @ n_b)
 
     best: dict[int, Candidate] = {}
     bounds = np.concatenate([[0], np.cumsum(counts)])

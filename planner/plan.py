@@ -225,6 +225,28 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
     candidates = align_nodes(tgt, model, windows, opts.box, opts.sample_s, opts.max_miss_km)
     timings["alignment"] = time.perf_counter() - clock
 
+    # Every candidate is refined against the changed observer's own propagation: the
+    # alignment model's nodal-rate sensitivity leaves misses of 0.1-5 km otherwise.
+    clock = time.perf_counter()
+    cache: dict[tuple[float, float], Trajectory] = {}
+
+    def changed_observer(cand: Candidate) -> Trajectory:
+        key = (cand.delta_ha_km, cand.delta_hp_km)
+        if key not in cache:
+            cache[key] = _observer_trajectory(obs_el.with_heights(*key), epoch, t1, opts.reading, tle_obs, pole)
+        return cache[key]
+
+    candidates = [_refined(cand, tgt, changed_observer(cand), windows) for cand in candidates]
+    candidates.sort(key=lambda c: (round(c.miss_km, 3), c.change_km, c.t_access_s))
+    far = [c for c in candidates if c.miss_km > opts.max_miss_km]
+    if far:
+        notes.append(
+            f"{len(far)} candidate(s) left out: refined against the changed observer's propagation, "
+            f"they miss by more than max_miss_km {opts.max_miss_km} km"
+        )
+        candidates = [c for c in candidates if c.miss_km <= opts.max_miss_km]
+    timings["refinement"] = time.perf_counter() - clock
+
     clock = time.perf_counter()
     lit = np.zeros(0, bool)
     sun = np.zeros((3, 0))
@@ -248,25 +270,22 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
     if candidates and not lit.any():
         notes.append("no candidate has the target sunlit at T_access; the best unlit one is planned")
     if opts.criterion == "least_dv" and candidates:
-        cache: dict[tuple[float, float], Trajectory] = {}
         pool = [k for k in order if lit[k]] or order
         costs = {
-            k: _phasing_cost_km_s(candidates[k], obs_el, epoch, t1, opts, tgt, tle_obs, model, cache, pole)
-            for k in pool
+            k: _phasing_cost_km_s(candidates[k], changed_observer(candidates[k]), tgt, opts, model, pole) for k in pool
         }
         order = sorted(pool, key=lambda k: costs[k]) + [k for k in order if k not in costs]
     for k in order:
         cand = candidates[k]
-        changed = obs_el.with_heights(cand.delta_ha_km, cand.delta_hp_km)
-        obs_new = _observer_trajectory(changed, epoch, t1, opts.reading, tle_obs, pole)
-        t_access, miss1 = _refine_crossing(tgt, obs_new, windows, cand)
+        obs_new = changed_observer(cand)
+        t_access = cand.t_access_s
         try:
             ph = phase(obs_new, tgt, t_access, opts.revolutions_before, t_earliest_burn_s=max(0.0, t_ref), pole=pole)
         except PlannerError as exc:
             notes.append(f"candidate {k} skipped: {exc}")
             continue
-        chosen_index, phasing, step1_miss, obs_chosen = k, ph, miss1, obs_new
-        chosen = replace(cand, t_access_s=t_access, miss_km=miss1)
+        chosen_index, phasing, step1_miss, obs_chosen = k, ph, cand.miss_km, obs_new
+        chosen = cand
         alignment_dv = float(height_change_dv_km_s(a, e, cand.delta_ha_km, cand.delta_hp_km))
         r_t, _ = tgt.state(t_access)
         sun_k = sun_position_km(epoch, t_access)
@@ -309,6 +328,19 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
     )
 
 
+def _refined(cand: Candidate, tgt: Trajectory, obs: Trajectory, windows: AccessWindows) -> Candidate:
+    """Return ``cand`` with ``t_access_s`` and ``miss_km`` from the changed observer's own propagation.
+
+    ``t_access_range_s`` is widened to hold the refined moment where it fell just outside
+    (the range is read from 1-s samples of the pass).
+    """
+    t_access, miss = _refine_crossing(tgt, obs, windows, cand)
+    t_range = cand.t_access_range_s
+    if t_range is not None:
+        t_range = (min(t_range[0], t_access), max(t_range[1], t_access))
+    return replace(cand, t_access_s=t_access, miss_km=miss, t_access_range_s=t_range)
+
+
 def _refine_crossing(tgt: Trajectory, obs: Trajectory, windows: AccessWindows, cand: Candidate) -> tuple[float, float]:
     """Return the moment in the candidate's pass where the target truly crosses the changed observer's plane, and the miss there."""
     from planner.alignment import node_miss_km
@@ -337,25 +369,12 @@ def _refine_crossing(tgt: Trajectory, obs: Trajectory, windows: AccessWindows, c
 
 
 def _phasing_cost_km_s(
-    cand: Candidate,
-    obs_el: Elements,
-    epoch: datetime,
-    t1: float,
-    opts: PlanOptions,
-    tgt: Trajectory,
-    tle_obs: bool,
-    model: ObserverPlaneModel,
-    cache: dict[tuple[float, float], Trajectory],
-    pole: Pole,
+    cand: Candidate, observer: Trajectory, tgt: Trajectory, opts: PlanOptions, model: ObserverPlaneModel, pole: Pole
 ) -> float:
     """Return the two-body estimate of a candidate's total Delta-v (height change + phasing), km/s."""
-    key = (cand.delta_ha_km, cand.delta_hp_km)
-    if key not in cache:
-        changed = obs_el.with_heights(*key)
-        cache[key] = _observer_trajectory(changed, epoch, t1, opts.reading, tle_obs, pole)
     try:
         ph = phase(
-            cache[key],
+            observer,
             tgt,
             cand.t_access_s,
             opts.revolutions_before,
@@ -365,7 +384,7 @@ def _phasing_cost_km_s(
         )
     except PlannerError:
         return math.inf
-    return ph.dv_total_km_s + float(height_change_dv_km_s(model.a_km, model.e, *key))
+    return ph.dv_total_km_s + float(height_change_dv_km_s(model.a_km, model.e, cand.delta_ha_km, cand.delta_hp_km))
 
 
 def utc(epoch: datetime, t_s: float) -> datetime:
