@@ -214,8 +214,13 @@ def format_plan(r: dict[str, Any]) -> str:
             f"dv {ph['dv_total_m_s']:.1f} m/s, RTN [{', '.join(f'{x:.1f}' for x in ph['dv_rtn_m_s'])}] m/s"
         )
         out.append(
-            f"verification (numerical J2): miss {v['miss_km'] * 1000:.1f} m at T_access "
+            f"verification (numerical J2): {v['miss_km'] * 1000:.1f} m from the aim point at T_access "
             f"(two-body Lambert alone: {v['two_body_miss_km']:.1f} km), relative speed {v['relative_speed_km_s']:.2f} km/s"
+        )
+        out.append(
+            f"encounter: stand-off {v['standoff_km']:.2f} km, separation {v['separation_km']:.3f} km at T_access, "
+            f"closest approach {v['closest_approach_km']:.3f} km at {v['closest_approach_time']}, "
+            f"target angular rate {v['target_angular_rate_deg_s']:.2f} deg/s"
         )
     if ch:
         f = ch["feasibility"]

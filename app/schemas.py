@@ -89,6 +89,25 @@ class SearchIn(Strict):
     criterion: Literal["smallest_change", "least_dv"] = "least_dv"
     max_imaging_range_km: Finite = Field(default=50.0, gt=0.0)
     max_phase_angle_deg: Finite = Field(default=90.0, gt=0.0, le=180.0)
+    standoff_km: Finite = Field(
+        default=5.0,
+        ge=0.5,
+        le=500.0,
+        description="the observer is aimed this far from the target at T_access (never at the target itself), "
+        "perpendicular to the relative velocity and toward the Sun where it can be",
+    )
+    min_separation_km: Finite = Field(
+        default=1.0,
+        ge=0.0,
+        le=100.0,
+        description="a plan whose closest approach over the arc is under this is marked infeasible (collision risk)",
+    )
+    max_tracking_rate_deg_s: Finite = Field(
+        default=10.0,
+        gt=0.0,
+        le=180.0,
+        description="the fastest line-of-sight rate the observer's optics can follow; faster fly-bys are infeasible",
+    )
 
     @model_validator(mode="after")
     def _ordered(self) -> SearchIn:
@@ -96,6 +115,11 @@ class SearchIn(Strict):
             raise ValueError(f"dha_min_km ({self.dha_min_km}) is above dha_max_km ({self.dha_max_km})")
         if self.dhp_min_km > self.dhp_max_km:
             raise ValueError(f"dhp_min_km ({self.dhp_min_km}) is above dhp_max_km ({self.dhp_max_km})")
+        if self.min_separation_km > self.standoff_km:
+            raise ValueError(
+                f"min_separation_km ({self.min_separation_km}) is above standoff_km ({self.standoff_km}): "
+                "every plan would be refused"
+            )
         return self
 
 
@@ -194,10 +218,23 @@ class CandidatePublic(BaseModel):
 
 
 class VerificationPublic(BaseModel):
-    miss_km: float = Field(description="numerically propagated (J2) observer-target distance at T_access")
-    two_body_miss_km: float = Field(description="distance if the plain two-body Lambert burn were flown")
+    miss_km: float = Field(
+        description="numerically propagated (J2) distance of the observer from its aim point at T_access"
+    )
+    two_body_miss_km: float = Field(
+        description="distance from the target if the plain two-body Lambert burn were flown"
+    )
     corrections: int
-    relative_speed_km_s: float
+    relative_speed_km_s: float = Field(description="observer-target relative speed at T_access")
+    standoff_km: float = Field(description="distance of the aim point from the target")
+    separation_km: float = Field(description="propagated observer-target distance at T_access")
+    closest_approach_km: float = Field(
+        description="least observer-target distance from the burn to one orbit after T_access"
+    )
+    closest_approach_time: datetime
+    target_angular_rate_deg_s: float = Field(
+        description="the target's angular rate seen from the observer at T_access (what an optical tracker must follow)"
+    )
 
 
 class PhasingPublic(BaseModel):

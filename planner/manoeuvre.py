@@ -18,7 +18,8 @@ from numpy.typing import NDArray
 from planner.constants import MU_EARTH_KM3_S2
 from planner.errors import LambertError, PlannerError
 from planner.lambert import lambert, max_revolutions
-from planner.propagation import Pole, Trajectory, propagate_j2
+from planner.propagation import NumericalJ2Trajectory, Pole, Trajectory, propagate_j2
+from planner.search import bisect_maxima
 
 Vec = NDArray[np.float64]
 
@@ -30,7 +31,10 @@ class Phasing:
     ``dv_km_s`` is the impulse in GCRS, ``dv_rtn_km_s`` the same in the observer's
     radial / along-track / cross-track frame at the burn. ``two_body_miss_km`` is
     how far the plain Lambert burn lands from the target once J2 is included, and
-    ``miss_km`` the verified distance after the J2 correction.
+    ``miss_km`` the verified distance from the aim point after the J2 correction. The aim
+    point is the target's position plus ``standoff_km_vec`` (GCRS, km) at ``t_access_s``:
+    a stand-off beside the target, never the target itself (that would be a collision course).
+    ``v_departure_km_s`` is the observer's velocity just after the burn.
     """
 
     t_burn_s: float
@@ -46,6 +50,8 @@ class Phasing:
     corrections: int
     r_observer_km: Vec
     v_relative_km_s: Vec
+    v_departure_km_s: Vec
+    standoff_km_vec: Vec
 
 
 def rtn_matrix(r_km: Vec, v_km_s: Vec) -> Vec:
@@ -90,11 +96,14 @@ def phase(
     tol_km: float = 1e-3,
     max_corrections: int = 8,
     pole: Pole | None = None,
+    standoff_km: float = 0.0,
+    sun_km: Vec | None = None,
 ) -> Phasing:
     """Plan the phasing burn for the cheapest of ``revolutions_before`` and verify it numerically.
 
     The verification integrates two-body + J2 about ``pole`` (the Earth's axis of date;
-    GCRS z if None) from the burn to ``t_access_s``.
+    GCRS z if None) from the burn to ``t_access_s``. The aim point lies ``standoff_km``
+    from the target (``standoff_direction``, toward the Sun at ``sun_km`` where it can).
 
     Raises PlannerError if every option would burn before ``t_earliest_burn_s``.
     """
@@ -119,16 +128,24 @@ def phase(
         )
     _, k, t_burn, r1, v1, v_dep, m, low = min(options, key=lambda o: o[0])
     tof = t_access_s - t_burn
-    aim = r2.copy()
+    h = np.cross(r1, v1)
     r_end, v_end = propagate_j2(r1, v_dep, t_burn, t_access_s, pole)
     two_body_miss = float(np.linalg.norm(r_end - r2))
+    offset = np.zeros(3)
+    aim = r2.copy()
     corrections = 0
-    h = np.cross(r1, v1)
-    while np.linalg.norm(r_end - r2) > tol_km and corrections < max_corrections:
-        aim = aim + (r2 - r_end)
-        v_dep = lambert(r1, aim, tof, m, low, prograde_normal=h).v1_km_s
-        r_end, v_end = propagate_j2(r1, v_dep, t_burn, t_access_s, pole)
-        corrections += 1
+    # The stand-off side depends on the relative velocity, which depends on the aim: twice is enough.
+    for _ in range(2 if standoff_km > 0.0 else 1):
+        if standoff_km > 0.0:
+            offset = standoff_km * standoff_direction(r2, v_end - v2_target, sun_km)
+        goal = r2 + offset
+        n = 0
+        while np.linalg.norm(r_end - goal) > tol_km and n < max_corrections:
+            aim = aim + (goal - r_end)
+            v_dep = lambert(r1, aim, tof, m, low, prograde_normal=h).v1_km_s
+            r_end, v_end = propagate_j2(r1, v_dep, t_burn, t_access_s, pole)
+            n += 1
+        corrections += n
     dv = v_dep - v1
     return Phasing(
         t_burn_s=t_burn,
@@ -140,8 +157,87 @@ def phase(
         dv_rtn_km_s=rtn_matrix(r1, v1) @ dv,
         dv_total_km_s=float(np.linalg.norm(dv)),
         two_body_miss_km=two_body_miss,
-        miss_km=float(np.linalg.norm(r_end - r2)),
+        miss_km=float(np.linalg.norm(r_end - (r2 + offset))),
         corrections=corrections,
         r_observer_km=r_end,
         v_relative_km_s=v_end - v2_target,
+        v_departure_km_s=v_dep,
+        standoff_km_vec=offset,
+    )
+
+
+def standoff_direction(r_target_km: Vec, v_relative_km_s: Vec, r_sun_km: Vec | None) -> Vec:
+    """Return the unit vector from the target to the stand-off point, shape (3,).
+
+    It is perpendicular to the relative velocity (so the stand-off is the closest
+    approach of a straight fly-by) and, within that plane, points as near the Sun as
+    it can, so the observer sees the target's lit side (the least phase angle). With
+    the Sun along the relative velocity, or no Sun given, it points radially outward.
+    """
+    v = np.asarray(v_relative_km_s, float)
+    vhat = v / np.linalg.norm(v)
+    options = []
+    if r_sun_km is not None:
+        options.append(np.asarray(r_sun_km, float) - r_target_km)
+    options.append(np.asarray(r_target_km, float))
+    for s in options:
+        d = s / np.linalg.norm(s)
+        d = d - (d @ vhat) * vhat
+        if np.linalg.norm(d) > 0.05:
+            return d / np.linalg.norm(d)
+    d = np.cross(vhat, [0.0, 0.0, 1.0])
+    return d / np.linalg.norm(d)
+
+
+@dataclass(frozen=True, slots=True)
+class Encounter:
+    """The observer's fly-by of the target, from the burn to one orbit after T_access.
+
+    ``separation_km``, ``relative_speed_km_s`` and ``target_angular_rate_deg_s`` (the
+    line of sight's rate as the observer sees it: what an optical tracker must follow)
+    are at ``t_access_s``; ``closest_approach_km`` / ``closest_approach_s`` over the whole arc.
+    """
+
+    separation_km: float
+    relative_speed_km_s: float
+    target_angular_rate_deg_s: float
+    closest_approach_km: float
+    closest_approach_s: float
+
+
+def encounter(
+    phasing: Phasing, observer: Trajectory, target: Trajectory, t_end_s: float, pole: Pole | None
+) -> Encounter:
+    """Fly the phasing burn (two-body + J2 about ``pole``) to ``t_end_s`` and measure the encounter with ``target``.
+
+    ``observer`` is the observer before the burn. The closest approach is found on 1-s
+    samples of the distance, each sampled minimum refined (so a fast fly-by, 10 km/s,
+    is timed to a millisecond).
+    """
+    r1, _ = observer.state(phasing.t_burn_s)
+    t0 = phasing.t_burn_s
+    arc = NumericalJ2Trajectory(r1[:, 0], phasing.v_departure_km_s, t0, t_end_s, pole=pole)
+
+    def distance(t_s: Vec) -> Vec:
+        r_o, _ = arc.state(t_s)
+        r_t, _ = target.state(t_s)
+        return np.linalg.norm(r_o - r_t, axis=0)
+
+    t = np.linspace(t0, t_end_s, int(math.ceil(t_end_s - t0)) + 1)
+    d = distance(t)
+    i = np.flatnonzero((d[1:-1] <= d[:-2]) & (d[1:-1] < d[2:])) + 1
+    t_min = bisect_maxima(lambda x: -distance(x), t[i - 1], t[i + 1], 1e-4) if i.size else np.empty(0)
+    cand_t = np.concatenate([t_min, [t[0], t[-1]]])
+    cand_d = distance(cand_t)
+    j = int(np.argmin(cand_d))
+    r_o, v_o = arc.state(phasing.t_access_s)
+    r_t, v_t = target.state(phasing.t_access_s)
+    rho, rho_dot = (r_t - r_o)[:, 0], (v_t - v_o)[:, 0]
+    rate = np.linalg.norm(np.cross(rho, rho_dot)) / float(rho @ rho)
+    return Encounter(
+        separation_km=float(np.linalg.norm(rho)),
+        relative_speed_km_s=float(np.linalg.norm(rho_dot)),
+        target_angular_rate_deg_s=math.degrees(rate),
+        closest_approach_km=float(cand_d[j]),
+        closest_approach_s=float(cand_t[j]),
     )

@@ -17,11 +17,11 @@ from numpy.typing import NDArray
 
 from planner.access import MAX_SPAN_S, AccessWindows, access_windows, validate_station
 from planner.alignment import Candidate, HeightBox, ObserverPlaneModel, align_nodes
-from planner.constants import R_EARTH_KM
+from planner.constants import MU_EARTH_KM3_S2, R_EARTH_KM
 from planner.elements import Elements, height_change_dv_km_s, state_to_elements
 from planner.errors import PlannerError, SearchRangeError
 from planner.illumination import phase_angle_deg, sun_position_km, sunlit
-from planner.manoeuvre import Phasing, phase
+from planner.manoeuvre import Encounter, Phasing, encounter, phase
 from planner.propagation import (
     EarthFrames,
     NumericalJ2Trajectory,
@@ -39,6 +39,7 @@ from planner.search import bisect_roots
 from planner.tle import TLE
 
 Vec = NDArray[np.float64]
+STANDOFF_RANGE_KM = (0.5, 500.0)  # under 0.5 km the fly-by is a collision risk; over 500 km, no imaging
 Reading = Literal["osculating", "mean"]
 Criterion = Literal["smallest_change", "least_dv"]
 
@@ -82,6 +83,9 @@ class PlanOptions:
     criterion: Criterion = "least_dv"
     max_imaging_range_km: float = 50.0
     max_phase_angle_deg: float = 90.0
+    standoff_km: float = 5.0
+    min_separation_km: float = 1.0
+    max_tracking_rate_deg_s: float = 10.0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.duration_s) and self.duration_s > 0):
@@ -98,6 +102,26 @@ class PlanOptions:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise SearchRangeError(f"{name} {value} must be a positive number", field=name)
+        if not (math.isfinite(self.standoff_km) and STANDOFF_RANGE_KM[0] <= self.standoff_km <= STANDOFF_RANGE_KM[1]):
+            raise SearchRangeError(
+                f"standoff_km {self.standoff_km} is outside [{STANDOFF_RANGE_KM[0]}, {STANDOFF_RANGE_KM[1]}] km",
+                field="standoff_km",
+            )
+        if not (math.isfinite(self.min_separation_km) and 0.0 <= self.min_separation_km <= 100.0):
+            raise SearchRangeError(
+                f"min_separation_km {self.min_separation_km} is outside [0, 100] km", field="min_separation_km"
+            )
+        if self.min_separation_km > self.standoff_km:
+            raise SearchRangeError(
+                f"min_separation_km {self.min_separation_km} is above standoff_km {self.standoff_km}: "
+                "every plan would be refused; lower it or raise standoff_km",
+                field="min_separation_km",
+            )
+        if not (math.isfinite(self.max_tracking_rate_deg_s) and 0.0 < self.max_tracking_rate_deg_s <= 180.0):
+            raise SearchRangeError(
+                f"max_tracking_rate_deg_s {self.max_tracking_rate_deg_s} is outside (0, 180] deg/s",
+                field="max_tracking_rate_deg_s",
+            )
         if self.access_step_s > 300.0:
             raise SearchRangeError("access_step_s above 300 s can miss short passes", field="access_step_s")
         if self.sample_s > 60.0:
@@ -141,6 +165,7 @@ class Plan:
     observer_trajectory: Trajectory | None = None
     frames: EarthFrames | None = None
     station: Station | None = None
+    encounter: Encounter | None = None
 
 
 def _target_trajectory(
@@ -201,17 +226,21 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
     clock = time.perf_counter()
     epoch = as_utc(opts.start) if opts.start is not None else target.epoch
     t1 = opts.duration_s
-    frames = EarthFrames(epoch, -3600.0, t1 + 3600.0)
+    # Frames and trajectories reach past the span: the encounter is followed for one
+    # observer orbit after T_access (at most a day for any Earth orbit planned here).
+    frames = EarthFrames(epoch, -3600.0, t1 + 2 * 86400.0)
     eop_note = earth_orientation_note(epoch, 0.0, t1)
     if eop_note:
         notes.append(eop_note)
     obs_el = _observer_elements(observer, epoch, frames)
     # One pole of date for the plan: J2 acts about it in every propagation and verification.
     t_first = min(0.0, seconds_between(epoch, obs_el.epoch), seconds_between(epoch, target.epoch))
-    pole = pole_of_date(epoch, t_first, t1)
-    tgt = _target_trajectory(target, epoch, frames, t1, opts.reading, pole)
+    t_after = min(2 * math.pi * math.sqrt(obs_el.a_km**3 / MU_EARTH_KM3_S2), 86400.0) + 600.0
+    t_end = t1 + t_after
+    pole = pole_of_date(epoch, t_first, t_end)
+    tgt = _target_trajectory(target, epoch, frames, t_end, opts.reading, pole)
     tle_obs = observer.tle is not None
-    obs_base = _observer_trajectory(obs_el, epoch, t1, opts.reading, tle_obs, pole)
+    obs_base = _observer_trajectory(obs_el, epoch, t_end, opts.reading, tle_obs, pole)
     t_ref = 0.0 if tle_obs else seconds_between(epoch, obs_el.epoch)
     timings["propagation"] = time.perf_counter() - clock
 
@@ -233,7 +262,7 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
     def changed_observer(cand: Candidate) -> Trajectory:
         key = (cand.delta_ha_km, cand.delta_hp_km)
         if key not in cache:
-            cache[key] = _observer_trajectory(obs_el.with_heights(*key), epoch, t1, opts.reading, tle_obs, pole)
+            cache[key] = _observer_trajectory(obs_el.with_heights(*key), epoch, t_end, opts.reading, tle_obs, pole)
         return cache[key]
 
     candidates = [_refined(cand, tgt, changed_observer(cand), windows) for cand in candidates]
@@ -266,6 +295,7 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
     alignment_dv = None
     chosen_feas = None
     obs_chosen: Trajectory | None = None
+    meet_chosen: Encounter | None = None
     order = [k for k in range(len(candidates)) if lit[k]] + [k for k in range(len(candidates)) if not lit[k]]
     if candidates and not lit.any():
         notes.append("no candidate has the target sunlit at T_access; the best unlit one is planned")
@@ -279,25 +309,48 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
         cand = candidates[k]
         obs_new = changed_observer(cand)
         t_access = cand.t_access_s
+        sun_k = sun_position_km(epoch, t_access)
         try:
-            ph = phase(obs_new, tgt, t_access, opts.revolutions_before, t_earliest_burn_s=max(0.0, t_ref), pole=pole)
+            ph = phase(
+                obs_new,
+                tgt,
+                t_access,
+                opts.revolutions_before,
+                t_earliest_burn_s=max(0.0, t_ref),
+                pole=pole,
+                standoff_km=opts.standoff_km,
+                sun_km=sun_k[:, 0],
+            )
         except PlannerError as exc:
             notes.append(f"candidate {k} skipped: {exc}")
             continue
         chosen_index, phasing, step1_miss, obs_chosen = k, ph, cand.miss_km, obs_new
         chosen = cand
         alignment_dv = float(height_change_dv_km_s(a, e, cand.delta_ha_km, cand.delta_hp_km))
+        period = 2 * math.pi * math.sqrt(obs_el.a_km**3 / MU_EARTH_KM3_S2)
+        meet = meet_chosen = encounter(ph, obs_new, tgt, min(t_access + period, t_end), pole)
         r_t, _ = tgt.state(t_access)
-        sun_k = sun_position_km(epoch, t_access)
-        # In the last moments the observer closes along -v_rel: that is its line of sight to the target.
-        los = -ph.v_relative_km_s
+        # The line of sight from the target to the observer at T_access: the stand-off vector.
+        los = ph.r_observer_km - r_t[:, 0]
         phase_deg = float(phase_angle_deg(r_t[:, 0], sun_k[:, 0], los))
         reasons = list(feas[k].reasons)
-        if ph.miss_km > opts.max_imaging_range_km:
-            reasons.append(f"observer passes {ph.miss_km:.1f} km away, over {opts.max_imaging_range_km} km")
+        if meet.closest_approach_km < opts.min_separation_km:
+            reasons.append(
+                f"closest approach {meet.closest_approach_km:.2f} km is under min_separation_km "
+                f"{opts.min_separation_km} km: a collision risk"
+            )
+        if meet.separation_km > opts.max_imaging_range_km:
+            reasons.append(
+                f"observer is {meet.separation_km:.1f} km away at T_access, over {opts.max_imaging_range_km} km"
+            )
         if phase_deg > opts.max_phase_angle_deg:
             reasons.append(f"Sun phase angle {phase_deg:.1f} deg is over {opts.max_phase_angle_deg} deg")
-        chosen_feas = Feasibility(feas[k].sunlit, ph.miss_km, phase_deg, not reasons, tuple(reasons))
+        if meet.target_angular_rate_deg_s > opts.max_tracking_rate_deg_s:
+            reasons.append(
+                f"the target crosses the observer's sky at {meet.target_angular_rate_deg_s:.1f} deg/s, over the "
+                f"{opts.max_tracking_rate_deg_s} deg/s a tracker follows (a larger standoff_km lowers it)"
+            )
+        chosen_feas = Feasibility(feas[k].sunlit, meet.separation_km, phase_deg, not reasons, tuple(reasons))
         feas[k] = chosen_feas
         break
     timings["phasing"] = time.perf_counter() - clock
@@ -307,24 +360,25 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
             "widen the box, lengthen the span or raise max_miss_km"
         )
     return Plan(
-        epoch,
-        t1,
-        opts.reading,
-        windows,
-        candidates,
-        feas,
-        chosen_index,
-        chosen,
-        alignment_dv,
-        step1_miss,
-        phasing,
-        chosen_feas,
-        timings,
-        notes,
-        tgt,
-        obs_chosen,
-        frames,
-        station,
+        epoch=epoch,
+        duration_s=t1,
+        reading=opts.reading,
+        windows=windows,
+        candidates=candidates,
+        feasibility=feas,
+        chosen_index=chosen_index,
+        chosen=chosen,
+        alignment_dv_km_s=alignment_dv,
+        step1_miss_km=step1_miss,
+        phasing=phasing,
+        chosen_feasibility=chosen_feas,
+        timings_s=timings,
+        notes=notes,
+        target_trajectory=tgt,
+        observer_trajectory=obs_chosen,
+        frames=frames,
+        station=station,
+        encounter=meet_chosen,
     )
 
 

@@ -66,6 +66,9 @@ def plan_options(req: PlanCreate) -> PlanOptions:
             criterion=s.criterion,
             max_imaging_range_km=s.max_imaging_range_km,
             max_phase_angle_deg=s.max_phase_angle_deg,
+            standoff_km=s.standoff_km,
+            min_separation_km=s.min_separation_km,
+            max_tracking_rate_deg_s=s.max_tracking_rate_deg_s,
         )
     except PlannerError as exc:
         raise InputError(["search", exc.field or "search"], str(exc)) from None
@@ -121,6 +124,22 @@ def _candidate_json(epoch: datetime, c: Candidate, f: Feasibility) -> dict[str, 
     }
 
 
+def _verification_json(epoch: datetime, plan: Plan) -> dict[str, Any]:
+    ph, meet = plan.phasing, plan.encounter
+    assert ph is not None and meet is not None
+    return {
+        "miss_km": ph.miss_km,
+        "two_body_miss_km": ph.two_body_miss_km,
+        "corrections": ph.corrections,
+        "relative_speed_km_s": meet.relative_speed_km_s,
+        "standoff_km": float(np.linalg.norm(ph.standoff_km_vec)),
+        "separation_km": meet.separation_km,
+        "closest_approach_km": meet.closest_approach_km,
+        "closest_approach_time": utc(epoch, meet.closest_approach_s).isoformat(),
+        "target_angular_rate_deg_s": meet.target_angular_rate_deg_s,
+    }
+
+
 def plan_json(plan: Plan) -> dict[str, Any]:
     """Return the plan as a JSON-ready dict (the stored and returned result)."""
     ep = plan.epoch
@@ -135,12 +154,7 @@ def plan_json(plan: Plan) -> dict[str, Any]:
             "dv_m_s": [float(x) * 1000.0 for x in ph.dv_km_s],
             "dv_rtn_m_s": [float(x) * 1000.0 for x in ph.dv_rtn_km_s],
             "dv_total_m_s": ph.dv_total_km_s * 1000.0,
-            "verification": {
-                "miss_km": ph.miss_km,
-                "two_body_miss_km": ph.two_body_miss_km,
-                "corrections": ph.corrections,
-                "relative_speed_km_s": float(np.linalg.norm(ph.v_relative_km_s)),
-            },
+            "verification": _verification_json(ep, plan),
         }
     chosen = None
     if plan.chosen is not None and plan.chosen_feasibility is not None:

@@ -28,8 +28,9 @@ def test_plan_has_candidates_phasing_and_verification(plan):
 
 
 def test_phasing_against_independent_integration(plan):
-    """The burn, integrated by an independent J2 integrator (about the Earth's axis of date), meets the
-    target, which the same integrator carries from its epoch: within 10 m at T_access."""
+    """The burn, integrated by an independent J2 integrator (about the Earth's axis of date), reaches the
+    stand-off point beside the target, which the same integrator carries from its epoch: within 10 m at
+    T_access; the separation is the 5-km stand-off, not a collision course."""
     ph = plan.phasing
     from planner.plan import _observer_trajectory
 
@@ -39,7 +40,40 @@ def test_phasing_against_independent_integration(plan):
     r_obs = propagate_tod_j2(PAPER_EPOCH, r1[:, 0], v1[:, 0] + ph.dv_km_s, ph.t_burn_s, ph.t_access_s)
     r0, v0 = elements_to_state(*PAPER_TARGET.radians())
     r_tgt = propagate_tod_j2(PAPER_EPOCH, r0, v0, 0.0, ph.t_access_s)
-    assert np.linalg.norm(r_obs[:, 0] - r_tgt[:, 0]) < ten_metres_km
+    assert np.linalg.norm(r_obs[:, 0] - (r_tgt[:, 0] + ph.standoff_km_vec)) < ten_metres_km
+    assert abs(np.linalg.norm(r_obs[:, 0] - r_tgt[:, 0]) - 5.0) < ten_metres_km
+
+
+def test_encounter_against_an_independent_scan(plan):
+    """Closest approach over the arc (burn to one orbit after T_access), separation, relative speed and
+    the target's angular rate seen from the observer, from the independent integrator sampled every 0.1 s
+    near the fly-by and every 10 s elsewhere."""
+    ph, meet = plan.phasing, plan.encounter
+    from planner.plan import _observer_trajectory
+
+    changed = PAPER_OBSERVER.with_heights(plan.chosen.delta_ha_km, plan.chosen.delta_hp_km)
+    obs = _observer_trajectory(changed, PAPER_EPOCH, plan.duration_s, "osculating", False)
+    r1, v1 = obs.state(ph.t_burn_s)
+    period = 2 * np.pi * np.sqrt(PAPER_OBSERVER.a_km**3 / 398600.4418)
+    t_end = ph.t_access_s + period
+    t = np.unique(np.concatenate([np.arange(ph.t_burn_s, t_end, 10.0), ph.t_access_s + np.arange(-30.0, 30.0, 0.1)]))
+    r_obs = propagate_tod_j2(PAPER_EPOCH, r1[:, 0], v1[:, 0] + ph.dv_km_s, ph.t_burn_s, t)
+    r0, v0 = elements_to_state(*PAPER_TARGET.radians())
+    r_tgt = propagate_tod_j2(PAPER_EPOCH, r0, v0, 0.0, t)
+    d = np.linalg.norm(r_obs - r_tgt, axis=0)
+    assert meet.closest_approach_km <= d.min() + ten_metres_km  # the two integrators agree to metres
+    assert meet.closest_approach_km >= d.min() - 0.05  # the scan's 0.1-s step at 13 km/s past a 5-km stand-off
+    assert meet.closest_approach_km > 1.0  # min_separation_km: no collision course
+    k = int(np.argmin(np.abs(t - ph.t_access_s)))
+    rho = r_tgt[:, k] - r_obs[:, k]
+    rho_dot = ((r_tgt[:, k + 1] - r_obs[:, k + 1]) - (r_tgt[:, k - 1] - r_obs[:, k - 1])) / (t[k + 1] - t[k - 1])
+    assert meet.separation_km == pytest.approx(np.linalg.norm(rho), abs=ten_metres_km)
+    assert meet.relative_speed_km_s == pytest.approx(np.linalg.norm(rho_dot), rel=1e-4)
+    rate = np.degrees(np.linalg.norm(np.cross(rho, rho_dot)) / (rho @ rho))
+    assert meet.target_angular_rate_deg_s == pytest.approx(rate, rel=1e-3)
+    # A head-on fly-by at ~13 km/s 5 km off crosses the sky at ~150 deg/s: no tracker follows it.
+    assert not plan.chosen_feasibility.feasible
+    assert any("deg/s" in r for r in plan.chosen_feasibility.reasons)
 
 
 def test_least_dv_is_no_dearer_than_smallest_change(plan):
@@ -110,3 +144,22 @@ def test_every_candidate_is_refined_against_an_independent_propagation():
         assert abs(miss[0] - c.miss_km) < 0.1, (k, miss[0], c.miss_km)
         lo, hi = c.t_access_range_s or (c.t_access_s, c.t_access_s)
         assert lo <= c.t_access_s <= hi
+
+
+@pytest.mark.parametrize(
+    "kwargs,field",
+    [
+        (dict(standoff_km=0.1), "standoff_km"),
+        (dict(standoff_km=float("nan")), "standoff_km"),
+        (dict(min_separation_km=-1.0), "min_separation_km"),
+        (dict(standoff_km=2.0, min_separation_km=3.0), "min_separation_km"),
+        (dict(max_tracking_rate_deg_s=0.0), "max_tracking_rate_deg_s"),
+        (dict(max_tracking_rate_deg_s=500.0), "max_tracking_rate_deg_s"),
+    ],
+)
+def test_encounter_options_are_checked(kwargs, field):
+    from planner.errors import SearchRangeError
+
+    with pytest.raises(SearchRangeError, match=field) as info:
+        PlanOptions(**kwargs)
+    assert info.value.field == field

@@ -141,6 +141,13 @@ CASES = [
     Case("name_with_path_separator", "POST", PLANS, _plan(**{"target.name": "../../etc/passwd"}), 422, "name"),
     Case("name_with_nul", "POST", PLANS, _plan(**{"observer.name": "obs\x00; DROP TABLE plans;--"}), 422, "name"),
     Case("name_10000_characters", "POST", PLANS, _plan(**{"target.name": "x'; DELETE FROM plans;--" * 400}), 422, "name"),
+    # the encounter's options
+    Case("standoff_zero", "POST", PLANS, _plan(**{"search.standoff_km": 0}), 422, "standoff_km"),
+    Case("standoff_over_500", "POST", PLANS, _plan(**{"search.standoff_km": 5000}), 422, "standoff_km"),
+    Case("min_separation_negative", "POST", PLANS, _plan(**{"search.min_separation_km": -1}), 422, "min_separation_km"),
+    Case("min_separation_above_standoff", "POST", PLANS, _plan(**{"search.standoff_km": 2, "search.min_separation_km": 3}), 422, "min_separation_km"),
+    Case("tracking_rate_zero", "POST", PLANS, _plan(**{"search.max_tracking_rate_deg_s": 0}), 422, "max_tracking_rate_deg_s"),
+    Case("tracking_rate_nan", "POST", PLANS, _raw(json.dumps({**PAPER_EXAMPLE, "search": {"duration_days": 1, "max_tracking_rate_deg_s": 1}}).replace('"max_tracking_rate_deg_s": 1', '"max_tracking_rate_deg_s": NaN')), 422, "max_tracking_rate_deg_s"),
     # operator limits
     Case("span_over_limit", "POST", PLANS, _plan(**{"search.duration_days": 5}), 422, "GSA_MAX_SPAN_DAYS"),
     Case("grid_over_limit", "POST", PLANS, _plan(**{"search.step_km": 0.01}), 422, "step_km"),
