@@ -9,6 +9,7 @@ from typing import Annotated, Any
 
 import numpy as np
 from fastapi import APIRouter, File, Form, HTTPException, Query, UploadFile
+from fastapi import Path as PathParam
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse, Response
 
@@ -16,7 +17,7 @@ from app import crud
 from app.api.deps import CurrentOperator, EstimatorDep, SessionDep, SettingsDep, as_utc, check_page_size
 from app.db.models import Estimate, utcnow
 from app.errors import InputError
-from app.schemas import EstimatePublic, EstimatesPublic, IsoDateTime
+from app.schemas import CONTROL_CHARACTERS, EstimatePublic, EstimatesPublic, IsoDateTime, Text
 from app.services import estimation as svc
 
 router = APIRouter(prefix="/estimates", tags=["estimates"])
@@ -57,6 +58,8 @@ def public(e: Estimate) -> dict[str, Any]:
 
 
 async def _read(upload: UploadFile, limit: int) -> bytes:
+    if CONTROL_CHARACTERS.search(upload.filename or ""):
+        raise InputError(["file"], "the file name must not contain control characters (NUL, tab, newline, ...)")
     data = await upload.read(limit + 1)
     if len(data) > limit:
         raise HTTPException(
@@ -74,6 +77,8 @@ def _estimate(
         raise InputError(["file"], "no frames in the upload")
     if len(uploads) > settings.max_batch_frames:
         raise InputError(["file"], f"{len(uploads)} frames is over the batch limit of {settings.max_batch_frames}")
+    if any(CONTROL_CHARACTERS.search(u.name) for u in uploads):
+        raise InputError(["file"], "a frame's name (a stack member) must not contain control characters")
     if (observed_at is None) != (plan_id is None) and observed_at is not None:
         raise InputError(["plan_id"], "observed_at needs a plan_id to place the attitude in LVLH and J2000")
     plan = None
@@ -132,7 +137,7 @@ async def create_estimate(
     est: EstimatorDep,
     file: Annotated[UploadFile, File(description=".npy/.npz (2-D, real or complex) or 8/16-bit grayscale PNG/TIFF")],
     resample: Annotated[bool, Form()] = False,
-    plan_id: Annotated[str | None, Form(max_length=36)] = None,
+    plan_id: Annotated[Text | None, Form(max_length=36)] = None,
     observed_at: Annotated[IsoDateTime | None, Form()] = None,
     snr_db: Annotated[float | None, Form(ge=-100, le=200)] = None,
     normalised: Annotated[bool, Form(description=NORMALISED)] = False,
@@ -161,7 +166,7 @@ async def create_estimates_batch(
     est: EstimatorDep,
     files: Annotated[list[UploadFile], File(description="several frames, or one .npz stack [N, H, W]")],
     resample: Annotated[bool, Form()] = False,
-    plan_id: Annotated[str | None, Form(max_length=36)] = None,
+    plan_id: Annotated[Text | None, Form(max_length=36)] = None,
     observed_at: Annotated[IsoDateTime | None, Form()] = None,
     normalised: Annotated[bool, Form(description=NORMALISED)] = False,
 ) -> dict[str, Any]:
@@ -183,7 +188,7 @@ def list_estimates(
     settings: SettingsDep,
     limit: Annotated[int | None, Query(ge=1, le=10_000, description="page size (default 20)")] = None,
     offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
-    plan_id: Annotated[str | None, Query(max_length=36)] = None,
+    plan_id: Annotated[Text | None, Query(max_length=36)] = None,
     created_after: IsoDateTime | None = None,
     created_before: IsoDateTime | None = None,
 ) -> dict[str, Any]:
@@ -194,7 +199,7 @@ def list_estimates(
     return {"data": [public(r) for r in rows], "count": total}
 
 
-def _owned(session: Any, operator_id: str, estimate_id: str) -> Estimate:
+def _owned(session: Any, operator_id: str, estimate_id: Annotated[Text, PathParam()]) -> Estimate:
     e = crud.get_estimate(session=session, operator_id=operator_id, estimate_id=estimate_id)
     if e is None:
         raise HTTPException(status_code=404, detail="Estimate not found")
@@ -202,7 +207,9 @@ def _owned(session: Any, operator_id: str, estimate_id: str) -> Estimate:
 
 
 @router.get("/{estimate_id}", response_model=EstimatePublic, responses=NOT_FOUND)
-def read_estimate(session: SessionDep, operator: CurrentOperator, estimate_id: str) -> dict[str, Any]:
+def read_estimate(
+    session: SessionDep, operator: CurrentOperator, estimate_id: Annotated[Text, PathParam()]
+) -> dict[str, Any]:
     """Return one of the caller's estimates."""
     return public(_owned(session, operator.id, estimate_id))
 
@@ -215,20 +222,24 @@ def _png(settings: Any, digest: str) -> Response:
 
 
 @router.get("/{estimate_id}/enhanced.png", response_class=FileResponse, responses=NOT_FOUND)
-def enhanced_png(session: SessionDep, operator: CurrentOperator, settings: SettingsDep, estimate_id: str) -> Response:
+def enhanced_png(
+    session: SessionDep, operator: CurrentOperator, settings: SettingsDep, estimate_id: Annotated[Text, PathParam()]
+) -> Response:
     """The UNet++-enhanced frame."""
     return _png(settings, _owned(session, operator.id, estimate_id).enhanced_sha256)
 
 
 @router.get("/{estimate_id}/original.png", response_class=FileResponse, responses=NOT_FOUND)
-def original_png(session: SessionDep, operator: CurrentOperator, settings: SettingsDep, estimate_id: str) -> Response:
+def original_png(
+    session: SessionDep, operator: CurrentOperator, settings: SettingsDep, estimate_id: Annotated[Text, PathParam()]
+) -> Response:
     """The uploaded frame as the models saw it (normalised)."""
     return _png(settings, _owned(session, operator.id, estimate_id).original_sha256)
 
 
 @router.delete("/{estimate_id}", status_code=204, responses=NOT_FOUND)
 def delete_estimate(
-    session: SessionDep, operator: CurrentOperator, settings: SettingsDep, estimate_id: str
+    session: SessionDep, operator: CurrentOperator, settings: SettingsDep, estimate_id: Annotated[Text, PathParam()]
 ) -> Response:
     """Delete one of the caller's estimates (its images go when no other estimate uses them)."""
     e = _owned(session, operator.id, estimate_id)

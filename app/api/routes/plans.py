@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body, HTTPException, Query
+from fastapi import APIRouter, Body, HTTPException, Path, Query
 
 from app import crud
 from app.api.deps import CurrentOperator, SessionDep, SettingsDep, as_utc, check_page_size, check_span
-from app.schemas import PAPER_EXAMPLE, IsoDateTime, PlanCreate, PlanPublic, PlansPublic, PlanSummary
+from app.schemas import PAPER_EXAMPLE, IsoDateTime, PlanCreate, PlanPublic, PlansPublic, PlanSummary, Text
 from app.services.planning import run_plan
 
 router = APIRouter(prefix="/plans", tags=["plans"])
@@ -49,7 +49,7 @@ def list_plans(
     settings: SettingsDep,
     limit: Annotated[int | None, Query(ge=1, le=10_000, description="page size (default 20)")] = None,
     offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
-    target_name: Annotated[str | None, Query(max_length=200)] = None,
+    target_name: Annotated[Text | None, Query(max_length=200)] = None,
     created_after: IsoDateTime | None = None,
     created_before: IsoDateTime | None = None,
 ) -> dict[str, Any]:
@@ -80,7 +80,7 @@ def list_plans(
 
 
 @router.get("/{plan_id}", response_model=PlanPublic, responses=NOT_FOUND)
-def read_plan(session: SessionDep, operator: CurrentOperator, plan_id: str) -> dict[str, Any]:
+def read_plan(session: SessionDep, operator: CurrentOperator, plan_id: Annotated[Text, Path()]) -> dict[str, Any]:
     """Return one of the caller's plans."""
     plan = crud.get_plan(session=session, operator_id=operator.id, plan_id=plan_id)
     if plan is None:

@@ -104,6 +104,14 @@ def _upload(data: bytes | Callable[[], bytes], name: str = "f.npy", **form: str)
     return lambda: {"files": {"file": (name, data() if callable(data) else data)}, "data": form}
 
 
+def _raw_multipart(filename: bytes, data: bytes) -> dict[str, Any]:
+    """A multipart upload written byte for byte (httpx would percent-encode a NUL in the file name)."""
+    b = b"gsa-test-boundary"
+    body = (b"--" + b + b'\r\nContent-Disposition: form-data; name="file"; filename="' + filename + b'"\r\n'
+            b"Content-Type: application/octet-stream\r\n\r\n" + data + b"\r\n--" + b + b"--\r\n")  # fmt: skip
+    return {"content": body, "headers": {"Content-Type": "multipart/form-data; boundary=" + b.decode()}}
+
+
 @dataclass(frozen=True)
 class Case:
     name: str
@@ -148,6 +156,18 @@ CASES = [
     Case("min_separation_above_standoff", "POST", PLANS, _plan(**{"search.standoff_km": 2, "search.min_separation_km": 3}), 422, "min_separation_km"),
     Case("tracking_rate_zero", "POST", PLANS, _plan(**{"search.max_tracking_rate_deg_s": 0}), 422, "max_tracking_rate_deg_s"),
     Case("tracking_rate_nan", "POST", PLANS, _raw(json.dumps({**PAPER_EXAMPLE, "search": {"duration_days": 1, "max_tracking_rate_deg_s": 1}}).replace('"max_tracking_rate_deg_s": 1', '"max_tracking_rate_deg_s": NaN')), 422, "max_tracking_rate_deg_s"),
+    # NUL and other control characters, refused at the edge on both databases (PostgreSQL cannot store NUL)
+    Case("nul_in_plan_id", "GET", "/v1/plans/abc%00", lambda: {}, 422, "plan_id"),
+    Case("nul_in_target_filter", "GET", "/v1/plans?target_name=a%00b", lambda: {}, 422, "target_name"),
+    Case("newline_in_target_filter", "GET", "/v1/plans?target_name=a%0Ab", lambda: {}, 422, "control characters"),
+    Case("nul_in_estimate_id", "GET", "/v1/estimates/abc%00", lambda: {}, 422, "estimate_id"),
+    Case("nul_in_estimate_delete", "DELETE", "/v1/estimates/abc%00", lambda: {}, 422, "estimate_id"),
+    Case("nul_in_estimate_png", "GET", "/v1/estimates/abc%00/enhanced.png", lambda: {}, 422, "estimate_id"),
+    Case("nul_in_estimates_filter", "GET", "/v1/estimates?plan_id=a%00", lambda: {}, 422, "plan_id"),
+    Case("nul_in_form_plan_id", "POST", EST, _upload(lambda: _npy(_frame()), plan_id="abc\x00"), 422, "plan_id"),
+    Case("nul_in_batch_plan_id", "POST", EST + "/batch",
+         lambda: {"files": [("files", ("f.npy", _npy(_frame())))], "data": {"plan_id": "a\x00b"}}, 422, "plan_id"),
+    Case("nul_in_upload_filename", "POST", EST, lambda: _raw_multipart(b"f\x00.npy", _npy(_frame())), 422, "control characters"),
     # operator limits
     Case("span_over_limit", "POST", PLANS, _plan(**{"search.duration_days": 5}), 422, "GSA_MAX_SPAN_DAYS"),
     Case("grid_over_limit", "POST", PLANS, _plan(**{"search.step_km": 0.01}), 422, "step_km"),

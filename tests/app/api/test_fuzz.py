@@ -87,3 +87,37 @@ def test_no_route_answers_5xx_or_off_schema(fuzz_app):
             failures.append(f"{op.label}: {str(exc)[:1500]}")
     assert not failures, "\n\n".join(failures)
     assert sum(n for (_, st), n in SEEN.items() if st >= 500) == 0
+
+
+CONTROL_STRINGS = ["a\x00b", "\x00", "line\nbreak", "tab\there", "esc\x1b[31m", "del\x7f"]
+
+
+def test_control_characters_in_every_string_parameter(fuzz_app):
+    """Every path and query string parameter of every route, given NUL and other control characters:
+    a 422 naming the parameter, never a 5xx (PostgreSQL cannot store NUL)."""
+    from urllib.parse import quote
+
+    spec = fuzz_app.openapi()
+    client = TestClient(fuzz_app)
+    sent = 0
+    for path, ops in spec["paths"].items():
+        for method, op in ops.items():
+            params = [p for p in op.get("parameters", []) if p["in"] in ("path", "query")]
+            for p in params:
+                schema = p.get("schema", {})
+                types = {schema.get("type")} | {s.get("type") for s in schema.get("anyOf", [])}
+                if "string" not in types or schema.get("format") == "date-time":
+                    continue
+                for bad in CONTROL_STRINGS:
+                    url = path
+                    query = {}
+                    for q in params:
+                        if q["in"] == "path":
+                            url = url.replace("{" + q["name"] + "}", quote(bad if q is p else "x", safe=""))
+                    if p["in"] == "query":
+                        query[p["name"]] = bad
+                    r = client.request(method.upper(), url, params=query, headers={"X-API-Key": KEY_A})
+                    sent += 1
+                    assert r.status_code == 422, (method, url, p["name"], r.status_code, r.text[:300])
+                    assert p["name"] in r.text
+    assert sent >= 6 * len(CONTROL_STRINGS)
