@@ -69,9 +69,13 @@ def as_utc(moment: datetime) -> datetime: ...
 @overload
 def as_utc(moment: None) -> None: ...
 def as_utc(moment: datetime | None) -> datetime | None:
-    """Return ``moment`` as aware UTC: SQLite hands back naive datetimes for UTC columns."""
-    if moment is None or moment.tzinfo is not None:
+    """Return ``moment`` as aware UTC: SQLite hands back naive datetimes for UTC columns, and a
+    filter given with another offset (``+14:00``) must be the same instant in UTC before it is
+    compared (SQLite compares the text, offset ignored)."""
+    if moment is None:
         return moment
+    if moment.tzinfo is not None:
+        return moment.astimezone(UTC)
     return moment.replace(tzinfo=UTC)
 
 

@@ -161,3 +161,28 @@ def test_sqlite_is_in_wal_mode(tmp_path):
 def test_page_size_limit(client):
     r = client.get("/v1/plans", params={"limit": 5000}, headers=A)
     assert r.status_code == 422
+
+
+@pytest.mark.parametrize("offset", ["+14:00", "-12:00", "+05:30", "Z"])
+def test_time_filters_compare_instants_whatever_the_offset(client, paper_plan, offset):
+    """created_after / created_before with any UTC offset mean the same instant (SQLite compared the text)."""
+    from datetime import datetime, timedelta, timezone
+
+    created = datetime.fromisoformat(paper_plan["created_at"].replace("Z", "+00:00"))
+    hours, minutes = (0, 0) if offset == "Z" else (int(offset[:3]), int(offset[0] + offset[4:]))
+    zone = timezone(timedelta(hours=hours, minutes=minutes))
+
+    def stamp(moment):
+        text = moment.astimezone(zone).isoformat(timespec="microseconds")
+        return text.replace("+00:00", "Z") if offset == "Z" else text
+
+    def ids(**params):
+        r = client.get("/v1/plans", params={**params, "limit": 100}, headers=A)
+        assert r.status_code == 200, r.text
+        return {p["id"] for p in r.json()["data"]}
+
+    second = timedelta(seconds=1)
+    assert paper_plan["id"] in ids(created_after=stamp(created - second))
+    assert paper_plan["id"] not in ids(created_after=stamp(created + second))
+    assert paper_plan["id"] in ids(created_before=stamp(created + second))
+    assert paper_plan["id"] not in ids(created_before=stamp(created - second))
