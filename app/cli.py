@@ -318,7 +318,24 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
+# The inference commands: name, module of inference (its add_arguments and run), help.
+INFERENCE_COMMANDS = (
+    ("simulate", "dataset", "simulate a labelled ISAR data set (or --preview a few frames)"),
+    ("train", "train", "train UNet++ and Swin on a simulated data set"),
+    ("finetune", "finetune", "fine-tune Swin's last stage of a trained run on cached features (CPU)"),
+    ("export", "export", "export a training run to ONNX with a model card"),
+    ("compare", "compare", "set training runs side by side: Swin's test error per epoch"),
+    ("evaluate", "evaluate", "the paper's Tables 4 and 7 for the ONNX models"),
+)
+
+
+def command_name(argv: list[str]) -> str | None:
+    """Return the subcommand ``argv`` names (its first word that is not an option), if any."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
+def build_parser(load: str | None = None) -> argparse.ArgumentParser:
+    """Build gsa's parser; only the inference command ``load`` gets its real arguments (and imports its module)."""
     p = argparse.ArgumentParser(prog="gsa", description="GSA-ISAR: GSA scene planning and ISAR attitude estimation")
     sub = p.add_subparsers(dest="cmd", required=True)
     s = sub.add_parser("serve", help="migrate the database and start the API")
@@ -347,13 +364,12 @@ def build_parser() -> argparse.ArgumentParser:
     ac.add_argument("file")
     ac.add_argument("--json", action="store_true")
     ac.set_defaults(func=cmd_access)
-    add_inference_command(sub, "simulate", "dataset", "simulate a labelled ISAR data set (or --preview a few frames)")
-    add_inference_command(sub, "train", "train", "train UNet++ and Swin on a simulated data set")
-    add_inference_command(sub, "finetune", "finetune",
-                          "fine-tune Swin's last stage of a trained run on cached features (CPU)")  # fmt: skip
-    add_inference_command(sub, "export", "export", "export a training run to ONNX with a model card")
-    add_inference_command(sub, "compare", "compare", "set training runs side by side: Swin's test error per epoch")
-    add_inference_command(sub, "evaluate", "evaluate", "the paper's Tables 4 and 7 for the ONNX models")
+    for name, module, help in INFERENCE_COMMANDS:
+        if name == load:
+            add_inference_command(sub, name, module, help)
+        else:
+            # Not asked for: a stand-in that keeps `gsa --help` from importing torch and the simulator.
+            sub.add_parser(name, help=help, add_help=False)
     es = sub.add_parser("estimate", help="estimate the attitude in one ISAR frame (.npy, .npz, PNG, TIFF)")
     es.add_argument("file")
     es.add_argument("--models", help="model directory (default: GSA_MODEL_DIR or the shipped models)")
@@ -368,7 +384,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else argv
+    args = build_parser(command_name(argv)).parse_args(argv)
     try:
         return int(args.func(args))
     except CliError as exc:

@@ -25,6 +25,11 @@ def _in_utc(value: datetime) -> datetime:
     return value.replace(tzinfo=UTC) if value.tzinfo is None else value.astimezone(UTC)
 
 
+def _utc_or_none(moment: datetime | None) -> datetime | None:
+    """A stored time as aware UTC (SQLite hands back naive datetimes for UTC columns)."""
+    return None if moment is None else _in_utc(moment)
+
+
 IsoDateTime = Annotated[datetime, BeforeValidator(_iso_only), AfterValidator(_in_utc)]
 
 CONTROL_CHARACTERS = re.compile(r"[\x00-\x1f\x7f]")
@@ -333,6 +338,33 @@ class EstimatePublic(BaseModel):
         False, description="true when the frame was sent already normalised (normalised=true) and taken as sent"
     )
     links: dict[str, str]
+
+    @staticmethod
+    def row_json(e: Any) -> dict[str, Any]:
+        """Return a stored estimate row (app.db.models.Estimate) as this schema's JSON-ready dict."""
+        r = e.result
+        return {
+            "id": e.id,
+            "created_at": _utc_or_none(e.created_at),
+            "plan_id": e.plan_id,
+            "observed_at": _utc_or_none(e.observed_at),
+            "input_name": e.input_name,
+            "input_sha256": e.input_sha256,
+            "shape": e.shape,
+            "dtype": e.dtype,
+            "snr_db": e.snr_db,
+            "attitude": r["attitude"],
+            "attitude_lvlh": r.get("attitude_lvlh"),
+            "attitude_j2000": r.get("attitude_j2000"),
+            "model": r["model"],
+            "timings_s": r["timings_s"],
+            "input_normalised": r.get("input_normalised", False),
+            "links": {
+                "self": f"/v1/estimates/{e.id}",
+                "enhanced_png": f"/v1/estimates/{e.id}/enhanced.png",
+                "original_png": f"/v1/estimates/{e.id}/original.png",
+            },
+        }
 
 
 class EstimatesPublic(BaseModel):

@@ -58,9 +58,9 @@ def bench_brute_force(plan) -> dict[str, float]:
     w = plan.windows
     n_moments = int(np.sum(np.ceil(w.set_s - w.rise_s) + 1))
     tgt = plan.target_trajectory
-    from planner.plan import _observer_trajectory
+    from planner.plan import observer_trajectory
 
-    obs = _observer_trajectory(PAPER_OBSERVER, PAPER_EPOCH, plan.duration_s, "osculating", False)
+    obs = observer_trajectory(PAPER_OBSERVER, PAPER_EPOCH, plan.duration_s, "osculating", False)
     model = ObserverPlaneModel(obs, PAPER_OBSERVER.a_km, PAPER_OBSERVER.e, math.radians(99.0), 0.0)
     t = np.linspace(w.rise_s[0], w.set_s[0], 20)
 

@@ -24,9 +24,9 @@ import numpy as np
 import torch
 
 from inference.errors import InferenceError, ModelFileError, module_main
+from inference.frames import ANGLE_SCALE_DEG
 from inference.models.build import build_models, get_config
 from inference.runtime import sha256_file
-from inference.train import ANGLE_SCALE_DEG
 
 OPSET = 17
 PARITY_RTOL = 1e-4  # relative difference, float32, ORT against torch

@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from inference.errors import ModelFileError, RadarError
+from inference.frames import euler_from_matrix, normalise_frame, rotation_matrix  # noqa: F401 (part of the simulator's API)
 from inference.targets import CURVED, EDGE, FLAT, ISOTROPIC, TargetModel
 
 Vec = NDArray[np.float64]
@@ -90,28 +91,6 @@ class Radar:
     def extent_m(self) -> tuple[float, float]:
         """Return the frame's size (range, cross-range) in metres."""
         return self.n_range * self.range_cell_m, self.n_azimuth * self.cross_range_cell_m
-
-
-def rotation_matrix(z_deg: float, y_deg: float, x_deg: float) -> Vec:
-    """Return R = Rz(z) Ry(y) Rx(x), body to observation frame, from angles in degrees.
-
-    >>> np.round(rotation_matrix(90.0, 0.0, 0.0) @ [1.0, 0.0, 0.0], 12).tolist()
-    [0.0, 1.0, 0.0]
-    """
-    z, y, x = (math.radians(a) for a in (z_deg, y_deg, x_deg))
-    cz, sz, cy, sy, cx, sx = math.cos(z), math.sin(z), math.cos(y), math.sin(y), math.cos(x), math.sin(x)
-    rz = np.array([[cz, -sz, 0.0], [sz, cz, 0.0], [0.0, 0.0, 1.0]])
-    ry = np.array([[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]])
-    rx = np.array([[1.0, 0.0, 0.0], [0.0, cx, -sx], [0.0, sx, cx]])
-    return rz @ ry @ rx
-
-
-def euler_from_matrix(r: Vec) -> tuple[float, float, float]:
-    """Return (z, y, x) in degrees of R = Rz(z) Ry(y) Rx(x) (the inverse of rotation_matrix, |y| < 90)."""
-    y = math.asin(max(-1.0, min(1.0, -r[2, 0])))
-    z = math.atan2(r[1, 0], r[0, 0])
-    x = math.atan2(r[2, 1], r[2, 2])
-    return math.degrees(z), math.degrees(y), math.degrees(x)
 
 
 def line_of_sight(pitch_rad: float, azimuth_rad: Vec | float) -> tuple[Vec, Vec]:
@@ -344,21 +323,6 @@ def label_mask(imager: Imager, surface_obs: Vec) -> NDArray[np.bool_]:
     mask = np.zeros((radar.n_range, radar.n_azimuth), bool)
     mask[iu[ok], iv[ok]] = True
     return np.asarray(binary_closing(mask, iterations=1) | mask)
-
-
-def normalise_frame(magnitude: NDArray[np.floating], dynamic_range_db: float = 40.0) -> NDArray[np.float32]:
-    """Map an ISAR magnitude image to [0, 1] the way the networks consume it (training and service alike).
-
-    Decibels relative to the 99.5th percentile (robust to one very bright cell:
-    a cylinder seen broadside can sit 40 dB above the rest), clipped to
-    ``dynamic_range_db`` below it.
-    """
-    mag = np.abs(np.asarray(magnitude, np.float64))
-    ref = float(np.percentile(mag, 99.5))
-    if not math.isfinite(ref) or ref <= 0.0:
-        return np.zeros(mag.shape, np.float32)
-    db = 20.0 * np.log10(np.maximum(mag, ref * 1e-12) / ref)
-    return np.clip((db + dynamic_range_db) / dynamic_range_db, 0.0, 1.0).astype(np.float32)
 
 
 @dataclass(frozen=True, slots=True)

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import threading
 import time
 from dataclasses import dataclass
@@ -174,7 +173,7 @@ class Estimator:
         return np.asarray(self._run("swin", frames) * self.angle_scale_deg, np.float32)
 
     def estimate(self, frames: NDArray[np.float32]) -> Estimate:
-        """Estimate attitudes of normalised frames [N, H, W] (``inference.isar.normalise_frame`` output).
+        """Estimate attitudes of normalised frames [N, H, W] (``inference.frames.normalise_frame`` output).
 
         Thread-safe. Concurrent callers' frames share runs; each caller gets its own
         frames' results, with the stage times of the runs it was in shared out per frame.
@@ -239,19 +238,3 @@ class Estimator:
                 j.done = True
                 k += n
             self._cv.notify_all()
-
-
-def euler_to_quaternion(z_deg: float, y_deg: float, x_deg: float) -> tuple[float, float, float, float]:
-    """Return the unit quaternion (w, x, y, z) of R = Rz(z) Ry(y) Rx(x).
-
-    >>> [round(q, 6) for q in euler_to_quaternion(90.0, 0.0, 0.0)]
-    [0.707107, 0.0, 0.0, 0.707107]
-    """
-    hz, hy, hx = (math.radians(a) / 2.0 for a in (z_deg, y_deg, x_deg))
-    cz, sz, cy, sy, cx, sx = math.cos(hz), math.sin(hz), math.cos(hy), math.sin(hy), math.cos(hx), math.sin(hx)
-    return (
-        cz * cy * cx + sz * sy * sx,
-        cz * cy * sx - sz * sy * cx,
-        cz * sy * cx + sz * cy * sx,
-        sz * cy * cx - cz * sy * sx,
-    )

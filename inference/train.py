@@ -36,11 +36,10 @@ import torch
 
 from inference.dataset import load_arrays, load_manifest
 from inference.errors import DatasetError, InferenceError, module_main
+from inference.frames import ANGLE_SCALE_DEG
 from inference.models.build import ModelConfig, build_models, get_config
 from inference.models.swin import angle_loss
 from inference.models.unetpp import relative_frobenius_loss
-
-ANGLE_SCALE_DEG = 45.0
 
 
 def split_indices(manifest: dict[str, Any], n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -168,9 +168,13 @@ class Plan:
     encounter: Encounter | None = None
 
 
-def _target_trajectory(
+def target_trajectory(
     orbit: Orbit, epoch: datetime, frames: EarthFrames, t1_s: float, reading: Reading, pole: Pole | None = None
 ) -> Trajectory:
+    """Return the target's trajectory over ``[0, t1_s]`` after ``epoch``: SGP4 for a TLE, else by ``reading``.
+
+    J2 acts about ``pole`` (default: the pole of date fitted over the span).
+    """
     if orbit.tle is not None:
         return SGP4Trajectory(orbit.tle, epoch, frames)
     assert orbit.elements is not None
@@ -198,9 +202,10 @@ def _observer_elements(orbit: Orbit, epoch: datetime, frames: EarthFrames) -> El
     )
 
 
-def _observer_trajectory(
+def observer_trajectory(
     elements: Elements, epoch: datetime, t1_s: float, reading: Reading, tle_based: bool, pole: Pole | None = None
 ) -> Trajectory:
+    """Return the observer's trajectory from its elements (a TLE observer's are osculating: numerical J2)."""
     pole = pole or pole_of_date(epoch, min(0.0, seconds_between(epoch, elements.epoch)), t1_s)
     if reading == "mean" and not tle_based:
         return SecularJ2Trajectory(elements, epoch, pole)
@@ -238,9 +243,9 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
     t_after = min(2 * math.pi * math.sqrt(obs_el.a_km**3 / MU_EARTH_KM3_S2), 86400.0) + 600.0
     t_end = t1 + t_after
     pole = pole_of_date(epoch, t_first, t_end)
-    tgt = _target_trajectory(target, epoch, frames, t_end, opts.reading, pole)
+    tgt = target_trajectory(target, epoch, frames, t_end, opts.reading, pole)
     tle_obs = observer.tle is not None
-    obs_base = _observer_trajectory(obs_el, epoch, t_end, opts.reading, tle_obs, pole)
+    obs_base = observer_trajectory(obs_el, epoch, t_end, opts.reading, tle_obs, pole)
     t_ref = 0.0 if tle_obs else seconds_between(epoch, obs_el.epoch)
     timings["propagation"] = time.perf_counter() - clock
 
@@ -262,7 +267,7 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
     def changed_observer(cand: Candidate) -> Trajectory:
         key = (cand.delta_ha_km, cand.delta_hp_km)
         if key not in cache:
-            cache[key] = _observer_trajectory(obs_el.with_heights(*key), epoch, t_end, opts.reading, tle_obs, pole)
+            cache[key] = observer_trajectory(obs_el.with_heights(*key), epoch, t_end, opts.reading, tle_obs, pole)
         return cache[key]
 
     candidates = [_refined(cand, tgt, changed_observer(cand), windows) for cand in candidates]

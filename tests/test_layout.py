@@ -1,22 +1,115 @@
+"""The house rules, checked: which folder may import what, and what stays out of the light entry points."""
+
+from __future__ import annotations
+
+import ast
+import json
 import subprocess
 import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_planner_imports_no_web_or_database_code():
+def _imports(path: Path, top_level_only: bool = False) -> list[tuple[str, list[str]]]:
+    """Return (module, names) of every import in a file (or only those at module level)."""
+    tree = ast.parse(path.read_text())
+    nodes = tree.body if top_level_only else list(ast.walk(tree))
+    out = []
+    for node in nodes:
+        if isinstance(node, ast.Import):
+            out += [(a.name, []) for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out.append((node.module, [a.name for a in node.names]))
+    return out
+
+
+def _module_path(name: str) -> Path | None:
+    p = ROOT / Path(*name.split("."))
+    if (p / "__init__.py").exists():
+        return p / "__init__.py"
+    return p.with_suffix(".py") if p.with_suffix(".py").exists() else None
+
+
+def _closure(module: str) -> set[str]:
+    """Every module imported at module level by ``module``, transitively, and everything it imports anywhere."""
+    seen: set[str] = set()
+    todo = [module]
+    outside: set[str] = set()
+    while todo:
+        m = todo.pop()
+        if m in seen:
+            continue
+        seen.add(m)
+        path = _module_path(m)
+        if path is None:
+            continue
+        for name, _ in _imports(path, top_level_only=(m != module)):
+            outside.add(name)
+            if name.split(".")[0] in ("app", "planner", "inference"):
+                todo.append(name)
+    return outside | seen
+
+
+def _package_files(package: str) -> list[Path]:
+    return sorted((ROOT / package).rglob("*.py"))
+
+
+@pytest.mark.parametrize("module", ["inference.isar", "inference.targets", "inference.dataset", "inference.frames"])
+def test_the_simulator_imports_no_torch(module):
+    assert not any(m.split(".")[0] in ("torch", "onnxruntime") for m in _closure(module)), module
+
+
+@pytest.mark.parametrize("module", ["inference.runtime", "inference.frames"])
+def test_the_runtime_imports_no_torch(module):
+    assert not any(m.split(".")[0] == "torch" for m in _closure(module)), module
+
+
+@pytest.mark.parametrize("package,forbidden", [("planner", ("app", "inference")), ("inference", ("app", "planner"))])
+def test_planner_and_inference_never_import_app_or_each_other(package, forbidden):
+    bad = [
+        (str(p.relative_to(ROOT)), name)
+        for p in _package_files(package)
+        for name, _ in _imports(p)
+        if name.split(".")[0] in forbidden
+    ]
+    assert not bad, bad
+
+
+def test_app_imports_no_private_name_of_another_package():
+    bad = [
+        (str(p.relative_to(ROOT)), module, name)
+        for p in _package_files("app")
+        for module, names in _imports(p)
+        if module.split(".")[0] in ("planner", "inference")
+        for name in names
+        if name.startswith("_")
+    ]
+    assert not bad, bad
+
+
+def test_no_route_module_imports_another():
+    routes = ROOT / "app" / "api" / "routes"
+    bad = [
+        (p.name, module)
+        for p in routes.glob("*.py")
+        for module, names in _imports(p)
+        if module.startswith("app.api.routes") or (module == "app.api" and "routes" in names)
+    ]
+    assert not bad, bad
+
+
+def test_light_entry_points_leave_torch_and_the_simulator_out():
+    """`import app.main` and building gsa's parser (what `gsa --help` and `gsa serve` do) import no torch."""
     code = (
-        "import sys, planner.plan, planner.access, planner.lambert; "
-        "bad = [m for m in ('fastapi', 'pydantic', 'sqlalchemy', 'app', 'inference') if m in sys.modules]; "
-        "print(','.join(bad))"
+        "import json, sys\n"
+        "import app.main\n"
+        "from app.cli import build_parser\n"
+        "build_parser().format_help()\n"
+        "heavy = ('torch', 'inference.isar', 'inference.targets', 'inference.dataset', 'inference.train', 'scipy.ndimage')\n"
+        "print(json.dumps([m for m in heavy if m in sys.modules]))\n"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == ""
-
-
-def test_simulator_needs_only_numpy_and_scipy():
-    code = (
-        "import sys, inference.dataset, inference.isar, inference.targets; "
-        "bad = [m for m in ('fastapi', 'pydantic', 'sqlalchemy', 'app', 'planner', 'skyfield', 'torch') "
-        "if m in sys.modules]; print(','.join(bad))"
-    )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == ""
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == []

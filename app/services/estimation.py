@@ -19,8 +19,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.errors import InputError
-from inference.isar import euler_from_matrix, normalise_frame, rotation_matrix
-from inference.runtime import Estimator, euler_to_quaternion
+from inference.frames import euler_from_matrix, euler_to_quaternion, normalise_frame, rotation_matrix
+from inference.runtime import Estimator
 
 MAX_NPZ_MEMBER_BYTES = 64 * 1024 * 1024  # decompressed; refuses zip bombs before reading them
 
@@ -187,7 +187,7 @@ def prepare(upload: Upload, size: int, resample: bool, normalised: bool = False)
         if lo < 0.0 or hi > 1.0:
             raise InputError(
                 _loc(upload.name),
-                f"normalised=true needs values in [0, 1] (inference.isar.normalise_frame output); "
+                f"normalised=true needs values in [0, 1] (inference.frames.normalise_frame output); "
                 f"this frame spans [{lo:.3g}, {hi:.3g}]: send it without normalised=true",
             )
         # normalise_frame maps its 99.5th percentile and everything above it to 1.0, so at least
@@ -197,7 +197,7 @@ def prepare(upload: Upload, size: int, resample: bool, normalised: bool = False)
             raise InputError(
                 _loc(upload.name),
                 f"normalised=true, but only {100 * at_top:.2g} % of the pixels are at 1.0, where "
-                "inference.isar.normalise_frame puts 0.5 %: this is a raw frame; send it without normalised=true",
+                "inference.frames.normalise_frame puts 0.5 %: this is a raw frame; send it without normalised=true",
             )
     if mag.shape != (size, size):
         if not resample:
@@ -302,7 +302,7 @@ def frames_at(plan_request: dict[str, Any], observed_at: datetime) -> dict[str, 
     """
     from app.schemas import PlanCreate
     from app.services.planning import plan_options, to_orbit, to_station
-    from planner.plan import _target_trajectory
+    from planner.plan import target_trajectory
     from planner.propagation import EarthFrames, as_utc, seconds_between
 
     req = PlanCreate.model_validate(plan_request)
@@ -311,7 +311,7 @@ def frames_at(plan_request: dict[str, Any], observed_at: datetime) -> dict[str, 
     reading = plan_options(req).reading
     epoch = as_utc(observed_at)
     frames = EarthFrames(epoch, -3600.0, 3600.0)
-    traj = _target_trajectory(target, epoch, frames, 10.0, reading) if target.tle else None
+    traj = target_trajectory(target, epoch, frames, 10.0, reading) if target.tle else None
     if traj is None:
         from planner.propagation import NumericalJ2Trajectory, SecularJ2Trajectory
 

@@ -195,13 +195,13 @@ def run_access(req: AccessCreate) -> dict[str, Any]:
     """Compute access windows alone."""
     target = to_orbit(req.target, "target")
     station = to_station(req.ground_station)
-    from planner.plan import _target_trajectory
+    from planner.plan import target_trajectory
 
     epoch = _aware(req.start) if req.start else target.epoch
     t1 = req.duration_days * 86400.0
     frames = EarthFrames(epoch, -3600.0, t1 + 3600.0)
     try:
-        traj = _target_trajectory(target, epoch, frames, t1, req.reading)
+        traj = target_trajectory(target, epoch, frames, t1, req.reading)
         w = access_windows(traj, station, frames, 0.0, t1)
     except PlannerError as exc:
         raise InputError([exc.field or "request"], str(exc)) from None

@@ -10,11 +10,12 @@ import torch
 from inference.dataset import DatasetSpec, generate
 from inference.errors import DatasetError, InferenceError, ModelFileError
 from inference.export import export
+from inference.frames import euler_to_quaternion
 from inference.isar import Radar
 from inference.models.build import build_models, get_config
 from inference.models.swin import SwinTransformer, window_partition, window_reverse
 from inference.models.unetpp import UNetPlusPlus, relative_frobenius_loss
-from inference.runtime import Estimator, euler_to_quaternion
+from inference.runtime import Estimator
 from inference.train import train
 
 SMALL = Radar(n_range=64, n_azimuth=64, bandwidth_hz=0.4e9, aperture_deg=5.1 / 4)

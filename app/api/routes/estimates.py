@@ -26,35 +26,9 @@ NOT_FOUND: dict[int | str, dict[str, Any]] = {404: {"description": "no estimate 
 
 
 NORMALISED = (
-    "the frame already is the models' input (inference.isar.normalise_frame output in [0, 1], as gsa simulate "
+    "the frame already is the models' input (inference.frames.normalise_frame output in [0, 1], as gsa simulate "
     "data sets store it): take it as sent instead of normalising it again"
 )
-
-
-def public(e: Estimate) -> dict[str, Any]:
-    r = e.result
-    return {
-        "id": e.id,
-        "created_at": as_utc(e.created_at),
-        "plan_id": e.plan_id,
-        "observed_at": as_utc(e.observed_at),
-        "input_name": e.input_name,
-        "input_sha256": e.input_sha256,
-        "shape": e.shape,
-        "dtype": e.dtype,
-        "snr_db": e.snr_db,
-        "attitude": r["attitude"],
-        "attitude_lvlh": r.get("attitude_lvlh"),
-        "attitude_j2000": r.get("attitude_j2000"),
-        "model": r["model"],
-        "timings_s": r["timings_s"],
-        "input_normalised": r.get("input_normalised", False),
-        "links": {
-            "self": f"/v1/estimates/{e.id}",
-            "enhanced_png": f"/v1/estimates/{e.id}/enhanced.png",
-            "original_png": f"/v1/estimates/{e.id}/original.png",
-        },
-    }
 
 
 async def _read(upload: UploadFile, limit: int) -> bytes:
@@ -153,7 +127,7 @@ async def create_estimate(
     rows = await run_in_threadpool(_estimate, session=session, operator_id=operator.id, settings=settings, est=est,
                                    uploads=uploads, resample=resample, plan_id=plan_id,
                                    observed_at=as_utc(observed_at), snr_db=snr_db, normalised=normalised)  # fmt: skip
-    return public(rows[0])
+    return EstimatePublic.row_json(rows[0])
 
 
 @router.post(
@@ -178,7 +152,7 @@ async def create_estimates_batch(
     rows = await run_in_threadpool(_estimate, session=session, operator_id=operator.id, settings=settings, est=est,
                                    uploads=uploads, resample=resample, plan_id=plan_id,
                                    observed_at=as_utc(observed_at), snr_db=None, normalised=normalised)  # fmt: skip
-    return {"data": [public(r) for r in rows], "count": len(rows)}
+    return {"data": [EstimatePublic.row_json(r) for r in rows], "count": len(rows)}
 
 
 @router.get("", response_model=EstimatesPublic)
@@ -196,7 +170,7 @@ def list_estimates(
     limit = check_page_size(limit, settings)
     rows, total = crud.list_estimates(session=session, operator_id=operator.id, limit=limit, offset=offset,
                                       plan_id=plan_id, created_after=created_after, created_before=created_before)  # fmt: skip
-    return {"data": [public(r) for r in rows], "count": total}
+    return {"data": [EstimatePublic.row_json(r) for r in rows], "count": total}
 
 
 def _owned(session: Any, operator_id: str, estimate_id: Annotated[Text, PathParam()]) -> Estimate:
@@ -211,7 +185,7 @@ def read_estimate(
     session: SessionDep, operator: CurrentOperator, estimate_id: Annotated[Text, PathParam()]
 ) -> dict[str, Any]:
     """Return one of the caller's estimates."""
-    return public(_owned(session, operator.id, estimate_id))
+    return EstimatePublic.row_json(_owned(session, operator.id, estimate_id))
 
 
 def _png(settings: Any, digest: str) -> Response:

@@ -8,9 +8,8 @@ from fastapi import APIRouter, Query
 from sqlalchemy import func, select
 
 from app.api.deps import CurrentOperator, SessionDep, SettingsDep, as_utc, check_page_size
-from app.api.routes.estimates import public
 from app.db.models import Estimate, Plan
-from app.schemas import ScenesPublic
+from app.schemas import EstimatePublic, ScenesPublic
 
 router = APIRouter(prefix="/scenes", tags=["scenes"])
 
@@ -39,5 +38,5 @@ def list_scenes(
         ):
             by_plan[str(e.plan_id)].append(e)
     data = [{"plan_id": p.id, "target_name": p.target_name, "t_access": as_utc(p.t_access), "miss_km": p.miss_km,
-             "estimates": [public(e) for e in by_plan[p.id]]} for p in plans]  # fmt: skip
+             "estimates": [EstimatePublic.row_json(e) for e in by_plan[p.id]]} for p in plans]  # fmt: skip
     return {"data": data, "count": total}
