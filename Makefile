@@ -21,17 +21,17 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -q
 
 bench: $(STAMP)
-	$(BIN)/python bench/run.py
-	$(BIN)/python bench/load.py
+	$(BIN)/python -m bench.run
+	$(BIN)/python -m bench.load
 
 # 5000+ generated requests per database (313 per route); the counts go to BENCHMARKS.md.
 fuzz: $(STAMP)
 	GSA_FUZZ_EXAMPLES_PER_ROUTE=313 GSA_FUZZ_REPORT=/tmp/gsa-fuzz.json $(BIN)/python -m pytest -q -p no:cacheprovider tests/app/api/test_fuzz.py
-	$(BIN)/python bench/fuzz.py /tmp/gsa-fuzz.json
+	$(BIN)/python -m bench.fuzz /tmp/gsa-fuzz.json
 
 # A real server with 2 workers under 16 clients, on SQLite and PostgreSQL; figures to BENCHMARKS.md.
 load: $(STAMP)
-	$(BIN)/python bench/load.py
+	$(BIN)/python -m bench.load
 
 lint: $(STAMP)
 	$(BIN)/ruff check app planner inference tests bench migrations
