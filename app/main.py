@@ -55,5 +55,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         """Say the process is up."""
         return {"status": "ok"}
 
-    app.include_router(api_router, prefix="/v1")
+    from fastapi import Depends
+
+    from app.api.deps import require_schema
+
+    app.include_router(
+        api_router,
+        prefix="/v1",
+        dependencies=[Depends(require_schema)],
+        responses={503: {"description": "the database is not migrated (run `gsa db upgrade`) or does not answer"}},
+    )
     return app

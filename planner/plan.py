@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from planner.access import MAX_SPAN_S, AccessWindows, access_windows, validate_station
 from planner.alignment import Candidate, HeightBox, ObserverPlaneModel, align_nodes
-from planner.constants import MU_EARTH_KM3_S2, R_EARTH_KM
+from planner.constants import MIN_PERIGEE_HEIGHT_KM, MU_EARTH_KM3_S2, R_EARTH_KM
 from planner.elements import Elements, height_change_dv_km_s, state_to_elements
 from planner.errors import PlannerError, SearchRangeError
 from planner.illumination import phase_angle_deg, sun_position_km, sunlit
@@ -168,6 +168,24 @@ class Plan:
     encounter: Encounter | None = None
 
 
+def check_box_reachable(elements: Elements, box: HeightBox) -> None:
+    """Refuse, before any planning, a (dHa, dHp) box whose corners take the observer's perigee below the limit.
+
+    The lowest perigee in the box is at its (dha_min, dhp_min) corner (the apsides swap when
+    the new apogee falls below the new perigee); the error names the box field to raise.
+    """
+    ha, hp = elements.ha_km + box.dha_min_km, elements.hp_km + box.dhp_min_km
+    if min(ha, hp) >= MIN_PERIGEE_HEIGHT_KM:
+        return
+    field = "dhp_min_km" if hp <= ha else "dha_min_km"
+    lowest = min(ha, hp)
+    raise SearchRangeError(
+        f"{field} takes the observer's perigee to {lowest:.1f} km, below {MIN_PERIGEE_HEIGHT_KM} km "
+        f"(observer Ha {elements.ha_km:.1f} km, Hp {elements.hp_km:.1f} km): raise {field}",
+        field=field,
+    )
+
+
 def target_trajectory(
     orbit: Orbit, epoch: datetime, frames: EarthFrames, t1_s: float, reading: Reading, pole: Pole | None = None
 ) -> Trajectory:
@@ -238,6 +256,7 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
     if eop_note:
         notes.append(eop_note)
     obs_el = _observer_elements(observer, epoch, frames)
+    check_box_reachable(obs_el, opts.box)
     # One pole of date for the plan: J2 acts about it in every propagation and verification.
     t_first = min(0.0, seconds_between(epoch, obs_el.epoch), seconds_between(epoch, target.epoch))
     t_after = min(2 * math.pi * math.sqrt(obs_el.a_km**3 / MU_EARTH_KM3_S2), 86400.0) + 600.0

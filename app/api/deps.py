@@ -30,6 +30,23 @@ def get_settings_dep(request: Request) -> Settings:
     return settings
 
 
+def require_schema(request: Request) -> None:
+    """Answer 503 on every /v1 route while the database is not at the code's schema (before authentication,
+    which reads the database). Once the schema is right it is not checked again in this process."""
+    if getattr(request.app.state, "schema_ok", False):
+        return
+    from app.core.db import database_status
+
+    status = database_status(request.app.state.engine)
+    if not status["ok"]:
+        raise HTTPException(
+            status_code=503,
+            detail=status.get("error", "the database does not answer")
+            + ("" if "upgrade" in status.get("error", "") else "; check GSA_DATABASE_URL, then run `gsa db upgrade`"),
+        )
+    request.app.state.schema_ok = True
+
+
 SessionDep = Annotated[Session, Depends(get_db)]
 SettingsDep = Annotated[Settings, Depends(get_settings_dep)]
 

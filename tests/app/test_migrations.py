@@ -70,3 +70,29 @@ def test_keys_from_before_0003_keep_working_and_hmac_keys_are_revoked_on_downgra
         rows = dict(conn.execute(text("SELECT id, revoked_at IS NOT NULL FROM api_keys")).all())
     engine.dispose()
     assert rows == {"k1": False, "k2": True}
+
+
+def test_an_unmigrated_database_answers_503_naming_the_fix(url, tmp_path, smoke_models):
+    """Every /v1 route answers 503 "run gsa db upgrade" (not 500) until the schema is there, key or no key."""
+    from fastapi.testclient import TestClient
+
+    from app.core.config import Settings
+    from app.core.db import upgrade_database
+    from app.main import create_app
+
+    settings = Settings(data_dir=tmp_path / "data", api_keys="k-unmigrated", model_dir=smoke_models, database_url=url)
+    with TestClient(create_app(settings)) as client:
+        for method, path in [
+            ("GET", "/v1/plans"),
+            ("GET", "/v1/estimates"),
+            ("POST", "/v1/plans"),
+            ("GET", "/v1/scenes"),
+        ]:
+            for headers in ({"X-API-Key": "k-unmigrated"}, {}):
+                r = client.request(method, path, headers=headers)
+                assert r.status_code == 503, (path, r.text)
+                assert "gsa db upgrade" in r.text
+        assert client.get("/readyz").status_code == 503
+        assert client.get("/healthz").status_code == 200
+        upgrade_database(url)
+        assert client.get("/v1/plans", headers={"X-API-Key": "k-unmigrated"}).status_code == 200

@@ -149,6 +149,9 @@ CASES = [
     Case("name_with_path_separator", "POST", PLANS, _plan(**{"target.name": "../../etc/passwd"}), 422, "name"),
     Case("name_with_nul", "POST", PLANS, _plan(**{"observer.name": "obs\x00; DROP TABLE plans;--"}), 422, "name"),
     Case("name_10000_characters", "POST", PLANS, _plan(**{"target.name": "x'; DELETE FROM plans;--" * 400}), 422, "name"),
+    # a box whose corner takes the observer under 100 km: refused before planning, naming the box field
+    Case("box_below_perigee_limit", "POST", PLANS, _plan(**{"search.dhp_min_km": -300, "search.step_km": 50}), 422, "dhp_min_km"),
+    Case("box_apogee_below_perigee_limit", "POST", PLANS, _plan(**{"observer.elements.ha_km": 400, "search.dha_min_km": -320, "search.dhp_min_km": 0, "search.step_km": 10}), 422, "dha_min_km"),
     # the encounter's options
     Case("standoff_zero", "POST", PLANS, _plan(**{"search.standoff_km": 0}), 422, "standoff_km"),
     Case("standoff_over_500", "POST", PLANS, _plan(**{"search.standoff_km": 5000}), 422, "standoff_km"),
