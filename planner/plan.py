@@ -86,6 +86,7 @@ class PlanOptions:
     standoff_km: float = 5.0
     min_separation_km: float = 1.0
     max_tracking_rate_deg_s: float = 10.0
+    max_tle_age_days: float = 30.0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.duration_s) and self.duration_s > 0):
@@ -166,6 +167,51 @@ class Plan:
     frames: EarthFrames | None = None
     station: Station | None = None
     encounter: Encounter | None = None
+
+
+def tle_age_notes(orbits: tuple[Orbit, ...], start: datetime, duration_s: float, max_age_days: float) -> list[str]:
+    """Return a note for each TLE older (or younger) than ``max_age_days`` anywhere in the span.
+
+    SGP4's error grows by about 1-3 km a day from the epoch for LEO: far from it the windows
+    and the plan describe no real pass.
+    """
+    notes = []
+    end = start + timedelta(seconds=duration_s)
+    for orbit in orbits:
+        if orbit.tle is None:
+            continue
+        age_days = max(abs((start - orbit.epoch).total_seconds()), abs((end - orbit.epoch).total_seconds())) / 86400.0
+        if age_days > max_age_days:
+            notes.append(
+                f"{orbit.name}: the TLE's epoch {orbit.epoch:%Y-%m-%d} is {age_days:.0f} days from the span's far end, "
+                f"over {max_age_days:g} days; SGP4 drifts 1-3 km a day, so use a fresher TLE"
+            )
+    return notes
+
+
+COPLANAR_DEG = 0.01  # 1.2 km out of plane at 7000 km: below it the line of nodes is not defined
+
+
+def check_not_coplanar(target: Trajectory, observer: Trajectory, t1_s: float) -> None:
+    """Refuse a target and observer whose orbit planes stay within ``COPLANAR_DEG`` over the span.
+
+    The scene is where the target crosses the observer's plane, on the planes' line of
+    nodes; two orbits in one plane (the same orbit, or co-orbital satellites) have no such
+    line, so there is no scene to plan.
+    """
+    t = np.linspace(0.0, t1_s, 5)
+    r_t, v_t = target.state(t)
+    r_o, v_o = observer.state(t)
+    n_t = np.cross(r_t, v_t, axis=0)
+    n_o = np.cross(r_o, v_o, axis=0)
+    cos = (n_t * n_o).sum(axis=0) / (np.linalg.norm(n_t, axis=0) * np.linalg.norm(n_o, axis=0))
+    angle = np.degrees(np.arccos(np.clip(np.abs(cos), -1.0, 1.0)))
+    if angle.max() < COPLANAR_DEG:
+        raise PlannerError(
+            f"the observer's orbit plane stays within {angle.max():.4f} deg of the target's over the span: "
+            "the two planes have no line of nodes, so there is no GSA scene; use an observer in another plane",
+            field="observer",
+        )
 
 
 def check_box_reachable(elements: Elements, box: HeightBox) -> None:
@@ -255,6 +301,7 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
     eop_note = earth_orientation_note(epoch, 0.0, t1)
     if eop_note:
         notes.append(eop_note)
+    notes += tle_age_notes((target, observer), epoch, t1, opts.max_tle_age_days)
     obs_el = _observer_elements(observer, epoch, frames)
     check_box_reachable(obs_el, opts.box)
     # One pole of date for the plan: J2 acts about it in every propagation and verification.
@@ -266,6 +313,7 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
     tle_obs = observer.tle is not None
     obs_base = observer_trajectory(obs_el, epoch, t_end, opts.reading, tle_obs, pole)
     t_ref = 0.0 if tle_obs else seconds_between(epoch, obs_el.epoch)
+    check_not_coplanar(tgt, obs_base, t1)
     timings["propagation"] = time.perf_counter() - clock
 
     clock = time.perf_counter()

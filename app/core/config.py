@@ -31,6 +31,8 @@ class Settings(BaseSettings):
     max_page_size: int = Field(default=100, ge=1, le=10_000)
     max_span_days: float = Field(default=30.0, gt=0, le=30.0)
     max_grid_points: int = Field(default=25_000_000, ge=1)
+    max_epoch_gap_days: float = Field(default=60.0, gt=0, le=36_525.0)
+    max_tle_age_days: float = Field(default=30.0, gt=0, le=36_525.0)
     max_request_bytes: int = Field(default=1_000_000, ge=1024)
     max_upload_bytes: int = Field(default=8 * 1024 * 1024, ge=1024)
     max_batch_bytes: int = Field(default=64 * 1024 * 1024, ge=1024)

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import math
-from datetime import UTC, datetime
+from dataclasses import replace
+from datetime import UTC, datetime, timedelta
 from typing import Any
 
 import numpy as np
@@ -173,12 +174,44 @@ def plan_json(plan: Plan) -> dict[str, Any]:
     }
 
 
-def run_plan(req: PlanCreate, max_grid_points: int | None = None) -> tuple[Plan, dict[str, Any]]:
+def check_epoch_gap(
+    orbit: Orbit, orbit_in: OrbitIn, where: str, start: datetime, duration_s: float, limit_days: float
+) -> None:
+    """Refuse an orbit whose epoch lies more than ``limit_days`` from the search span (``GSA_MAX_EPOCH_GAP_DAYS``).
+
+    The osculating propagation integrates the whole gap (about 4.5 CPU-seconds a year), and
+    a TLE far from its epoch describes no real orbit: both are bounded here, before any work.
+    """
+    epoch = orbit.epoch
+    end = start + timedelta(seconds=duration_s)
+    gap_s = max((start - epoch).total_seconds(), (epoch - end).total_seconds(), 0.0)
+    if gap_s <= limit_days * 86400.0:
+        return
+    loc: list[str | int] = [where, "tle"] if orbit_in.tle is not None else [where, "elements", "epoch"]
+    raise InputError(
+        loc,
+        f"the epoch {epoch:%Y-%m-%dT%H:%M:%SZ} is {gap_s / 86400.0:.1f} days from the search span, over the limit "
+        f"of {limit_days:g} days (GSA_MAX_EPOCH_GAP_DAYS): give elements or a TLE near the span, or move search.start",
+    )
+
+
+def run_plan(
+    req: PlanCreate,
+    max_grid_points: int | None = None,
+    max_epoch_gap_days: float | None = None,
+    max_tle_age_days: float | None = None,
+) -> tuple[Plan, dict[str, Any]]:
     """Validate a plan request against the planner, run it, and return the plan and its JSON."""
     target = to_orbit(req.target, "target")
     observer = to_orbit(req.observer, "observer")
     station = to_station(req.ground_station)
     opts = plan_options(req)
+    if max_tle_age_days is not None:
+        opts = replace(opts, max_tle_age_days=max_tle_age_days)
+    if max_epoch_gap_days is not None:
+        start = opts.start or target.epoch
+        for orbit, orbit_in, where in ((target, req.target, "target"), (observer, req.observer, "observer")):
+            check_epoch_gap(orbit, orbit_in, where, start, opts.duration_s, max_epoch_gap_days)
     if max_grid_points is not None and opts.box.grid_points > max_grid_points:
         raise InputError(
             ["search", "step_km"],
@@ -187,11 +220,12 @@ def run_plan(req: PlanCreate, max_grid_points: int | None = None) -> tuple[Plan,
     try:
         plan = make_plan(target, observer, station, opts)
     except PlannerError as exc:
-        raise InputError(["search", exc.field or "search"], str(exc)) from None
+        side = exc.field if exc.field in ("target", "observer") else None
+        raise InputError([side] if side else ["search", exc.field or "search"], str(exc)) from None
     return plan, plan_json(plan)
 
 
-def run_access(req: AccessCreate) -> dict[str, Any]:
+def run_access(req: AccessCreate, max_epoch_gap_days: float | None = None) -> dict[str, Any]:
     """Compute access windows alone."""
     target = to_orbit(req.target, "target")
     station = to_station(req.ground_station)
@@ -199,6 +233,8 @@ def run_access(req: AccessCreate) -> dict[str, Any]:
 
     epoch = _aware(req.start) if req.start else target.epoch
     t1 = req.duration_days * 86400.0
+    if max_epoch_gap_days is not None:
+        check_epoch_gap(target, req.target, "target", epoch, t1, max_epoch_gap_days)
     frames = EarthFrames(epoch, -3600.0, t1 + 3600.0)
     try:
         traj = target_trajectory(target, epoch, frames, t1, req.reading)

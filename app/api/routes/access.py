@@ -17,4 +17,4 @@ router = APIRouter(prefix="/access-windows", tags=["access"])
 def compute_access(_operator: CurrentOperator, settings: SettingsDep, access_in: AccessCreate) -> dict[str, Any]:
     """Return rise, culmination and set of every pass of the target over the station."""
     check_span(access_in.duration_days, settings, ["duration_days"])
-    return run_access(access_in)
+    return run_access(access_in, max_epoch_gap_days=settings.max_epoch_gap_days)

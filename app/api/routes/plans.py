@@ -36,7 +36,12 @@ def create_plan(
 ) -> dict[str, Any]:
     """Plan a GSA scene: access windows, ranked node alignments, the phasing burn and its verification."""
     check_span(plan_in.search.duration_days, settings, ["search", "duration_days"])
-    _, result = run_plan(plan_in, max_grid_points=settings.max_grid_points)
+    _, result = run_plan(
+        plan_in,
+        max_grid_points=settings.max_grid_points,
+        max_epoch_gap_days=settings.max_epoch_gap_days,
+        max_tle_age_days=settings.max_tle_age_days,
+    )
     request = plan_in.model_dump(mode="json")
     plan = crud.create_plan(session=session, operator_id=operator.id, request=request, result=result)
     return _public(plan)

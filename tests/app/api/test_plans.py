@@ -186,3 +186,40 @@ def test_time_filters_compare_instants_whatever_the_offset(client, paper_plan, o
     assert paper_plan["id"] not in ids(created_after=stamp(created + second))
     assert paper_plan["id"] in ids(created_before=stamp(created + second))
     assert paper_plan["id"] not in ids(created_before=stamp(created - second))
+
+
+def test_a_tle_far_from_the_span_is_noted_and_one_further_is_refused(client):
+    """A TLE more than GSA_MAX_TLE_AGE_DAYS (30) from the span is noted; beyond GSA_MAX_EPOCH_GAP_DAYS (60),
+    or osculating elements as far, the request is refused before any propagation, naming the field."""
+    from tests.utils.orbits import ISS_L1, ISS_L2
+
+    iss = {"name": "ISS", "tle": [ISS_L1, ISS_L2]}  # epoch 2008-09-20
+    station = PAPER_EXAMPLE["ground_station"]
+    body = {"target": iss, "ground_station": station, "start": "2008-10-30T00:00:00Z", "duration_days": 1}
+    r = client.post("/v1/access-windows", json=body, headers=A)
+    assert r.status_code == 200
+    body["start"] = "2009-01-01T00:00:00Z"
+    r = client.post("/v1/access-windows", json=body, headers=A)
+    assert r.status_code == 422 and r.json()["detail"][0]["loc"][-2:] == ["target", "tle"]
+    assert "GSA_MAX_EPOCH_GAP_DAYS" in r.text
+    plan = copy.deepcopy(PAPER_EXAMPLE)
+    plan["target"] = iss
+    plan["search"] = {"start": "2008-10-25T00:00:00Z", "duration_days": 1}
+    r = client.post("/v1/plans", json=plan, headers=A)
+    assert r.status_code == 422 and r.json()["detail"][0]["loc"][-3:] == ["observer", "elements", "epoch"]
+    plan["observer"] = copy.deepcopy(plan["observer"])
+    plan["observer"]["elements"]["epoch"] = "2008-10-25T00:00:00Z"
+    r = client.post("/v1/plans", json=plan, headers=A)
+    assert r.status_code == 201, r.text
+    assert any("TLE's epoch 2008-09-20" in n and "fresher TLE" in n for n in r.json()["notes"])
+
+
+def test_target_and_observer_in_one_plane_are_refused(client):
+    """Target and observer on the same orbit: no line of nodes, so a 422 saying so instead of a 10,000-km 'plan'."""
+    plan = copy.deepcopy(PAPER_EXAMPLE)
+    plan["observer"] = copy.deepcopy(plan["target"])
+    plan["observer"]["name"] = "twin"
+    plan["search"] = {"duration_days": 1}
+    r = client.post("/v1/plans", json=plan, headers=A)
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"][0]["loc"][-1] == "observer" and "line of nodes" in r.text
