@@ -354,6 +354,20 @@ def _j2_rhs(pole: Pole | None):  # type: ignore[no-untyped-def]
     return rhs
 
 
+def _release(solver: Any) -> None:
+    """Drop what scipy's dop853 integrator holds once it has run.
+
+    Its Fortran wrapper keeps a reference to the integrator's bound ``_solout`` after the
+    solver is gone, and with it the work arrays and our callback: 0.8 MB a plan grew without
+    bound before (tests/planner/test_propagation.py::test_integrations_do_not_leak).
+    """
+    integrator = getattr(solver, "_integrator", None)
+    if integrator is not None:
+        integrator.solout = None
+        integrator.call_args = []
+        integrator.work = integrator.iwork = None
+
+
 class NumericalJ2Trajectory:
     """Two-body + J2 motion integrated once with DOP853, then interpolated anywhere in its span.
 
@@ -395,10 +409,15 @@ class NumericalJ2Trajectory:
             solver.set_solout(solout)
             solver.set_initial_value(y0, t0_s)
             solver.integrate(t1_s)
+            _release(solver)
             if not solver.successful():
                 raise PlannerError("numerical propagation failed (orbit decayed or diverged)", field="elements")
         t = np.array(steps_t)
         y = np.array(steps_y).T
+        # scipy's Fortran dop853 keeps a reference to the solout callback (and so to these lists)
+        # after the solver is gone: emptied here (and _release), a plan no longer leaks every step.
+        steps_t.clear()
+        steps_y.clear()
         order = np.argsort(t)
         self._t = t[order]
         self._r = y[:3, order]
