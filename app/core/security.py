@@ -50,13 +50,31 @@ def key_fingerprint(key: str) -> str:
     return key_digest(key, b"", LEGACY_SCHEME)[:12]
 
 
+def private_dir(path: Path) -> Path:
+    """Create ``path`` and any missing parents readable by this user only (0700); return it.
+
+    (``Path.mkdir(parents=True)`` gives the parents the umask's mode, so each is made here.)
+    """
+    missing = [p for p in (path, *path.parents) if not p.exists()]
+    for p in reversed(missing):
+        p.mkdir(mode=0o700, exist_ok=True)
+    return path
+
+
+def write_private(path: Path, data: bytes) -> None:
+    """Write ``data`` to a new file only this user can read (0600), whatever the umask."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "wb") as fh:
+        fh.write(data)
+
+
 def load_key_secret(configured: str, data_dir: Path) -> bytes:
     """Return the HMAC secret: ``GSA_KEY_SECRET`` if set, else ``data_dir/key-secret`` (made once, mode 600)."""
     if configured:
         return configured.encode("utf-8")
     path = Path(data_dir) / "key-secret"
     if not path.exists():
-        path.parent.mkdir(parents=True, exist_ok=True)
+        private_dir(path.parent)
         tmp = path.with_name(f"key-secret.{os.getpid()}.tmp")
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
         with os.fdopen(fd, "w") as fh:

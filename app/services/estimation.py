@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from app.core.security import private_dir, write_private
 from app.errors import InputError
 from inference.frames import euler_from_matrix, euler_to_quaternion, normalise_frame, rotation_matrix
 from inference.runtime import Estimator
@@ -64,6 +65,8 @@ def _check_array(arr: NDArray[Any], name: str) -> NDArray[np.float64]:
         raise InputError(_loc(name), "the frame contains NaN or infinite values")
     if not np.any(mag):
         raise InputError(_loc(name), "the frame is all zero: there is no echo to estimate an attitude from")
+    if float(mag.max()) == float(mag.min()):
+        raise InputError(_loc(name), "the frame is constant: there is no structure to estimate an attitude from")
     return np.asarray(mag, np.float64)
 
 
@@ -131,10 +134,17 @@ def _image(data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE) -> NDArray[
         img.load()
     except (UnidentifiedImageError, OSError, ValueError, SyntaxError, Image.DecompressionBombError) as exc:
         raise InputError(_loc(name), f"not a readable PNG or TIFF image: {exc}") from None
-    if img.mode not in ("L", "I;16", "I;16B", "I;16L", "I"):
+    frames = int(getattr(img, "n_frames", 1))
+    if frames > 1:
+        kind = "an animated PNG" if img.format == "PNG" else "a multi-page TIFF"
+        raise InputError(
+            _loc(name),
+            f"{kind} of {frames} frames: send one frame per image, or the frames as a .npz stack to the batch",
+        )
+    if img.mode not in ("L", "I;16", "I;16B", "I;16L"):
         raise InputError(_loc(name), f"image mode {img.mode} is not 8- or 16-bit grayscale")
     arr = np.asarray(img)
-    if arr.dtype.kind not in "ui" or arr.dtype.itemsize > 4:
+    if arr.dtype.kind not in "ui" or arr.dtype.itemsize > 2:
         raise InputError(_loc(name), f"image of dtype {arr.dtype} is not 8- or 16-bit grayscale")
     return arr
 
@@ -246,9 +256,9 @@ def store_blob(data_dir: Path, data: bytes) -> str:
     digest = hashlib.sha256(data).hexdigest()
     path = blob_path(data_dir, digest)
     if not path.exists():
-        path.parent.mkdir(parents=True, exist_ok=True)
+        private_dir(path.parent)
         tmp = path.with_name(f"{digest}.{os.getpid()}.{threading.get_ident()}.tmp")
-        tmp.write_bytes(data)
+        write_private(tmp, data)
         tmp.replace(path)
     return digest
 

@@ -111,3 +111,31 @@ def test_kill_9_mid_writes_loses_no_acknowledged_write_and_restarts_clean(server
     finally:
         srv2.stop()
     _check_store(server_env)  # the restart swept what the kill left half-written
+
+
+def test_the_data_directory_is_private(tmp_path, smoke_models):
+    """The database, its WAL files, the key secret and stored images: 0600 files in 0700 folders."""
+    import io
+    import stat
+
+    import numpy as np
+    from fastapi.testclient import TestClient
+
+    from app.core.config import Settings
+    from app.core.db import upgrade_database
+    from app.main import create_app
+
+    data = tmp_path / "fresh" / "data"
+    s = Settings(data_dir=data, api_keys="k-files", model_dir=smoke_models, database_url=f"sqlite:///{data}/gsa.db")
+    upgrade_database(s.database_url)
+    buf = io.BytesIO()
+    np.save(buf, np.random.default_rng(0).random((64, 64)) + 0.1)
+    with TestClient(create_app(s)) as client:
+        r = client.post("/v1/estimates", files={"file": ("f.npy", buf.getvalue())}, headers={"X-API-Key": "k-files"})
+        assert r.status_code == 201, r.text
+    paths = [data, *data.rglob("*")]
+    assert any(p.name == "gsa.db" for p in paths) and any(p.name == "key-secret" for p in paths)
+    assert any(p.suffix == ".png" or p.parent.name != "data" for p in paths if p.is_file())
+    for p in paths:
+        mode = stat.S_IMODE(p.stat().st_mode)
+        assert mode & 0o077 == 0, f"{p.relative_to(tmp_path)} is {oct(mode)}"

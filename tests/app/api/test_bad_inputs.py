@@ -62,6 +62,21 @@ def _tiff_float() -> bytes:
     return buf.getvalue()
 
 
+def _multi_frame(fmt: str) -> bytes:
+    """Two 8-bit frames in one file: a multi-page TIFF or an animated PNG."""
+    a = Image.fromarray((_frame() * 100).astype(np.uint8), mode="L")
+    b = Image.fromarray((_frame((64, 64))[::-1] * 100).astype(np.uint8), mode="L")
+    buf = io.BytesIO()
+    a.save(buf, format=fmt, save_all=True, append_images=[b])
+    return buf.getvalue()
+
+
+def _tiff_int32() -> bytes:
+    buf = io.BytesIO()
+    Image.fromarray((_frame() * 1000).astype(np.int32), mode="I").save(buf, format="TIFF")
+    return buf.getvalue()
+
+
 def _lying_npy() -> bytes:
     good = _npy(_frame())
     header_end = good.index(b"\n") + 1
@@ -188,6 +203,10 @@ CASES = [
     Case("npz_zip_bomb", "POST", EST, _upload(_zip_bomb, "bomb.npz"), 422, "unpacks to"),
     Case("png_that_is_not", "POST", EST, _upload(b"\x89PNG\r\n\x1a\n" + b"garbage" * 50, "f.png"), 422, "PNG"),
     Case("tiff_float_depth", "POST", EST, _upload(_tiff_float, "f.tif"), 422, "grayscale"),
+    Case("tiff_int32", "POST", EST, _upload(_tiff_int32, "f.tif"), 422, "16-bit"),
+    Case("tiff_two_pages", "POST", EST, _upload(lambda: _multi_frame("TIFF"), "f.tif"), 422, "multi-page TIFF"),
+    Case("apng_two_frames", "POST", EST, _upload(lambda: _multi_frame("PNG"), "f.png"), 422, "animated PNG"),
+    Case("frame_constant", "POST", EST, _upload(lambda: _npy(np.full((64, 64), 0.7))), 422, "constant"),
     Case("png_rgb", "POST", EST, _upload(lambda: _png(np.zeros((64, 64, 3), np.uint8) + 9), "f.png"), 422, "grayscale"),
     Case("frame_wrong_shape", "POST", EST, _upload(lambda: _npy(_frame((32, 48)))), 422, "resample"),
     Case("frame_3d_to_single", "POST", EST, _upload(lambda: _npy(_frame((2, 64, 64)))), 422, "batch"),
