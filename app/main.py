@@ -59,6 +59,23 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     from app.api.deps import require_schema
 
+    def openapi() -> dict[str, Any]:
+        """The OpenAPI document, with each page size's maximum the operator's GSA_MAX_PAGE_SIZE."""
+        if app.openapi_schema is None:
+            from fastapi.openapi.utils import get_openapi
+
+            schema = get_openapi(title=app.title, version=app.version, description=app.description, routes=app.routes)
+            for ops in schema.get("paths", {}).values():
+                for op in ops.values():
+                    for param in op.get("parameters", []):
+                        if param.get("name") == "limit" and param.get("in") == "query":
+                            for s in (param["schema"], *param["schema"].get("anyOf", [])):
+                                if s.get("type") == "integer":
+                                    s["maximum"] = settings.max_page_size
+            app.openapi_schema = schema
+        return app.openapi_schema
+
+    app.openapi = openapi  # type: ignore[method-assign]
     app.include_router(
         api_router,
         prefix="/v1",

@@ -74,6 +74,12 @@ class ElementsIn(Strict):
 class OrbitIn(Strict):
     """A satellite: a name and exactly one of ``elements`` or ``tle`` (two lines)."""
 
+    model_config = ConfigDict(
+        extra="forbid",
+        allow_inf_nan=False,
+        json_schema_extra={"oneOf": [{"required": ["elements"]}, {"required": ["tle"]}]},
+    )
+
     name: Name
     elements: ElementsIn | None = None
     tle: list[Annotated[str, Field(max_length=80)]] | None = Field(default=None, min_length=2, max_length=2)

@@ -2,6 +2,7 @@ from fastapi import APIRouter, Depends, Request
 from fastapi.dependencies.models import Dependant
 from fastapi.routing import APIRoute
 
+from app.api.deps import CurrentOperator
 from app.api.routes import access, estimates, plans, scenes
 from app.errors import InputError
 from app.schemas import ERROR_RESPONSES
@@ -14,8 +15,11 @@ def _query_names(dep: Dependant) -> set[str]:
     return names
 
 
-def reject_unknown_query(request: Request) -> None:
-    """Refuse query parameters a route does not take: a misspelt filter must not silently list everything."""
+def reject_unknown_query(request: Request, _operator: CurrentOperator) -> None:
+    """Refuse query parameters a route does not take: a misspelt filter must not silently list everything.
+
+    Authentication comes first (a caller without a key learns nothing about the routes' parameters).
+    """
     route = request.scope.get("route")
     if not isinstance(route, APIRoute) or not request.query_params:
         return

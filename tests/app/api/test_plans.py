@@ -223,3 +223,25 @@ def test_target_and_observer_in_one_plane_are_refused(client):
     r = client.post("/v1/plans", json=plan, headers=A)
     assert r.status_code == 422, r.text
     assert r.json()["detail"][0]["loc"][-1] == "observer" and "line of nodes" in r.text
+
+
+def test_the_openapi_document_says_what_the_service_enforces(client, settings):
+    """limit's maximum is the operator's page size; an orbit is oneOf elements / tle; and a request without a
+    key is 401 before any parameter is judged (an unknown query parameter included)."""
+    spec = client.get("/openapi.json").json()
+    limits = [
+        s["maximum"]
+        for ops in spec["paths"].values()
+        for op in ops.values()
+        for p in op.get("parameters", [])
+        if p["name"] == "limit"
+        for s in (p["schema"], *p["schema"].get("anyOf", []))
+        if s.get("type") == "integer"
+    ]
+    assert len(limits) >= 3 and set(limits) == {settings.max_page_size}
+    r = client.get("/v1/plans", params={"limit": settings.max_page_size + 1}, headers=A)
+    assert r.status_code == 422
+    orbit = spec["components"]["schemas"]["OrbitIn"]
+    assert orbit["oneOf"] == [{"required": ["elements"]}, {"required": ["tle"]}]
+    assert client.get("/v1/plans", params={"colour": "red"}).status_code == 401
+    assert client.get("/v1/plans", params={"colour": "red"}, headers=A).status_code == 422
