@@ -90,8 +90,12 @@ def cmd_serve(args: argparse.Namespace) -> int:
         print(f"  it is also in {Path(settings.data_dir) / 'dev-api-key.txt'}")
     sys.stdout.flush()
     log_config = uvicorn_log_config(settings.log_level) if settings.log_json else None
+    from app.core.server import raise_descriptor_limit, uvicorn_limits
+
+    raise_descriptor_limit(settings.max_connections)
     uvicorn.run("app.main:create_app", factory=True, host=host, port=port, workers=args.workers,
-                log_level=settings.log_level, log_config=log_config, access_log=not settings.log_json)  # fmt: skip
+                log_level=settings.log_level, log_config=log_config, access_log=not settings.log_json,
+                **uvicorn_limits(settings))  # fmt: skip
     return 0
 
 

@@ -139,3 +139,73 @@ def test_the_data_directory_is_private(tmp_path, smoke_models):
     for p in paths:
         mode = stat.S_IMODE(p.stat().st_mode)
         assert mode & 0o077 == 0, f"{p.relative_to(tmp_path)} is {oct(mode)}"
+
+
+def test_idle_and_slow_connections_are_closed_and_1000_held_do_not_block(tmp_path, smoke_models):
+    """GSA_HEADER_TIMEOUT_S: a socket that sends nothing, and one that sends its headers a byte at a time
+    (slowloris), are closed at the deadline; an idle keep-alive connection after GSA_KEEP_ALIVE_TIMEOUT_S;
+    with 1,000 idle sockets held the service still answers; SIGTERM stops it within GSA_SHUTDOWN_GRACE_S.
+    The database does not matter here: SQLite."""
+    import os
+    import signal
+    import socket
+
+    data = tmp_path / "data"
+    env = {
+        "GSA_DATA_DIR": str(data),
+        "GSA_MODEL_DIR": str(smoke_models),
+        "GSA_API_KEYS": KEY_A,
+        "GSA_ORT_THREADS": "1",
+        "GSA_LOG_LEVEL": "warning",
+        "GSA_HEADER_TIMEOUT_S": "2",
+        "GSA_KEEP_ALIVE_TIMEOUT_S": "1",
+        "GSA_SHUTDOWN_GRACE_S": "3",
+    }
+    srv = Server(env, workers=1, log_path=tmp_path / "server.log").start()
+    addr = ("127.0.0.1", srv.port)
+
+    def closed_after(sock: socket.socket, trickle: bytes = b"") -> float:
+        """Seconds until the server closes ``sock`` (sending ``trickle`` a byte every 0.3 s meanwhile)."""
+        start = time.monotonic()
+        sock.settimeout(0.3)
+        sent = 0
+        while time.monotonic() - start < 15.0:
+            try:
+                if not sock.recv(4096):
+                    return time.monotonic() - start
+            except TimeoutError:
+                if sent < len(trickle):
+                    try:
+                        sock.sendall(trickle[sent : sent + 1])
+                    except OSError:
+                        return time.monotonic() - start
+                    sent += 1
+            except OSError:
+                return time.monotonic() - start
+        return float("inf")
+
+    try:
+        assert closed_after(socket.create_connection(addr)) < 3.5  # sends nothing
+        slow = b"GET /healthz HTTP/1.1\r\nHost: x\r\n" + b"X-Slow: " + b"a" * 200 + b"\r\n\r\n"
+        assert closed_after(socket.create_connection(addr), slow) < 3.5  # slowloris
+        keep = socket.create_connection(addr)
+        keep.sendall(b"GET /healthz HTTP/1.1\r\nHost: x\r\n\r\n")
+        assert b"200 OK" in keep.recv(4096)
+        assert closed_after(keep) < 2.5  # idle after a response: the keep-alive timeout
+        held = [socket.create_connection(addr) for _ in range(1000)]
+        try:
+            t0 = time.monotonic()
+            r = httpx.get(srv.url + "/healthz", timeout=5.0)
+            assert r.status_code == 200 and time.monotonic() - t0 < 2.0
+            r = httpx.get(srv.url + "/v1/plans", headers={"X-API-Key": KEY_A}, timeout=5.0)
+            assert r.status_code == 200
+        finally:
+            for s in held:
+                s.close()
+        assert srv.proc is not None
+        t0 = time.monotonic()
+        os.killpg(srv.proc.pid, signal.SIGTERM)
+        srv.proc.wait(timeout=10.0)
+        assert time.monotonic() - t0 < 3.0 + 2.0
+    finally:
+        srv.stop()
