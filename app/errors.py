@@ -10,7 +10,7 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from app.core.observability import current_request_id
-from planner.errors import PlannerError
+from planner.errors import PlannerError, PlanningStopped
 
 
 class InputError(ValueError):
@@ -50,6 +50,11 @@ def install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(InputError)
     async def _input_error(_request: Request, exc: InputError) -> JSONResponse:
         return JSONResponse(status_code=422, content=_body([exc.where, *exc.loc], exc.message))
+
+    @app.exception_handler(PlanningStopped)
+    async def _planning_stopped(_request: Request, exc: PlanningStopped) -> JSONResponse:
+        # Not the caller's input: the service's budget (GSA_PLAN_TIMEOUT_S). Retry later or plan less.
+        return JSONResponse(status_code=503, content={"detail": str(exc), "request_id": current_request_id()})
 
     @app.exception_handler(PlannerError)
     async def _planner_error(_request: Request, exc: PlannerError) -> JSONResponse:

@@ -31,3 +31,7 @@ class SearchRangeError(PlannerError):
 
 class LambertError(PlannerError):
     """A Lambert problem with no solution for the requested revolutions."""
+
+
+class PlanningStopped(PlannerError):
+    """Planning was stopped part-way: over its time budget, or its caller went away."""

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from datetime import datetime, timedelta
 from typing import Literal
@@ -19,7 +20,7 @@ from planner.access import MAX_SPAN_S, AccessWindows, access_windows, validate_s
 from planner.alignment import Candidate, HeightBox, ObserverPlaneModel, align_nodes
 from planner.constants import MIN_PERIGEE_HEIGHT_KM, MU_EARTH_KM3_S2, R_EARTH_KM
 from planner.elements import Elements, height_change_dv_km_s, state_to_elements
-from planner.errors import PlannerError, SearchRangeError
+from planner.errors import PlannerError, PlanningStopped, SearchRangeError
 from planner.illumination import phase_angle_deg, sun_position_km, sunlit
 from planner.manoeuvre import Encounter, Phasing, encounter, phase
 from planner.propagation import (
@@ -276,7 +277,16 @@ def observer_trajectory(
     return NumericalJ2Trajectory.from_elements(elements, epoch, 0.0, t1_s, pole)
 
 
-def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOptions | None = None) -> Plan:
+StopCheck = Callable[[], str | None]
+
+
+def make_plan(
+    target: Orbit,
+    observer: Orbit,
+    station: Station,
+    options: PlanOptions | None = None,
+    stop: StopCheck | None = None,
+) -> Plan:
     """Plan a GSA scene: access windows, ranked alignments, the phasing burn and its verification.
 
     The height change is made at the observer's element epoch (for a TLE observer:
@@ -287,8 +297,18 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
     (``least_dv``; two-body estimate over all candidates); unlit ones only when none
     is sunlit. It is refined against the changed observer's own propagation, phased
     and verified numerically.
+
+    ``stop`` is asked between steps (and between candidates): when it returns a reason,
+    planning stops at once with PlanningStopped. No step runs long: the span is at most
+    30 days and the service bounds the epoch's distance from it, so the bound is about a second.
     """
     opts = options or PlanOptions()
+
+    def check(stage: str) -> None:
+        reason = stop() if stop is not None else None
+        if reason:
+            raise PlanningStopped(f"planning stopped during {stage}: {reason}", field="search")
+
     validate_station(station)
     timings: dict[str, float] = {}
     notes: list[str] = []
@@ -315,16 +335,19 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
     t_ref = 0.0 if tle_obs else seconds_between(epoch, obs_el.epoch)
     check_not_coplanar(tgt, obs_base, t1)
     timings["propagation"] = time.perf_counter() - clock
+    check("propagation")
 
     clock = time.perf_counter()
     windows = access_windows(tgt, station, frames, 0.0, t1, step_s=opts.access_step_s)
     timings["access"] = time.perf_counter() - clock
+    check("the access search")
 
     clock = time.perf_counter()
     a, e, i = obs_el.a_km, obs_el.e, math.radians(obs_el.inclination_deg)
     model = ObserverPlaneModel(obs_base, a, e, i, t_ref, pole.at(max(0.0, t_ref)))
     candidates = align_nodes(tgt, model, windows, opts.box, opts.sample_s, opts.max_miss_km)
     timings["alignment"] = time.perf_counter() - clock
+    check("the node alignment")
 
     # Every candidate is refined against the changed observer's own propagation: the
     # alignment model's nodal-rate sensitivity leaves misses of 0.1-5 km otherwise.
@@ -337,7 +360,11 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
             cache[key] = observer_trajectory(obs_el.with_heights(*key), epoch, t_end, opts.reading, tle_obs, pole)
         return cache[key]
 
-    candidates = [_refined(cand, tgt, changed_observer(cand), windows) for cand in candidates]
+    refined = []
+    for cand in candidates:
+        check("the refinement of the candidates")
+        refined.append(_refined(cand, tgt, changed_observer(cand), windows))
+    candidates = refined
     candidates.sort(key=lambda c: (round(c.miss_km, 3), c.change_km, c.t_access_s))
     far = [c for c in candidates if c.miss_km > opts.max_miss_km]
     if far:
@@ -378,6 +405,7 @@ def make_plan(target: Orbit, observer: Orbit, station: Station, options: PlanOpt
         }
         order = sorted(pool, key=lambda k: costs[k]) + [k for k in order if k not in costs]
     for k in order:
+        check("the phasing")
         cand = candidates[k]
         obs_new = changed_observer(cand)
         t_access = cand.t_access_s

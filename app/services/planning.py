@@ -14,8 +14,8 @@ from app.schemas import AccessCreate, OrbitIn, PlanCreate, StationIn
 from planner.access import AccessWindows, access_windows
 from planner.alignment import Candidate, HeightBox
 from planner.elements import Elements
-from planner.errors import PlannerError
-from planner.plan import Feasibility, Orbit, Plan, PlanOptions, make_plan, utc
+from planner.errors import PlannerError, PlanningStopped
+from planner.plan import Feasibility, Orbit, Plan, PlanOptions, StopCheck, make_plan, utc
 from planner.propagation import EarthFrames, Station
 from planner.tle import parse_tle
 
@@ -200,6 +200,7 @@ def run_plan(
     max_grid_points: int | None = None,
     max_epoch_gap_days: float | None = None,
     max_tle_age_days: float | None = None,
+    stop: StopCheck | None = None,
 ) -> tuple[Plan, dict[str, Any]]:
     """Validate a plan request against the planner, run it, and return the plan and its JSON."""
     target = to_orbit(req.target, "target")
@@ -218,7 +219,9 @@ def run_plan(
             f"the dHa/dHp grid has {opts.box.grid_points} points, over the limit of {max_grid_points}: widen step_km",
         )
     try:
-        plan = make_plan(target, observer, station, opts)
+        plan = make_plan(target, observer, station, opts, stop=stop)
+    except PlanningStopped:
+        raise
     except PlannerError as exc:
         side = exc.field if exc.field in ("target", "observer") else None
         raise InputError([side] if side else ["search", exc.field or "search"], str(exc)) from None

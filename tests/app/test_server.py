@@ -209,3 +209,36 @@ def test_idle_and_slow_connections_are_closed_and_1000_held_do_not_block(tmp_pat
         assert time.monotonic() - t0 < 3.0 + 2.0
     finally:
         srv.stop()
+
+
+def test_a_client_that_leaves_stops_its_plan(tmp_path, smoke_models):
+    """A 30-day plan (about 2 s of work) whose client disconnects after 0.3 s is stopped: nothing is stored,
+    and the server answers the next request at once."""
+    import json
+    import socket
+
+    from app.schemas import PAPER_EXAMPLE
+
+    data = tmp_path / "data"
+    env = {"GSA_DATA_DIR": str(data), "GSA_MODEL_DIR": str(smoke_models), "GSA_API_KEYS": KEY_A,
+           "GSA_ORT_THREADS": "1", "GSA_LOG_LEVEL": "warning"}  # fmt: skip
+    srv = Server(env, workers=1, log_path=tmp_path / "server.log").start()
+    try:
+        body = json.dumps({**PAPER_EXAMPLE, "search": {"duration_days": 30}}).encode()
+        head = (
+            f"POST /v1/plans HTTP/1.1\r\nHost: x\r\nX-API-Key: {KEY_A}\r\nContent-Type: application/json\r\n"
+            f"Content-Length: {len(body)}\r\n\r\n"
+        ).encode()
+        sock = socket.create_connection(("127.0.0.1", srv.port))
+        sock.sendall(head + body)
+        time.sleep(0.3)
+        sock.close()
+        time.sleep(4.0)  # long enough for the whole plan had it gone on
+        r = httpx.get(srv.url + "/v1/plans", headers={"X-API-Key": KEY_A}, timeout=5.0)
+        assert r.status_code == 200 and r.json()["count"] == 0
+        # The same plan from a client that waits is stored: the test above is not vacuous.
+        r = httpx.post(srv.url + "/v1/plans", content=body, timeout=60.0,
+                       headers={"X-API-Key": KEY_A, "Content-Type": "application/json"})  # fmt: skip
+        assert r.status_code == 201, r.text
+    finally:
+        srv.stop()

@@ -163,3 +163,22 @@ def test_encounter_options_are_checked(kwargs, field):
     with pytest.raises(SearchRangeError, match=field) as info:
         PlanOptions(**kwargs)
     assert info.value.field == field
+
+
+def test_planning_stops_when_asked():
+    """The stop check is asked between steps and candidates: a budget that runs out stops the plan at once."""
+    import time
+
+    from planner.errors import PlanningStopped
+
+    calls = []
+
+    def stop():
+        calls.append(time.perf_counter())
+        return "over budget" if len(calls) >= 4 else None
+
+    t0 = time.perf_counter()
+    with pytest.raises(PlanningStopped, match="over budget"):
+        make_plan(Orbit("T", PAPER_TARGET), Orbit("O", PAPER_OBSERVER), PAPER_STATION, PlanOptions(), stop=stop)
+    assert len(calls) == 4  # and nothing after the answer
+    assert calls[-1] - t0 < 1.0

@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import asyncio
+import threading
+import time
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body, HTTPException, Path, Query
+from fastapi import APIRouter, Body, HTTPException, Path, Query, Request
+from fastapi.concurrency import run_in_threadpool
 
 from app import crud
 from app.api.deps import CurrentOperator, SessionDep, SettingsDep, as_utc, check_page_size, check_span
@@ -27,23 +31,57 @@ def _public(plan: Any) -> dict[str, Any]:
     }
 
 
-@router.post("", status_code=201, response_model=PlanPublic)
-def create_plan(
+@router.post(
+    "",
+    status_code=201,
+    response_model=PlanPublic,
+    responses={503: {"description": "planning ran over GSA_PLAN_TIMEOUT_S and was stopped; nothing was stored"}},
+)
+async def create_plan(
+    request: Request,
     session: SessionDep,
     operator: CurrentOperator,
     settings: SettingsDep,
     plan_in: Annotated[PlanCreate, Body(openapi_examples={"paper_table_1": {"value": PAPER_EXAMPLE}})],
 ) -> dict[str, Any]:
-    """Plan a GSA scene: access windows, ranked node alignments, the phasing burn and its verification."""
+    """Plan a GSA scene: access windows, ranked node alignments, the phasing burn and its verification.
+
+    Planning runs in a worker thread under a time budget (``GSA_PLAN_TIMEOUT_S``) and stops
+    when the caller disconnects; either way nothing is stored.
+    """
     check_span(plan_in.search.duration_days, settings, ["search", "duration_days"])
-    _, result = run_plan(
-        plan_in,
-        max_grid_points=settings.max_grid_points,
-        max_epoch_gap_days=settings.max_epoch_gap_days,
-        max_tle_age_days=settings.max_tle_age_days,
+    deadline = time.monotonic() + settings.plan_timeout_s
+    gone = threading.Event()
+
+    def stop() -> str | None:
+        if gone.is_set():
+            return "the client disconnected"
+        if time.monotonic() > deadline:
+            return f"over the {settings.plan_timeout_s:g}-s budget (GSA_PLAN_TIMEOUT_S); plan a shorter span or a coarser box"
+        return None
+
+    async def watch() -> None:
+        while not gone.is_set():
+            if await request.is_disconnected():
+                gone.set()
+            await asyncio.sleep(0.2)
+
+    watcher = asyncio.create_task(watch())
+    try:
+        _, result = await run_in_threadpool(
+            run_plan,
+            plan_in,
+            max_grid_points=settings.max_grid_points,
+            max_epoch_gap_days=settings.max_epoch_gap_days,
+            max_tle_age_days=settings.max_tle_age_days,
+            stop=stop,
+        )
+    finally:
+        watcher.cancel()
+    stored = plan_in.model_dump(mode="json")
+    plan = await run_in_threadpool(
+        crud.create_plan, session=session, operator_id=operator.id, request=stored, result=result
     )
-    request = plan_in.model_dump(mode="json")
-    plan = crud.create_plan(session=session, operator_id=operator.id, request=request, result=result)
     return _public(plan)
 
 

@@ -245,3 +245,17 @@ def test_the_openapi_document_says_what_the_service_enforces(client, settings):
     assert orbit["oneOf"] == [{"required": ["elements"]}, {"required": ["tle"]}]
     assert client.get("/v1/plans", params={"colour": "red"}).status_code == 401
     assert client.get("/v1/plans", params={"colour": "red"}, headers=A).status_code == 422
+
+
+def test_a_plan_over_its_time_budget_is_503_and_stores_nothing(settings):
+    from fastapi.testclient import TestClient
+
+    from app.main import create_app
+
+    quick = settings.model_copy(update={"plan_timeout_s": 0.05})
+    with TestClient(create_app(quick)) as c:
+        before = c.get("/v1/plans", headers=A).json()["count"]
+        r = c.post("/v1/plans", json=PAPER_EXAMPLE, headers=A)
+        assert r.status_code == 503, r.text
+        assert "GSA_PLAN_TIMEOUT_S" in r.json()["detail"]
+        assert c.get("/v1/plans", headers=A).json()["count"] == before
