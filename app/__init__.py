@@ -1,1 +1,1 @@
-"""GSA-ISAR web service: FastAPI over the planner (and, later, the attitude estimator)."""
+"""GSA-ISAR web service: FastAPI over the planner and the attitude estimator."""

@@ -24,9 +24,10 @@ TAU = 2.0 * math.pi
 class Elements:
     """Orbital elements at an epoch in the paper's Table 1 form (heights in km, angles in degrees).
 
-    ``reading`` says how to interpret them: ``"osculating"`` (the instantaneous
-    two-body orbit at the epoch, propagated numerically with J2) or ``"mean"``
-    (mean elements propagated with the J2 secular rates).
+    The elements are GCRS/J2000 and carry no reading of their own: the plan's
+    ``PlanOptions.reading`` says how they are taken, ``"osculating"`` (the instantaneous
+    two-body orbit at the epoch, propagated numerically with J2) or ``"mean"`` (mean
+    elements propagated with the J2 secular rates).
     """
 
     epoch: datetime

@@ -116,12 +116,6 @@ def skyfield_times(epoch: datetime, t_s: ArrayLike) -> Any:
     return ts.tt_jd(t0.whole, t0.tt_fraction + offset_days)
 
 
-def utc_datetimes(epoch: datetime, t_s: ArrayLike) -> list[datetime]:
-    """Return UTC datetimes (microsecond precision) for elapsed seconds after ``epoch``."""
-    times = skyfield_times(epoch, np.atleast_1d(np.asarray(t_s, float)))
-    return [d.replace(tzinfo=UTC) for d in times.utc_datetime()]
-
-
 def seconds_between(epoch: datetime, moment: datetime) -> float:
     """Return elapsed seconds from ``epoch`` to ``moment`` (both UTC)."""
     ts = timescale()

@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import hashlib
 import io
-import math
 import os
 import struct
 import threading
 import zipfile
 import zlib
 from dataclasses import dataclass
-from datetime import UTC, datetime
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +20,6 @@ from numpy.typing import NDArray
 from app.core.security import private_dir, write_private
 from app.errors import InputError
 from inference.frames import euler_from_matrix, euler_to_quaternion, normalise_frame, rotation_matrix
-from inference.runtime import Estimator
 
 MAX_NPZ_MEMBER_BYTES = 64 * 1024 * 1024  # decompressed; refuses zip bombs before reading them
 
@@ -366,17 +364,3 @@ def attitudes_in_frames(
     return out
 
 
-def utc_now() -> datetime:
-    return datetime.now(UTC)
-
-
-def finite_or_none(x: float | None) -> float | None:
-    return None if x is None or not math.isfinite(x) else x
-
-
-def run_models(
-    est: Estimator, frames: NDArray[np.float32]
-) -> tuple[NDArray[np.float32], NDArray[np.float32], dict[str, float]]:
-    """Run the two networks on a stack; return angles [N, 3], enhanced [N, H, W] and timings."""
-    res = est.estimate(frames)
-    return res.angles_deg, res.enhanced, res.timings_s

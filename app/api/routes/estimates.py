@@ -63,7 +63,8 @@ def _estimate(
     t0 = time.perf_counter()
     frames = np.stack([svc.prepare(u, est.img_size, resample, normalised) for u in uploads])
     t_prep = time.perf_counter() - t0
-    angles, enhanced, timings = svc.run_models(est, frames)
+    res = est.estimate(frames)
+    angles, enhanced, timings = res.angles_deg, res.enhanced, res.timings_s
     per_frame = {"preprocess": t_prep / len(uploads), **{k: v / len(uploads) for k, v in timings.items()}}
     in_frames: list[dict[str, Any] | None] = [None] * len(uploads)
     if plan is not None and observed_at is not None:
