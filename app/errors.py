@@ -46,6 +46,20 @@ def _safe(value: Any, depth: int = 0) -> Any:
     return str(value)[:200]
 
 
+def _allowed_methods(app: FastAPI, request: Request) -> list[str]:
+    """Every method the OpenAPI document serves at this request's path (HEAD with GET, as Starlette does)."""
+    import re
+
+    methods: set[str] = set()
+    for template, item in app.openapi().get("paths", {}).items():
+        pattern = "^" + re.sub(r"\\{[^}]+\\}", "[^/]+", re.escape(template)) + "$"
+        if re.match(pattern, request.url.path):
+            methods |= {m.upper() for m in item}
+    if "GET" in methods:
+        methods.add("HEAD")
+    return sorted(methods)
+
+
 def install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(InputError)
     async def _input_error(_request: Request, exc: InputError) -> JSONResponse:
@@ -70,9 +84,16 @@ def install_error_handlers(app: FastAPI) -> None:
         return JSONResponse(status_code=422, content={"detail": errors, "request_id": current_request_id()})
 
     @app.exception_handler(StarletteHTTPException)
-    async def _http_error(_request: Request, exc: StarletteHTTPException) -> JSONResponse:
+    async def _http_error(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        headers = getattr(exc, "headers", None)
+        if exc.status_code == 405:
+            # Starlette names only the first matching route's methods; a path served by two
+            # routes (GET and POST /v1/plans) must list both.
+            allowed = _allowed_methods(app, request)
+            if allowed:
+                headers = {**(headers or {}), "Allow": ", ".join(allowed)}
         return JSONResponse(
             status_code=exc.status_code,
             content={"detail": exc.detail, "request_id": current_request_id()},
-            headers=getattr(exc, "headers", None),
+            headers=headers,
         )

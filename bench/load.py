@@ -46,6 +46,59 @@ def one(backend: str, root: Path) -> dict:
             "locked": sum("locked" in e for e in res.errors)}  # fmt: skip
 
 
+def _rss_mb(pid: int) -> float:
+    """Resident memory of a process and its children (uvicorn's workers), MB."""
+    import subprocess
+
+    out = subprocess.run(["ps", "-o", "rss=", "--ppid", str(pid), "-p", str(pid)], capture_output=True, text=True)
+    return sum(int(x) for x in out.stdout.split()) / 1024.0
+
+
+def soak(root: Path, plans: int = 500) -> list[str]:
+    """One worker, one-day plans one after another: resident memory at the start, after 100 and after 500;
+    then /healthz latency while 1,000 idle connections are held."""
+    import socket
+    import time
+
+    import httpx
+
+    from tests.utils.server import plan_body
+
+    data = root / "soak"
+    data.mkdir(parents=True)
+    env = {"GSA_DATA_DIR": str(data), "GSA_MODEL_DIR": str(DEFAULT_MODEL_DIR), "GSA_API_KEYS": KEYS[0],
+           "GSA_ORT_THREADS": "1", "GSA_LOG_LEVEL": "warning"}  # fmt: skip
+    srv = Server(env, workers=1, log_path=root / "soak.log").start()
+    marks = {}
+    try:
+        assert srv.proc is not None
+        with httpx.Client(timeout=60.0, headers={"X-API-Key": KEYS[0]}) as client:
+            for k in range(plans + 20):
+                if k in (20, 120, plans + 19):
+                    marks[k - 20] = _rss_mb(srv.proc.pid)
+                r = client.post(srv.url + "/v1/plans", json=plan_body(k))
+                assert r.status_code == 201, r.text
+                if k % 100 == 0:
+                    print(f"soak: {k} plans, {_rss_mb(srv.proc.pid):.0f} MB", flush=True)
+            held = [socket.create_connection(("127.0.0.1", srv.port)) for _ in range(1000)]
+            t0 = time.monotonic()
+            ok = httpx.get(srv.url + "/healthz", timeout=10.0).status_code == 200
+            held_ms = (time.monotonic() - t0) * 1000.0
+            for s in held:
+                s.close()
+    finally:
+        srv.stop()
+    steps = sorted(marks)
+    return [
+        "### Soak and held connections", "",
+        f"One worker, {plans} one-day plans in a row after 20 to warm up (resident memory of the server process):",
+        ", ".join(f"{marks[s]:.0f} MB after {s}" for s in steps)
+        + f"; growth {marks[steps[-1]] - marks[steps[0]]:.1f} MB (goal: under 50 MB).",
+        f"With 1,000 idle connections held, `/healthz` answered {'200' if ok else 'not 200'} in {held_ms:.0f} ms"
+        " (idle sockets are closed after GSA_HEADER_TIMEOUT_S, 10 s).", "",
+    ]  # fmt: skip
+
+
 def main() -> None:
     today = datetime.now(UTC).strftime("%Y-%m-%d")
     lines = ["## Load", "",
@@ -70,6 +123,8 @@ def main() -> None:
                     f"| {op} | {p['n']} | {p['p50_ms']:.0f} ms | {p['p95_ms']:.0f} ms | {p['p99_ms']:.0f} ms | {p['max_ms']:.0f} ms |"
                 )
             lines.append("")
+        print("load: soak ...", flush=True)
+        lines += soak(Path(tmp))
     replace_section("Load", lines)
     print("\n".join(lines))
 

@@ -279,3 +279,9 @@ def test_memory_stays_flat_over_repeated_plans(client):
             gc.collect()
             marks.append(rss_mb())
     assert marks[1] - marks[0] < 5.0, marks
+
+
+def test_405_lists_every_method_of_the_path(client):
+    r = client.put("/v1/plans", headers=A)
+    assert r.status_code == 405
+    assert {m.strip() for m in r.headers["allow"].split(",")} >= {"GET", "POST"}
