@@ -292,6 +292,35 @@ def parse_snr(text: str) -> tuple[float | None, float | None]:
     return lo, hi
 
 
+TRAIN_SHARE = 0.8  # the paper's split: the first 80 % of frames train, the last 20 % test
+
+
+def default_train_frames(n: int) -> int:
+    """Return how many of ``n`` frames train under the paper's split (the rest test).
+
+    >>> default_train_frames(5000), default_train_frames(7)
+    (4000, 6)
+    """
+    return int(round(TRAIN_SHARE * n))
+
+
+def split_ranges(manifest: dict[str, Any]) -> tuple[tuple[int, int], tuple[int, int]]:
+    """Return a data set's ``(train, test)`` frame ranges ``[lo, hi)``: its manifest's split, else the paper's.
+
+    The one split rule: training, export's calibration and ``gsa evaluate`` all read it here.
+
+    >>> split_ranges({"frames": 7})
+    ((0, 6), (6, 7))
+    """
+    split = manifest.get("split")
+    if split:
+        (a, b), (c, d) = split["train"], split["test"]
+        return (int(a), int(b)), (int(c), int(d))
+    n = int(manifest["frames"])
+    cut = default_train_frames(n)
+    return (0, cut), (cut, n)
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--n", type=int, default=5000, help="number of frames (default 5000)")
     p.add_argument("--seed", type=int, default=0)
@@ -319,7 +348,7 @@ def run(args: argparse.Namespace) -> int:
     lo, hi = parse_snr(args.snr_db)
     if args.split and args.n_train is not None:
         raise DatasetError("give --split (80 % train) or --n-train N, not both", field="n_train")
-    n_train = int(round(0.8 * args.n)) if args.split else args.n_train
+    n_train = default_train_frames(args.n) if args.split else args.n_train
     spec = DatasetSpec(
         args.n, args.seed, lo, hi, args.max_angle_deg, args.shard_size, n_train, args.model, args.model_scale
     )

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from inference.dataset import DatasetSpec, load_manifest, load_range, render_frames
+from inference.dataset import DatasetSpec, load_manifest, load_range, render_frames, split_ranges
 from inference.errors import InferenceError, module_main
 from inference.isar import Radar, rotation_matrix
 from inference.runtime import Estimator
@@ -160,8 +160,7 @@ def evaluate(
 
 def held_out(data_dir: str | Path, manifest: dict[str, Any]) -> tuple[NDArray[Any], NDArray[Any]]:
     """Return a data set's test frames and angles (its manifest's split, or the last 20 %)."""
-    split = manifest.get("split")
-    lo, hi = split["test"] if split else (int(0.8 * manifest["frames"]), manifest["frames"])
+    _, (lo, hi) = split_ranges(manifest)
     data = load_range(data_dir, lo, hi, verify=False)
     return data["image"], data["angles_deg"]
 

@@ -287,8 +287,9 @@ def calibration_frames(data_dir: str | Path, n: int) -> tuple[np.ndarray, str]:
     if n < INT8_MIN_FRAMES:
         raise InferenceError(f"--n-frames {n} is too few: give at least {INT8_MIN_FRAMES}")
     manifest = load_manifest(data_dir)
-    split = manifest.get("split")
-    train_end = split["train"][1] if split else int(0.8 * manifest["frames"])
+    from inference.dataset import split_ranges
+
+    (_, train_end), _ = split_ranges(manifest)
     if train_end < INT8_MIN_FRAMES:
         raise InferenceError(f"{data_dir} has {train_end} training frames: too few to calibrate on")
     frames = load_range(data_dir, 0, min(n, train_end), ("image",), verify=False)["image"].astype(np.float32)

@@ -35,7 +35,7 @@ from typing import Any
 
 import torch
 
-from inference.dataset import DatasetSpec, generate, load_arrays, load_manifest
+from inference.dataset import DatasetSpec, default_train_frames, generate, load_arrays, load_manifest
 from inference.errors import InferenceError, ModelFileError
 from inference.evaluate import PAPER, SNR_DB, held_out, plot_errors, row_name, score, snr_spec, table
 from inference.export import load_trained
@@ -66,7 +66,7 @@ def prepare(work: Path, n: int, n_train: int | None = None, n_snr: int = 0, seed
     data = work / "data"
     if not (data / "manifest.json").exists():
         shutil.rmtree(data, ignore_errors=True)
-        n_train = int(round(0.8 * n)) if n_train is None else n_train
+        n_train = default_train_frames(n) if n_train is None else n_train
         generate(DatasetSpec(n=n, seed=seed, n_train=n_train), data, radar, workers=workers)
     for snr in SNR_DB if n_snr else ():
         d = work / f"snr-{snr:g}"

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from inference.dataset import load_arrays, load_manifest
+from inference.dataset import load_arrays, load_manifest, split_ranges
 from inference.errors import DatasetError, InferenceError, module_main
 from inference.frames import ANGLE_SCALE_DEG
 from inference.models.build import ModelConfig, build_models, get_config
@@ -43,12 +43,9 @@ from inference.models.unetpp import relative_frobenius_loss
 
 
 def split_indices(manifest: dict[str, Any], n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Return train and test indices: the manifest's split, or the last 20 % as test."""
-    split = manifest.get("split")
-    if split:
-        return np.arange(*split["train"]), np.arange(*split["test"])
-    cut = int(round(0.8 * n))
-    return np.arange(cut), np.arange(cut, n)
+    """Return train and test indices (``inference.dataset.split_ranges``, the one split rule)."""
+    (a, b), (c, d) = split_ranges({**manifest, "frames": n})
+    return np.arange(a, b), np.arange(c, d)
 
 
 def _device(name: str | None) -> torch.device:

@@ -116,3 +116,18 @@ def test_model_far_larger_than_the_frame(tmp_path):
     out = _simulate("--n", "2", "--model", str(obj), "--out", str(tmp_path / "set"), cwd=tmp_path)
     assert out.returncode == 2 and "frame is only" in out.stderr
     assert not (tmp_path / "set").exists()
+
+
+def test_one_split_rule_for_training_export_and_evaluation():
+    """Training, int8 calibration and gsa evaluate read one rule: for 7 frames without a stored split,
+    frames 0-5 train and frame 6 tests everywhere (evaluate used to score [5, 7): a training frame)."""
+    from inference.dataset import split_ranges
+    from inference.train import split_indices
+
+    manifest = {"frames": 7}
+    train, test = split_indices(manifest, 7)
+    assert train.tolist() == list(range(6)) and test.tolist() == [6]
+    assert split_ranges(manifest) == ((0, 6), (6, 7))
+    stored = {"frames": 10, "split": {"train": [0, 7], "test": [7, 10]}}
+    assert split_ranges(stored) == ((0, 7), (7, 10))
+    assert split_indices(stored, 10)[1].tolist() == [7, 8, 9]
