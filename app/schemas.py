@@ -7,6 +7,7 @@ from datetime import UTC, datetime
 from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, model_validator
+from pydantic.json_schema import SkipJsonSchema
 
 _ISO_DATE = re.compile(r"^\d{4}-\d{2}-\d{2}")
 
@@ -81,8 +82,11 @@ class OrbitIn(Strict):
     )
 
     name: Name
-    elements: ElementsIn | None = None
-    tle: list[Annotated[str, Field(max_length=80)]] | None = Field(default=None, min_length=2, max_length=2)
+    # Optional, but never null in the schema: oneOf below says which one is given.
+    elements: ElementsIn | SkipJsonSchema[None] = None
+    tle: (
+        Annotated[list[Annotated[str, Field(max_length=80)]], Field(min_length=2, max_length=2)] | SkipJsonSchema[None]
+    ) = None
 
     @model_validator(mode="after")
     def _one_source(self) -> OrbitIn:

@@ -362,5 +362,3 @@ def attitudes_in_frames(
         out[name]["rotation_matrix"] = r.round(12).tolist()
     out["observation_axes_in_j2000"] = axes["observation"].round(12).tolist()
     return out
-
-

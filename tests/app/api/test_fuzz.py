@@ -37,6 +37,8 @@ CHECKS = [
     oa.response_headers_conformance,
     oa.response_schema_conformance,
     oa.negative_data_rejection,
+    oa.unsupported_method,
+    oa.allow_header_conformance,
 ]
 SEEN: Counter[tuple[str, int]] = Counter()
 MODES: Counter[str] = Counter()
