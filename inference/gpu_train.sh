@@ -22,9 +22,9 @@
 # Back home: tar xzf records.tgz; python -m inference.pipeline join --pieces DIR --run runs/gpu-compact
 #
 # To continue the shipped compact weights instead of starting afresh, point GSA_GPU_FROM at their
-# float16 pieces (inference/models/checkpoints/compact-e15-cpu-tail: the H100's epoch 15 with Swin's
+# float16 pieces (records/checkpoints/compact-e15-cpu-tail: the H100's epoch 15 with Swin's
 # last stage fine-tuned on a CPU) and give the schedule to go on with,
-# e.g. GSA_GPU_FROM=inference/models/checkpoints/compact-e15-cpu-tail GSA_GPU_COMPACT_EPOCHS=6
+# e.g. GSA_GPU_FROM=records/checkpoints/compact-e15-cpu-tail GSA_GPU_COMPACT_EPOCHS=6
 # GSA_GPU_COMPACT_LR=4e-5 (epoch 15's rate was 2e-4 x 0.9^15 = 4.1e-5).
 set -u
 W=${GSA_GPU_WORK:-/root/gsa-work}
