@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import re
-from datetime import UTC, datetime
-from typing import Annotated, Any, Literal
+from datetime import datetime
+from typing import Annotated, Any, Literal, overload
 
 from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 from pydantic.json_schema import SkipJsonSchema
+
+from planner.propagation import as_utc
 
 _ISO_DATE = re.compile(r"^\d{4}-\d{2}-\d{2}")
 
@@ -21,17 +23,20 @@ def _iso_only(value: Any) -> Any:
     return value
 
 
-def _in_utc(value: datetime) -> datetime:
-    """The same instant in UTC (naive date-times are taken as UTC): filters compare instants on every database."""
-    return value.replace(tzinfo=UTC) if value.tzinfo is None else value.astimezone(UTC)
+@overload
+def utc_or_none(moment: datetime) -> datetime: ...
+@overload
+def utc_or_none(moment: None) -> None: ...
+def utc_or_none(moment: datetime | None) -> datetime | None:
+    """The same instant as aware UTC (planner.propagation.as_utc; naive is taken as UTC), or None.
+
+    SQLite hands back naive datetimes for UTC columns, and a filter given with another offset
+    (``+14:00``) must be the same instant in UTC before it is compared (SQLite compares the text).
+    """
+    return None if moment is None else as_utc(moment)
 
 
-def _utc_or_none(moment: datetime | None) -> datetime | None:
-    """A stored time as aware UTC (SQLite hands back naive datetimes for UTC columns)."""
-    return None if moment is None else _in_utc(moment)
-
-
-IsoDateTime = Annotated[datetime, BeforeValidator(_iso_only), AfterValidator(_in_utc)]
+IsoDateTime = Annotated[datetime, BeforeValidator(_iso_only), AfterValidator(as_utc)]
 
 CONTROL_CHARACTERS = re.compile(r"[\x00-\x1f\x7f]")
 
@@ -355,9 +360,9 @@ class EstimatePublic(BaseModel):
         r = e.result
         return {
             "id": e.id,
-            "created_at": _utc_or_none(e.created_at),
+            "created_at": utc_or_none(e.created_at),
             "plan_id": e.plan_id,
-            "observed_at": _utc_or_none(e.observed_at),
+            "observed_at": utc_or_none(e.observed_at),
             "input_name": e.input_name,
             "input_sha256": e.input_sha256,
             "shape": e.shape,

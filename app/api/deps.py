@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
-from datetime import UTC, datetime
-from typing import Annotated, cast, overload
+from typing import Annotated, cast
 
 from fastapi import Depends, HTTPException, Request, Security
 from fastapi.security import APIKeyHeader
@@ -15,6 +14,7 @@ from app.core.config import Settings
 from app.core.security import digests_equal, key_fingerprint
 from app.db.models import Operator
 from app.errors import InputError
+from app.schemas import utc_or_none
 from inference.runtime import Estimator
 
 api_key_header = APIKeyHeader(name="X-API-Key", auto_error=False, description="an operator's API key")
@@ -81,19 +81,7 @@ def get_estimator(request: Request) -> Estimator:
 EstimatorDep = Annotated[Estimator, Depends(get_estimator)]
 
 
-@overload
-def as_utc(moment: datetime) -> datetime: ...
-@overload
-def as_utc(moment: None) -> None: ...
-def as_utc(moment: datetime | None) -> datetime | None:
-    """Return ``moment`` as aware UTC: SQLite hands back naive datetimes for UTC columns, and a
-    filter given with another offset (``+14:00``) must be the same instant in UTC before it is
-    compared (SQLite compares the text, offset ignored)."""
-    if moment is None:
-        return moment
-    if moment.tzinfo is not None:
-        return moment.astimezone(UTC)
-    return moment.replace(tzinfo=UTC)
+as_utc = utc_or_none  # the routes' name for it
 
 
 DEFAULT_PAGE_SIZE = 20

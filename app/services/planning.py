@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from datetime import UTC, datetime, timedelta
+from datetime import datetime, timedelta
 from typing import Any
 
 import numpy as np
@@ -16,12 +16,8 @@ from planner.alignment import Candidate, HeightBox
 from planner.elements import Elements
 from planner.errors import PlannerError, PlanningStopped
 from planner.plan import Feasibility, Orbit, Plan, PlanOptions, StopCheck, make_plan, utc
-from planner.propagation import EarthFrames, Station
+from planner.propagation import EarthFrames, Station, as_utc
 from planner.tle import parse_tle
-
-
-def _aware(moment: datetime) -> datetime:
-    return moment.replace(tzinfo=UTC) if moment.tzinfo is None else moment.astimezone(UTC)
 
 
 def to_orbit(orbit: OrbitIn, where: str) -> Orbit:
@@ -32,7 +28,7 @@ def to_orbit(orbit: OrbitIn, where: str) -> Orbit:
         assert orbit.elements is not None
         e = orbit.elements
         el = Elements(
-            _aware(e.epoch),
+            as_utc(e.epoch),
             e.ha_km,
             e.hp_km,
             e.inclination_deg,
@@ -58,7 +54,7 @@ def plan_options(req: PlanCreate) -> PlanOptions:
     try:
         box = HeightBox(s.dha_min_km, s.dha_max_km, s.dhp_min_km, s.dhp_max_km, s.step_km)
         return PlanOptions(
-            start=_aware(s.start) if s.start else None,
+            start=as_utc(s.start) if s.start else None,
             duration_s=s.duration_days * 86400.0,
             reading=s.reading,
             box=box,
@@ -234,7 +230,7 @@ def run_access(req: AccessCreate, max_epoch_gap_days: float | None = None) -> di
     station = to_station(req.ground_station)
     from planner.plan import target_trajectory
 
-    epoch = _aware(req.start) if req.start else target.epoch
+    epoch = as_utc(req.start) if req.start else target.epoch
     t1 = req.duration_days * 86400.0
     if max_epoch_gap_days is not None:
         check_epoch_gap(target, req.target, "target", epoch, t1, max_epoch_gap_days)
