@@ -291,16 +291,16 @@ def align_nodes(
                 j = int(np.argmin(miss))
                 fam_a, fam_p = height_family(observer, box, q_ext)
                 cand = Candidate(
-                    p,
-                    "+OC" if sign[j] > 0 else "-OC",
-                    float(t[sl][j]),
-                    dha,
-                    dhp,
-                    float(miss[j]),
-                    q_ext,
-                    None,
-                    fam_a,
-                    fam_p,
+                    pass_index=p,
+                    node="+OC" if sign[j] > 0 else "-OC",
+                    t_access_s=float(t[sl][j]),
+                    delta_ha_km=dha,
+                    delta_hp_km=dhp,
+                    miss_km=float(miss[j]),
+                    rate_change_rad_s=q_ext,
+                    t_access_range_s=None,
+                    family_dha_km=fam_a,
+                    family_dhp_km=fam_p,
                 )
             if cand.miss_km > max_miss_km:
                 continue
@@ -367,7 +367,18 @@ def _exact_candidate(
     r, v = target.state(t_root)
     miss, sign = node_miss_km(r, v, observer.normal(np.array([t_root]), q_d))
     fam_a, fam_p = height_family(observer, box, q_d)
-    return Candidate(p, "+OC" if sign[0] > 0 else "-OC", t_root, dha, dhp, float(miss[0]), q_d, None, fam_a, fam_p)
+    return Candidate(
+        pass_index=p,
+        node="+OC" if sign[0] > 0 else "-OC",
+        t_access_s=t_root,
+        delta_ha_km=dha,
+        delta_hp_km=dhp,
+        miss_km=float(miss[0]),
+        rate_change_rad_s=q_d,
+        t_access_range_s=None,
+        family_dha_km=fam_a,
+        family_dhp_km=fam_p,
+    )
 
 
 def brute_force_miss(target: Trajectory, observer: ObserverPlaneModel, t_s: Vec, dha_km: Vec, dhp_km: Vec) -> Vec:
