@@ -18,7 +18,11 @@ from app.errors import install_error_handlers
 def create_app(settings: Settings | None = None) -> FastAPI:
     """Build the service. The database must already be migrated (``gsa db upgrade``; ``gsa serve`` does it)."""
     settings = settings or get_settings()
-    app = FastAPI(
+    # The docs pages load Swagger UI and ReDoc from files fastapi-offline ships, not from a CDN:
+    # operations networks have no internet, and /docs was a blank page there.
+    from fastapi_offline import FastAPIOffline
+
+    app = FastAPIOffline(
         title="GSA-ISAR",
         version="0.1.0",
         description="Ground-and-space-access scene planning (Hou et al. 2023, Algorithm 1) and ISAR attitude estimation.",

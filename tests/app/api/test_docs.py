@@ -1,0 +1,22 @@
+"""The API docs work with no network: /docs and /redoc reference only files the app itself serves."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+
+@pytest.mark.parametrize("page", ["/docs", "/redoc"])
+def test_docs_pages_load_every_asset_from_the_app(client, page):
+    r = client.get(page)
+    assert r.status_code == 200 and "text/html" in r.headers["content-type"]
+    refs = re.findall(r"""(?:src|href)=["']([^"']+)["']|url:\s*["']([^"']+)["']|spec-url=["']([^"']+)["']""", r.text)
+    urls = {u for group in refs for u in group if u}
+    assert not [u for u in urls if re.match(r"^(https?:)?//", u)], urls  # nothing from another host
+    assert any(u.endswith(".js") for u in urls)
+    for u in urls:
+        asset = client.get(u)
+        assert asset.status_code == 200, u
+        assert len(asset.content) > 100, u
+    assert "/openapi.json" in r.text
