@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from fastapi import FastAPI
-from fastapi.responses import JSONResponse
+from fastapi.responses import HTMLResponse, JSONResponse
 
 from app.api.main import api_router
 from app.core.config import Settings, get_settings
@@ -13,6 +13,21 @@ from app.core.db import database_status, make_engine, make_session_factory
 from app.core.observability import RequestContextMiddleware
 from app.core.security import load_key_secret
 from app.errors import install_error_handlers
+
+LANDING_HTML = """<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><title>GSA-ISAR</title>
+<style>body{font-family:sans-serif;max-width:42rem;margin:3rem auto;line-height:1.5;color:#222}a{color:#05a}</style>
+</head><body>
+<h1>GSA-ISAR</h1>
+<p>Ground-and-space-access scene planning (Hou et al. 2023, Algorithm 1) and ISAR attitude estimation.
+Every <code>/v1</code> call needs an <code>X-API-Key</code> header.</p>
+<ul>
+<li><a href="/docs">API docs (Swagger UI)</a> and <a href="/redoc">the same as ReDoc</a>, served offline</li>
+<li><a href="/openapi.json">OpenAPI document</a></li>
+<li><a href="/healthz">/healthz</a> (the process is up) and <a href="/readyz">/readyz</a> (database and models)</li>
+</ul>
+</body></html>
+"""
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -53,6 +68,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         db = database_status(engine)
         body = {"status": "ready" if db["ok"] else "not ready", "database": db, "models": app.state.estimator.identity}
         return body if db["ok"] else JSONResponse(status_code=503, content=body)
+
+    @app.get("/", include_in_schema=False)
+    def landing() -> HTMLResponse:
+        """A landing page: what this is and where the docs and health checks are."""
+        return HTMLResponse(LANDING_HTML)
 
     @app.get("/healthz", tags=["health"])
     def healthz() -> dict[str, str]:

@@ -25,6 +25,10 @@ router = APIRouter(prefix="/estimates", tags=["estimates"])
 NOT_FOUND: dict[int | str, dict[str, Any]] = {404: {"description": "no estimate with this id belongs to the caller"}}
 
 
+RESAMPLE = "resample a frame of another size to the models' (bilinear, in pixels); without it such a frame is a 422"
+PLAN_ID = "one of your plans: with observed_at, the attitude is also given in that plan's target LVLH and J2000 frames"
+OBSERVED_AT = "when the frame was observed (ISO 8601 UTC, e.g. 2022-12-05T11:54:33Z); needs plan_id"
+SNR_DB = "the frame's signal-to-noise ratio in dB, if known: stored with the estimate, not used by the models"
 NORMALISED = (
     "the frame already is the models' input (inference.frames.normalise_frame output in [0, 1], as gsa simulate "
     "data sets store it): take it as sent instead of normalising it again"
@@ -111,10 +115,10 @@ async def create_estimate(
     settings: SettingsDep,
     est: EstimatorDep,
     file: Annotated[UploadFile, File(description=".npy/.npz (2-D, real or complex) or 8/16-bit grayscale PNG/TIFF")],
-    resample: Annotated[bool, Form()] = False,
-    plan_id: Annotated[Text | None, Form(max_length=36)] = None,
-    observed_at: Annotated[IsoDateTime | None, Form()] = None,
-    snr_db: Annotated[float | None, Form(ge=-100, le=200)] = None,
+    resample: Annotated[bool, Form(description=RESAMPLE)] = False,
+    plan_id: Annotated[Text | None, Form(max_length=36, description=PLAN_ID)] = None,
+    observed_at: Annotated[IsoDateTime | None, Form(description=OBSERVED_AT)] = None,
+    snr_db: Annotated[float | None, Form(ge=-100, le=200, description=SNR_DB)] = None,
     normalised: Annotated[bool, Form(description=NORMALISED)] = False,
 ) -> dict[str, Any]:
     """Estimate the attitude of one ISAR frame; the result is stored."""
@@ -140,9 +144,9 @@ async def create_estimates_batch(
     settings: SettingsDep,
     est: EstimatorDep,
     files: Annotated[list[UploadFile], File(description="several frames, or one .npz stack [N, H, W]")],
-    resample: Annotated[bool, Form()] = False,
-    plan_id: Annotated[Text | None, Form(max_length=36)] = None,
-    observed_at: Annotated[IsoDateTime | None, Form()] = None,
+    resample: Annotated[bool, Form(description=RESAMPLE)] = False,
+    plan_id: Annotated[Text | None, Form(max_length=36, description=PLAN_ID)] = None,
+    observed_at: Annotated[IsoDateTime | None, Form(description=OBSERVED_AT)] = None,
     normalised: Annotated[bool, Form(description=NORMALISED)] = False,
 ) -> dict[str, Any]:
     """Estimate several frames as one batch through the models; one stored row each."""

@@ -20,3 +20,21 @@ def test_docs_pages_load_every_asset_from_the_app(client, page):
         assert asset.status_code == 200, u
         assert len(asset.content) > 100, u
     assert "/openapi.json" in r.text
+
+
+def test_the_landing_page_links_docs_and_health(client):
+    r = client.get("/")
+    assert r.status_code == 200 and "text/html" in r.headers["content-type"]
+    links = re.findall(r'href="([^"]+)"', r.text)
+    assert {"/docs", "/redoc", "/healthz", "/readyz"} <= set(links)
+    for link in links:
+        assert client.get(link).status_code == 200, link
+
+
+def test_every_estimate_form_field_is_described(client):
+    spec = client.get("/openapi.json").json()
+    for name, schema in spec["components"]["schemas"].items():
+        if name.startswith("Body_create_estimate"):
+            for field in ("resample", "plan_id", "observed_at", "normalised"):
+                if field in schema["properties"]:
+                    assert schema["properties"][field].get("description"), (name, field)
