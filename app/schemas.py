@@ -153,11 +153,6 @@ class SearchIn(Strict):
             raise ValueError(f"dha_min_km ({self.dha_min_km}) is above dha_max_km ({self.dha_max_km})")
         if self.dhp_min_km > self.dhp_max_km:
             raise ValueError(f"dhp_min_km ({self.dhp_min_km}) is above dhp_max_km ({self.dhp_max_km})")
-        if self.min_separation_km > self.standoff_km:
-            raise ValueError(
-                f"min_separation_km ({self.min_separation_km}) is above standoff_km ({self.standoff_km}): "
-                "every plan would be refused"
-            )
         return self
 
 

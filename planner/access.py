@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from planner.errors import SearchRangeError, StationError
 from planner.propagation import EarthFrames, Station, Trajectory
-from planner.search import TimeFunction, bisect_maxima, bisect_roots, time_grid
+from planner.search import TimeFunction, bisect_roots, grid_maxima, time_grid
 
 Vec = NDArray[np.float64]
 
@@ -99,18 +99,6 @@ def look_function(traj: Trajectory, station: Station, frames: EarthFrames):  # t
     return f
 
 
-def elevation_function(traj: Trajectory, station: Station, frames: EarthFrames):  # type: ignore[no-untyped-def]
-    """Return ``f(t_s)``: elevation above the station's mask, in degrees (the access g-function)."""
-    look = look_function(traj, station, frames)
-    return lambda t_s: look(t_s)[0]
-
-
-def range_function(traj: Trajectory, station: Station, frames: EarthFrames, max_range_km: float):  # type: ignore[no-untyped-def]
-    """Return ``f(t_s)``: ``max_range_km`` minus the slant range (positive when close enough)."""
-    look = look_function(traj, station, frames)
-    return lambda t_s: max_range_km - look(t_s)[1]
-
-
 @dataclass(frozen=True, slots=True)
 class Intervals:
     """Where a function of time is positive: ``start``/``end`` (N,), and whether each lies on the span's edge."""
@@ -119,37 +107,6 @@ class Intervals:
     end: Vec
     start_clipped: NDArray[np.bool_]
     end_clipped: NDArray[np.bool_]
-
-
-def grid_extrema(f: TimeFunction, t: Vec, g: Vec, select: NDArray[np.bool_], tol_s: float) -> tuple[Vec, Vec]:
-    """Refine the grid's local maxima of ``f`` where ``select`` (per grid point) holds, ends of the span included.
-
-    An interior maximum is bracketed by its grid neighbours. At either end of the
-    span a maximum can hide inside the first (last) step while the grid falls away
-    from it; it is found from the one-sided slope there. Returns ``(t, f(t))``.
-    """
-    if t.size < 2:
-        return np.empty(0), np.empty(0)
-    lo: list[Vec] = []
-    hi: list[Vec] = []
-    if t.size >= 3:
-        peak = (g[1:-1] >= g[:-2]) & (g[1:-1] > g[2:]) & select[1:-1]
-        i = np.flatnonzero(peak) + 1
-        lo.append(t[i - 1])
-        hi.append(t[i + 1])
-    h = 1e-3
-    if g[0] > g[1] and select[0]:
-        s = f(np.array([t[0], t[0] + 2.0 * h]))
-        if s[1] > s[0]:
-            lo.append(np.array([t[0] + h]))
-            hi.append(np.array([t[1]]))
-    if g[-1] > g[-2] and select[-1]:
-        s = f(np.array([t[-1] - 2.0 * h, t[-1]]))
-        if s[0] > s[1]:
-            lo.append(np.array([t[-2]]))
-            hi.append(np.array([t[-1] - h]))
-    t_max = bisect_maxima(f, np.concatenate(lo), np.concatenate(hi), tol_s, h_s=h)
-    return t_max, f(t_max) if t_max.size else np.empty(0)
 
 
 def positive_intervals(f: TimeFunction, t: Vec, g: Vec, extrema_t: Vec, extrema_g: Vec, tol_s: float) -> Intervals:
@@ -244,19 +201,20 @@ def access_windows(
     # below the mask is safe. A sampled minimum only matters if it is above the mask.
     # Extrema to 1 ms: the function is flat there, so a finer time buys nothing.
     ext_tol = max(tol_s, 1e-3)
-    every = np.ones(t.size, bool)
-    t_max, g_max = grid_extrema(f_el, t, g, every, ext_tol)
-    t_min, g_min = grid_extrema(lambda x: -f_el(x), t, -g, g > 0.0, ext_tol)
+    t_max, g_max = grid_maxima(f_el, t, g, ext_tol, include_ends=True)
+    t_min, g_min = grid_maxima(lambda x: -f_el(x), t, -g, ext_tol, select=g > 0.0, include_ends=True)
     windows = positive_intervals(f_el, t, g, np.concatenate([t_max, t_min]), np.concatenate([g_max, -g_min]), tol_s)
     # Range minima: for the least range in each window and for a range limit.
-    t_near, near = grid_extrema(f_near, t, -rng, every, ext_tol)
+    t_near, near = grid_maxima(f_near, t, -rng, ext_tol, include_ends=True)
     if station.max_range_km is not None and windows.start.size:
         limit = station.max_range_km
 
         def f_in(t_s: Vec) -> Vec:
             return limit - look(t_s)[1]
 
-        t_far, far = grid_extrema(lambda x: -f_in(x), t, rng - limit, limit - rng > 0.0, ext_tol)
+        t_far, far = grid_maxima(
+            lambda x: -f_in(x), t, rng - limit, ext_tol, select=limit - rng > 0.0, include_ends=True
+        )
         in_range = positive_intervals(
             f_in, t, limit - rng, np.concatenate([t_near, t_far]), np.concatenate([limit + near, -far]), tol_s
         )
@@ -277,17 +235,16 @@ def _describe(
         return AccessWindows(
             empty, empty, empty, empty, empty, empty, empty, empty, np.zeros(0, bool), np.zeros(0, bool)
         )
-    # Each window's highest point and least range lie at an interior extremum or at an end.
+    # Each window's highest point and least range lie at an interior extremum or at an end:
+    # one look at those moments gives both.
     look = look_function(traj, station, frames)
     culm = np.empty(n)
     nearest = np.empty(n)
     for k in range(n):
         s, e = float(w.start[k]), float(w.end[k])
-        cand = np.concatenate([[s, e], _inside(t_peaks, s, e)])
-        el, _ = look(cand)
+        cand = np.concatenate([[s, e], _inside(t_peaks, s, e), _inside(t_near, s, e)])
+        el, rg = look(cand)
         culm[k] = cand[int(np.argmax(el))]
-        cand = np.concatenate([[s, e], _inside(t_near, s, e)])
-        _, rg = look(cand)
         nearest[k] = float(rg.min())
     t_all = np.concatenate([w.start, culm, w.end])
     r, _ = traj.state(t_all)

@@ -19,7 +19,7 @@ from planner.constants import MU_EARTH_KM3_S2
 from planner.errors import LambertError, PlannerError
 from planner.lambert import lambert, max_revolutions
 from planner.propagation import NumericalJ2Trajectory, Pole, Trajectory, propagate_j2
-from planner.search import bisect_maxima
+from planner.search import grid_maxima
 
 Vec = NDArray[np.float64]
 
@@ -224,9 +224,7 @@ def encounter(
         return np.linalg.norm(r_o - r_t, axis=0)
 
     t = np.linspace(t0, t_end_s, int(math.ceil(t_end_s - t0)) + 1)
-    d = distance(t)
-    i = np.flatnonzero((d[1:-1] <= d[:-2]) & (d[1:-1] < d[2:])) + 1
-    t_min = bisect_maxima(lambda x: -distance(x), t[i - 1], t[i + 1], 1e-4) if i.size else np.empty(0)
+    t_min, _ = grid_maxima(lambda x: -distance(x), t, -distance(t), 1e-4)
     cand_t = np.concatenate([t_min, [t[0], t[-1]]])
     cand_d = distance(cand_t)
     j = int(np.argmin(cand_d))

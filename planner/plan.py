@@ -326,8 +326,8 @@ def make_plan(
     check_box_reachable(obs_el, opts.box)
     # One pole of date for the plan: J2 acts about it in every propagation and verification.
     t_first = min(0.0, seconds_between(epoch, obs_el.epoch), seconds_between(epoch, target.epoch))
-    t_after = min(2 * math.pi * math.sqrt(obs_el.a_km**3 / MU_EARTH_KM3_S2), 86400.0) + 600.0
-    t_end = t1 + t_after
+    obs_period_s = 2 * math.pi * math.sqrt(obs_el.a_km**3 / MU_EARTH_KM3_S2)
+    t_end = t1 + min(obs_period_s, 86400.0) + 600.0
     pole = pole_of_date(epoch, t_first, t_end)
     tgt = target_trajectory(target, epoch, frames, t_end, opts.reading, pole)
     tle_obs = observer.tle is not None
@@ -427,8 +427,7 @@ def make_plan(
         chosen_index, phasing, step1_miss, obs_chosen = k, ph, cand.miss_km, obs_new
         chosen = cand
         alignment_dv = float(height_change_dv_km_s(a, e, cand.delta_ha_km, cand.delta_hp_km))
-        period = 2 * math.pi * math.sqrt(obs_el.a_km**3 / MU_EARTH_KM3_S2)
-        meet = meet_chosen = encounter(ph, obs_new, tgt, min(t_access + period, t_end), pole)
+        meet = meet_chosen = encounter(ph, obs_new, tgt, min(t_access + obs_period_s, t_end), pole)
         r_t, _ = tgt.state(t_access)
         # The line of sight from the target to the observer at T_access: the stand-off vector.
         los = ph.r_observer_km - r_t[:, 0]

@@ -70,10 +70,12 @@ def timescale() -> Any:
     return ts
 
 
+@lru_cache(maxsize=1)
 def polar_motion_coverage() -> tuple[datetime, datetime]:
     """Return the first and last UTC moments of the polar-motion table (IERS finals2000A.all)."""
-    tt = timescale().polar_motion_table[0]
-    first, last = timescale().tt_jd(np.array([tt[0], tt[-1]])).utc_datetime()
+    ts = timescale()
+    tt = ts.polar_motion_table[0]
+    first, last = ts.tt_jd(np.array([tt[0], tt[-1]])).utc_datetime()
     return first, last
 
 

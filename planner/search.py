@@ -113,17 +113,46 @@ def find_roots(
     return _find_roots_core(f, t, f(t), tol_s)
 
 
-def _find_maxima_core(f: TimeFunction, t_s: Vec, values: Vec, tol_s: float, floor: float = -np.inf) -> tuple[Vec, Vec]:
-    """Algorithm core of find_maxima for callers that already have ``f`` on a grid.
+def grid_maxima(
+    f: TimeFunction,
+    t_s: Vec,
+    values: Vec,
+    tol_s: float,
+    select: NDArray[np.bool_] | None = None,
+    include_ends: bool = False,
+    h_s: float = 1e-3,
+) -> tuple[Vec, Vec]:
+    """Refine the local maxima of ``f`` sampled as ``values`` on the grid ``t_s``; return ``(t, f(t))``.
 
-    Grid maxima at or below ``floor`` are not refined (callers that only want maxima
-    above some level pass that level minus what ``f`` can gain within a grid step).
+    Algorithm core of find_maxima, for callers that already have ``f`` on a grid. An
+    interior maximum is bracketed by its grid neighbours; only grid points where
+    ``select`` holds are refined. With ``include_ends``, a maximum hiding inside the
+    first (last) step while the grid falls away from it is found from the one-sided
+    slope there (a pass peaking just after the span starts).
     """
-    if t_s.size < 3:
+    if t_s.size < 2:
         return np.empty(0), np.empty(0)
-    peak = (values[1:-1] >= values[:-2]) & (values[1:-1] > values[2:]) & (values[1:-1] > floor)
-    interior = np.flatnonzero(peak) + 1
-    t_max = bisect_maxima(f, t_s[interior - 1], t_s[interior + 1], tol_s)
+    select = np.ones(t_s.size, bool) if select is None else select
+    lo: list[Vec] = []
+    hi: list[Vec] = []
+    if t_s.size >= 3:
+        peak = (values[1:-1] >= values[:-2]) & (values[1:-1] > values[2:]) & select[1:-1]
+        i = np.flatnonzero(peak) + 1
+        lo.append(t_s[i - 1])
+        hi.append(t_s[i + 1])
+    if include_ends and values[0] > values[1] and select[0]:
+        s = f(np.array([t_s[0], t_s[0] + 2.0 * h_s]))
+        if s[1] > s[0]:
+            lo.append(np.array([t_s[0] + h_s]))
+            hi.append(np.array([t_s[1]]))
+    if include_ends and values[-1] > values[-2] and select[-1]:
+        s = f(np.array([t_s[-1] - 2.0 * h_s, t_s[-1]]))
+        if s[0] > s[1]:
+            lo.append(np.array([t_s[-2]]))
+            hi.append(np.array([t_s[-1] - h_s]))
+    if not lo:
+        return np.empty(0), np.empty(0)
+    t_max = bisect_maxima(f, np.concatenate(lo), np.concatenate(hi), tol_s, h_s=h_s)
     return t_max, f(t_max) if t_max.size else np.empty(0)
 
 
@@ -135,4 +164,4 @@ def find_maxima(f: TimeFunction, t0_s: float, t1_s: float, step_s: float, tol_s:
     ([2.0, 4.0, 6.0], [1.0, 1.0, 1.0])
     """
     t = time_grid(t0_s, t1_s, step_s)
-    return _find_maxima_core(f, t, f(t), tol_s)
+    return grid_maxima(f, t, f(t), tol_s)

@@ -76,9 +76,7 @@ def load_key_secret(configured: str, data_dir: Path) -> bytes:
     if not path.exists():
         private_dir(path.parent)
         tmp = path.with_name(f"key-secret.{os.getpid()}.tmp")
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-        with os.fdopen(fd, "w") as fh:
-            fh.write(secrets.token_hex(32))
+        write_private(tmp, secrets.token_hex(32).encode("ascii"))
         try:
             os.link(tmp, path)  # atomic and exclusive: two starting workers agree on one secret
         except FileExistsError:

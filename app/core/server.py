@@ -20,6 +20,7 @@ from uvicorn.protocols.http.h11_impl import H11Protocol
 
 @lru_cache(maxsize=1)
 def _header_timeout_s() -> float:
+    """``GSA_HEADER_TIMEOUT_S``, read once per process (each uvicorn worker loads the environment)."""
     from app.core.config import get_settings
 
     return float(get_settings().header_timeout_s)
@@ -33,14 +34,9 @@ class GuardedH11Protocol(H11Protocol):
         self._header_timer: asyncio.TimerHandle | None = None
         self._arm_header_timer()
 
-    @property
-    def header_timeout_s(self) -> float:
-        """``GSA_HEADER_TIMEOUT_S``, read once per process from the settings (each worker loads the environment)."""
-        return _header_timeout_s()
-
     def _arm_header_timer(self) -> None:
         if self._header_timer is None:
-            self._header_timer = self.loop.call_later(self.header_timeout_s, self._header_timeout)
+            self._header_timer = self.loop.call_later(_header_timeout_s(), self._header_timeout)
 
     def _disarm_header_timer(self) -> None:
         if self._header_timer is not None:
