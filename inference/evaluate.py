@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -20,7 +19,8 @@ from numpy.typing import NDArray
 
 from inference.dataset import DatasetSpec, load_manifest, load_range, render_frames, split_ranges
 from inference.errors import InferenceError, module_main
-from inference.isar import Radar, rotation_matrix
+from inference.frames import geodesic_deg
+from inference.isar import Radar
 from inference.runtime import Estimator
 
 PAPER = {
@@ -73,15 +73,6 @@ def score(
             print(f"evaluate: {name}: MAE z/y/x {r['mae_deg']} deg, geodesic p95 {r['geodesic_p95_deg']} deg",
                   file=sys.stderr, flush=True)  # fmt: skip
     return rows, errors
-
-
-def geodesic_deg(pred: NDArray[np.floating], true: NDArray[np.floating]) -> NDArray[np.float64]:
-    """Return the rotation angle (deg) between predicted and true attitudes, Euler z, y, x in degrees [N, 3]."""
-    out = np.empty(len(pred))
-    for k, (p, t) in enumerate(zip(pred, true, strict=True)):
-        r = rotation_matrix(*p).T @ rotation_matrix(*t)
-        out[k] = math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(r) - 1.0) / 2.0))))
-    return out
 
 
 def summarise(pred: NDArray[np.floating], true: NDArray[np.floating]) -> dict[str, Any]:

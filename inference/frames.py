@@ -68,3 +68,33 @@ def euler_to_quaternion(z_deg: float, y_deg: float, x_deg: float) -> tuple[float
         cz * sy * cx + sz * cy * sx,
         sz * cy * cx - cz * sy * sx,
     )
+
+
+def rotation_matrices(angles_deg: Vec) -> Vec:
+    """Return R = Rz(z) Ry(y) Rx(x) for angles [H, 3] (deg) as [H, 3, 3] (``inference.frames.rotation_matrix``)."""
+    a = np.radians(np.asarray(angles_deg, float).reshape(-1, 3))
+    cz, sz = np.cos(a[:, 0]), np.sin(a[:, 0])
+    cy, sy = np.cos(a[:, 1]), np.sin(a[:, 1])
+    cx, sx = np.cos(a[:, 2]), np.sin(a[:, 2])
+    r = np.empty((len(a), 3, 3))
+    r[:, 0, 0] = cz * cy
+    r[:, 0, 1] = cz * sy * sx - sz * cx
+    r[:, 0, 2] = cz * sy * cx + sz * sx
+    r[:, 1, 0] = sz * cy
+    r[:, 1, 1] = sz * sy * sx + cz * cx
+    r[:, 1, 2] = sz * sy * cx - cz * sx
+    r[:, 2, 0] = -sy
+    r[:, 2, 1] = cy * sx
+    r[:, 2, 2] = cy * cx
+    return r
+
+
+def geodesic_deg(a_deg: Vec, b_deg: Vec) -> Vec:
+    """Return the rotation angle (deg) between attitudes a and b, Euler z, y, x in degrees, each [N, 3] or [3].
+
+    >>> geodesic_deg(np.array([10.0, 0.0, 0.0]), np.array([0.0, 0.0, 0.0])).round(9).tolist()
+    [10.0]
+    """
+    ra, rb = rotation_matrices(a_deg), rotation_matrices(b_deg)
+    trace = np.einsum("hij,hij->h", ra, rb)
+    return np.degrees(np.arccos(np.clip((trace - 1.0) / 2.0, -1.0, 1.0)))

@@ -203,6 +203,76 @@ def tiangong_like(scatterer_spacing_m: float = 0.3, surface_spacing_m: float = 0
     )
 
 
+def comsat_like(scatterer_spacing_m: float = 0.3, surface_spacing_m: float = 0.08) -> TargetModel:
+    """Build a second target, unlike the default: a box-wing communications satellite.
+
+    A 3.2 m x 2.4 m x 2.6 m bus (its long side along x), two solar wings of 7 m x 2.2 m
+    on yokes along +-y (the +y wing turned 25 deg about its length, the -y wing
+    -10 deg), a 2.6 m dish on the bus's +z face (a shallow cylinder standing in for it)
+    and a 1.2 m thruster cylinder at -x. No network was trained on it: it is the
+    catalogue's "another satellite" and the target of the no-network path's measurements.
+    """
+    s_sc, s_surf = scatterer_spacing_m, surface_spacing_m
+    ex, ey, ez = np.eye(3)
+    parts_sc: list[tuple[Vec, Vec, int]] = []
+    parts_surf: list[Vec] = []
+
+    def add_plate(center: Vec, u: Vec, v: Vec, su: float, sv: float, tilt: float = 0.0) -> None:
+        u, v = _tilted(u, v, tilt)
+        face, normals, edge = plate(center, u, v, su, sv, s_sc)
+        parts_sc.extend([(face, normals, FLAT), (edge, np.broadcast_to(normals[0], edge.shape).copy(), EDGE)])
+        fine = plate(center, u, v, su, sv, s_surf)
+        parts_surf.extend([fine[0], fine[2]])
+
+    def add_cylinder(origin: Vec, axis: Vec, radius: float, length: float) -> None:
+        p, n, rim, rim_n = cylinder(origin, axis, radius, length, s_sc)
+        parts_sc.extend([(p, n, CURVED), (rim, rim_n, EDGE)])
+        parts_surf.append(cylinder(origin, axis, radius, length, s_surf)[0])
+        a = axis / np.linalg.norm(axis)
+        for end, normal in ((origin, -a), (origin + length * a, a)):
+            parts_sc.append((*disc(end, normal, radius, s_sc), FLAT))
+            parts_surf.append(disc(end, normal, radius, s_surf)[0])
+
+    lx, ly, lz = 3.2, 2.4, 2.6
+    for axis, size, (u, v, su, sv) in (
+        (ex, lx, (ey, ez, ly, lz)), (ey, ly, (ex, ez, lx, lz)), (ez, lz, (ex, ey, lx, ly)),
+    ):  # fmt: skip
+        for sign in (1.0, -1.0):
+            add_plate(sign * axis * size / 2, u, v, su, sv)
+    add_plate(np.array([0.0, ly / 2 + 0.6 + 3.5, 0.0]), ey, ex, 7.0, 2.2, 25.0)
+    add_plate(np.array([0.0, -ly / 2 - 0.6 - 3.5, 0.0]), ey, ex, 7.0, 2.2, -10.0)
+    for sign in (1.0, -1.0):  # the yokes: rods from the bus to the wings
+        add_cylinder(np.array([0.0, sign * ly / 2, 0.0]), sign * ey, 0.1, 0.6)
+    add_cylinder(np.array([0.4, 0.0, lz / 2]), ez, 1.3, 0.35)
+    add_cylinder(np.array([-lx / 2 - 1.2, 0.0, 0.0]), ex, 0.5, 1.2)
+    sc = np.concatenate([p for p, _, _ in parts_sc])
+    normals = np.concatenate([n for _, n, _ in parts_sc])
+    kinds = np.concatenate([np.full(len(p), k, np.int8) for p, _, k in parts_sc])
+    surface = np.concatenate(parts_surf)
+    centroid = surface.mean(axis=0)
+    return TargetModel(
+        "comsat-like",
+        surface - centroid,
+        sc - centroid,
+        normals,
+        kinds,
+        "box-wing communications satellite (inference/targets.py: comsat_like)",
+    )
+
+
+BUILTIN_TARGETS = {"tiangong-like": tiangong_like, "comsat-like": comsat_like}
+DEFAULT_TARGET = "tiangong-like"
+
+
+def builtin_target(name: str) -> TargetModel:
+    """Return a built-in target by name (``BUILTIN_TARGETS``); ModelFileError names the choices otherwise."""
+    if name not in BUILTIN_TARGETS:
+        raise ModelFileError(
+            f"unknown target {name!r}: the built-in targets are {', '.join(sorted(BUILTIN_TARGETS))}", field="target"
+        )
+    return BUILTIN_TARGETS[name]()
+
+
 def _read_obj(path: Path) -> tuple[Vec, NDArray[np.int64]]:
     verts: list[list[float]] = []
     faces: list[list[int]] = []

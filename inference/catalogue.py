@@ -1,0 +1,104 @@
+"""Frames the service must not answer with confidence, and fresh good frames to hold them against.
+
+Each kind is a way an operator's upload can go wrong while still looking like an ISAR
+frame to the networks. ``bad_frames(kind, n, seed)`` returns the normalised frames the
+models would see (what ``app.services.estimation.prepare`` makes of the upload), so the
+flag rate of every kind can be measured (``bench/trust.py``, ``tests/inference/test_trust.py``):
+
+* ``other-satellite``: frames of ``comsat_like``, a box-wing satellite, not the target;
+* ``range-flipped`` / ``cross-range-flipped``: the rows / columns reversed (a sign convention);
+* ``transposed``: range and cross-range swapped;
+* ``normalised-twice``: a normalised frame sent again as raw (``normalised=false``);
+* ``pixels-halved``: a 512 x 512 frame of the same radar resampled to 256 in pixels, not in
+  metres, so the target shrinks to half its size;
+* ``pixels-zoomed``: the centre 176 x 176 of a frame resampled to 256 in pixels (the target 1.45x);
+* ``pure-noise``: complex white Gaussian noise, no target;
+* ``inverted``: a normalised frame's negative (1 - frame), bright sky and dark target.
+
+Good frames are ``DatasetSpec`` frames of the default target (angles uniform in +-45 deg,
+SNR uniform in -3..15 dB) from a seed no training or test set uses.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from inference.dataset import DatasetSpec, frame_truth
+from inference.frames import normalise_frame
+from inference.isar import Imager, Radar, simulate
+from inference.targets import TargetModel, comsat_like, tiangong_like
+
+KINDS = (
+    "other-satellite", "range-flipped", "cross-range-flipped", "transposed", "normalised-twice",
+    "pixels-halved", "pixels-zoomed", "pure-noise", "inverted",
+)  # fmt: skip
+CATALOGUE_SEED = 50_000  # bad frames: a seed no training, validation or test set uses
+FRESH_SEED = 60_000  # fresh good frames for the trust tests and benchmarks
+CALIBRATION_SEED = 70_000  # fresh good frames the shipped trust calibration was fitted on
+
+
+def good_frames(n: int, seed: int = FRESH_SEED, radar: Radar | None = None,
+                model: TargetModel | None = None) -> tuple[NDArray[np.float32], NDArray[np.float64], NDArray[np.float64]]:  # fmt: skip
+    """Return n fresh normalised frames of ``model`` (default: the default target), their angles and SNRs."""
+    radar = radar or Radar()
+    model = model or tiangong_like()
+    imager = Imager(radar)
+    spec = DatasetSpec(n=n, seed=seed)
+    frames = np.empty((n, radar.n_range, radar.n_azimuth), np.float32)
+    angles = np.empty((n, 3))
+    snrs = np.empty(n)
+    for i in range(n):
+        ang, snr, s = frame_truth(spec, i)
+        frames[i] = normalise_frame(np.abs(simulate(model, imager, ang, snr, s).image))
+        angles[i], snrs[i] = ang, snr
+    return frames, angles, snrs
+
+
+def _zoom(mag: NDArray[Any], size: int) -> NDArray[np.float64]:
+    from scipy.ndimage import zoom
+
+    return np.asarray(zoom(mag, (size / mag.shape[0], size / mag.shape[1]), order=1))
+
+
+def bad_frames(kind: str, n: int, seed: int = CATALOGUE_SEED, radar: Radar | None = None) -> NDArray[np.float32]:
+    """Return n normalised frames of one ``KINDS`` kind, as the models would receive them."""
+    if kind not in KINDS:
+        raise ValueError(f"unknown kind {kind!r}; one of {', '.join(KINDS)}")
+    radar = radar or Radar()
+    size = radar.n_range
+    spec = DatasetSpec(n=n, seed=seed + KINDS.index(kind) * 1000)
+    rng = np.random.default_rng(spec.seed)
+    out = np.empty((n, radar.n_range, radar.n_azimuth), np.float32)
+    model = comsat_like() if kind == "other-satellite" else tiangong_like()
+    if kind == "pixels-halved":
+        imager = Imager(Radar(n_range=2 * radar.n_range, n_azimuth=2 * radar.n_azimuth))
+    else:
+        imager = Imager(radar)
+    for i in range(n):
+        ang, snr, s = frame_truth(spec, i)
+        if kind == "pure-noise":
+            mag = np.abs(rng.standard_normal((size, size)) + 1j * rng.standard_normal((size, size)))
+            out[i] = normalise_frame(mag)
+            continue
+        mag = np.abs(simulate(model, imager, ang, snr, s).image)
+        if kind == "range-flipped":
+            mag = mag[::-1]
+        elif kind == "cross-range-flipped":
+            mag = mag[:, ::-1]
+        elif kind == "transposed":
+            mag = mag.T
+        elif kind == "pixels-halved":
+            mag = _zoom(mag, size)
+        elif kind == "pixels-zoomed":
+            c, half = size // 2, 88
+            mag = _zoom(mag[c - half : c + half, c - half : c + half], size)
+        frame = normalise_frame(mag)
+        if kind == "normalised-twice":
+            frame = normalise_frame(frame)
+        elif kind == "inverted":
+            frame = 1.0 - frame
+        out[i] = frame
+    return out

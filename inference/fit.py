@@ -1,0 +1,448 @@
+"""Render and compare: fit the target's theoretical projection (paper eq. 10) to an enhanced frame.
+
+numpy and scipy only, so the service runs it beside ONNX Runtime without torch.
+
+The renderer. ``inference.isar.label_mask`` marks every pixel that some surface point
+rounds into, then closes the mask with a 3 x 3 cross. ``Renderer.occupancy`` does the
+same with two changes that make it smooth in the attitude: a point's count moves to
+the neighbouring pixel linearly within 0.1 pixel of the boundary between them (instead
+of jumping there), and counts become occupancy by ``1 - exp(-count / 0.35)`` before
+the same closing, taken grey. The skin is thinned to one point per voxel of 0.9 pixel
+(42,000 points for the default target), which is enough to leave no holes. At the
+true attitude this reproduces the label to an IoU of 0.99-0.995.
+
+Coarse scale. ``Renderer.coverage`` renders 4x-pooled frames from a skin thinned to
+one point per voxel of 3 pixels, each point weighted by the share of a pooled pixel its
+skin covers seen from the image plane (at least a line one fine pixel wide where the
+skin is edge-on). It is biased by a few tenths of a percent of IoU, enough to prefer an
+attitude several degrees from the truth, so it only ever serves to find a start
+(``Library``), never to refine one.
+
+The search. ``fit`` refines starts (Swin's answer, its near-mirror, library matches)
+at once. Per iteration and hypothesis it renders a 10-point stencil at step h (the
+centre, six axis points, three face diagonals), fits the full quadratic through it,
+and renders the quadratic's minimum (at most 2 h away); it moves to the best point
+seen and shrinks h from 1 deg to 0.35 and 0.12 deg after at most two iterations each. Every render of an
+iteration is one batch. The cost is one minus the soft IoU with the enhanced frame,
+plus a weak Gaussian prior around the hypothesis's own start, so a hypothesis stays
+a refinement of where it began. The last quadratic's Hessian is each answer's
+curvature, from which ``inference.trust`` makes the uncertainty.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from inference.frames import geodesic_deg, rotation_matrices
+from inference.isar import Radar, projection_matrix
+from inference.targets import TargetModel
+
+Vec = NDArray[np.float64]
+F32 = NDArray[np.float32]
+
+FINE_SPACING_PX = 0.9  # skin thinning for the fine renderer, in pixels
+COARSE_FACTOR = 4
+SHARP_ZONE = 0.1  # half-width (pixels) of the linear hand-over between neighbouring pixels
+COUNT_SCALE = 0.35  # counts per pixel at which occupancy reaches 1 - 1/e
+STEPS_DEG = (1.0, 0.35, 0.12)
+MAX_ITER = 2
+WINDOW_MARGIN_PX = 12
+
+
+def mirror(angles_deg: Vec) -> Vec:
+    """Return the near-mirror attitude (z, -y, -x): the same projection as the body reflected in its own z.
+
+    Reflection M = diag(1, 1, -1) gives M R(z, y, x) M = R(z, -y, -x), and the projection
+    along the observation Z ignores the sign of Z, so a body nearly symmetric in z
+    looks the same at both attitudes.
+    """
+    a = np.array(angles_deg, float)
+    a[..., 1:] *= -1.0
+    return a
+
+
+def surface_normals(points: Vec, k: int = 12) -> Vec:
+    """Return each point's unit normal (sign-free) from the principal axes of its ``k`` nearest neighbours."""
+    from scipy.spatial import cKDTree
+
+    _, idx = cKDTree(points).query(points, k=min(k, len(points)))
+    nb = points[idx] - points[idx].mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", nb, nb)
+    return np.asarray(np.linalg.eigh(cov)[1][:, :, 0])
+
+
+def skin_area(points: Vec) -> float:
+    """Return the skin's area (m^2) from a uniform sampling: the points times their median spacing squared."""
+    from scipy.spatial import cKDTree
+
+    d, _ = cKDTree(points).query(points[:: max(1, len(points) // 5000)], k=2)
+    return float(len(points) * np.median(d[:, 1]) ** 2)
+
+
+def thin(points: Vec, normals: Vec, areas: Vec, spacing_m: float) -> tuple[Vec, Vec, Vec]:
+    """Merge the points of each cubic voxel of ``spacing_m``: their centroid, mean normal (sign-free), summed area."""
+    cells = np.floor(points / spacing_m).astype(np.int64)
+    _, inv = np.unique(cells, axis=0, return_inverse=True)
+    inv = inv.ravel()
+    n = int(inv.max()) + 1
+    count = np.bincount(inv, minlength=n).astype(float)
+    centre = np.stack([np.bincount(inv, points[:, i], n) for i in range(3)], axis=1) / count[:, None]
+    outer = np.einsum("ni,nj->nij", normals, normals).reshape(-1, 9)
+    scatter = np.stack([np.bincount(inv, outer[:, i], n) for i in range(9)], axis=1).reshape(n, 3, 3)
+    mean_normal = np.linalg.eigh(scatter)[1][:, :, -1]
+    return centre, mean_normal, np.bincount(inv, areas, n)
+
+
+def pool(frame: Vec, factor: int) -> Vec:
+    """Mean-pool a frame [H, W] by ``factor`` (H and W divisible by it)."""
+    if factor == 1:
+        return np.asarray(frame, float)
+    h, w = frame.shape
+    return np.asarray(frame, float).reshape(h // factor, factor, w // factor, factor).mean(axis=(1, 3))
+
+
+@dataclass(frozen=True)
+class Window:
+    """A crop of the frame: rows r0..r0+h, columns c0..c0+w."""
+
+    r0: int
+    c0: int
+    h: int
+    w: int
+
+    @staticmethod
+    def around(mask: NDArray[np.bool_], margin: int, shape: tuple[int, int]) -> Window:
+        rows, cols = np.nonzero(mask)
+        if len(rows) == 0:
+            return Window(0, 0, shape[0], shape[1])
+        r0, r1 = max(int(rows.min()) - margin, 0), min(int(rows.max()) + margin + 1, shape[0])
+        c0, c1 = max(int(cols.min()) - margin, 0), min(int(cols.max()) + margin + 1, shape[1])
+        return Window(r0, c0, r1 - r0, c1 - c0)
+
+
+def _cross(x: F32, op: Any, pad: float) -> F32:
+    p = np.pad(x, ((0, 0), (1, 1), (1, 1)), constant_values=pad)
+    out = op(p[:, 1:-1, 1:-1], p[:, :-2, 1:-1])
+    op(out, p[:, 2:, 1:-1], out=out)
+    op(out, p[:, 1:-1, :-2], out=out)
+    op(out, p[:, 1:-1, 2:], out=out)
+    return out
+
+
+def grey_closing(x: F32) -> F32:
+    """Dilate then erode [H, n, m] with the 3 x 3 cross, keeping the original where larger (as ``label_mask``)."""
+    return np.maximum(_cross(_cross(x, np.maximum, 0.0), np.minimum, 1.0), x)
+
+
+@dataclass(frozen=True)
+class Renderer:
+    """A target's silhouette for one radar: fine (``occupancy``) and 4x coarse (``coverage``)."""
+
+    model: TargetModel
+    radar: Radar
+    points: F32 = field(init=False)  # fine skin (N, 3), body frame
+    coarse_points: Vec = field(init=False)
+    coarse_normals: Vec = field(init=False)
+    coarse_areas: Vec = field(init=False)
+    rows: Vec = field(init=False)  # (2, 3): observation-frame metres to (range, cross-range) pixels
+    pixel_m: float = field(init=False)
+
+    def __post_init__(self) -> None:
+        r = self.radar
+        set_ = object.__setattr__
+        set_(self, "rows", projection_matrix(r) / np.array([[r.range_cell_m], [r.cross_range_cell_m]]))
+        pixel = math.sqrt(r.range_cell_m * r.cross_range_cell_m)
+        set_(self, "pixel_m", pixel)
+        surface = np.asarray(self.model.surface, float)
+        normals = surface_normals(surface)
+        areas = np.full(len(surface), skin_area(surface) / len(surface))
+        fine, _, _ = thin(surface, normals, areas, FINE_SPACING_PX * pixel)
+        set_(self, "points", fine.astype(np.float32))
+        pts, nrm, ar = thin(surface, normals, areas, 0.75 * COARSE_FACTOR * pixel)
+        set_(self, "coarse_points", pts)
+        set_(self, "coarse_normals", nrm)
+        set_(self, "coarse_areas", ar)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.radar.n_range, self.radar.n_azimuth
+
+    def pixels(self, angles_deg: Vec, points: Vec | None = None) -> tuple[F32, F32]:
+        """Return fractional pixel rows and columns [H, N] of the skin at attitudes [H, 3]."""
+        pts = self.points if points is None else points
+        m = (self.rows[None] @ rotation_matrices(angles_deg)).astype(np.float32)  # (H, 2, 3)
+        uv = m @ np.asarray(pts, np.float32).T  # (H, 2, N)
+        return uv[:, 0] + np.float32(self.radar.n_range / 2), uv[:, 1] + np.float32(self.radar.n_azimuth / 2)
+
+    def occupancy(self, angles_deg: Vec, window: Window | None = None) -> F32:
+        """Return the smooth label [H, h, w] of attitudes [H, 3] inside ``window`` (default: the whole frame).
+
+        Points that fall outside the window are counted on its border, so a hypothesis
+        never gains by pushing parts of the target out of view.
+        """
+        win = window or Window(0, 0, *self.shape)
+        u, v = self.pixels(angles_deg)
+        u -= np.float32(win.r0)
+        v -= np.float32(win.c0)
+        iu, iv = np.floor(u), np.floor(v)
+        fu = np.clip((u - iu - np.float32(0.5 - SHARP_ZONE)) / np.float32(2 * SHARP_ZONE), 0.0, 1.0)
+        fv = np.clip((v - iv - np.float32(0.5 - SHARP_ZONE)) / np.float32(2 * SHARP_ZONE), 0.0, 1.0)
+        h = len(u)
+        stride = win.w + 1
+        size = (win.h + 1) * stride
+        base = (np.arange(h, dtype=np.int64) * size)[:, None]
+        idx = base + np.clip(iu, 0, win.h - 1).astype(np.int64) * stride + np.clip(iv, 0, win.w - 1).astype(np.int64)
+        gu, gv = 1.0 - fu, 1.0 - fv
+        counts = np.bincount(idx.ravel(), (gu * gv).ravel(), h * size)
+        counts += np.bincount((idx + stride).ravel(), (fu * gv).ravel(), h * size)
+        counts += np.bincount((idx + 1).ravel(), (gu * fv).ravel(), h * size)
+        counts += np.bincount((idx + stride + 1).ravel(), (fu * fv).ravel(), h * size)
+        grid = counts.reshape(h, win.h + 1, stride)[:, : win.h, : win.w].astype(np.float32)
+        return grey_closing(1.0 - np.exp(grid * np.float32(-1.0 / COUNT_SCALE)))
+
+    def coverage(self, angles_deg: Vec) -> F32:
+        """Return the 4x-pooled silhouette [H, n_range / 4, n_azimuth / 4]: the share of each pixel covered."""
+        f = COARSE_FACTOR
+        nr, na = self.radar.n_range // f, self.radar.n_azimuth // f
+        rot = rotation_matrices(angles_deg)
+        u, v = self.pixels(angles_deg, self.coarse_points)
+        u = (u + np.float32(0.5)) / f - np.float32(0.5)
+        v = (v + np.float32(0.5)) / f - np.float32(0.5)
+        iu, iv = np.floor(u), np.floor(v)
+        fu, fv = u - iu, v - iv
+        nz = np.abs(rot[:, 2, :] @ self.coarse_normals.T).astype(np.float32)  # (H, N)
+        a = self.coarse_areas.astype(np.float32)
+        px = np.float32(self.pixel_m)
+        w = (a * nz + np.sqrt(a) * px * np.sqrt(np.maximum(1 - nz * nz, 0))) / (f * px) ** 2
+        h = len(rot)
+        stride = na + 2
+        size = (nr + 2) * stride
+        base = (np.arange(h, dtype=np.int64) * size)[:, None]
+        idx = base + (np.clip(iu, -1, nr).astype(np.int64) + 1) * stride + np.clip(iv, -1, na).astype(np.int64) + 1
+        idx = np.minimum(idx, base + size - stride - 2)
+        counts = np.bincount(idx.ravel(), (w * (1 - fu) * (1 - fv)).ravel(), h * size)
+        counts += np.bincount((idx + stride).ravel(), (w * fu * (1 - fv)).ravel(), h * size)
+        counts += np.bincount((idx + 1).ravel(), (w * (1 - fu) * fv).ravel(), h * size)
+        counts += np.bincount((idx + stride + 1).ravel(), (w * fu * fv).ravel(), h * size)
+        grid = counts.reshape(h, nr + 2, stride)[:, 1:-1, 1:-1]
+        return np.minimum(grid, 1.0).astype(np.float32)
+
+
+def soft_iou(occupancy: F32, target: Vec, target_total: float | None = None) -> Vec:
+    """Return the soft IoU of occupancies [H, n, m] with a target [n, m] in [0, 1].
+
+    ``target_total`` is the target's sum over the whole frame when ``target`` is a crop.
+    """
+    inter = np.einsum("hij,ij->h", occupancy, target.astype(np.float32), dtype=np.float64)
+    total = float(target.sum()) if target_total is None else target_total
+    union = occupancy.sum(axis=(1, 2), dtype=np.float64) + total - inter
+    return np.asarray(inter / np.maximum(union, 1e-9))
+
+
+def hard_iou(a: NDArray[np.bool_], b: NDArray[np.bool_]) -> float:
+    union = int(np.count_nonzero(a | b))
+    return float(np.count_nonzero(a & b)) / union if union else 0.0
+
+
+def _stencil() -> Vec:
+    e = np.eye(3)
+    return np.vstack([np.zeros((1, 3)), e, -e, e[0] + e[1], e[0] + e[2], e[1] + e[2]])
+
+
+STENCIL = _stencil()  # (10, 3): exactly determines a quadratic in three variables
+
+
+def _design(d: Vec) -> Vec:
+    x, y, z = d[:, 0], d[:, 1], d[:, 2]
+    return np.stack([np.ones_like(x), x, y, z, x * x, y * y, z * z, x * y, x * z, y * z], axis=1)
+
+
+_DESIGN_INV = np.linalg.inv(_design(STENCIL))
+
+
+def quadratic(values: Vec) -> tuple[Vec, Vec]:
+    """Fit c + g.d + d'Hd/2 through the stencil's values (unit step); return the gradient g and Hessian H."""
+    c = _DESIGN_INV @ values
+    hess = np.array([[2 * c[4], c[7], c[8]], [c[7], 2 * c[5], c[9]], [c[8], c[9], 2 * c[6]]])
+    return c[1:4], hess
+
+
+@dataclass(frozen=True)
+class Fit:
+    """One refined hypothesis: attitude (deg), soft IoU, cost, curvature of the cost (per deg^2), where it began."""
+
+    angles_deg: Vec
+    iou: float
+    cost: float
+    hessian: Vec
+    start: str
+    start_deg: Vec
+    renders: int
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """The search's knobs (defaults measured in BENCHMARKS.md)."""
+
+    steps_deg: tuple[float, ...] = STEPS_DEG
+    max_iter: int = MAX_ITER
+    prior_sigma_deg: float = 10.0
+    prior_weight: float = 0.002  # cost at one sigma from the start: 0.2 % of IoU
+    prune: float = 0.03  # drop a hypothesis whose cost is this far behind the best after the first step
+
+
+def fit(renderer: Renderer, enhanced: Vec, starts: dict[str, Vec], options: FitOptions | None = None) -> list[Fit]:
+    """Refine each start (name -> (z, y, x) deg) against the enhanced frame; return the fits, best first."""
+    opt = options or FitOptions()
+    target = np.clip(np.asarray(enhanced, np.float32), 0.0, 1.0)
+    total = float(target.sum(dtype=np.float64))
+    names = list(starts)
+    origin = np.array([starts[n] for n in names], float).reshape(-1, 3)
+    best = origin.copy()
+    best_cost = np.full(len(names), np.inf)
+    best_iou = np.zeros(len(names))
+    hess = np.zeros((len(names), 3, 3))
+    alive = np.ones(len(names), bool)
+    renders = 0
+    silhouette = target > 0.5
+
+    def cost(points: Vec, live: NDArray[np.intp]) -> tuple[Vec, Vec]:
+        nonlocal renders
+        flat = points.reshape(-1, 3)
+        renders += len(flat)
+        # The window: the frame's silhouette and where the centres put the target, with a margin.
+        win = _window_for(renderer, silhouette, best[live])
+        crop = target[win.r0 : win.r0 + win.h, win.c0 : win.c0 + win.w]
+        iou = soft_iou(renderer.occupancy(flat, win), crop, total).reshape(points.shape[:-1])
+        prior = opt.prior_weight * np.sum(((points - origin[live][:, None, :]) / opt.prior_sigma_deg) ** 2, axis=-1)
+        return 1.0 - iou + prior, iou
+
+    # Score every start first, and refine only those that begin within ``prune`` of the best.
+    c0, iou0 = cost(best[:, None, :], np.arange(len(names)))
+    best_cost, best_iou = c0[:, 0].copy(), iou0[:, 0].copy()
+    if opt.prune > 0:
+        alive &= best_cost <= best_cost.min() + opt.prune
+    for step_no, h in enumerate(opt.steps_deg):
+        for _ in range(opt.max_iter):
+            live = np.flatnonzero(alive)
+            pts = best[live][:, None, :] + h * STENCIL[None]
+            c, iou = cost(pts, live)
+            moved = np.zeros(len(live), bool)
+            proposals = np.empty((len(live), 3))
+            for j, k in enumerate(live):
+                if c[j, 0] < best_cost[k]:
+                    best_cost[k], best_iou[k] = c[j, 0], iou[j, 0]
+                g, hk = quadratic(c[j])
+                hess[k] = hk / h**2
+                d = None
+                if np.all(np.linalg.eigvalsh(hk) > 1e-12):
+                    d = -np.linalg.solve(hk, g)
+                i = int(np.argmin(c[j]))
+                if d is None or not np.all(np.isfinite(d)):
+                    d = STENCIL[i]
+                proposals[j] = best[k] + h * np.clip(d, -2.0, 2.0)
+                if c[j, i] < best_cost[k]:  # a stencil point beat the centre: go there at least
+                    moved[j] = True
+                    best[k] = best[k] + h * STENCIL[i]
+                    best_cost[k], best_iou[k] = c[j, i], iou[j, i]
+            c2, iou2 = cost(proposals[:, None, :], live)
+            better = c2[:, 0] < best_cost[live]
+            best[live[better]] = proposals[better]
+            best_cost[live[better]], best_iou[live[better]] = c2[better, 0], iou2[better, 0]
+            if step_no == 0 and opt.prune > 0:
+                alive &= best_cost <= best_cost.min() + opt.prune
+            if not np.any(moved | better):
+                break
+    order = np.argsort(np.where(alive, best_cost, np.inf))
+    return [
+        Fit(
+            best[k].copy(), float(best_iou[k]), float(best_cost[k]), hess[k].copy(), names[k], origin[k].copy(), renders
+        )
+        for k in order
+        if alive[k]
+    ]
+
+
+CURVATURE_STEP_DEG = 0.6  # the stencil that measures the answer's curvature: wide enough to see past pixel steps
+
+
+def _window_for(renderer: Renderer, silhouette: NDArray[np.bool_], angles_deg: Vec) -> Window:
+    u, v = renderer.pixels(np.asarray(angles_deg, float).reshape(-1, 3))
+    mask = silhouette.copy()
+    rows = np.clip(np.rint(u), 0, mask.shape[0] - 1).astype(np.int64)
+    cols = np.clip(np.rint(v), 0, mask.shape[1] - 1).astype(np.int64)
+    mask[rows, cols] = True
+    return Window.around(mask, WINDOW_MARGIN_PX, mask.shape)
+
+
+def silhouette_iou(renderer: Renderer, angles_deg: Vec, enhanced: Vec) -> Vec:
+    """Return the hard IoU of each attitude's label (occupancy > 0.5) with the enhanced silhouette (> 0.5)."""
+    sil = np.asarray(enhanced) > 0.5
+    angles = np.asarray(angles_deg, float).reshape(-1, 3)
+    win = _window_for(renderer, sil, angles)
+    crop = sil[win.r0 : win.r0 + win.h, win.c0 : win.c0 + win.w]
+    occ = renderer.occupancy(angles, win) > 0.5
+    inter = np.count_nonzero(occ & crop, axis=(1, 2))
+    union = np.count_nonzero(occ, axis=(1, 2)) + int(sil.sum()) - inter
+    return np.asarray(inter / np.maximum(union, 1), float)
+
+
+def curvature(
+    renderer: Renderer, enhanced: Vec, angles_deg: Vec, step_deg: float = CURVATURE_STEP_DEG
+) -> tuple[Vec, float]:
+    """Return the Hessian (per deg^2) of 1 - soft IoU at an attitude, from the quadratic through a stencil, and the soft IoU there."""
+    target = np.clip(np.asarray(enhanced, np.float32), 0.0, 1.0)
+    pts = np.asarray(angles_deg, float) + step_deg * STENCIL
+    win = _window_for(renderer, target > 0.5, pts)
+    crop = target[win.r0 : win.r0 + win.h, win.c0 : win.c0 + win.w]
+    iou = soft_iou(renderer.occupancy(pts, win), crop, float(target.sum(dtype=np.float64)))
+    _, hess = quadratic(1.0 - iou)
+    return hess / step_deg**2, float(iou[0])
+
+
+LIBRARY_STEP_DEG = 7.5
+LIBRARY_HALF_RANGE_DEG = 45.0
+
+
+@dataclass(frozen=True)
+class Library:
+    """Coarse silhouettes of a grid of attitudes over the +-45 deg cube: starts for targets without networks.
+
+    Built once per target (2,197 attitudes at 7.5 deg, about 1 s and 18 MB here); ``starts``
+    scores every entry against a frame's 4x-pooled enhanced silhouette in one product
+    and returns the best few, each at least ``separation_deg`` from the others.
+    """
+
+    angles_deg: Vec
+    silhouettes: NDArray[np.float16]  # (M, n / 4 * n / 4)
+    totals: Vec
+
+    @staticmethod
+    def build(renderer: Renderer, step_deg: float = LIBRARY_STEP_DEG, half_range_deg: float = LIBRARY_HALF_RANGE_DEG,
+              batch: int = 128) -> Library:  # fmt: skip
+        g = np.arange(-half_range_deg, half_range_deg + 1e-9, step_deg)
+        angles = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+        parts = [renderer.coverage(angles[k : k + batch]).reshape(-1, (renderer.shape[0] // COARSE_FACTOR)
+                                                                   * (renderer.shape[1] // COARSE_FACTOR))
+                 for k in range(0, len(angles), batch)]  # fmt: skip
+        sil = np.concatenate(parts)
+        return Library(angles, sil.astype(np.float16), sil.sum(axis=1, dtype=np.float64))
+
+    def starts(self, enhanced: Vec, count: int = 4, separation_deg: float = 15.0) -> list[Vec]:
+        """Return up to ``count`` library attitudes that best match the enhanced frame, best first."""
+        target = pool(np.clip(np.asarray(enhanced, float), 0.0, 1.0), COARSE_FACTOR).ravel().astype(np.float32)
+        inter = self.silhouettes.astype(np.float32) @ target
+        iou = inter / np.maximum(self.totals + target.sum() - inter, 1e-9)
+        chosen: list[Vec] = []
+        for k in np.argsort(-iou):
+            a = self.angles_deg[k]
+            if all(geodesic_deg(a, c)[0] >= separation_deg for c in chosen):
+                chosen.append(a.copy())
+                if len(chosen) == count:
+                    break
+        return chosen

@@ -1,0 +1,307 @@
+"""Checked attitudes: the fitted answer, how sure it is, what else fits, and whether to trust it.
+
+numpy and scipy only (the service's side). ``Checker.check`` takes a normalised frame,
+UNet++'s enhanced frame and Swin's answer (None for a target without networks), fits
+the target's projection (``inference.fit``), and returns a ``Checked``:
+
+* ``angles_deg``: the fitted attitude (Swin's own when ``refine`` is off);
+* ``quality.silhouette_iou``: the hard IoU of the fitted projection (the label
+  ``label_mask`` would draw) with the enhanced frame's silhouette (> 0.5);
+* ``quality.uncertainty_deg``: a 90 % bound per axis (z, y, x) on the error. From the fit's
+  curvature: ``raw = sqrt(inv(H)_ii * (1 - soft IoU))``, the error a residual of that size
+  would leave along a valley of that curvature, then ``bound = sqrt(floor^2 + (scale raw)^2)``
+  with ``scale`` and ``floor`` per axis fitted on fresh frames so 90 % of the errors fall
+  inside (``calibrate``). Without refinement: the calibration frames' 90 % quantile of
+  Swin's own error;
+* ``quality.trusted`` and ``quality.reasons``: every check the answer failed, in words;
+* ``alternatives``: other attitudes (the near-mirror (z, -y, -x), library matches) whose
+  fit is within ``ALTERNATIVE_MARGIN`` of the best, each with its own IoU.
+
+The checks, each a threshold from the calibration (``trust.json`` beside the models):
+the frame's brightness statistics lie where fresh frames' do (the median pixel; catches
+frames normalised twice, inverted frames, noise); UNet++ is sure of its pixels (the share
+of enhanced pixels between 0.1 and 0.9, against the silhouette's area); the projection
+fits (``iou_min``); the fit stayed near Swin's answer (``moved_max_deg``); the attitude
+lies in the +-45 deg the networks were trained on (with a margin); no other attitude fits
+within ``ambiguity_margin``; and the bound is under ``max_bound_deg``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from inference.fit import FitOptions, Library, Renderer, curvature, fit, mirror, silhouette_iou
+from inference.frames import geodesic_deg
+from inference.isar import Radar
+from inference.targets import TargetModel
+
+Vec = NDArray[np.float64]
+
+TRUST_FILE = "trust.json"
+ALTERNATIVE_MARGIN = 0.02  # soft-IoU cost within which another attitude is listed
+DISTINCT_DEG = 5.0  # an alternative is at least this far from the answer
+LIBRARY_OPTIONS = FitOptions(steps_deg=(2.0, 1.0, 0.35, 0.12), prior_weight=0.0)
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Thresholds and the uncertainty model; ``calibrate`` fits them on fresh frames of ``target``."""
+
+    target: str = "tiangong-like"
+    iou_min: float = 0.95
+    doubt_max: float = 0.08
+    median_range: tuple[float, float] = (0.1, 0.65)
+    moved_max_deg: float = 5.0
+    angle_limit_deg: float = 50.0
+    ambiguity_margin: float = 0.002
+    max_bound_deg: float = 5.0
+    scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    floor_deg: tuple[float, float, float] = (0.1, 0.2, 0.3)
+    network_bound_deg: tuple[float, float, float] = (1.0, 1.5, 1.5)
+    made: dict[str, Any] = field(default_factory=dict)
+
+    @staticmethod
+    def load(path: str | Path) -> Calibration:
+        raw = json.loads(Path(path).read_text())
+        known = {k: v for k, v in raw.items() if k in Calibration.__dataclass_fields__}
+        for k in ("median_range", "scale", "floor_deg", "network_bound_deg"):
+            if k in known:
+                known[k] = tuple(known[k])
+        return Calibration(**known)
+
+    def write(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(asdict(self), indent=2) + "\n")
+
+
+@dataclass(frozen=True)
+class Quality:
+    silhouette_iou: float
+    uncertainty_deg: tuple[float, float, float]
+    trusted: bool
+    reasons: list[str]
+
+
+@dataclass(frozen=True)
+class Alternative:
+    angles_deg: tuple[float, float, float]
+    silhouette_iou: float
+    fit_gap: float  # how much worse its soft-IoU cost is than the answer's
+    distance_deg: float
+    start: str
+
+
+@dataclass(frozen=True)
+class Checked:
+    angles_deg: Vec
+    network_deg: Vec | None
+    refined: bool
+    quality: Quality
+    alternatives: list[Alternative]
+    features: dict[str, float]  # what the checks read (for calibration and the record)
+
+
+def frame_median(frame: Vec) -> float:
+    return float(np.median(frame))
+
+
+def enhancer_doubt(enhanced: Vec) -> float:
+    """Return the share of enhanced pixels UNet++ is unsure of (0.1..0.9), over the silhouette's share."""
+    sil = float(np.mean(enhanced > 0.5))
+    return float(np.mean((enhanced > 0.1) & (enhanced < 0.9))) / max(sil, 1e-4)
+
+
+def raw_uncertainty(hessian: Vec, soft_iou: float) -> Vec:
+    """Return sqrt(inv(H)_ii (1 - soft IoU)) per axis (deg); infinite where H is not positive definite."""
+    try:
+        if np.all(np.linalg.eigvalsh(hessian) > 0):
+            cov = np.linalg.inv(hessian)
+            return np.sqrt(np.maximum(np.diag(cov), 0.0) * max(1.0 - soft_iou, 1e-4))
+    except np.linalg.LinAlgError:
+        pass
+    return np.full(3, np.inf)
+
+
+class Checker:
+    """The fit and the checks for one target and radar."""
+
+    def __init__(self, model: TargetModel, radar: Radar | None = None, calibration: Calibration | None = None,
+                 networks: bool = True) -> None:  # fmt: skip
+        self.model = model
+        self.radar = radar or Radar()
+        self.renderer = Renderer(model, self.radar)
+        self.calibration = calibration or Calibration(target=model.name)
+        self.networks = networks
+        self._library: Library | None = None
+
+    @property
+    def library(self) -> Library:
+        if self._library is None:
+            self._library = Library.build(self.renderer)
+        return self._library
+
+    def check(self, frame: Vec, enhanced: Vec, network_deg: Vec | None, refine: bool = True) -> Checked:
+        """Fit (unless ``refine`` is off), bound, and check one frame; ``network_deg`` None means no networks."""
+        cal = self.calibration
+        net = None if network_deg is None else np.asarray(network_deg, float)
+        features = {"median": frame_median(frame), "doubt": enhancer_doubt(enhanced)}
+        fits = []
+        if refine or net is None:
+            starts: dict[str, Vec] = {}
+            if net is not None:
+                starts = {"network": net, "mirror": mirror(net)}
+                fits = fit(self.renderer, enhanced, starts)
+            if net is None or self._hard_iou(fits[0].angles_deg, enhanced) < cal.iou_min:
+                # No networks, or their answer does not fit: search the library too.
+                lib = {f"library-{i}": a for i, a in enumerate(self.library.starts(enhanced))}
+                fits = sorted(fits + fit(self.renderer, enhanced, lib, LIBRARY_OPTIONS), key=lambda f: f.cost)
+            best = fits[0]
+            angles = best.angles_deg
+            hessian, soft = curvature(self.renderer, enhanced, angles)
+            raw = raw_uncertainty(hessian, soft)
+            finite = np.isfinite(raw)
+            spread = np.asarray(cal.scale) * np.where(finite, raw, 0.0)
+            bound = np.where(finite, np.sqrt(np.asarray(cal.floor_deg) ** 2 + spread**2), np.inf)
+            features.update({f"raw_{a}": float(r) for a, r in zip("zyx", raw, strict=True)})
+            features["soft_iou"] = soft
+        else:
+            angles = net
+            bound = np.asarray(cal.network_bound_deg, float)
+        iou = self._hard_iou(angles, enhanced)
+        features["iou"] = iou
+        alternatives = []
+        if fits:
+            for f in fits[1:]:
+                dist = float(geodesic_deg(f.angles_deg, angles)[0])
+                gap = f.cost - fits[0].cost
+                if (
+                    dist >= DISTINCT_DEG
+                    and gap <= ALTERNATIVE_MARGIN
+                    and all(geodesic_deg(f.angles_deg, np.array(a.angles_deg))[0] >= DISTINCT_DEG for a in alternatives)
+                ):
+                    alternatives.append(Alternative(tuple(float(x) for x in f.angles_deg),  # type: ignore[arg-type]
+                                                    self._hard_iou(f.angles_deg, enhanced), float(gap), dist, f.start))  # fmt: skip
+        if net is not None:
+            features["moved_deg"] = float(geodesic_deg(angles, net)[0])
+        reasons = self._reasons(features, angles, bound, alternatives, net is not None and refine)
+        quality = Quality(round(iou, 4), tuple(round(float(b), 3) for b in bound), not reasons, reasons)  # type: ignore[arg-type]
+        return Checked(angles, net, bool(fits), quality, alternatives, features)
+
+    def _hard_iou(self, angles: Vec, enhanced: Vec) -> float:
+        return float(silhouette_iou(self.renderer, angles, enhanced)[0])
+
+    def _reasons(self, features: dict[str, float], angles: Vec, bound: Vec, alternatives: list[Alternative],
+                 compare_network: bool) -> list[str]:  # fmt: skip
+        cal = self.calibration
+        out = []
+        lo, hi = cal.median_range
+        if not lo <= features["median"] <= hi:
+            out.append(
+                f"the frame's median brightness {features['median']:.2f} is outside the {lo:.2f}-{hi:.2f} of fresh "
+                "frames: normalised twice, inverted, or not an ISAR magnitude frame?"
+            )
+        if features["doubt"] > cal.doubt_max:
+            out.append(
+                f"UNet++ is unsure of {100 * features['doubt']:.0f} % of the silhouette's area (fresh frames: under "
+                f"{100 * cal.doubt_max:.0f} %): the frame is unlike its training frames"
+            )
+        if features["iou"] < cal.iou_min:
+            out.append(
+                f"the {self.model.name} projection fits the enhanced silhouette poorly (IoU {features['iou']:.3f}, "
+                f"fresh frames at least {cal.iou_min:.3f}): another satellite, a flipped or transposed frame, or "
+                "pixels of another size (send range_cell_m and cross_range_cell_m)?"
+            )
+        if compare_network and features.get("moved_deg", 0.0) > cal.moved_max_deg:
+            out.append(
+                f"the fit moved {features['moved_deg']:.1f} deg from the network's answer (fresh frames: under "
+                f"{cal.moved_max_deg:.1f} deg)"
+            )
+        if np.max(np.abs(angles)) > cal.angle_limit_deg:
+            out.append(
+                f"the attitude is outside the +-{cal.angle_limit_deg:.0f} deg the networks and the calibration cover"
+            )
+        close = [a for a in alternatives if a.fit_gap < cal.ambiguity_margin]
+        if close:
+            a = close[0]
+            out.append(
+                f"another attitude {a.distance_deg:.0f} deg away (z {a.angles_deg[0]:.1f}, y {a.angles_deg[1]:.1f}, "
+                f"x {a.angles_deg[2]:.1f}) fits nearly as well: the frame cannot tell them apart"
+            )
+        if not np.all(np.isfinite(bound)) or np.max(bound) > cal.max_bound_deg:
+            worst = "z y x".split()[int(np.argmax(np.where(np.isfinite(bound), bound, 1e9)))]
+            out.append(
+                f"the 90 % bound on {worst} is over {cal.max_bound_deg:.0f} deg: the silhouette barely constrains it"
+            )
+        if cal.target != self.model.name:
+            out.append(
+                f"the bounds and thresholds were calibrated on {cal.target}, not {self.model.name} "
+                "(gsa calibrate makes a calibration for it)"
+            )
+        return out
+
+
+def fit_bounds(raw: Vec, errors: Vec, coverage: float = 0.9) -> tuple[float, float]:
+    """Return (scale, floor) for one axis: the bound sqrt(floor^2 + (scale raw)^2) covering ``coverage``.
+
+    Of the pairs that cover, the one with the narrowest mean bound, the floor kept at or
+    under the median error so the curvature, not a constant, carries the tail.
+    """
+    err = np.abs(errors)
+    finite = np.isfinite(raw)
+    raw = np.where(finite, raw, 1e6)
+    best = (math.inf, 1.0, 0.0)
+    for floor in np.quantile(err, np.linspace(0.0, 0.5, 11)):
+        need = np.sqrt(np.maximum(err**2 - floor**2, 0.0)) / np.maximum(raw, 1e-9)
+        scale = float(np.quantile(need, coverage))
+        width = float(np.mean(np.sqrt(floor**2 + (scale * raw) ** 2)))
+        if width < best[0]:
+            best = (width, scale, float(floor))
+    return best[1], best[2]
+
+
+def calibrate(checker: Checker, frames: NDArray[np.floating], enhanced: NDArray[np.floating],
+              network_deg: NDArray[np.floating], truth: Vec, made: dict[str, Any] | None = None,
+              progress: bool = False) -> tuple[Calibration, list[Checked]]:  # fmt: skip
+    """Fit the thresholds and the uncertainty model on fresh good frames with known attitudes.
+
+    Thresholds sit just outside what the good frames show (1st/99th percentiles with a
+    margin), so about 1-2 % of good frames are flagged by design; the bounds are fitted per
+    axis to cover 90 %. Returns the calibration and the frames' checks under it.
+    """
+    import sys
+
+    loose = Calibration(target=checker.model.name, iou_min=0.0, doubt_max=math.inf, median_range=(0.0, 1.0),
+                        moved_max_deg=math.inf, angle_limit_deg=math.inf, max_bound_deg=math.inf)  # fmt: skip
+    checker.calibration = loose
+    checks = []
+    for k in range(len(frames)):
+        checks.append(checker.check(frames[k], enhanced[k], network_deg[k]))
+        if progress and (k + 1) % 50 == 0:
+            print(f"calibrate: {k + 1}/{len(frames)} frames", file=sys.stderr, flush=True)
+    feats = {key: np.array([c.features[key] for c in checks]) for key in checks[0].features}
+    fitted = np.array([c.angles_deg for c in checks])
+    err = fitted - truth
+    raw = np.stack([feats[f"raw_{a}"] for a in "zyx"], axis=1)
+    pairs = [fit_bounds(raw[:, i], err[:, i]) for i in range(3)]
+    cal = Calibration(
+        target=checker.model.name,
+        iou_min=round(float(np.quantile(feats["iou"], 0.01)) - 0.005, 4),
+        doubt_max=round(float(np.quantile(feats["doubt"], 0.99)) * 1.25, 4),
+        median_range=(
+            round(float(np.quantile(feats["median"], 0.005)) * 0.8, 4),
+            round(float(np.quantile(feats["median"], 0.995)) + 0.05, 4),
+        ),  # fmt: skip
+        moved_max_deg=round(max(float(np.quantile(feats["moved_deg"], 0.99)) * 1.5, 3.0), 3),
+        scale=tuple(round(p[0], 4) for p in pairs),  # type: ignore[arg-type]
+        floor_deg=tuple(round(p[1], 4) for p in pairs),  # type: ignore[arg-type]
+        network_bound_deg=tuple(round(float(q), 4) for q in np.quantile(np.abs(network_deg - truth), 0.9, axis=0)),  # type: ignore[arg-type]
+        made={**(made or {}), "frames": len(frames)},
+    )
+    checker.calibration = cal
+    return cal, [checker.check(frames[k], enhanced[k], network_deg[k]) for k in range(len(frames))]
