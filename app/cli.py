@@ -10,6 +10,7 @@ import importlib
 import json
 import os
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -256,12 +257,43 @@ def add_inference_command(sub: Any, name: str, module: str, help: str) -> None:
     p.set_defaults(func=command)
 
 
+def _print_checked(body: dict[str, Any], prefix: str = "") -> None:
+    """Print an estimate's answer (the API's JSON shape): attitude, network answer, quality, alternatives."""
+    z, y, x = body["attitude"]["euler_zyx_deg"]
+    q = body["attitude"]["quaternion_wxyz"]
+    kind = "fitted" if body.get("refined") else "network"
+    print(f"{prefix}z {z:.2f} y {y:.2f} x {x:.2f} deg ({kind}, observation frame, target {body.get('target')}); "
+          f"quaternion w x y z {', '.join(f'{v:.5f}' for v in q)}")  # fmt: skip
+    net = body.get("attitude_network")
+    if net and body.get("refined"):
+        nz, ny, nx = net["euler_zyx_deg"]
+        print(f"Swin alone: z {nz:.2f} y {ny:.2f} x {nx:.2f} deg")
+    qual = body.get("quality")
+    if qual:
+        bounds = " / ".join("-" if b is None else f"{b:.2f}" for b in qual["uncertainty_deg"])
+        state = "trusted" if qual["trusted"] else "NOT TRUSTED"
+        print(f"{state}: silhouette IoU {qual['silhouette_iou']:.3f}, 90 % bound z / y / x {bounds} deg")
+        for r in qual["reasons"]:
+            print(f"  - {r}")
+    for alt in body.get("alternatives", []):
+        az, ay, ax = alt["euler_zyx_deg"]
+        print(f"also fits: z {az:.2f} y {ay:.2f} x {ax:.2f} deg ({alt['distance_deg']:.0f} deg away, "
+              f"IoU {alt['silhouette_iou']:.3f}, fit {alt['fit_gap']:+.4f})")  # fmt: skip
+
+
 def cmd_estimate(args: argparse.Namespace) -> int:
     import numpy as np
 
     from app.errors import InputError
     from inference.errors import InferenceError
 
+    if (args.range_cell_m is None) != (args.cross_range_cell_m is None):
+        raise CliError("give --range-cell-m and --cross-range-cell-m together (the frame's cells in metres)")
+    for name in ("range_cell_m", "cross_range_cell_m"):
+        value = getattr(args, name)
+        if value is not None and not 0 < value <= 100:
+            raise CliError(f"--{name.replace('_', '-')} {value}: a cell size in metres, over 0 and at most 100")
+    cells = None if args.range_cell_m is None else (args.range_cell_m, args.cross_range_cell_m)
     try:
         data = Path(args.file).read_bytes()
     except OSError as exc:
@@ -269,52 +301,69 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     if args.server:
         import httpx
 
+        form = {"resample": str(args.resample).lower(), "normalised": str(args.normalised).lower(),
+                "refine": str(not args.no_refine).lower()}  # fmt: skip
+        if args.target:
+            form["target"] = args.target
+        if cells:
+            form.update({"range_cell_m": str(cells[0]), "cross_range_cell_m": str(cells[1])})
         try:
             r = httpx.post(
                 args.server.rstrip("/") + "/v1/estimates", files={"file": (Path(args.file).name, data)},
-                data={"resample": str(args.resample).lower(), "normalised": str(args.normalised).lower()},
-                headers={"X-API-Key": args.api_key or ""}, timeout=60,
+                data=form, headers={"X-API-Key": args.api_key or ""}, timeout=60,
             )  # fmt: skip
         except httpx.HTTPError as exc:
             raise CliError(f"cannot reach {args.server}: {exc}") from None
         if r.status_code >= 400:
             raise CliError(f"server answered {r.status_code}: {r.text[:300]}")
         body = r.json()
-        angles = body["attitude"]["euler_zyx_deg"]
-        print(f"estimate {body['id']}: z {angles[0]:.2f} y {angles[1]:.2f} x {angles[2]:.2f} deg (observation frame)")
+        _print_checked(body, prefix=f"estimate {body['id']}: ")
         return 0
     from app.services import estimation as svc
     from inference.runtime import Estimator
+    from inference.trust import load_checkers
 
+    settings = _settings()
     try:
-        est = Estimator.load(args.models or _settings().model_dir)
+        model_dir = args.models or settings.model_dir
+        est = Estimator.load(model_dir)
+        checkers = load_checkers(model_dir, est.img_size, settings.target_model, settings.target_scale,
+                                 settings.default_target)  # fmt: skip
+        checker = checkers.get(args.target or checkers.default)
         (up,) = svc.decode(data, Path(args.file).name, allow_stack=False)
-        frame = svc.prepare(up, est.img_size, args.resample, args.normalised)
+        frame = svc.prepare(up, est.img_size, args.resample, args.normalised, cells)
         res = est.estimate(frame[None])
+        t0 = time.perf_counter()
+        checked = checker.check(frame, res.enhanced[0], res.angles_deg[0] if checker.networks else None,
+                                not args.no_refine)  # fmt: skip
+        t_fit = time.perf_counter() - t0
     except InputError as exc:
         raise CliError(exc.message) from None
     except InferenceError as exc:
         raise CliError(str(exc)) from None
-    z, y, x = (float(a) for a in res.angles_deg[0])
-    q = svc.attitude_json(res.angles_deg[0])["quaternion_wxyz"]
-    print(
-        f"z {z:.2f} y {y:.2f} x {x:.2f} deg (observation frame); quaternion w x y z {', '.join(f'{v:.5f}' for v in q)}"
-    )
-    print(f"UNet++ {res.timings_s['unetpp'] * 1000:.0f} ms, Swin {res.timings_s['swin'] * 1000:.0f} ms")
+    body = {**svc.checked_json(checked), "target": checker.model.name}
+    _print_checked(body)
+    print(f"UNet++ {res.timings_s['unetpp'] * 1000:.0f} ms, Swin {res.timings_s['swin'] * 1000:.0f} ms, "
+          f"fit and checks {t_fit * 1000:.0f} ms")  # fmt: skip
     if args.plot:
         import matplotlib
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        fig, ax = plt.subplots(1, 2, figsize=(8, 4.2))
+        outline = checker.renderer.occupancy(np.asarray(checked.angles_deg, float)[None])[0] > 0.5
+        z, y, x = (float(a) for a in checked.angles_deg)
+        fig, ax = plt.subplots(1, 2, figsize=(9, 4.6))
         ax[0].imshow(frame, cmap="gray", vmin=0, vmax=1)
-        ax[0].set_title("input (normalised)")
+        ax[0].set_title("input (normalised) and the fitted projection")
         ax[1].imshow(np.clip(res.enhanced[0], 0, 1), cmap="gray", vmin=0, vmax=1)
-        ax[1].set_title(f"enhanced; z {z:.1f} y {y:.1f} x {x:.1f} deg")
+        q = checked.quality
+        ax[1].set_title(f"enhanced; fitted z {z:.1f} y {y:.1f} x {x:.1f} deg\n"
+                        f"IoU {q.silhouette_iou:.3f}, {'trusted' if q.trusted else 'NOT trusted'}", fontsize=10)  # fmt: skip
         for a in ax:
-            a.set_xlabel("cross-range cell")
-            a.set_ylabel("range cell")
+            a.contour(outline, levels=[0.5], colors=["#ff7f0e"], linewidths=0.9)
+            a.set_xlabel("cross-range cell (column)")
+            a.set_ylabel("range cell (row)")
         fig.tight_layout()
         fig.savefig(args.plot, dpi=100)
         plt.close(fig)
@@ -328,6 +377,7 @@ INFERENCE_COMMANDS = (
     ("train", "train", "train UNet++ and Swin on a simulated data set"),
     ("finetune", "finetune", "fine-tune Swin's last stage of a trained run on cached features (CPU)"),
     ("export", "export", "export a training run to ONNX with a model card"),
+    ("calibrate", "trust", "fit the attitude checks' thresholds and 90-percent bounds on fresh frames (trust.json)"),
     ("compare", "compare", "set training runs side by side: Swin's test error per epoch"),
     ("evaluate", "evaluate", "the paper's Tables 4 and 7 for the ONNX models"),
 )
@@ -382,7 +432,11 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
                     help="the frame is already normalised (a frame of a gsa simulate data set): take it as sent")  # fmt: skip
     es.add_argument("--server", help="send it to a running service instead, e.g. http://127.0.0.1:8000")
     es.add_argument("--api-key")
-    es.add_argument("--plot", metavar="PNG", help="draw the input beside the enhanced frame")
+    es.add_argument("--plot", metavar="PNG", help="draw the input and the enhanced frame with the fitted outline")
+    es.add_argument("--no-refine", action="store_true", help="answer Swin's estimate, without the fit")
+    es.add_argument("--target", help="the target the frame shows (default GSA_DEFAULT_TARGET: tiangong-like)")
+    es.add_argument("--range-cell-m", type=float, help="the frame's range cell (rows) in metres: resample in metres")
+    es.add_argument("--cross-range-cell-m", type=float, help="the frame's cross-range cell (columns) in metres")
     es.set_defaults(func=cmd_estimate)
     return p
 

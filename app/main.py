@@ -49,6 +49,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.estimator = Estimator.load(
         settings.model_dir, threads=settings.ort_threads or None, run_batch=settings.ort_run_batch
     )
+    # The targets the fit knows; an operator's mesh that cannot be read, or does not fit the
+    # frame, stops the service here, naming the file. The default target's renderer is built now.
+    from inference.trust import load_checkers
+
+    app.state.checkers = load_checkers(settings.model_dir, app.state.estimator.img_size, settings.target_model,
+                                       settings.target_scale, settings.default_target)  # fmt: skip
     app.state.settings = settings
     app.state.key_secret = load_key_secret(settings.key_secret, settings.data_dir)
     app.state.engine = engine
@@ -66,7 +72,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     def readyz() -> Any:
         """Say whether the database answers at the migrated schema, and which models are loaded."""
         db = database_status(engine)
-        body = {"status": "ready" if db["ok"] else "not ready", "database": db, "models": app.state.estimator.identity}
+        body = {
+            "status": "ready" if db["ok"] else "not ready",
+            "database": db,
+            "models": app.state.estimator.identity,
+            "targets": app.state.checkers.names,
+        }
         return body if db["ok"] else JSONResponse(status_code=503, content=body)
 
     @app.get("/", include_in_schema=False)

@@ -329,6 +329,25 @@ class AttitudePublic(BaseModel):
     rotation_matrix: list[list[float]]
 
 
+class QualityPublic(BaseModel):
+    silhouette_iou: float = Field(
+        description="IoU of the fitted projection (the label the simulator would draw) with UNet++'s silhouette; "
+        "fresh frames of the default target: 0.98-0.99"
+    )
+    uncertainty_deg: list[float | None] = Field(
+        description="90 % bound on the error of z, y, x (deg), calibrated on fresh frames (inference/models/shipped/"
+        "trust.json); null where the fit's curvature bounds nothing"
+    )
+    trusted: bool = Field(description="false when any check failed; reasons says which")
+    reasons: list[str] = Field(description="each failed check in words; empty when trusted")
+
+
+class AlternativePublic(AttitudePublic):
+    silhouette_iou: float
+    fit_gap: float = Field(description="how much worse its fit is (1 - soft IoU) than the answer's")
+    distance_deg: float = Field(description="rotation angle between it and the answer")
+
+
 class EstimatePublic(BaseModel):
     id: str
     created_at: datetime
@@ -339,7 +358,18 @@ class EstimatePublic(BaseModel):
     shape: list[int]
     dtype: str
     snr_db: float | None
-    attitude: AttitudePublic = Field(description="in the ISAR observation frame")
+    attitude: AttitudePublic = Field(
+        description="in the ISAR observation frame: the fitted attitude (Swin's own when refine=false)"
+    )
+    attitude_network: AttitudePublic | None = Field(
+        None, description="Swin's own estimate, the fit's start (null for a target without trained networks)"
+    )
+    refined: bool = Field(True, description="whether the attitude was fitted to the target's projection")
+    target: str | None = Field(None, description="the target model the frame was fitted to")
+    quality: QualityPublic | None = Field(None, description="how sure the answer is (null on estimates made before it)")
+    alternatives: list[AlternativePublic] = Field(
+        default_factory=list, description="other attitudes that fit nearly as well, e.g. the near-mirror (z, -y, -x)"
+    )
     attitude_lvlh: AttitudePublic | None = None
     attitude_j2000: AttitudePublic | None = None
     model: dict[str, Any]
@@ -364,6 +394,11 @@ class EstimatePublic(BaseModel):
             "dtype": e.dtype,
             "snr_db": e.snr_db,
             "attitude": r["attitude"],
+            "attitude_network": r.get("attitude_network"),
+            "refined": r.get("refined", False),
+            "target": r.get("target"),
+            "quality": r.get("quality"),
+            "alternatives": r.get("alternatives", []),
             "attitude_lvlh": r.get("attitude_lvlh"),
             "attitude_j2000": r.get("attitude_j2000"),
             "model": r["model"],

@@ -31,7 +31,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from inference.errors import DatasetError, module_main
-from inference.isar import Imager, Radar, check_fits, normalise_frame, simulate
+from inference.frames import normalise_frame
+from inference.isar import Imager, Radar, check_fits, simulate
 from inference.runtime import sha256_file
 from inference.targets import TargetModel, load_model, tiangong_like
 

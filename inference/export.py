@@ -235,6 +235,9 @@ def _export_into(
                                                   "hardware", "train_seconds")},
         **({"finetune": training["finetune"]} if "finetune" in training else {}),
         "final_epoch": (training.get("history") or [{}])[-1],
+        # The radar and target the training frames were simulated with: what the fit renders.
+        "radar": (training.get("data") or {}).get("radar"),
+        "target": (training.get("data") or {}).get("target"),
         **(extra or {}),
     }  # fmt: skip
     (out / "model_card.json").write_text(json.dumps(card, indent=2))

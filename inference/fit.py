@@ -95,7 +95,7 @@ def thin(points: Vec, normals: Vec, areas: Vec, spacing_m: float) -> tuple[Vec, 
     outer = np.einsum("ni,nj->nij", normals, normals).reshape(-1, 9)
     scatter = np.stack([np.bincount(inv, outer[:, i], n) for i in range(9)], axis=1).reshape(n, 3, 3)
     mean_normal = np.linalg.eigh(scatter)[1][:, :, -1]
-    return centre, mean_normal, np.bincount(inv, areas, n)
+    return np.asarray(centre, float), np.asarray(mean_normal, float), np.bincount(inv, areas, n).astype(float)
 
 
 def pool(frame: Vec, factor: int) -> Vec:
@@ -114,15 +114,6 @@ class Window:
     c0: int
     h: int
     w: int
-
-    @staticmethod
-    def around(mask: NDArray[np.bool_], margin: int, shape: tuple[int, int]) -> Window:
-        rows, cols = np.nonzero(mask)
-        if len(rows) == 0:
-            return Window(0, 0, shape[0], shape[1])
-        r0, r1 = max(int(rows.min()) - margin, 0), min(int(rows.max()) + margin + 1, shape[0])
-        c0, c1 = max(int(cols.min()) - margin, 0), min(int(cols.max()) + margin + 1, shape[1])
-        return Window(r0, c0, r1 - r0, c1 - c0)
 
 
 def _cross(x: F32, op: Any, pad: float) -> F32:
@@ -210,9 +201,9 @@ class Renderer:
         f = COARSE_FACTOR
         nr, na = self.radar.n_range // f, self.radar.n_azimuth // f
         rot = rotation_matrices(angles_deg)
-        u, v = self.pixels(angles_deg, self.coarse_points)
-        u = (u + np.float32(0.5)) / f - np.float32(0.5)
-        v = (v + np.float32(0.5)) / f - np.float32(0.5)
+        u0, v0 = self.pixels(angles_deg, self.coarse_points)
+        u = (u0 + np.float32(0.5)) / np.float32(f) - np.float32(0.5)
+        v = (v0 + np.float32(0.5)) / np.float32(f) - np.float32(0.5)
         iu, iv = np.floor(u), np.floor(v)
         fu, fv = u - iu, v - iv
         nz = np.abs(rot[:, 2, :] @ self.coarse_normals.T).astype(np.float32)  # (H, N)
@@ -233,7 +224,7 @@ class Renderer:
         return np.minimum(grid, 1.0).astype(np.float32)
 
 
-def soft_iou(occupancy: F32, target: Vec, target_total: float | None = None) -> Vec:
+def soft_iou(occupancy: F32, target: NDArray[np.floating], target_total: float | None = None) -> Vec:
     """Return the soft IoU of occupancies [H, n, m] with a target [n, m] in [0, 1].
 
     ``target_total`` is the target's sum over the whole frame when ``target`` is a crop.
@@ -372,12 +363,19 @@ CURVATURE_STEP_DEG = 0.6  # the stencil that measures the answer's curvature: wi
 
 
 def _window_for(renderer: Renderer, silhouette: NDArray[np.bool_], angles_deg: Vec) -> Window:
+    """The crop holding the frame's silhouette and the target at these attitudes, with a margin."""
     u, v = renderer.pixels(np.asarray(angles_deg, float).reshape(-1, 3))
-    mask = silhouette.copy()
-    rows = np.clip(np.rint(u), 0, mask.shape[0] - 1).astype(np.int64)
-    cols = np.clip(np.rint(v), 0, mask.shape[1] - 1).astype(np.int64)
-    mask[rows, cols] = True
-    return Window.around(mask, WINDOW_MARGIN_PX, mask.shape)
+    rows, cols = np.flatnonzero(silhouette.any(axis=1)), np.flatnonzero(silhouette.any(axis=0))
+    r_lo = min(float(u.min()), float(rows[0]) if len(rows) else math.inf)
+    r_hi = max(float(u.max()), float(rows[-1]) if len(rows) else -math.inf)
+    c_lo = min(float(v.min()), float(cols[0]) if len(cols) else math.inf)
+    c_hi = max(float(v.max()), float(cols[-1]) if len(cols) else -math.inf)
+    n_r, n_c = silhouette.shape
+    r0, r1 = max(int(r_lo) - WINDOW_MARGIN_PX, 0), min(int(r_hi) + WINDOW_MARGIN_PX + 1, n_r)
+    c0, c1 = max(int(c_lo) - WINDOW_MARGIN_PX, 0), min(int(c_hi) + WINDOW_MARGIN_PX + 1, n_c)
+    if r1 <= r0 or c1 <= c0:
+        return Window(0, 0, n_r, n_c)
+    return Window(r0, c0, r1 - r0, c1 - c0)
 
 
 def silhouette_iou(renderer: Renderer, angles_deg: Vec, enhanced: Vec) -> Vec:
@@ -392,17 +390,25 @@ def silhouette_iou(renderer: Renderer, angles_deg: Vec, enhanced: Vec) -> Vec:
     return np.asarray(inter / np.maximum(union, 1), float)
 
 
-def curvature(
-    renderer: Renderer, enhanced: Vec, angles_deg: Vec, step_deg: float = CURVATURE_STEP_DEG
-) -> tuple[Vec, float]:
-    """Return the Hessian (per deg^2) of 1 - soft IoU at an attitude, from the quadratic through a stencil, and the soft IoU there."""
+def curvature(renderer: Renderer, enhanced: Vec, angles_deg: Vec,
+              step_deg: float = CURVATURE_STEP_DEG) -> tuple[Vec, float, float]:  # fmt: skip
+    """Return the Hessian (per deg^2) of 1 - soft IoU at an attitude, the soft IoU and the hard IoU there.
+
+    The Hessian is the quadratic's through the 10-point stencil at ``step_deg``; the hard
+    IoU is the stencil centre's label (occupancy > 0.5) against the silhouette (> 0.5).
+    """
     target = np.clip(np.asarray(enhanced, np.float32), 0.0, 1.0)
+    sil = target > 0.5
     pts = np.asarray(angles_deg, float) + step_deg * STENCIL
-    win = _window_for(renderer, target > 0.5, pts)
+    win = _window_for(renderer, sil, pts)
     crop = target[win.r0 : win.r0 + win.h, win.c0 : win.c0 + win.w]
-    iou = soft_iou(renderer.occupancy(pts, win), crop, float(target.sum(dtype=np.float64)))
+    occ = renderer.occupancy(pts, win)
+    iou = soft_iou(occ, crop, float(target.sum(dtype=np.float64)))
     _, hess = quadratic(1.0 - iou)
-    return hess / step_deg**2, float(iou[0])
+    label = occ[0] > 0.5
+    inter = int(np.count_nonzero(label & (crop > 0.5)))
+    hard = inter / max(int(np.count_nonzero(label)) + int(sil.sum()) - inter, 1)
+    return hess / step_deg**2, float(iou[0]), float(hard)
 
 
 LIBRARY_STEP_DEG = 7.5

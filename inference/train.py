@@ -302,7 +302,8 @@ def train(
             "seed": seed,
             "complete": done,
             "data": {"dir": str(data_dir), "content_sha256": manifest["content_sha256"], "frames": int(n),
-                     "train": int(len(train_idx)), "test": int(len(test_idx))},
+                     "train": int(len(train_idx)), "test": int(len(test_idx)), "radar": manifest.get("radar"),
+                     "target": (manifest.get("model") or {}).get("name")},
             "hardware": {"device": str(dev), "name": torch.cuda.get_device_name(0) if dev.type == "cuda" else platform.processor()
                          or platform.machine(), "torch": torch.__version__, "threads": torch.get_num_threads()},
             "train_seconds": sum(h["seconds"] for h in history),

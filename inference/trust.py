@@ -146,24 +146,26 @@ class Checker:
             self._library = Library.build(self.renderer)
         return self._library
 
-    def check(self, frame: Vec, enhanced: Vec, network_deg: Vec | None, refine: bool = True) -> Checked:
+    def check(self, frame: NDArray[np.floating], enhanced: NDArray[np.floating], network_deg: NDArray[np.floating] | None,
+              refine: bool = True) -> Checked:  # fmt: skip
         """Fit (unless ``refine`` is off), bound, and check one frame; ``network_deg`` None means no networks."""
         cal = self.calibration
         net = None if network_deg is None else np.asarray(network_deg, float)
-        features = {"median": frame_median(frame), "doubt": enhancer_doubt(enhanced)}
+        enh = np.asarray(enhanced, np.float64)
+        features = {"median": frame_median(np.asarray(frame, np.float64)), "doubt": enhancer_doubt(enh)}
         fits = []
         if refine or net is None:
             starts: dict[str, Vec] = {}
             if net is not None:
                 starts = {"network": net, "mirror": mirror(net)}
-                fits = fit(self.renderer, enhanced, starts)
-            if net is None or self._hard_iou(fits[0].angles_deg, enhanced) < cal.iou_min:
+                fits = fit(self.renderer, enh, starts)
+            if net is None or self._hard_iou(fits[0].angles_deg, enh) < cal.iou_min:
                 # No networks, or their answer does not fit: search the library too.
-                lib = {f"library-{i}": a for i, a in enumerate(self.library.starts(enhanced))}
-                fits = sorted(fits + fit(self.renderer, enhanced, lib, LIBRARY_OPTIONS), key=lambda f: f.cost)
+                lib = {f"library-{i}": a for i, a in enumerate(self.library.starts(enh))}
+                fits = sorted(fits + fit(self.renderer, enh, lib, LIBRARY_OPTIONS), key=lambda f: f.cost)
             best = fits[0]
             angles = best.angles_deg
-            hessian, soft = curvature(self.renderer, enhanced, angles)
+            hessian, soft, iou = curvature(self.renderer, enh, angles)
             raw = raw_uncertainty(hessian, soft)
             finite = np.isfinite(raw)
             spread = np.asarray(cal.scale) * np.where(finite, raw, 0.0)
@@ -173,9 +175,9 @@ class Checker:
         else:
             angles = net
             bound = np.asarray(cal.network_bound_deg, float)
-        iou = self._hard_iou(angles, enhanced)
+            iou = self._hard_iou(angles, enh)
         features["iou"] = iou
-        alternatives = []
+        alternatives: list[Alternative] = []
         if fits:
             for f in fits[1:]:
                 dist = float(geodesic_deg(f.angles_deg, angles)[0])
@@ -186,7 +188,7 @@ class Checker:
                     and all(geodesic_deg(f.angles_deg, np.array(a.angles_deg))[0] >= DISTINCT_DEG for a in alternatives)
                 ):
                     alternatives.append(Alternative(tuple(float(x) for x in f.angles_deg),  # type: ignore[arg-type]
-                                                    self._hard_iou(f.angles_deg, enhanced), float(gap), dist, f.start))  # fmt: skip
+                                                    self._hard_iou(f.angles_deg, enh), float(gap), dist, f.start))  # fmt: skip
         if net is not None:
             features["moved_deg"] = float(geodesic_deg(angles, net)[0])
         reasons = self._reasons(features, angles, bound, alternatives, net is not None and refine)
@@ -305,3 +307,143 @@ def calibrate(checker: Checker, frames: NDArray[np.floating], enhanced: NDArray[
     )
     checker.calibration = cal
     return cal, [checker.check(frames[k], enhanced[k], network_deg[k]) for k in range(len(frames))]
+
+
+class Checkers:
+    """The service's targets, each with its lazily built ``Checker``; thread-safe.
+
+    The built-in targets (``inference.targets.BUILTIN_TARGETS``) and, with ``extra``, an
+    operator's own mesh. The calibration in ``model_dir/trust.json`` belongs to the target
+    it names; the networks' own target (``trained_target``) starts from Swin's answer, any
+    other from the library.
+    """
+
+    def __init__(self, model_dir: str | Path, radar: Radar | None = None, trained_target: str = "tiangong-like",
+                 extra: TargetModel | None = None) -> None:  # fmt: skip
+        import threading
+
+        from inference.targets import BUILTIN_TARGETS
+
+        self.radar = radar or Radar()
+        self.trained_target = trained_target
+        path = Path(model_dir) / TRUST_FILE
+        self.calibration = Calibration.load(path) if path.is_file() else None
+        self._factories: dict[str, Any] = dict(BUILTIN_TARGETS)
+        if extra is not None:
+            self._factories[extra.name] = lambda: extra
+        self._built: dict[str, Checker] = {}
+        self._lock = threading.Lock()
+        self.default = trained_target
+
+    @property
+    def names(self) -> list[str]:
+        return sorted(self._factories)
+
+    def get(self, name: str) -> Checker:
+        from inference.errors import ModelFileError
+        from inference.isar import check_fits
+
+        with self._lock:
+            if name in self._built:
+                return self._built[name]
+            if name not in self._factories:
+                raise ModelFileError(
+                    f"unknown target {name!r}: this service knows {', '.join(self.names)}", field="target"
+                )
+            model = self._factories[name]()
+            check_fits(model, self.radar)
+            cal = self.calibration if self.calibration is not None and self.calibration.target == name else None
+            if cal is None and self.calibration is not None:
+                cal = Calibration(**{**asdict(self.calibration), "made": {}})  # the thresholds of the calibrated target
+            checker = Checker(model, self.radar, cal, networks=name == self.trained_target)
+            self._built[name] = checker
+            return checker
+
+
+def add_arguments(p: Any) -> None:
+    from inference.catalogue import CALIBRATION_SEED
+
+    p.add_argument("--models", default=None, help="model directory (default: the shipped models)")
+    p.add_argument("--frames", type=int, default=300, help="fresh frames to calibrate on (default 300)")
+    p.add_argument("--seed", type=int, default=CALIBRATION_SEED, help=f"their seed (default {CALIBRATION_SEED})")
+    p.add_argument("--out", help="where to write the calibration (default: MODELS/trust.json)")
+
+
+def run(args: Any) -> int:
+    """``gsa calibrate``: simulate fresh frames, run the models and the fit, and write ``trust.json``."""
+    import sys
+    import time
+    from datetime import UTC, datetime
+
+    from inference.catalogue import good_frames
+    from inference.errors import DatasetError
+    from inference.runtime import DEFAULT_MODEL_DIR, Estimator
+    from inference.targets import builtin_target
+
+    if args.frames < 50:
+        raise DatasetError(f"--frames {args.frames}: calibrating needs at least 50 frames", field="frames")
+    model_dir = Path(args.models) if args.models else DEFAULT_MODEL_DIR
+    est = Estimator.load(model_dir)
+    radar, target = card_radar_and_target(model_dir, est.img_size)
+    t0 = time.perf_counter()
+    print(f"calibrate: simulating {args.frames} fresh frames (seed {args.seed})", file=sys.stderr, flush=True)
+    frames, truth, _ = good_frames(args.frames, args.seed, radar, builtin_target(target))
+    res = est.estimate(frames)
+    made = {"command": f"gsa calibrate --frames {args.frames} --seed {args.seed}", "seed": args.seed,
+            "date": datetime.now(UTC).date().isoformat(), "models": est.identity}  # fmt: skip
+    cal, checks = calibrate(Checker(builtin_target(target), radar), frames, res.enhanced, res.angles_deg,
+                            truth, made, progress=True)  # fmt: skip
+    out = Path(args.out) if args.out else model_dir / TRUST_FILE
+    cal.write(out)
+    flagged = np.mean([not c.quality.trusted for c in checks])
+    print(
+        f"calibration written to {out} in {time.perf_counter() - t0:.0f} s; {100 * flagged:.1f} % of its frames flagged"
+    )
+    return 0
+
+
+def card_radar_and_target(model_dir: str | Path, img_size: int = 256) -> tuple[Radar, str]:
+    """The radar and target the models' training frames were made with (their card's), for the fit to render.
+
+    Cards exported before they recorded these (the shipped models') were trained on the
+    paper's radar (Table 3) and the default target.
+    """
+    from inference.targets import DEFAULT_TARGET
+
+    path = Path(model_dir) / "model_card.json"
+    card = json.loads(path.read_text()) if path.is_file() else {}
+    radar = Radar(**card["radar"]) if card.get("radar") else Radar(n_range=img_size, n_azimuth=img_size)
+    return radar, str(card.get("target") or DEFAULT_TARGET)
+
+
+def load_checkers(model_dir: str | Path, img_size: int = 256, target_model: str | Path | None = None,
+                  target_scale: float = 1.0, default_target: str | None = None) -> Checkers:  # fmt: skip
+    """The service's targets: the built-in ones and an operator's mesh, checked now; the default one built now.
+
+    Raises ModelFileError naming the file or the target when the mesh cannot be read, does
+    not fit the frame, takes a built-in target's name, or the default target is unknown.
+    """
+    from inference.errors import ModelFileError
+    from inference.isar import check_fits
+    from inference.targets import BUILTIN_TARGETS, load_model
+
+    radar, trained = card_radar_and_target(model_dir, img_size)
+    extra = None
+    if target_model is not None:
+        extra = load_model(target_model, target_scale)
+        if extra.name in BUILTIN_TARGETS:
+            raise ModelFileError(
+                f"target model {target_model}: its name {extra.name!r} is a built-in target's; rename the file",
+                field="target_model",
+            )
+        check_fits(extra, radar)
+    checkers = Checkers(model_dir, radar, trained, extra)
+    name = default_target or trained
+    if name not in checkers.names:
+        raise ModelFileError(
+            f"default target {name!r} is not one this service knows ({', '.join(checkers.names)})",
+            field="default_target",
+        )
+    checkers.default = name
+    checkers.get(name)
+    return checkers

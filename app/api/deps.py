@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
-from typing import Annotated, cast
+from typing import TYPE_CHECKING, Annotated, Any, cast
 
 from fastapi import Depends, HTTPException, Request, Security
 from fastapi.security import APIKeyHeader
@@ -16,6 +16,9 @@ from app.db.models import Operator
 from app.errors import InputError
 from app.schemas import utc_or_none
 from inference.runtime import Estimator
+
+if TYPE_CHECKING:  # the fit's module imports the simulator's geometry: kept out of `gsa --help`
+    from inference.trust import Checkers
 
 api_key_header = APIKeyHeader(name="X-API-Key", auto_error=False, description="an operator's API key")
 
@@ -79,6 +82,14 @@ def get_estimator(request: Request) -> Estimator:
 
 
 EstimatorDep = Annotated[Estimator, Depends(get_estimator)]
+
+
+def get_checkers(request: Request) -> Checkers:
+    """The targets the fit knows (``inference.trust.Checkers``), loaded at start-up."""
+    return cast("Checkers", request.app.state.checkers)
+
+
+CheckersDep = Annotated[Any, Depends(get_checkers)]
 
 
 as_utc = utc_or_none  # the routes' name for it

@@ -19,6 +19,9 @@ class Settings(BaseSettings):
     made once and kept in ``GSA_DATA_DIR/key-secret`` (several hosts must share one).
     ``GSA_ORPHAN_GRACE_S``: image files no row refers to are removed at start-up once
     older than this (0 on one host; raise it when hosts share the image folder).
+    ``GSA_TARGET_MODEL``: an operator's own target mesh (OBJ or PLY, metres times
+    ``GSA_TARGET_SCALE``), offered beside the built-in targets under its file's stem;
+    ``GSA_DEFAULT_TARGET`` names the target an estimate fits when it names none.
     """
 
     model_config = SettingsConfigDict(env_prefix="GSA_", env_file=".env", env_ignore_empty=True, extra="ignore")
@@ -46,6 +49,9 @@ class Settings(BaseSettings):
     model_dir: Path = DEFAULT_MODEL_DIR
     ort_threads: int = Field(default=0, ge=0, le=256, description="0: all cores")
     ort_run_batch: int = Field(default=DEFAULT_RUN_BATCH, ge=1, le=256, description="frames per ONNX Runtime run")
+    target_model: Path | None = None
+    target_scale: float = Field(default=1.0, gt=0, le=1000.0)
+    default_target: str = "tiangong-like"
     key_secret: str = ""
     orphan_grace_s: float = Field(default=0.0, ge=0.0)
     log_level: str = Field(default="info", pattern="^(debug|info|warning|error)$")

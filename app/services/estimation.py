@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import math
 import os
 import struct
 import threading
@@ -182,12 +183,50 @@ def decode(data: bytes, name: str, allow_stack: bool = True, max_side: int = DEF
 NORMALISED_MIN_TOP_SHARE = 0.004  # normalise_frame clips the top 0.5 % of pixels to 1.0 (a margin for ties)
 
 
-def prepare(upload: Upload, size: int, resample: bool, normalised: bool = False) -> NDArray[np.float32]:
+def model_cells_m() -> tuple[float, float]:
+    """The models' pixel: (range, cross-range) cell in metres of the paper's radar (Table 3), c/2B and lambda/2dtheta."""
+    from inference.isar import Radar
+
+    r = Radar()
+    return r.range_cell_m, r.cross_range_cell_m
+
+
+def resample_metres(
+    mag: NDArray[np.float64], cells_m: tuple[float, float], size: int, name: str
+) -> NDArray[np.float64]:
+    """Resample a frame of cells ``cells_m`` (range, cross-range metres) to the models' cells, centred, ``size`` a side.
+
+    Bilinear; the frame's centre pixel (N/2, counted from 0) stays the centre. Where the frame
+    covers less than the models' 24 x 29 m, the rest is its median (its noise floor).
+    """
+    from scipy.ndimage import affine_transform
+
+    model = model_cells_m()
+    scale = (model[0] / cells_m[0], model[1] / cells_m[1])  # input pixels per model pixel
+    spans = (mag.shape[0] / scale[0], mag.shape[1] / scale[1])
+    if min(spans) < 8:
+        raise InputError(
+            ["range_cell_m"],
+            f"a {mag.shape[0]}x{mag.shape[1]} frame of {cells_m[0]:g} x {cells_m[1]:g} m cells covers under 8 of the "
+            f"models' {model[0]:.4f} x {model[1]:.4f} m pixels: check the cell sizes",
+        )
+    centre_in = np.array([mag.shape[0] // 2, mag.shape[1] // 2], float)
+    offset = centre_in - np.array(scale) * (size // 2)
+    out = affine_transform(mag, scale, offset=offset, output_shape=(size, size), order=1, mode="constant",
+                           cval=float(np.median(mag)))  # fmt: skip
+    return np.asarray(out, np.float64)
+
+
+def prepare(upload: Upload, size: int, resample: bool, normalised: bool = False,
+            cells_m: tuple[float, float] | None = None) -> NDArray[np.float32]:  # fmt: skip
     """Return the normalised frame the models take: the training normalisation, resampled if asked.
 
     ``normalised`` says the frame already is the models' input (``normalise_frame``'s output,
     as ``gsa simulate`` data sets store it): it is then taken as sent, since normalising twice
-    would change it.
+    would change it. ``cells_m`` (range, cross-range metres) resamples in metres to the
+    models' cells (``resample_metres``), whatever the frame's size; without it, a frame of
+    another size needs ``resample`` (in pixels, which is only right when it spans the same
+    metres as the models' frames).
     """
     mag = upload.magnitude
     if normalised:
@@ -207,11 +246,14 @@ def prepare(upload: Upload, size: int, resample: bool, normalised: bool = False)
                 f"normalised=true, but only {100 * at_top:.2g} % of the pixels are at 1.0, where "
                 "inference.frames.normalise_frame puts 0.5 %: this is a raw frame; send it without normalised=true",
             )
-    if mag.shape != (size, size):
+    if cells_m is not None:
+        mag = resample_metres(mag, cells_m, size, upload.name)
+    elif mag.shape != (size, size):
         if not resample:
             raise InputError(
                 _loc(upload.name),
-                f"frame is {mag.shape[0]}x{mag.shape[1]}; the models take {size}x{size} (or send resample=true)",
+                f"frame is {mag.shape[0]}x{mag.shape[1]}; the models take {size}x{size}: send range_cell_m and "
+                "cross_range_cell_m to resample in metres, or resample=true to resample in pixels",
             )
         if min(mag.shape) < 8 or max(mag.shape) > 8192:
             raise InputError(
@@ -298,6 +340,31 @@ def attitude_json(angles_deg: NDArray[np.floating]) -> dict[str, Any]:
         "euler_zyx_deg": [z, y, x],
         "quaternion_wxyz": list(euler_to_quaternion(z, y, x)),
         "rotation_matrix": r.round(12).tolist(),
+    }
+
+
+def checked_json(checked: Any) -> dict[str, Any]:
+    """Return an ``inference.trust.Checked`` as the stored result's attitude, quality and alternatives."""
+    q = checked.quality
+    return {
+        "attitude": attitude_json(checked.angles_deg),
+        "attitude_network": None if checked.network_deg is None else attitude_json(checked.network_deg),
+        "refined": checked.refined,
+        "quality": {
+            "silhouette_iou": q.silhouette_iou,
+            "uncertainty_deg": [b if math.isfinite(b) else None for b in q.uncertainty_deg],
+            "trusted": q.trusted,
+            "reasons": list(q.reasons),
+        },  # fmt: skip
+        "alternatives": [
+            {
+                **attitude_json(np.array(a.angles_deg)),
+                "silhouette_iou": round(a.silhouette_iou, 4),
+                "fit_gap": round(a.fit_gap, 5),
+                "distance_deg": round(a.distance_deg, 2),
+            }  # fmt: skip
+            for a in checked.alternatives
+        ],
     }
 
 

@@ -14,7 +14,7 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse, Response
 
 from app import crud
-from app.api.deps import CurrentOperator, EstimatorDep, SessionDep, SettingsDep, as_utc, check_page_size
+from app.api.deps import CheckersDep, CurrentOperator, EstimatorDep, SessionDep, SettingsDep, as_utc, check_page_size
 from app.db.models import Estimate, utcnow
 from app.errors import InputError
 from app.schemas import CONTROL_CHARACTERS, EstimatePublic, EstimatesPublic, IsoDateTime, Text
@@ -33,6 +33,32 @@ NORMALISED = (
     "the frame already is the models' input (inference.frames.normalise_frame output in [0, 1], as gsa simulate "
     "data sets store it): take it as sent instead of normalising it again"
 )
+REFINE = (
+    "fit the target's projection to the enhanced frame, starting from Swin's answer (default true); false "
+    "returns Swin's answer with the calibration's fixed bounds"
+)
+TARGET = "which target the frame shows (GET /readyz lists them); default GSA_DEFAULT_TARGET, the shipped tiangong-like"
+RANGE_CELL = (
+    "the frame's range cell in metres (rows; with cross_range_cell_m): the frame is resampled in metres to the "
+    "models' 0.0937 m cells, about its centre pixel"
+)
+CROSS_RANGE_CELL = "the frame's cross-range cell in metres (columns; with range_cell_m); the models' is 0.1123 m"
+
+
+def _cells(range_cell_m: float | None, cross_range_cell_m: float | None) -> tuple[float, float] | None:
+    if (range_cell_m is None) != (cross_range_cell_m is None):
+        missing = "cross_range_cell_m" if cross_range_cell_m is None else "range_cell_m"
+        raise InputError([missing], "send range_cell_m and cross_range_cell_m together (the frame's cells in metres)")
+    return None if range_cell_m is None or cross_range_cell_m is None else (range_cell_m, cross_range_cell_m)
+
+
+def _checker(checkers: Any, target: str | None) -> Any:
+    from inference.errors import ModelFileError
+
+    try:
+        return checkers.get(target or checkers.default)
+    except ModelFileError as exc:
+        raise InputError(["target"], str(exc)) from None
 
 
 async def _read(upload: UploadFile, limit: int) -> bytes:
@@ -49,6 +75,7 @@ async def _read(upload: UploadFile, limit: int) -> bytes:
 def _estimate(
     *, session: Any, operator_id: str, settings: Any, est: Any, uploads: list[svc.Upload], resample: bool,
     plan_id: str | None, observed_at: datetime | None, snr_db: float | None, normalised: bool = False,
+    checker: Any, refine: bool = True, cells_m: tuple[float, float] | None = None,
 ) -> list[Estimate]:  # fmt: skip
     """Validate everything, run the models on one batch, store the images, then the rows in one transaction."""
     if not uploads:
@@ -65,11 +92,17 @@ def _estimate(
         if plan is None:
             raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
     t0 = time.perf_counter()
-    frames = np.stack([svc.prepare(u, est.img_size, resample, normalised) for u in uploads])
+    frames = np.stack([svc.prepare(u, est.img_size, resample, normalised, cells_m) for u in uploads])
     t_prep = time.perf_counter() - t0
     res = est.estimate(frames)
-    angles, enhanced, timings = res.angles_deg, res.enhanced, res.timings_s
-    per_frame = {"preprocess": t_prep / len(uploads), **{k: v / len(uploads) for k, v in timings.items()}}
+    enhanced, timings = res.enhanced, res.timings_s
+    t1 = time.perf_counter()
+    checks = [checker.check(frames[k], enhanced[k], res.angles_deg[k] if checker.networks else None, refine)
+              for k in range(len(uploads))]  # fmt: skip
+    t_fit = time.perf_counter() - t1
+    angles = [c.angles_deg for c in checks]
+    per_frame = {"preprocess": t_prep / len(uploads), **{k: v / len(uploads) for k, v in timings.items()},
+                 "fit": t_fit / len(uploads)}  # fmt: skip
     in_frames: list[dict[str, Any] | None] = [None] * len(uploads)
     if plan is not None and observed_at is not None:
         in_frames = [svc.attitudes_in_frames(plan.request, observed_at, a) for a in angles]
@@ -79,9 +112,9 @@ def _estimate(
         blobs += [svc.png_bytes(frames[k]), svc.png_bytes(enhanced[k])]
         original = svc.store_blob(settings.data_dir, blobs[-2])
         enh = svc.store_blob(settings.data_dir, blobs[-1])
-        result: dict[str, Any] = {"attitude": svc.attitude_json(angles[k]), "model": est.identity,
+        result: dict[str, Any] = {**svc.checked_json(checks[k]), "target": checker.model.name, "model": est.identity,
                                   "timings_s": {**per_frame, "batch_size": len(uploads)},
-                                  "input_normalised": normalised}  # fmt: skip
+                                  "input_normalised": normalised, "cells_m": list(cells_m) if cells_m else None}  # fmt: skip
         placed = in_frames[k]
         if placed is not None:
             result["attitude_lvlh"] = placed["lvlh"]
@@ -114,14 +147,21 @@ async def create_estimate(
     operator: CurrentOperator,
     settings: SettingsDep,
     est: EstimatorDep,
+    checkers: CheckersDep,
     file: Annotated[UploadFile, File(description=".npy/.npz (2-D, real or complex) or 8/16-bit grayscale PNG/TIFF")],
     resample: Annotated[bool, Form(description=RESAMPLE)] = False,
     plan_id: Annotated[Text | None, Form(max_length=36, description=PLAN_ID)] = None,
     observed_at: Annotated[IsoDateTime | None, Form(description=OBSERVED_AT)] = None,
     snr_db: Annotated[float | None, Form(ge=-100, le=200, description=SNR_DB)] = None,
     normalised: Annotated[bool, Form(description=NORMALISED)] = False,
+    refine: Annotated[bool, Form(description=REFINE)] = True,
+    target: Annotated[Text | None, Form(max_length=200, description=TARGET)] = None,
+    range_cell_m: Annotated[float | None, Form(gt=0, le=100, description=RANGE_CELL)] = None,
+    cross_range_cell_m: Annotated[float | None, Form(gt=0, le=100, description=CROSS_RANGE_CELL)] = None,
 ) -> dict[str, Any]:
-    """Estimate the attitude of one ISAR frame; the result is stored."""
+    """Estimate the attitude of one ISAR frame: Swin's answer, fitted to the target's projection and checked; stored."""
+    cells_m = _cells(range_cell_m, cross_range_cell_m)
+    checker = _checker(checkers, target)
     data = await _read(file, settings.max_upload_bytes)
     # Decoding, the models and the database run in a worker thread, so the event loop keeps serving meanwhile.
     uploads = await run_in_threadpool(
@@ -131,7 +171,8 @@ async def create_estimate(
         raise InputError(["file"], f"the file holds {len(uploads)} frames; send stacks to /v1/estimates/batch")
     rows = await run_in_threadpool(_estimate, session=session, operator_id=operator.id, settings=settings, est=est,
                                    uploads=uploads, resample=resample, plan_id=plan_id,
-                                   observed_at=as_utc(observed_at), snr_db=snr_db, normalised=normalised)  # fmt: skip
+                                   observed_at=as_utc(observed_at), snr_db=snr_db, normalised=normalised,
+                                   checker=checker, refine=refine, cells_m=cells_m)  # fmt: skip
     return EstimatePublic.row_json(rows[0])
 
 
@@ -143,20 +184,28 @@ async def create_estimates_batch(
     operator: CurrentOperator,
     settings: SettingsDep,
     est: EstimatorDep,
+    checkers: CheckersDep,
     files: Annotated[list[UploadFile], File(description="several frames, or one .npz stack [N, H, W]")],
     resample: Annotated[bool, Form(description=RESAMPLE)] = False,
     plan_id: Annotated[Text | None, Form(max_length=36, description=PLAN_ID)] = None,
     observed_at: Annotated[IsoDateTime | None, Form(description=OBSERVED_AT)] = None,
     normalised: Annotated[bool, Form(description=NORMALISED)] = False,
+    refine: Annotated[bool, Form(description=REFINE)] = True,
+    target: Annotated[Text | None, Form(max_length=200, description=TARGET)] = None,
+    range_cell_m: Annotated[float | None, Form(gt=0, le=100, description=RANGE_CELL)] = None,
+    cross_range_cell_m: Annotated[float | None, Form(gt=0, le=100, description=CROSS_RANGE_CELL)] = None,
 ) -> dict[str, Any]:
-    """Estimate several frames as one batch through the models; one stored row each."""
+    """Estimate several frames as one batch through the models, each fitted and checked; one stored row each."""
+    cells_m = _cells(range_cell_m, cross_range_cell_m)
+    checker = _checker(checkers, target)
     uploads: list[svc.Upload] = []
     for f in files:
         data = await _read(f, settings.max_upload_bytes)
         uploads += await run_in_threadpool(svc.decode, data, f.filename or "upload", max_side=settings.max_image_side)
     rows = await run_in_threadpool(_estimate, session=session, operator_id=operator.id, settings=settings, est=est,
                                    uploads=uploads, resample=resample, plan_id=plan_id,
-                                   observed_at=as_utc(observed_at), snr_db=None, normalised=normalised)  # fmt: skip
+                                   observed_at=as_utc(observed_at), snr_db=None, normalised=normalised,
+                                   checker=checker, refine=refine, cells_m=cells_m)  # fmt: skip
     return {"data": [EstimatePublic.row_json(r) for r in rows], "count": len(rows)}
 
 
