@@ -331,7 +331,8 @@ def cmd_estimate(args: argparse.Namespace) -> int:
                                  settings.default_target)  # fmt: skip
         checker = checkers.get(args.target or checkers.default)
         (up,) = svc.decode(data, Path(args.file).name, allow_stack=False)
-        frame = svc.prepare(up, est.img_size, args.resample, args.normalised, cells)
+        model_cells = (checker.radar.range_cell_m, checker.radar.cross_range_cell_m)
+        frame = svc.prepare(up, est.img_size, args.resample, args.normalised, cells, model_cells)
         res = est.estimate(frame[None])
         t0 = time.perf_counter()
         checked = checker.check(frame, res.enhanced[0], res.angles_deg[0] if checker.networks else None,

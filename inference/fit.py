@@ -22,7 +22,7 @@ The search. ``fit`` refines starts (Swin's answer, its near-mirror, library matc
 at once. Per iteration and hypothesis it renders a 10-point stencil at step h (the
 centre, six axis points, three face diagonals), fits the full quadratic through it,
 and renders the quadratic's minimum (at most 2 h away); it moves to the best point
-seen and shrinks h from 1 deg to 0.35 and 0.12 deg after at most two iterations each. Every render of an
+seen and shrinks h from 1 deg (at most four iterations) to 0.35 and 0.12 deg (two each). Every render of an
 iteration is one batch. The cost is one minus the soft IoU with the enhanced frame,
 plus a weak Gaussian prior around the hypothesis's own start, so a hypothesis stays
 a refinement of where it began. The last quadratic's Hessian is each answer's
@@ -50,7 +50,7 @@ COARSE_FACTOR = 4
 SHARP_ZONE = 0.1  # half-width (pixels) of the linear hand-over between neighbouring pixels
 COUNT_SCALE = 0.35  # counts per pixel at which occupancy reaches 1 - 1/e
 STEPS_DEG = (1.0, 0.35, 0.12)
-MAX_ITER = 2
+MAX_ITER = (4, 2, 2)  # iterations at each step: the first may have a few degrees to travel
 WINDOW_MARGIN_PX = 12
 
 
@@ -281,10 +281,11 @@ class FitOptions:
     """The search's knobs (defaults measured in BENCHMARKS.md)."""
 
     steps_deg: tuple[float, ...] = STEPS_DEG
-    max_iter: int = MAX_ITER
+    max_iter: tuple[int, ...] = MAX_ITER  # per step; the last entry serves any further steps
     prior_sigma_deg: float = 10.0
     prior_weight: float = 0.002  # cost at one sigma from the start: 0.2 % of IoU
     prune: float = 0.03  # drop a hypothesis whose cost is this far behind the best after the first step
+    coarse: bool = False  # fit the 4x-pooled coverage instead (Renderer.coverage): smooth but biased, for far starts
 
 
 def fit(renderer: Renderer, enhanced: Vec, starts: dict[str, Vec], options: FitOptions | None = None) -> list[Fit]:
@@ -301,15 +302,19 @@ def fit(renderer: Renderer, enhanced: Vec, starts: dict[str, Vec], options: FitO
     alive = np.ones(len(names), bool)
     renders = 0
     silhouette = target > 0.5
+    pooled = pool(target, COARSE_FACTOR) if opt.coarse else target
 
     def cost(points: Vec, live: NDArray[np.intp]) -> tuple[Vec, Vec]:
         nonlocal renders
         flat = points.reshape(-1, 3)
         renders += len(flat)
-        # The window: the frame's silhouette and where the centres put the target, with a margin.
-        win = _window_for(renderer, silhouette, best[live])
-        crop = target[win.r0 : win.r0 + win.h, win.c0 : win.c0 + win.w]
-        iou = soft_iou(renderer.occupancy(flat, win), crop, total).reshape(points.shape[:-1])
+        if opt.coarse:
+            iou = soft_iou(renderer.coverage(flat), pooled).reshape(points.shape[:-1])
+        else:
+            # The window: the frame's silhouette and where the centres put the target, with a margin.
+            win = _window_for(renderer, silhouette, best[live])
+            crop = target[win.r0 : win.r0 + win.h, win.c0 : win.c0 + win.w]
+            iou = soft_iou(renderer.occupancy(flat, win), crop, total).reshape(points.shape[:-1])
         prior = opt.prior_weight * np.sum(((points - origin[live][:, None, :]) / opt.prior_sigma_deg) ** 2, axis=-1)
         return 1.0 - iou + prior, iou
 
@@ -319,7 +324,7 @@ def fit(renderer: Renderer, enhanced: Vec, starts: dict[str, Vec], options: FitO
     if opt.prune > 0:
         alive &= best_cost <= best_cost.min() + opt.prune
     for step_no, h in enumerate(opt.steps_deg):
-        for _ in range(opt.max_iter):
+        for _ in range(opt.max_iter[min(step_no, len(opt.max_iter) - 1)]):
             live = np.flatnonzero(alive)
             pts = best[live][:, None, :] + h * STENCIL[None]
             c, iou = cost(pts, live)

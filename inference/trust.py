@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from inference.fit import FitOptions, Library, Renderer, curvature, fit, mirror, silhouette_iou
+from inference.fit import Fit, FitOptions, Library, Renderer, curvature, fit, mirror, silhouette_iou
 from inference.frames import geodesic_deg
 from inference.isar import Radar
 from inference.targets import TargetModel
@@ -47,7 +47,9 @@ Vec = NDArray[np.float64]
 TRUST_FILE = "trust.json"
 ALTERNATIVE_MARGIN = 0.02  # soft-IoU cost within which another attitude is listed
 DISTINCT_DEG = 5.0  # an alternative is at least this far from the answer
-LIBRARY_OPTIONS = FitOptions(steps_deg=(2.0, 1.0, 0.35, 0.12), prior_weight=0.0)
+# From library starts: first the coarse coverage (smooth, within a degree or two), then the fine label.
+LIBRARY_COARSE = FitOptions(steps_deg=(4.0, 2.0, 1.0), max_iter=(3, 3, 3), prior_weight=0.0, prune=0.05, coarse=True)
+LIBRARY_FINE = FitOptions(steps_deg=(2.0, 1.0, 0.5, 0.25, 0.12), max_iter=(4, 4, 3, 2, 2), prior_weight=0.0)
 
 
 @dataclass(frozen=True)
@@ -161,8 +163,7 @@ class Checker:
                 fits = fit(self.renderer, enh, starts)
             if net is None or self._hard_iou(fits[0].angles_deg, enh) < cal.iou_min:
                 # No networks, or their answer does not fit: search the library too.
-                lib = {f"library-{i}": a for i, a in enumerate(self.library.starts(enh))}
-                fits = sorted(fits + fit(self.renderer, enh, lib, LIBRARY_OPTIONS), key=lambda f: f.cost)
+                fits = sorted(fits + self.search(enh), key=lambda f: f.cost)
             best = fits[0]
             angles = best.angles_deg
             hessian, soft, iou = curvature(self.renderer, enh, angles)
@@ -194,6 +195,12 @@ class Checker:
         reasons = self._reasons(features, angles, bound, alternatives, net is not None and refine)
         quality = Quality(round(iou, 4), tuple(round(float(b), 3) for b in bound), not reasons, reasons)  # type: ignore[arg-type]
         return Checked(angles, net, bool(fits), quality, alternatives, features)
+
+    def search(self, enhanced: Vec, count: int = 4) -> list[Fit]:
+        """Fit from the library's best ``count`` matches, coarse then fine (no network needed); best first."""
+        starts = {f"library-{i}": a for i, a in enumerate(self.library.starts(enhanced, count))}
+        coarse = fit(self.renderer, enhanced, starts, LIBRARY_COARSE)
+        return fit(self.renderer, enhanced, {f.start: f.angles_deg for f in coarse[:3]}, LIBRARY_FINE)
 
     def _hard_iou(self, angles: Vec, enhanced: Vec) -> float:
         return float(silhouette_iou(self.renderer, angles, enhanced)[0])
@@ -240,7 +247,12 @@ class Checker:
             out.append(
                 f"the 90 % bound on {worst} is over {cal.max_bound_deg:.0f} deg: the silhouette barely constrains it"
             )
-        if cal.target != self.model.name:
+        if not cal.made:
+            out.append(
+                "the thresholds and bounds are defaults, not calibrated for these models "
+                "(gsa calibrate writes trust.json beside them)"
+            )
+        elif cal.target != self.model.name:
             out.append(
                 f"the bounds and thresholds were calibrated on {cal.target}, not {self.model.name} "
                 "(gsa calibrate makes a calibration for it)"
@@ -352,9 +364,8 @@ class Checkers:
                 )
             model = self._factories[name]()
             check_fits(model, self.radar)
-            cal = self.calibration if self.calibration is not None and self.calibration.target == name else None
-            if cal is None and self.calibration is not None:
-                cal = Calibration(**{**asdict(self.calibration), "made": {}})  # the thresholds of the calibrated target
+            # Another target borrows the calibrated target's thresholds (and says so in every answer).
+            cal = self.calibration
             checker = Checker(model, self.radar, cal, networks=name == self.trained_target)
             self._built[name] = checker
             return checker

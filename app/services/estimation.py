@@ -183,25 +183,18 @@ def decode(data: bytes, name: str, allow_stack: bool = True, max_side: int = DEF
 NORMALISED_MIN_TOP_SHARE = 0.004  # normalise_frame clips the top 0.5 % of pixels to 1.0 (a margin for ties)
 
 
-def model_cells_m() -> tuple[float, float]:
-    """The models' pixel: (range, cross-range) cell in metres of the paper's radar (Table 3), c/2B and lambda/2dtheta."""
-    from inference.isar import Radar
-
-    r = Radar()
-    return r.range_cell_m, r.cross_range_cell_m
-
-
 def resample_metres(
-    mag: NDArray[np.float64], cells_m: tuple[float, float], size: int, name: str
+    mag: NDArray[np.float64], cells_m: tuple[float, float], model_cells_m: tuple[float, float], size: int
 ) -> NDArray[np.float64]:
     """Resample a frame of cells ``cells_m`` (range, cross-range metres) to the models' cells, centred, ``size`` a side.
 
     Bilinear; the frame's centre pixel (N/2, counted from 0) stays the centre. Where the frame
-    covers less than the models' 24 x 29 m, the rest is its median (its noise floor).
+    covers less than the models' frame (24 x 29 m for the shipped models), the rest is its median
+    (its noise floor).
     """
     from scipy.ndimage import affine_transform
 
-    model = model_cells_m()
+    model = model_cells_m
     scale = (model[0] / cells_m[0], model[1] / cells_m[1])  # input pixels per model pixel
     spans = (mag.shape[0] / scale[0], mag.shape[1] / scale[1])
     if min(spans) < 8:
@@ -218,13 +211,14 @@ def resample_metres(
 
 
 def prepare(upload: Upload, size: int, resample: bool, normalised: bool = False,
-            cells_m: tuple[float, float] | None = None) -> NDArray[np.float32]:  # fmt: skip
+            cells_m: tuple[float, float] | None = None,
+            model_cells_m: tuple[float, float] | None = None) -> NDArray[np.float32]:  # fmt: skip
     """Return the normalised frame the models take: the training normalisation, resampled if asked.
 
     ``normalised`` says the frame already is the models' input (``normalise_frame``'s output,
     as ``gsa simulate`` data sets store it): it is then taken as sent, since normalising twice
     would change it. ``cells_m`` (range, cross-range metres) resamples in metres to the
-    models' cells (``resample_metres``), whatever the frame's size; without it, a frame of
+    models' cells ``model_cells_m`` (``resample_metres``), whatever the frame's size; without it, a frame of
     another size needs ``resample`` (in pixels, which is only right when it spans the same
     metres as the models' frames).
     """
@@ -247,7 +241,9 @@ def prepare(upload: Upload, size: int, resample: bool, normalised: bool = False,
                 "inference.frames.normalise_frame puts 0.5 %: this is a raw frame; send it without normalised=true",
             )
     if cells_m is not None:
-        mag = resample_metres(mag, cells_m, size, upload.name)
+        if model_cells_m is None:
+            raise ValueError("resampling in metres needs the models' cells")
+        mag = resample_metres(mag, cells_m, model_cells_m, size)
     elif mag.shape != (size, size):
         if not resample:
             raise InputError(

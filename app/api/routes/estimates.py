@@ -92,7 +92,8 @@ def _estimate(
         if plan is None:
             raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
     t0 = time.perf_counter()
-    frames = np.stack([svc.prepare(u, est.img_size, resample, normalised, cells_m) for u in uploads])
+    model_cells = (checker.radar.range_cell_m, checker.radar.cross_range_cell_m)
+    frames = np.stack([svc.prepare(u, est.img_size, resample, normalised, cells_m, model_cells) for u in uploads])
     t_prep = time.perf_counter() - t0
     res = est.estimate(frames)
     enhanced, timings = res.enhanced, res.timings_s

@@ -219,6 +219,16 @@ CASES = [
     Case("unknown_plan_id", "POST", EST, _upload(lambda: _npy(_frame()), plan_id="0" * 36), 422, "plan_id"),
     Case("observed_at_without_plan", "POST", EST, _upload(lambda: _npy(_frame()), observed_at="2022-11-28T11:28:29Z"), 422, "plan_id"),
     Case("snr_not_a_number", "POST", EST, _upload(lambda: _npy(_frame()), snr_db="nan"), 422, "snr_db"),
+    # the fit's fields
+    Case("refine_not_a_bool", "POST", EST, _upload(lambda: _npy(_frame()), refine="perhaps"), 422, "refine"),
+    Case("unknown_target", "POST", EST, _upload(lambda: _npy(_frame()), target="hubble"), 422, "target"),
+    Case("unknown_target_in_batch", "POST", EST + "/batch",
+         lambda: {"files": [("files", ("f.npy", _npy(_frame())))], "data": {"target": "../etc"}}, 422, "target"),
+    Case("range_cell_without_cross_range", "POST", EST, _upload(lambda: _npy(_frame()), range_cell_m="0.1"), 422, "cross_range_cell_m"),
+    Case("cross_range_cell_without_range", "POST", EST, _upload(lambda: _npy(_frame()), cross_range_cell_m="0.1"), 422, "range_cell_m"),
+    Case("range_cell_zero", "POST", EST, _upload(lambda: _npy(_frame()), range_cell_m="0", cross_range_cell_m="0.1"), 422, "range_cell_m"),
+    Case("cross_range_cell_nan", "POST", EST, _upload(lambda: _npy(_frame()), range_cell_m="0.1", cross_range_cell_m="nan"), 422, "cross_range_cell_m"),
+    Case("cells_too_coarse_for_the_frame", "POST", EST, _upload(lambda: _npy(_frame()), range_cell_m="0.001", cross_range_cell_m="0.001"), 422, "cell"),
     Case("batch_over_frame_limit", "POST", EST + "/batch",
          lambda: {"files": [("files", (f"f{k}.npy", _npy(_frame()))) for k in range(3)]}, 422, "batch limit"),
     # listings

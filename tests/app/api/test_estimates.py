@@ -286,3 +286,69 @@ def test_service_refuses_to_start_on_a_corrupt_model(settings, tmp_path):
     with pytest.raises(ModelFileError, match="unetpp.onnx"):
         create_app(settings.model_copy(update={"model_dir": bad}))
     assert TestClient  # the factory raised before any request could be served
+
+
+def test_every_answer_is_fitted_and_checked(client, frame):
+    body = _post(client, _npy(frame)).json()
+    assert body["refined"] is True and body["target"] == "tiangong-like"
+    assert body["attitude_network"] is not None and len(body["attitude_network"]["euler_zyx_deg"]) == 3
+    q = body["quality"]
+    assert 0.0 <= q["silhouette_iou"] <= 1.0 and len(q["uncertainty_deg"]) == 3
+    assert isinstance(q["trusted"], bool) and (q["trusted"] == (q["reasons"] == []))
+    assert isinstance(body["alternatives"], list) and "fit" in body["timings_s"]
+    # The smoke models' one-epoch Swin is far off, and the check says so.
+    assert q["trusted"] is False
+    stored = client.get(body["links"]["self"], headers=A).json()
+    assert stored["quality"] == q and stored["attitude"] == body["attitude"]
+
+
+def test_refine_false_answers_swin_alone(client, frame):
+    body = _post(client, _npy(frame), refine="false").json()
+    assert body["refined"] is False
+    assert body["attitude"]["euler_zyx_deg"] == body["attitude_network"]["euler_zyx_deg"]
+    assert body["quality"]["uncertainty_deg"] and body["alternatives"] == []
+
+
+def test_another_target_is_fitted_from_the_library(client, frame):
+    assert set(client.get("/readyz").json()["targets"]) >= {"tiangong-like", "comsat-like"}
+    body = _post(client, _npy(frame), target="comsat-like").json()
+    assert body["target"] == "comsat-like" and body["attitude_network"] is None and body["refined"] is True
+    # The smoke models carry no calibration: every answer says its bounds are defaults.
+    assert any("not calibrated for these models" in r for r in body["quality"]["reasons"])
+
+
+def test_cells_in_metres_resample_about_the_centre(client):
+    """A frame of twice the models' cells, resampled in metres, shows the target at the models' scale."""
+    from app.services.estimation import resample_metres
+
+    coarse = type(SMOKE_RADAR)(n_range=32, n_azimuth=32, bandwidth_hz=SMOKE_RADAR.bandwidth_hz / 2,
+                               aperture_deg=SMOKE_RADAR.aperture_deg / 2)  # fmt: skip
+    model = tiangong_like()
+    a = simulate(model, Imager(coarse), (20.0, 10.0, -15.0), None, 0).label.astype(float)
+    b = simulate(model, Imager(SMOKE_RADAR), (20.0, 10.0, -15.0), None, 0).label
+    cells = (coarse.range_cell_m, coarse.cross_range_cell_m)
+    model_cells = (SMOKE_RADAR.range_cell_m, SMOKE_RADAR.cross_range_cell_m)
+    out = resample_metres(a, cells, model_cells, 64) > 0.5
+    assert np.count_nonzero(out & b) / np.count_nonzero(out | b) > 0.75
+    r = _post(client, _npy(simulate(model, Imager(coarse), (20.0, 10.0, -15.0), 10.0, 0).image),
+              range_cell_m=str(cells[0]), cross_range_cell_m=str(cells[1]))  # fmt: skip
+    assert r.status_code == 201, r.text
+
+
+def test_an_operators_mesh_is_offered_and_a_bad_one_refused(settings, tmp_path):
+    mesh = tmp_path / "cube-sat.obj"
+    verts = [(x, y, z) for x in (-1.5, 1.5) for y in (-1, 1) for z in (-1, 1)]
+    faces = [(1, 2, 4, 3), (5, 7, 8, 6), (1, 5, 6, 2), (3, 4, 8, 7), (1, 3, 7, 5), (2, 6, 8, 4)]
+    mesh.write_text(
+        "".join(f"v {x} {y} {z}\n" for x, y, z in verts) + "".join(f"f {a} {b} {c} {d}\n" for a, b, c, d in faces)
+    )
+    with TestClient(create_app(settings.model_copy(update={"target_model": mesh}))) as c:
+        assert "cube-sat" in c.get("/readyz").json()["targets"]
+    broken = tmp_path / "broken.obj"
+    broken.write_text("v 1 2\nf 1 2 3\n")
+    with pytest.raises(ModelFileError, match="broken.obj"):
+        create_app(settings.model_copy(update={"target_model": broken}))
+    huge = tmp_path / "huge.obj"
+    huge.write_text(mesh.read_text())
+    with pytest.raises(ModelFileError, match="frame is only"):
+        create_app(settings.model_copy(update={"target_model": huge, "target_scale": 50.0}))
