@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 
 from inference.frames import geodesic_deg, rotation_matrices
 from inference.isar import Radar, projection_matrix
-from inference.targets import TargetModel
+from inference.targets import TargetModel, surface_normals
 
 Vec = NDArray[np.float64]
 F32 = NDArray[np.float32]
@@ -64,16 +64,6 @@ def mirror(angles_deg: Vec) -> Vec:
     a = np.array(angles_deg, float)
     a[..., 1:] *= -1.0
     return a
-
-
-def surface_normals(points: Vec, k: int = 12) -> Vec:
-    """Return each point's unit normal (sign-free) from the principal axes of its ``k`` nearest neighbours."""
-    from scipy.spatial import cKDTree
-
-    _, idx = cKDTree(points).query(points, k=min(k, len(points)))
-    nb = points[idx] - points[idx].mean(axis=1, keepdims=True)
-    cov = np.einsum("nki,nkj->nij", nb, nb)
-    return np.asarray(np.linalg.eigh(cov)[1][:, :, 0])
 
 
 def skin_area(points: Vec) -> float:

@@ -290,8 +290,9 @@ def visible(
 
 
 def scatterer_amplitudes(
-    normals_obs: Vec, kinds: NDArray[np.int8], los: Vec, rng: np.random.Generator
-) -> NDArray[np.complex128]:
+    normals_obs: Vec, kinds: NDArray[np.int8], los: Vec, rng: np.random.Generator, lobe_scale: float = 1.0,
+    edge_gain: float = 1.0, dense: bool = False,
+) -> NDArray[np.complex128]:  # fmt: skip
     """Return complex amplitudes: aspect-dependent magnitude, seeded jitter and a random sub-cell phase.
 
     FLAT facets flash when their normal meets the line of sight (Gaussian lobe of
@@ -304,9 +305,13 @@ def scatterer_amplitudes(
     flat = kinds == FLAT
     curved = kinds == CURVED
     edge = kinds == EDGE
-    mag[flat] = 0.15 + 3.0 * np.exp(-((angle[flat] / math.radians(2.0)) ** 2))
-    mag[curved] = 0.25 + 1.5 * np.exp(-((angle[curved] / math.radians(6.0)) ** 2))
-    mag[edge] = 0.5
+    if dense:  # the skin sampled densely: one law for all of it, the curved skin's
+        mag[:] = 0.25 + 1.5 * np.exp(-((angle / math.radians(6.0 * lobe_scale)) ** 2))
+        mag *= rng.lognormal(0.0, 0.25, len(kinds))
+        return mag * np.exp(2j * np.pi * rng.random(len(kinds)))
+    mag[flat] = 0.15 + 3.0 * np.exp(-((angle[flat] / math.radians(2.0 * lobe_scale)) ** 2))
+    mag[curved] = 0.25 + 1.5 * np.exp(-((angle[curved] / math.radians(6.0 * lobe_scale)) ** 2))
+    mag[edge] = 0.5 * edge_gain
     mag[kinds == ISOTROPIC] = 1.0
     mag *= rng.lognormal(0.0, 0.25, len(kinds))
     return mag * np.exp(2j * np.pi * rng.random(len(kinds)))
@@ -346,24 +351,176 @@ def check_fits(model: TargetModel, radar: Radar) -> None:
         )
 
 
+WINDOWS = ("taylor", "hamming", "none")
+IMAGING = ("polar", "range-doppler")
+SCATTERERS = ("lattice", "dense")
+
+
+@dataclass(frozen=True, slots=True)
+class Scattering:
+    """How the simulator turns the target into an image; the defaults are what every data set so far used.
+
+    * ``scatterers``: ``lattice``, the model's scattering centres (0.3 m apart); or ``dense``,
+      the skin itself (0.08 m apart, jittered by up to 4 cm per frame), several points per
+      resolution cell, all with the same aspect law: fully developed speckle, no lattice.
+    * ``edge_gain``: factor on rim and edge returns (0: none; 1: 27 % of the image energy).
+    * ``lobe_scale``: factor on the specular lobe widths (plates 2 deg, curved skin 6 deg).
+    * ``window``: ``taylor`` (Radar.window_sidelobe_db), ``hamming`` or ``none``.
+    * ``imaging``: ``polar``, the exact polar-format image; ``range-doppler``, the 2-D FFT of
+      the polar samples without reformatting (range migration smears the far parts).
+    * ``dominant``: that many point-like returns (dihedrals, ports) at random points of the
+      visible skin, each as bright as the brightest scatterer.
+    * ``phase_error_rad``: a residual phase error across the aperture (imperfect motion
+      compensation), a random quadratic-plus-cubic curve peaking at this value.
+    * ``scale_error``: range and cross-range scale errors drawn in +-this (an uncertain
+      rotation rate scales cross-range); the label keeps the true geometry.
+    * ``blur_px``: Gaussian blur (sigma, pixels) of the magnitude image (defocus).
+    """
+
+    scatterers: str = "lattice"
+    edge_gain: float = 1.0
+    lobe_scale: float = 1.0
+    window: str = "taylor"
+    imaging: str = "polar"
+    dominant: int = 0
+    phase_error_rad: float = 0.0
+    scale_error: float = 0.0
+    blur_px: float = 0.0
+
+    def __post_init__(self) -> None:
+        checks = (
+            ("scatterers", self.scatterers in SCATTERERS),
+            ("edge_gain", 0.0 <= self.edge_gain <= 10.0),
+            ("lobe_scale", 0.1 <= self.lobe_scale <= 10.0),
+            ("window", self.window in WINDOWS),
+            ("imaging", self.imaging in IMAGING),
+            ("dominant", 0 <= self.dominant <= 100),
+            ("phase_error_rad", 0.0 <= self.phase_error_rad <= 2 * math.pi),
+            ("scale_error", 0.0 <= self.scale_error <= 0.2),
+            ("blur_px", 0.0 <= self.blur_px <= 10.0),
+        )
+        for name, ok in checks:
+            if not ok:
+                raise RadarError(f"{name} = {getattr(self, name)!r} is not usable (see inference.isar.Scattering)",
+                                 field=name)  # fmt: skip
+
+
+DEFAULT_SCATTERING = Scattering()
+# The simulator variants of the robustness benchmark (bench/trust.py): none was used in training.
+VARIANTS = {
+    "dense speckle scatterers": Scattering(scatterers="dense"),
+    "no edge scatterers": Scattering(edge_gain=0.0),
+    "specular lobes x0.5": Scattering(lobe_scale=0.5),
+    "specular lobes x2": Scattering(lobe_scale=2.0),
+    "no window": Scattering(window="none"),
+    "Hamming window": Scattering(window="hamming"),
+    "range-Doppler, no polar reformatting": Scattering(imaging="range-doppler"),
+    "1 px blur": Scattering(blur_px=1.0),
+    "5 dominant point returns": Scattering(dominant=5),
+    "phase error 1 rad": Scattering(phase_error_rad=1.0),
+    "scale errors +-2 %": Scattering(scale_error=0.02),
+}
+
+_DENSE: dict[int, tuple[Vec, Vec]] = {}
+
+
+def _dense_skin(model: TargetModel) -> tuple[Vec, Vec]:
+    """The model's skin and its normals (computed once per model)."""
+    from inference.targets import surface_normals
+
+    key = id(model.surface)
+    if key not in _DENSE:
+        _DENSE.clear()
+        _DENSE[key] = (model.surface, surface_normals(model.surface))
+    return _DENSE[key]
+
+
+def window_1d(n: int, kind: str, sidelobe_db: float) -> Vec:
+    if kind == "taylor":
+        return taylor_window(n, sidelobe_db)
+    if kind == "hamming":
+        return np.hamming(n)
+    return np.ones(n)
+
+
+def polar_echo(radar: Radar, points_obs: Vec, amplitudes: NDArray[np.complex128]) -> NDArray[np.complex128]:
+    """Return the echo on the radar's real polar samples (as ``polar_echo_direct``), by a 1-D NUFFT per aspect.
+
+    Along each aspect the frequencies are uniform, so each column is a type-1 NUFFT of the
+    scatterers' ranges; ~0.3 s a frame instead of ~5 s.
+    """
+    nr, na = radar.n_range, radar.n_azimuth
+    b = math.radians(radar.aperture_deg) / na * np.arange(-na // 2, na // 2, dtype=np.float64)
+    los, _ = line_of_sight(math.radians(radar.pitch_deg), b)  # (3, na)
+    ranges = points_obs @ los  # (K, na)
+    kc = 4.0 * math.pi * radar.carrier_hz / C_M_S
+    cell = radar.range_cell_m
+    echo = np.empty((nr, na), np.complex128)
+    for j in range(na):
+        c = amplitudes * np.exp(-1j * kc * ranges[:, j])
+        u = ranges[:, j] / cell + nr / 2
+        echo[:, j] = nufft_type1(u, np.full(len(u), 4.0), c, nr, 8)[:, 0]
+    return echo
+
+
 def simulate(
     model: TargetModel,
     imager: Imager,
     angles_deg: tuple[float, float, float],
     snr_db: float | None,
     seed: int,
+    scattering: Scattering = DEFAULT_SCATTERING,
 ) -> Frame:
-    """Simulate one frame: rotate, cull hidden scatterers, image, add noise at ``snr_db`` (None: noise-free)."""
+    """Simulate one frame: rotate, cull hidden scatterers, image, add noise at ``snr_db`` (None: noise-free).
+
+    ``scattering`` other than the default changes how (``Scattering``); the default draws the
+    same random numbers in the same order as before it existed, so every data set stays the same.
+    """
     rng = np.random.default_rng(seed)
     rot = rotation_matrix(*angles_deg)
-    pts = model.scatterers @ rot.T
-    normals = model.normals @ rot.T
-    los = projection_matrix(imager.radar)[0]
-    seen = visible(pts, normals, model.kinds, los)
-    amps = scatterer_amplitudes(normals[seen], model.kinds[seen], los, rng)
-    echo = imager.echo(pts[seen], amps)
+    sc = scattering
+    radar = imager.radar
+    if sc.scatterers == "dense":
+        skin, skin_normals = _dense_skin(model)
+        body = skin + rng.uniform(-0.04, 0.04, skin.shape)
+        kinds = np.full(len(skin), FLAT, np.int8)
+        pts, normals = body @ rot.T, skin_normals @ rot.T
+    else:
+        kinds = model.kinds
+        pts, normals = model.scatterers @ rot.T, model.normals @ rot.T
+    los = projection_matrix(radar)[0]
+    seen = visible(pts, normals, kinds, los)
+    if sc == DEFAULT_SCATTERING:
+        amps = scatterer_amplitudes(normals[seen], kinds[seen], los, rng)
+    else:
+        amps = scatterer_amplitudes(normals[seen], kinds[seen], los, rng, sc.lobe_scale, sc.edge_gain,
+                                    dense=sc.scatterers == "dense")  # fmt: skip
+    p = pts[seen]
+    if sc.dominant:
+        pick = rng.choice(len(p), size=min(sc.dominant, len(p)), replace=False)
+        amps[pick] = np.abs(amps).max() * np.exp(2j * np.pi * rng.random(len(pick)))
+    if sc.scale_error:
+        p = p * np.array([1.0 + rng.uniform(-1, 1) * sc.scale_error, 1.0 + rng.uniform(-1, 1) * sc.scale_error, 1.0])
+    if sc.imaging == "range-doppler":
+        echo = polar_echo(radar, p, amps)
+    else:
+        echo = imager.echo(p, amps)
+    if sc.phase_error_rad:
+        t = np.linspace(-1.0, 1.0, radar.n_azimuth)
+        curve = rng.uniform(-1, 1) * t**2 + rng.uniform(-1, 1) * t**3
+        echo = echo * np.exp(1j * sc.phase_error_rad * curve / max(np.abs(curve).max(), 1e-9))[None, :]
     if snr_db is not None:
         echo = add_noise(echo, snr_db, rng)
-    image = imager.image_from_echo(echo)
+    if sc.window == "taylor":
+        image = imager.image_from_echo(echo)
+    else:
+        import scipy.fft
+
+        w = np.outer(window_1d(radar.n_range, sc.window, 0), window_1d(radar.n_azimuth, sc.window, 0))
+        image = np.fft.fftshift(scipy.fft.ifft2(np.fft.ifftshift(w * echo)))
+    if sc.blur_px:
+        from scipy.ndimage import gaussian_filter
+
+        image = gaussian_filter(np.abs(image), sc.blur_px).astype(np.complex128)
     label = label_mask(imager, model.surface @ rot.T)
     return Frame(image, label, angles_deg, snr_db)

@@ -73,6 +73,16 @@ def _orthonormal(axis: Vec) -> tuple[Vec, Vec]:
     return u, np.cross(a, u)
 
 
+def surface_normals(points: Vec, k: int = 12) -> Vec:
+    """Return each point's unit normal (sign-free) from the principal axes of its ``k`` nearest neighbours."""
+    from scipy.spatial import cKDTree
+
+    _, idx = cKDTree(points).query(points, k=min(k, len(points)))
+    nb = points[idx] - points[idx].mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", nb, nb)
+    return np.asarray(np.linalg.eigh(cov)[1][:, :, 0])
+
+
 def cylinder(origin: Vec, axis: Vec, radius: float, length: float, spacing: float) -> tuple[Vec, Vec, Vec, Vec]:
     """Sample a cylinder's side: returns skin points, skin normals, rim points, rim normals."""
     a = np.asarray(axis, float) / np.linalg.norm(axis)

@@ -211,3 +211,44 @@ def test_model_files(tmp_path):
         load_model(junk)
     with pytest.raises(ModelFileError, match="frame is only"):
         check_fits(load_model(obj, scale=20.0), RADAR)
+
+
+def test_default_frames_are_unchanged_by_the_scattering_options():
+    """The hash of three default frames, recorded on the commit before inference.isar.Scattering existed."""
+    import hashlib
+
+    from inference.dataset import DatasetSpec, render_frames
+
+    a = render_frames(DatasetSpec(n=3, seed=0), RADAR, 0, 3)
+    digest = hashlib.sha256(a["image"].tobytes() + a["label"].tobytes()).hexdigest()
+    assert digest == "cfddc122e75fce63eb09552a5c8953761952b81d0dcf676feb7bcf22eaac5a44"
+
+
+def test_fast_polar_echo_matches_the_direct_sum():
+    from inference.isar import polar_echo
+
+    pts = np.random.default_rng(3).uniform(-10, 10, (40, 3))
+    amps = np.exp(2j * np.pi * np.random.default_rng(4).random(40))
+    fast = polar_echo(RADAR, pts, amps)
+    direct, _, _ = polar_echo_direct(RADAR, pts, amps)
+    assert np.abs(fast - direct).max() < 1e-2 * np.abs(direct).max()
+
+
+def test_every_variant_images_the_target_where_its_label_is():
+    from inference.isar import VARIANTS
+
+    model = tiangong_like()
+    for name, sc in VARIANTS.items():
+        f = simulate(model, IMAGER, (15.0, -10.0, 20.0), None, 2, sc)
+        mag = np.abs(f.image)
+        inside = mag[f.label].mean()
+        outside = mag[~f.label].mean()
+        assert inside > 5 * outside, name
+
+
+def test_bad_scattering_options_are_refused():
+    from inference.isar import Scattering
+
+    for kw in ({"window": "kaiser"}, {"edge_gain": -1}, {"scatterers": "mesh"}, {"scale_error": 0.5}):
+        with pytest.raises(RadarError, match=next(iter(kw))):
+            Scattering(**kw)
