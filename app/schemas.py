@@ -344,7 +344,10 @@ class QualityPublic(BaseModel):
 
 class AlternativePublic(AttitudePublic):
     silhouette_iou: float
-    fit_gap: float = Field(description="how much worse its fit is (1 - soft IoU) than the answer's")
+    fit_gap: float = Field(
+        description="how much lower its soft IoU is than the answer's; negative when it fits better but the answer "
+        "stays nearer Swin's estimate (Swin saw the brightness the silhouette lacks)"
+    )
     distance_deg: float = Field(description="rotation angle between it and the answer")
 
 

@@ -24,7 +24,7 @@ centre, six axis points, three face diagonals), fits the full quadratic through 
 and renders the quadratic's minimum (at most 2 h away); it moves to the best point
 seen and shrinks h from 1 deg (at most four iterations) to 0.35 and 0.12 deg (two each). Every render of an
 iteration is one batch. The cost is one minus the soft IoU with the enhanced frame,
-plus a weak Gaussian prior around the hypothesis's own start, so a hypothesis stays
+plus a weak Gaussian prior around Swin's answer (or, for library starts, each one's own), so a hypothesis stays
 a refinement of where it began. The last quadratic's Hessian is each answer's
 curvature, from which ``inference.trust`` makes the uncertainty.
 """
@@ -88,7 +88,7 @@ def thin(points: Vec, normals: Vec, areas: Vec, spacing_m: float) -> tuple[Vec, 
     return np.asarray(centre, float), np.asarray(mean_normal, float), np.bincount(inv, areas, n).astype(float)
 
 
-def pool(frame: Vec, factor: int) -> Vec:
+def pool(frame: NDArray[np.floating], factor: int) -> Vec:
     """Mean-pool a frame [H, W] by ``factor`` (H and W divisible by it)."""
     if factor == 1:
         return np.asarray(frame, float)
@@ -278,14 +278,20 @@ class FitOptions:
     coarse: bool = False  # fit the 4x-pooled coverage instead (Renderer.coverage): smooth but biased, for far starts
 
 
-def fit(renderer: Renderer, enhanced: Vec, starts: dict[str, Vec], options: FitOptions | None = None) -> list[Fit]:
-    """Refine each start (name -> (z, y, x) deg) against the enhanced frame; return the fits, best first."""
+def fit(renderer: Renderer, enhanced: Vec, starts: dict[str, Vec], options: FitOptions | None = None,
+        prior_at: Vec | None = None) -> list[Fit]:  # fmt: skip
+    """Refine each start (name -> (z, y, x) deg) against the enhanced frame; return the fits, best first.
+
+    The prior pulls each hypothesis toward its own start, or toward ``prior_at`` for all of
+    them (what the network saw: its near-mirror then has to fit clearly better to win).
+    """
     opt = options or FitOptions()
     target = np.clip(np.asarray(enhanced, np.float32), 0.0, 1.0)
     total = float(target.sum(dtype=np.float64))
     names = list(starts)
     origin = np.array([starts[n] for n in names], float).reshape(-1, 3)
     best = origin.copy()
+    centre = origin if prior_at is None else np.broadcast_to(np.asarray(prior_at, float), origin.shape)
     best_cost = np.full(len(names), np.inf)
     best_iou = np.zeros(len(names))
     hess = np.zeros((len(names), 3, 3))
@@ -305,7 +311,7 @@ def fit(renderer: Renderer, enhanced: Vec, starts: dict[str, Vec], options: FitO
             win = _window_for(renderer, silhouette, best[live])
             crop = target[win.r0 : win.r0 + win.h, win.c0 : win.c0 + win.w]
             iou = soft_iou(renderer.occupancy(flat, win), crop, total).reshape(points.shape[:-1])
-        prior = opt.prior_weight * np.sum(((points - origin[live][:, None, :]) / opt.prior_sigma_deg) ** 2, axis=-1)
+        prior = opt.prior_weight * np.sum(((points - centre[live][:, None, :]) / opt.prior_sigma_deg) ** 2, axis=-1)
         return 1.0 - iou + prior, iou
 
     # Score every start first, and refine only those that begin within ``prune`` of the best.
@@ -404,6 +410,45 @@ def curvature(renderer: Renderer, enhanced: Vec, angles_deg: Vec,
     inter = int(np.count_nonzero(label & (crop > 0.5)))
     hard = inter / max(int(np.count_nonzero(label)) + int(sil.sum()) - inter, 1)
     return hess / step_deg**2, float(iou[0]), float(hard)
+
+
+BRIGHTNESS_BLUR_PX = 1.5
+
+
+def brightness_agreement(
+    model: TargetModel, radar: Radar, frame: Vec, angles_deg: Vec, mask: NDArray[np.bool_]
+) -> float:
+    """Return how well an attitude explains which parts of the frame are bright: a correlation in [-1, 1].
+
+    What the silhouette cannot show: the scatterers the radar sees at that attitude (facing
+    it, not hidden behind nearer parts: ``inference.isar.visible``), each with its expected
+    aspect-dependent power (``expected_magnitude``), splatted and blurred by 1.5 pixels, in
+    log scale, against the normalised frame (itself in dB) blurred alike, over ``mask``. The
+    near-mirror's silhouette can match within a tenth of a percent while its bright parts
+    (which wing flashes, which side of a module faces the radar) do not.
+    """
+    from scipy.ndimage import gaussian_filter
+
+    from inference.frames import rotation_matrix
+    from inference.isar import Imager, expected_magnitude, visible
+
+    rot = rotation_matrix(*(float(a) for a in angles_deg))
+    pts, normals = model.scatterers @ rot.T, model.normals @ rot.T
+    los = projection_matrix(radar)[0]
+    seen = visible(pts, normals, model.kinds, los)
+    power = expected_magnitude(normals[seen], model.kinds[seen], los) ** 2
+    u, v = Imager(radar).pixel_coordinates(pts[seen])
+    iu = np.clip(np.rint(u).astype(np.int64), 0, radar.n_range - 1)
+    iv = np.clip(np.rint(v).astype(np.int64), 0, radar.n_azimuth - 1)
+    image = np.bincount(iu * radar.n_azimuth + iv, power, radar.n_range * radar.n_azimuth).reshape(
+        radar.n_range, radar.n_azimuth
+    )
+    image = gaussian_filter(image, BRIGHTNESS_BLUR_PX)
+    x = np.log(image[mask] + 1e-3 * max(float(image.max()), 1e-12))
+    y = gaussian_filter(np.asarray(frame, float), BRIGHTNESS_BLUR_PX)[mask]
+    if len(x) < 10 or np.std(x) == 0 or np.std(y) == 0:
+        return 0.0
+    return float(np.corrcoef(x, y)[0, 1])
 
 
 LIBRARY_STEP_DEG = 7.5

@@ -289,31 +289,38 @@ def visible(
     return front & (depth >= nearest[key] - cell_m)
 
 
-def scatterer_amplitudes(
-    normals_obs: Vec, kinds: NDArray[np.int8], los: Vec, rng: np.random.Generator, lobe_scale: float = 1.0,
-    edge_gain: float = 1.0, dense: bool = False,
-) -> NDArray[np.complex128]:  # fmt: skip
-    """Return complex amplitudes: aspect-dependent magnitude, seeded jitter and a random sub-cell phase.
+def expected_magnitude(
+    normals_obs: Vec, kinds: NDArray[np.int8], los: Vec, lobe_scale: float = 1.0, edge_gain: float = 1.0,
+    dense: bool = False,
+) -> Vec:  # fmt: skip
+    """Return each scatterer's aspect-dependent magnitude before the per-frame jitter (``scatterer_amplitudes``).
 
     FLAT facets flash when their normal meets the line of sight (Gaussian lobe of
     2 deg) over a weak diffuse floor; CURVED skin is bright along its specular line
     (lobe 6 deg); EDGE points are weak and steady; ISOTROPIC points are all equal.
+    ``dense`` gives all of them the curved skin's law.
     """
     cos_t = np.abs(np.clip(normals_obs @ los, -1.0, 1.0))
     angle = np.arccos(cos_t)
+    if dense:
+        return np.asarray(0.25 + 1.5 * np.exp(-((angle / math.radians(6.0 * lobe_scale)) ** 2)))
     mag = np.empty(len(kinds))
     flat = kinds == FLAT
     curved = kinds == CURVED
-    edge = kinds == EDGE
-    if dense:  # the skin sampled densely: one law for all of it, the curved skin's
-        mag[:] = 0.25 + 1.5 * np.exp(-((angle / math.radians(6.0 * lobe_scale)) ** 2))
-        mag *= rng.lognormal(0.0, 0.25, len(kinds))
-        return mag * np.exp(2j * np.pi * rng.random(len(kinds)))
     mag[flat] = 0.15 + 3.0 * np.exp(-((angle[flat] / math.radians(2.0 * lobe_scale)) ** 2))
     mag[curved] = 0.25 + 1.5 * np.exp(-((angle[curved] / math.radians(6.0 * lobe_scale)) ** 2))
-    mag[edge] = 0.5 * edge_gain
+    mag[kinds == EDGE] = 0.5 * edge_gain
     mag[kinds == ISOTROPIC] = 1.0
-    mag *= rng.lognormal(0.0, 0.25, len(kinds))
+    return mag
+
+
+def scatterer_amplitudes(
+    normals_obs: Vec, kinds: NDArray[np.int8], los: Vec, rng: np.random.Generator, lobe_scale: float = 1.0,
+    edge_gain: float = 1.0, dense: bool = False,
+) -> NDArray[np.complex128]:  # fmt: skip
+    """Return complex amplitudes: ``expected_magnitude``, seeded log-normal jitter and a random sub-cell phase."""
+    mag = expected_magnitude(normals_obs, kinds, los, lobe_scale, edge_gain, dense)
+    mag = mag * rng.lognormal(0.0, 0.25, len(kinds))
     return mag * np.exp(2j * np.pi * rng.random(len(kinds)))
 
 

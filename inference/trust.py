@@ -37,7 +37,17 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from inference.fit import Fit, FitOptions, Library, Renderer, curvature, fit, mirror, silhouette_iou
+from inference.fit import (
+    Fit,
+    FitOptions,
+    Library,
+    Renderer,
+    brightness_agreement,
+    curvature,
+    fit,
+    mirror,
+    silhouette_iou,
+)
 from inference.frames import geodesic_deg
 from inference.isar import Radar
 from inference.targets import TargetModel
@@ -46,6 +56,7 @@ Vec = NDArray[np.float64]
 
 TRUST_FILE = "trust.json"
 ALTERNATIVE_MARGIN = 0.02  # soft-IoU cost within which another attitude is listed
+BRIGHTNESS_MARGIN = 0.01  # silhouettes this close (soft IoU) are told apart by their bright parts
 DISTINCT_DEG = 5.0  # an alternative is at least this far from the answer
 # From library starts: first the coarse coverage (smooth, within a degree or two), then the fine label.
 LIBRARY_COARSE = FitOptions(steps_deg=(4.0, 2.0, 1.0), max_iter=(3, 3, 3), prior_weight=0.0, prune=0.05, coarse=True)
@@ -94,7 +105,7 @@ class Quality:
 class Alternative:
     angles_deg: tuple[float, float, float]
     silhouette_iou: float
-    fit_gap: float  # how much worse its soft-IoU cost is than the answer's
+    fit_gap: float  # how much lower its soft IoU is than the answer's (negative: it fits better, the prior chose)
     distance_deg: float
     start: str
 
@@ -160,10 +171,13 @@ class Checker:
             starts: dict[str, Vec] = {}
             if net is not None:
                 starts = {"network": net, "mirror": mirror(net)}
-                fits = fit(self.renderer, enh, starts)
+                # The prior sits on Swin's answer for both: Swin saw the brightness, which tells the
+                # near-mirror apart where the silhouettes are alike, so the mirror must fit clearly better.
+                fits = fit(self.renderer, enh, starts, prior_at=net)
             if net is None or self._hard_iou(fits[0].angles_deg, enh) < cal.iou_min:
                 # No networks, or their answer does not fit: search the library too.
                 fits = sorted(fits + self.search(enh), key=lambda f: f.cost)
+            fits = self._by_brightness(frame, enh, fits)
             best = fits[0]
             angles = best.angles_deg
             hessian, soft, iou = curvature(self.renderer, enh, angles)
@@ -182,7 +196,7 @@ class Checker:
         if fits:
             for f in fits[1:]:
                 dist = float(geodesic_deg(f.angles_deg, angles)[0])
-                gap = f.cost - fits[0].cost
+                gap = fits[0].iou - f.iou  # the fits alone, without the prior
                 if (
                     dist >= DISTINCT_DEG
                     and gap <= ALTERNATIVE_MARGIN
@@ -195,6 +209,18 @@ class Checker:
         reasons = self._reasons(features, angles, bound, alternatives, net is not None and refine)
         quality = Quality(round(iou, 4), tuple(round(float(b), 3) for b in bound), not reasons, reasons)  # type: ignore[arg-type]
         return Checked(angles, net, bool(fits), quality, alternatives, features)
+
+    def _by_brightness(self, frame: NDArray[np.floating], enhanced: Vec, fits: list[Fit]) -> list[Fit]:
+        """Where a distinct attitude's silhouette fits within ``BRIGHTNESS_MARGIN``, let the bright parts choose."""
+        rivals = [f for f in fits[1:] if fits[0].iou - f.iou < BRIGHTNESS_MARGIN
+                  and geodesic_deg(f.angles_deg, fits[0].angles_deg)[0] >= DISTINCT_DEG]  # fmt: skip
+        if not rivals:
+            return fits
+        mask = enhanced > 0.5
+        score = {id(f): brightness_agreement(self.model, self.radar, np.asarray(frame, float), f.angles_deg, mask)
+                 for f in [fits[0], *rivals]}  # fmt: skip
+        winner = max([fits[0], *rivals], key=lambda f: score[id(f)])
+        return [winner, *[f for f in fits if f is not winner]]
 
     def search(self, enhanced: Vec, count: int = 4) -> list[Fit]:
         """Fit from the library's best ``count`` matches, coarse then fine (no network needed); best first."""

@@ -62,7 +62,7 @@ def test_the_simulator_imports_no_torch(module):
     assert not any(m.split(".")[0] in ("torch", "onnxruntime") for m in _closure(module)), module
 
 
-@pytest.mark.parametrize("module", ["inference.runtime", "inference.frames"])
+@pytest.mark.parametrize("module", ["inference.runtime", "inference.frames", "inference.fit", "inference.trust"])
 def test_the_runtime_imports_no_torch(module):
     assert not any(m.split(".")[0] == "torch" for m in _closure(module)), module
 

@@ -43,6 +43,11 @@ RANGE_CELL = (
     "models' 0.0937 m cells, about its centre pixel"
 )
 CROSS_RANGE_CELL = "the frame's cross-range cell in metres (columns; with range_cell_m); the models' is 0.1123 m"
+FILE = (
+    ".npy/.npz (2-D, real or complex) or 8/16-bit grayscale PNG/TIFF. Convention: rows are range, growing toward "
+    "the radar; columns are cross-range, along the line of sight's rate of change; the target's centre at pixel "
+    "(N/2, N/2) counted from 0; the shipped models' cells are 0.0937 m (range) x 0.1123 m (cross-range), 256 x 256"
+)
 
 
 def _cells(range_cell_m: float | None, cross_range_cell_m: float | None) -> tuple[float, float] | None:
@@ -149,7 +154,7 @@ async def create_estimate(
     settings: SettingsDep,
     est: EstimatorDep,
     checkers: CheckersDep,
-    file: Annotated[UploadFile, File(description=".npy/.npz (2-D, real or complex) or 8/16-bit grayscale PNG/TIFF")],
+    file: Annotated[UploadFile, File(description=FILE)],
     resample: Annotated[bool, Form(description=RESAMPLE)] = False,
     plan_id: Annotated[Text | None, Form(max_length=36, description=PLAN_ID)] = None,
     observed_at: Annotated[IsoDateTime | None, Form(description=OBSERVED_AT)] = None,
@@ -186,7 +191,7 @@ async def create_estimates_batch(
     settings: SettingsDep,
     est: EstimatorDep,
     checkers: CheckersDep,
-    files: Annotated[list[UploadFile], File(description="several frames, or one .npz stack [N, H, W]")],
+    files: Annotated[list[UploadFile], File(description="several frames, or one .npz stack [N, H, W]; " + FILE)],
     resample: Annotated[bool, Form(description=RESAMPLE)] = False,
     plan_id: Annotated[Text | None, Form(max_length=36, description=PLAN_ID)] = None,
     observed_at: Annotated[IsoDateTime | None, Form(description=OBSERVED_AT)] = None,
