@@ -188,7 +188,7 @@ def main() -> None:
         lines += bench_service(DEFAULT_MODEL_DIR)
     from bench.sections import kept_sections
 
-    lines += kept_sections(("Load", "Fuzzing"))  # written by `make load` and `make fuzz`
+    lines += kept_sections(("Attitude fit and trust", "Load", "Fuzzing"))  # bench.trust, `make load`, `make fuzz`
     Path("BENCHMARKS.md").write_text("\n".join(lines))
     print("\n".join(lines))
 

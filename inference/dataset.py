@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from inference.errors import DatasetError, module_main
 from inference.frames import normalise_frame
-from inference.isar import Imager, Radar, check_fits, simulate
+from inference.isar import Imager, Radar, check_fits, draw_scattering, simulate
 from inference.runtime import sha256_file
 from inference.targets import TargetModel, load_model, tiangong_like
 
@@ -52,6 +52,8 @@ class DatasetSpec:
     n_train: int | None = None  # the paper's split is n_train=4000 of 5000
     model_path: str | None = None
     model_scale: float = 1.0
+    variety: str | None = None  # a VARIETY_PRESETS name: each frame draws its own Scattering (None: the default)
+    variety_overrides: tuple[tuple[str, Any], ...] = ()
 
     def __post_init__(self) -> None:
         if not isinstance(self.n, int) or self.n <= 0:
@@ -71,6 +73,8 @@ class DatasetSpec:
             raise DatasetError(f"max_angle_deg {self.max_angle_deg} is outside [0, 89]", field="max_angle_deg")
         if self.shard_size <= 0:
             raise DatasetError("shard_size must be positive", field="shard_size")
+        if self.variety is not None:
+            draw_scattering(self.variety, np.random.default_rng(0), dict(self.variety_overrides))  # fails early
         if self.n_train is not None and not 0 <= self.n_train <= self.n:
             raise DatasetError(f"n_train {self.n_train} must be within [0, n={self.n}]", field="n_train")
 
@@ -112,7 +116,11 @@ def render_frames(
     seeds = np.empty(n, np.int64)
     for k, index in enumerate(range(start, stop)):
         ang, snr, s = frame_truth(spec, index)
-        frame = simulate(model, imager, ang, snr, s)
+        if spec.variety is None:
+            frame = simulate(model, imager, ang, snr, s)
+        else:  # the variety draws from its own stream, so a frame's angles, SNR and seed stay the default set's
+            sc = draw_scattering(spec.variety, np.random.default_rng([s, 1]), dict(spec.variety_overrides))
+            frame = simulate(model, imager, ang, snr, s, sc)
         images[k] = normalise_frame(np.abs(frame.image))
         labels[k] = np.packbits(frame.label, axis=1)
         angles[k] = ang
@@ -340,8 +348,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--n-range", type=int, default=256)
     p.add_argument("--n-azimuth", type=int, default=256)
     p.add_argument("--aperture-deg", type=float, default=5.1)
+    p.add_argument("--variety", help="draw each frame's scattering from a preset (robust: inference.isar.VARIETY_PRESETS)")
+    p.add_argument("--variety-set", action="append", default=[], metavar="NAME=VALUE",
+                   help="fix one scattering parameter under --variety, e.g. window=none or edge_gain=0 (repeatable)")  # fmt: skip
     p.add_argument("--out", help="new directory for the data set")
     p.add_argument("--preview", metavar="PNG", help="draw a few frames beside their labels instead")
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+    """Parse NAME=VALUE (a number, or a word such as none / hamming / dense)."""
+    name, sep, value = text.partition("=")
+    if not sep or not name:
+        raise DatasetError(f"--variety-set {text!r}: write NAME=VALUE, e.g. window=none", field="variety")
+    for kind in (int, float):
+        try:
+            return name.strip(), kind(value)
+        except ValueError:
+            continue
+    return name.strip(), value.strip()
 
 
 def run(args: argparse.Namespace) -> int:
@@ -350,9 +374,12 @@ def run(args: argparse.Namespace) -> int:
     if args.split and args.n_train is not None:
         raise DatasetError("give --split (80 % train) or --n-train N, not both", field="n_train")
     n_train = default_train_frames(args.n) if args.split else args.n_train
+    if args.variety_set and not args.variety:
+        raise DatasetError("--variety-set needs --variety PRESET", field="variety")
     spec = DatasetSpec(
-        args.n, args.seed, lo, hi, args.max_angle_deg, args.shard_size, n_train, args.model, args.model_scale
-    )
+        args.n, args.seed, lo, hi, args.max_angle_deg, args.shard_size, n_train, args.model, args.model_scale,
+        args.variety, tuple(parse_override(v) for v in args.variety_set),
+    )  # fmt: skip
     radar = Radar(args.carrier_hz, args.bandwidth_hz, args.n_range, args.n_azimuth, args.aperture_deg)
     if args.preview:
         build_model(spec, radar)

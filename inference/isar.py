@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -427,6 +428,42 @@ VARIANTS = {
     "phase error 1 rad": Scattering(phase_error_rad=1.0),
     "scale errors +-2 %": Scattering(scale_error=0.02),
 }
+
+# ``gsa simulate --variety robust``: every frame draws its own Scattering from these ranges
+# (uniform, or a choice), so a training set spans what the robustness benchmark varies.
+VARIETY_PRESETS: dict[str, dict[str, tuple[Any, ...]]] = {
+    "robust": {
+        "scatterers": ("lattice", "dense"),
+        "edge_gain": (0.0, 1.0),
+        "lobe_scale": (0.5, 2.0),
+        "window": ("taylor", "hamming", "none"),
+        "imaging": ("polar", "polar", "range-doppler"),
+        "dominant": (0, 5),
+        "phase_error_rad": (0.0, 1.0),
+        "scale_error": (0.0, 0.02),
+        "blur_px": (0.0, 1.0),
+    },
+}
+
+
+def draw_scattering(preset: str, rng: np.random.Generator, overrides: dict[str, Any] | None = None) -> Scattering:
+    """Draw one frame's Scattering from a ``VARIETY_PRESETS`` preset; ``overrides`` fix parameters."""
+    if preset not in VARIETY_PRESETS:
+        raise RadarError(f"unknown variety preset {preset!r}; one of {', '.join(VARIETY_PRESETS)}", field="variety")
+    values: dict[str, Any] = {}
+    for name, spec in VARIETY_PRESETS[preset].items():
+        if isinstance(spec[0], str) or len(spec) != 2:
+            values[name] = spec[int(rng.integers(len(spec)))]
+        elif isinstance(spec[0], int) and isinstance(spec[1], int):
+            values[name] = int(rng.integers(spec[0], spec[1] + 1))
+        else:
+            values[name] = float(rng.uniform(spec[0], spec[1]))
+    for name, value in (overrides or {}).items():
+        if name not in Scattering.__dataclass_fields__:
+            raise RadarError(f"unknown scattering parameter {name!r} (see inference.isar.Scattering)", field="variety")
+        values[name] = value
+    return Scattering(**values)
+
 
 _DENSE: dict[int, tuple[Vec, Vec]] = {}
 

@@ -131,3 +131,27 @@ def test_one_split_rule_for_training_export_and_evaluation():
     stored = {"frames": 10, "split": {"train": [0, 7], "test": [7, 10]}}
     assert split_ranges(stored) == ((0, 7), (7, 10))
     assert split_indices(stored, 10)[1].tolist() == [7, 8, 9]
+
+
+def test_variety_changes_the_scattering_but_not_the_truth(tmp_path):
+    from inference.dataset import DatasetSpec, render_frames
+    from inference.isar import Radar
+
+    radar = Radar(n_range=64, n_azimuth=64, bandwidth_hz=0.4e9, aperture_deg=5.1 / 4)
+    plain = render_frames(DatasetSpec(n=4, seed=3), radar, 0, 4)
+    varied = render_frames(DatasetSpec(n=4, seed=3, variety="robust"), radar, 0, 4)
+    np.testing.assert_array_equal(plain["angles_deg"], varied["angles_deg"])
+    np.testing.assert_array_equal(plain["label"], varied["label"])  # the label is the exact projection either way
+    assert not np.array_equal(plain["image"], varied["image"])
+    again = render_frames(DatasetSpec(n=4, seed=3, variety="robust"), radar, 0, 4)
+    np.testing.assert_array_equal(varied["image"], again["image"])  # seeded
+
+
+def test_bad_variety_is_refused_before_any_work():
+    from inference.dataset import DatasetSpec
+    from inference.errors import InferenceError
+
+    with pytest.raises(InferenceError, match="unknown variety preset"):
+        DatasetSpec(n=4, variety="fancy")
+    with pytest.raises(InferenceError, match="window"):
+        DatasetSpec(n=4, variety="robust", variety_overrides=(("window", "kaiser"),))
