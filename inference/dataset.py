@@ -348,7 +348,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--n-range", type=int, default=256)
     p.add_argument("--n-azimuth", type=int, default=256)
     p.add_argument("--aperture-deg", type=float, default=5.1)
-    p.add_argument("--variety", help="draw each frame's scattering from a preset (robust: inference.isar.VARIETY_PRESETS)")
+    p.add_argument(
+        "--variety", help="draw each frame's scattering from a preset (robust: inference.isar.VARIETY_PRESETS)"
+    )
     p.add_argument("--variety-set", action="append", default=[], metavar="NAME=VALUE",
                    help="fix one scattering parameter under --variety, e.g. window=none or edge_gain=0 (repeatable)")  # fmt: skip
     p.add_argument("--out", help="new directory for the data set")
