@@ -10,7 +10,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from app.core.security import HMAC_SCHEME, LEGACY_SCHEME, digests_equal, key_digest, key_prefix, new_api_key
-from app.db.models import ApiKey, Estimate, Operator, Plan, utcnow
+from app.db.models import ApiKey, Estimate, Operator, Pass, Plan, utcnow
 
 
 def get_or_create_operator(*, session: Session, name: str) -> Operator:
@@ -182,3 +182,7 @@ def blob_in_use(*, session: Session, digest: str) -> bool:
         .where((Estimate.original_sha256 == digest) | (Estimate.enhanced_sha256 == digest))
     )
     return bool(hit)
+
+
+def get_pass(*, session: Session, operator_id: str, pass_id: str) -> Pass | None:
+    return session.scalar(select(Pass).where(Pass.id == pass_id, Pass.operator_id == operator_id))

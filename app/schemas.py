@@ -445,3 +445,46 @@ ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
     401: {"model": ErrorMessage, "description": "no API key, or an invalid or revoked one"},
     413: {"model": ErrorMessage, "description": "the request or an uploaded file is over its size limit"},
 }
+
+
+class PassFramePublic(BaseModel):
+    index: int
+    name: str
+    observed_at: datetime
+    attitude: AttitudePublic = Field(description="the frame's fitted attitude, in its own observation frame")
+    attitude_network: AttitudePublic | None = None
+    refined: bool
+    quality: QualityPublic
+    alternatives: list[AlternativePublic]
+    attitude_lvlh: AttitudePublic = Field(description="the branch the fusion took for this frame, in LVLH")
+    branch: str = Field(description="answer, near-mirror, or alternative N: which of the frame's candidates agreed")
+    used: bool
+    rejected_because: str | None = None
+    residual_deg: float = Field(description="rotation angle between this frame's branch and the fused attitude")
+
+
+class PassAttitudeJ2000(AttitudePublic):
+    at: datetime = Field(description="LVLH turns with the orbit: the J2000 attitude holds at this moment (mid-pass)")
+
+
+class PassPublic(BaseModel):
+    id: str
+    created_at: datetime
+    plan_id: str | None
+    target: str
+    attitude_lvlh: AttitudePublic = Field(
+        description="the fused attitude, body to LVLH (x radial, y along-track, z normal)"
+    )
+    attitude_j2000: PassAttitudeJ2000
+    uncertainty_deg: list[float] = Field(description="90 % bound on the fused LVLH Euler z, y, x (deg)")
+    used: int
+    rejected: int
+    stable: bool = Field(description="false when the frames show a body rate beyond their scatter")
+    rate_deg_s: list[float] = Field(description="the fitted body rate (deg/s, body axes)")
+    rate_sigma_deg_s: list[float | None]
+    stability: str
+    frames: list[PassFramePublic]
+
+    @staticmethod
+    def row_json(p: Any) -> dict[str, Any]:
+        return {"id": p.id, "created_at": utc_or_none(p.created_at), "plan_id": p.plan_id, **p.result}

@@ -1,11 +1,11 @@
-"""Request dependencies: the database session, the settings and the calling operator."""
+"""Request dependencies: the database session, the settings, the calling operator, and the upload helpers."""
 
 from __future__ import annotations
 
 from collections.abc import Iterator
 from typing import TYPE_CHECKING, Annotated, Any, cast
 
-from fastapi import Depends, HTTPException, Request, Security
+from fastapi import Depends, HTTPException, Request, Security, UploadFile
 from fastapi.security import APIKeyHeader
 from sqlalchemy.orm import Session
 
@@ -14,7 +14,7 @@ from app.core.config import Settings
 from app.core.security import digests_equal, key_fingerprint
 from app.db.models import Operator
 from app.errors import InputError
-from app.schemas import utc_or_none
+from app.schemas import CONTROL_CHARACTERS, utc_or_none
 from inference.runtime import Estimator
 
 if TYPE_CHECKING:  # the fit's module imports the simulator's geometry: kept out of `gsa --help`
@@ -117,3 +117,30 @@ def check_span(days: float, settings: Settings, loc: list[str | int]) -> None:
         raise InputError(
             loc, f"{days} days is over the span limit of {settings.max_span_days} days (GSA_MAX_SPAN_DAYS)"
         )
+
+
+async def read_upload(upload: UploadFile, limit: int) -> bytes:
+    if CONTROL_CHARACTERS.search(upload.filename or ""):
+        raise InputError(["file"], "the file name must not contain control characters (NUL, tab, newline, ...)")
+    data = await upload.read(limit + 1)
+    if len(data) > limit:
+        raise HTTPException(
+            status_code=413, detail=f"file {upload.filename!r} is over the upload limit of {limit} bytes"
+        )
+    return data
+
+
+def cells_from_form(range_cell_m: float | None, cross_range_cell_m: float | None) -> tuple[float, float] | None:
+    if (range_cell_m is None) != (cross_range_cell_m is None):
+        missing = "cross_range_cell_m" if cross_range_cell_m is None else "range_cell_m"
+        raise InputError([missing], "send range_cell_m and cross_range_cell_m together (the frame's cells in metres)")
+    return None if range_cell_m is None or cross_range_cell_m is None else (range_cell_m, cross_range_cell_m)
+
+
+def checker_for(checkers: Any, target: str | None) -> Any:
+    from inference.errors import ModelFileError
+
+    try:
+        return checkers.get(target or checkers.default)
+    except ModelFileError as exc:
+        raise InputError(["target"], str(exc)) from None

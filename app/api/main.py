@@ -3,7 +3,7 @@ from fastapi.dependencies.models import Dependant
 from fastapi.routing import APIRoute
 
 from app.api.deps import CurrentOperator
-from app.api.routes import access, estimates, plans, scenes
+from app.api.routes import access, estimates, passes, plans, scenes
 from app.errors import InputError
 from app.schemas import ERROR_RESPONSES
 
@@ -37,3 +37,4 @@ api_router.include_router(plans.router)
 api_router.include_router(access.router)
 api_router.include_router(estimates.router)
 api_router.include_router(scenes.router)
+api_router.include_router(passes.router)

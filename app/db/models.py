@@ -76,3 +76,16 @@ class Estimate(Base):
     result: Mapped[dict[str, Any]] = mapped_column(JSON)
     original_sha256: Mapped[str] = mapped_column(String(64))
     enhanced_sha256: Mapped[str] = mapped_column(String(64))
+
+
+class Pass(Base):
+    """A pass's frames fused into one attitude (``POST /v1/passes``): the answer and every frame's part in it."""
+
+    __tablename__ = "passes"
+    __table_args__ = (Index("ix_passes_operator_created", "operator_id", "created_at"),)
+
+    id: Mapped[str] = mapped_column(String(36), primary_key=True, default=new_id)
+    operator_id: Mapped[str] = mapped_column(ForeignKey("operators.id", ondelete="CASCADE"))
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    plan_id: Mapped[str | None] = mapped_column(ForeignKey("plans.id", ondelete="SET NULL"), nullable=True, index=True)
+    result: Mapped[dict[str, Any]] = mapped_column(JSON)

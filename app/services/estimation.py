@@ -339,6 +339,26 @@ def attitude_json(angles_deg: NDArray[np.floating]) -> dict[str, Any]:
     }
 
 
+def check_frames(*, est: Any, checker: Any, uploads: list[Upload], resample: bool, normalised: bool,
+                 cells_m: tuple[float, float] | None, refine: bool = True) -> tuple[Any, Any, list[Any], dict[str, float]]:  # fmt: skip
+    """Prepare uploads, run the models on them as one batch and fit and check each; return frames, models' output,
+    checks and the seconds per frame of each stage."""
+    import time
+
+    t0 = time.perf_counter()
+    model_cells = (checker.radar.range_cell_m, checker.radar.cross_range_cell_m)
+    frames = np.stack([prepare(u, est.img_size, resample, normalised, cells_m, model_cells) for u in uploads])
+    t_prep = time.perf_counter() - t0
+    res = est.estimate(frames)
+    t1 = time.perf_counter()
+    checks = [checker.check(frames[k], res.enhanced[k], res.angles_deg[k] if checker.networks else None, refine)
+              for k in range(len(uploads))]  # fmt: skip
+    t_fit = time.perf_counter() - t1
+    n = len(uploads)
+    per_frame = {"preprocess": t_prep / n, **{k: v / n for k, v in res.timings_s.items()}, "fit": t_fit / n}
+    return frames, res, checks, per_frame
+
+
 def checked_json(checked: Any) -> dict[str, Any]:
     """Return an ``inference.trust.Checked`` as the stored result's attitude, quality and alternatives."""
     q = checked.quality

@@ -2,19 +2,28 @@
 
 from __future__ import annotations
 
-import time
 from datetime import datetime
 from pathlib import Path
 from typing import Annotated, Any
 
-import numpy as np
 from fastapi import APIRouter, File, Form, HTTPException, Query, UploadFile
 from fastapi import Path as PathParam
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse, Response
 
 from app import crud
-from app.api.deps import CheckersDep, CurrentOperator, EstimatorDep, SessionDep, SettingsDep, as_utc, check_page_size
+from app.api.deps import (
+    CheckersDep,
+    CurrentOperator,
+    EstimatorDep,
+    SessionDep,
+    SettingsDep,
+    as_utc,
+    cells_from_form,
+    check_page_size,
+    checker_for,
+    read_upload,
+)
 from app.db.models import Estimate, utcnow
 from app.errors import InputError
 from app.schemas import CONTROL_CHARACTERS, EstimatePublic, EstimatesPublic, IsoDateTime, Text
@@ -50,33 +59,6 @@ FILE = (
 )
 
 
-def _cells(range_cell_m: float | None, cross_range_cell_m: float | None) -> tuple[float, float] | None:
-    if (range_cell_m is None) != (cross_range_cell_m is None):
-        missing = "cross_range_cell_m" if cross_range_cell_m is None else "range_cell_m"
-        raise InputError([missing], "send range_cell_m and cross_range_cell_m together (the frame's cells in metres)")
-    return None if range_cell_m is None or cross_range_cell_m is None else (range_cell_m, cross_range_cell_m)
-
-
-def _checker(checkers: Any, target: str | None) -> Any:
-    from inference.errors import ModelFileError
-
-    try:
-        return checkers.get(target or checkers.default)
-    except ModelFileError as exc:
-        raise InputError(["target"], str(exc)) from None
-
-
-async def _read(upload: UploadFile, limit: int) -> bytes:
-    if CONTROL_CHARACTERS.search(upload.filename or ""):
-        raise InputError(["file"], "the file name must not contain control characters (NUL, tab, newline, ...)")
-    data = await upload.read(limit + 1)
-    if len(data) > limit:
-        raise HTTPException(
-            status_code=413, detail=f"file {upload.filename!r} is over the upload limit of {limit} bytes"
-        )
-    return data
-
-
 def _estimate(
     *, session: Any, operator_id: str, settings: Any, est: Any, uploads: list[svc.Upload], resample: bool,
     plan_id: str | None, observed_at: datetime | None, snr_db: float | None, normalised: bool = False,
@@ -96,19 +78,10 @@ def _estimate(
         plan = crud.get_plan(session=session, operator_id=operator_id, plan_id=plan_id)
         if plan is None:
             raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
-    t0 = time.perf_counter()
-    model_cells = (checker.radar.range_cell_m, checker.radar.cross_range_cell_m)
-    frames = np.stack([svc.prepare(u, est.img_size, resample, normalised, cells_m, model_cells) for u in uploads])
-    t_prep = time.perf_counter() - t0
-    res = est.estimate(frames)
-    enhanced, timings = res.enhanced, res.timings_s
-    t1 = time.perf_counter()
-    checks = [checker.check(frames[k], enhanced[k], res.angles_deg[k] if checker.networks else None, refine)
-              for k in range(len(uploads))]  # fmt: skip
-    t_fit = time.perf_counter() - t1
+    frames, res, checks, per_frame = svc.check_frames(est=est, checker=checker, uploads=uploads, resample=resample,
+                                                      normalised=normalised, cells_m=cells_m, refine=refine)  # fmt: skip
+    enhanced = res.enhanced
     angles = [c.angles_deg for c in checks]
-    per_frame = {"preprocess": t_prep / len(uploads), **{k: v / len(uploads) for k, v in timings.items()},
-                 "fit": t_fit / len(uploads)}  # fmt: skip
     in_frames: list[dict[str, Any] | None] = [None] * len(uploads)
     if plan is not None and observed_at is not None:
         in_frames = [svc.attitudes_in_frames(plan.request, observed_at, a) for a in angles]
@@ -166,9 +139,9 @@ async def create_estimate(
     cross_range_cell_m: Annotated[float | None, Form(gt=0, le=100, description=CROSS_RANGE_CELL)] = None,
 ) -> dict[str, Any]:
     """Estimate the attitude of one ISAR frame: Swin's answer, fitted to the target's projection and checked; stored."""
-    cells_m = _cells(range_cell_m, cross_range_cell_m)
-    checker = _checker(checkers, target)
-    data = await _read(file, settings.max_upload_bytes)
+    cells_m = cells_from_form(range_cell_m, cross_range_cell_m)
+    checker = checker_for(checkers, target)
+    data = await read_upload(file, settings.max_upload_bytes)
     # Decoding, the models and the database run in a worker thread, so the event loop keeps serving meanwhile.
     uploads = await run_in_threadpool(
         svc.decode, data, file.filename or "upload", allow_stack=False, max_side=settings.max_image_side
@@ -202,11 +175,11 @@ async def create_estimates_batch(
     cross_range_cell_m: Annotated[float | None, Form(gt=0, le=100, description=CROSS_RANGE_CELL)] = None,
 ) -> dict[str, Any]:
     """Estimate several frames as one batch through the models, each fitted and checked; one stored row each."""
-    cells_m = _cells(range_cell_m, cross_range_cell_m)
-    checker = _checker(checkers, target)
+    cells_m = cells_from_form(range_cell_m, cross_range_cell_m)
+    checker = checker_for(checkers, target)
     uploads: list[svc.Upload] = []
     for f in files:
-        data = await _read(f, settings.max_upload_bytes)
+        data = await read_upload(f, settings.max_upload_bytes)
         uploads += await run_in_threadpool(svc.decode, data, f.filename or "upload", max_side=settings.max_image_side)
     rows = await run_in_threadpool(_estimate, session=session, operator_id=operator.id, settings=settings, est=est,
                                    uploads=uploads, resample=resample, plan_id=plan_id,

@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import copy
 import hashlib
+import io
 import json
 import logging
 import re
+from datetime import datetime
 
 import numpy as np
 import pytest
@@ -20,7 +22,7 @@ from app import crud
 from app.core.db import head_revision, make_engine, make_session_factory
 from app.core.observability import JsonFormatter
 from app.core.security import LEGACY_SCHEME, key_digest, load_key_secret
-from app.db.models import ApiKey, Estimate, Plan
+from app.db.models import ApiKey, Estimate, Pass, Plan
 from app.schemas import PAPER_EXAMPLE
 from tests.conftest import KEY_A, KEY_B
 from tests.utils.server import npy_bytes
@@ -28,7 +30,8 @@ from tests.utils.server import npy_bytes
 A = {"X-API-Key": KEY_A}
 B = {"X-API-Key": KEY_B}
 # The stored record each path parameter names; a route with any other parameter fails the test.
-ID_PARAMS = {"plan_id": "plan", "estimate_id": "estimate"}
+ID_PARAMS = {"plan_id": "plan", "estimate_id": "estimate", "pass_id": "pass"}
+COLLECTIONS = {"plan": "plans", "estimate": "estimates", "pass": "passes"}
 
 
 def _v1_routes(app):
@@ -40,7 +43,9 @@ def _v1_routes(app):
 def _counts(settings):
     engine = create_engine(settings.database_url)
     with engine.connect() as conn:
-        out = {t.__tablename__: conn.scalar(select(func.count()).select_from(t)) for t in (Plan, Estimate, ApiKey)}
+        out = {
+            t.__tablename__: conn.scalar(select(func.count()).select_from(t)) for t in (Plan, Estimate, Pass, ApiKey)
+        }
     engine.dispose()
     return out
 
@@ -54,7 +59,15 @@ def records(client):
     est = client.post("/v1/estimates", files={"file": ("f.npy", npy_bytes(frame))}, data={"plan_id": plan.json()["id"]},
                       headers=A)  # fmt: skip
     assert est.status_code == 201, est.text
-    return {"plan": plan.json()["id"], "estimate": est.json()["id"]}
+    w = plan.json()["access_windows"][0]
+    rise, end = datetime.fromisoformat(w["rise"]), datetime.fromisoformat(w["set"])
+    times = [(rise + (end - rise) * f).isoformat() for f in (0.3, 0.6)]
+    buf = io.BytesIO()
+    np.savez(buf, frames=np.random.default_rng(1).random((2, 64, 64)))
+    ps = client.post("/v1/passes", files=[("files", ("p.npz", buf.getvalue()))],
+                     data={"plan_id": plan.json()["id"], "observed_at": times}, headers=A)  # fmt: skip
+    assert ps.status_code == 201, ps.text
+    return {"plan": plan.json()["id"], "estimate": est.json()["id"], "pass": ps.json()["id"]}
 
 
 @pytest.fixture(scope="module")
@@ -85,7 +98,7 @@ def test_every_v1_route_answers_401_without_a_valid_key(client, records, revoked
 
 
 def test_another_operators_records_are_404_and_unchanged(client, settings, records):
-    before = {name: client.get(f"/v1/{name}s/{rid}", headers=A).json() for name, rid in records.items()}
+    before = {name: client.get(f"/v1/{COLLECTIONS[name]}/{rid}", headers=A).json() for name, rid in records.items()}
     counts = _counts(settings)
     checked = 0
     for method, path in _v1_routes(client.app):
@@ -96,7 +109,7 @@ def test_another_operators_records_are_404_and_unchanged(client, settings, recor
         checked += 1
     assert checked >= 5  # plan, estimate, its two images, delete
     assert _counts(settings) == counts
-    after = {name: client.get(f"/v1/{name}s/{rid}", headers=A).json() for name, rid in records.items()}
+    after = {name: client.get(f"/v1/{COLLECTIONS[name]}/{rid}", headers=A).json() for name, rid in records.items()}
     assert after == before
 
 

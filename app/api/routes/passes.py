@@ -1,0 +1,110 @@
+"""Passes: a pass's frames, each fitted and placed in the target's orbital frame, fused into one attitude."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, File, Form, HTTPException, UploadFile
+from fastapi import Path as PathParam
+from fastapi.concurrency import run_in_threadpool
+
+from app import crud
+from app.api.deps import (
+    CheckersDep,
+    CurrentOperator,
+    EstimatorDep,
+    SessionDep,
+    SettingsDep,
+    cells_from_form,
+    checker_for,
+    read_upload,
+)
+from app.db.models import Pass, utcnow
+from app.errors import InputError
+from app.schemas import IsoDateTime, PassPublic, Text
+from app.services import estimation as svc
+from app.services import passes as pass_svc
+
+router = APIRouter(prefix="/passes", tags=["passes"])
+
+OBSERVED_AT = "each frame's time (ISO 8601 UTC), one per frame in upload order (repeat the field); inside the plan's access windows"
+
+
+def _fuse(*, session: Any, operator_id: str, settings: Any, est: Any, checker: Any, uploads: list[svc.Upload],
+          plan_id: str, observed_at: list[Any], cells_m: tuple[float, float] | None, normalised: bool) -> Pass:  # fmt: skip
+    if len(uploads) < 2:
+        raise InputError(["files"], f"a pass needs at least two frames; this upload holds {len(uploads)}")
+    if len(uploads) > settings.max_batch_frames:
+        raise InputError(["files"], f"{len(uploads)} frames is over the batch limit of {settings.max_batch_frames}")
+    if len(observed_at) != len(uploads):
+        raise InputError(
+            ["observed_at"], f"{len(observed_at)} times for {len(uploads)} frames: send one time per frame"
+        )
+    plan = crud.get_plan(session=session, operator_id=operator_id, plan_id=plan_id)
+    if plan is None:
+        raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
+    pass_svc.check_times(plan.result, observed_at)
+    _, _, checks, per_frame = svc.check_frames(est=est, checker=checker, uploads=uploads, resample=False,
+                                               normalised=normalised, cells_m=cells_m)  # fmt: skip
+    result = pass_svc.fuse_frames(plan_request=plan.request, checks=checks, observed_at=observed_at,
+                                  names=[u.name for u in uploads])  # fmt: skip
+    result = {**result, "target": checker.model.name, "timings_s": per_frame}
+    row = Pass(operator_id=operator_id, created_at=utcnow(), plan_id=plan_id, result=_jsonable(result))
+    session.add(row)
+    session.commit()
+    return row
+
+
+def _jsonable(value: Any) -> Any:
+    from datetime import datetime
+
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, datetime):
+        return value.isoformat()
+    return value
+
+
+@router.post("", status_code=201, response_model=PassPublic, responses={413: {"description": "file too large"}})
+async def create_pass(
+    session: SessionDep,
+    operator: CurrentOperator,
+    settings: SettingsDep,
+    est: EstimatorDep,
+    checkers: CheckersDep,
+    files: Annotated[
+        list[UploadFile], File(description="the pass's frames: several files, or one .npz stack [N, H, W]")
+    ],
+    plan_id: Annotated[Text, Form(max_length=36, description="the plan whose target and station made the pass")],
+    observed_at: Annotated[list[IsoDateTime], Form(description=OBSERVED_AT)],
+    target: Annotated[
+        Text | None, Form(max_length=200, description="the target model (default GSA_DEFAULT_TARGET)")
+    ] = None,
+    normalised: Annotated[bool, Form(description="the frames already are the models' input (gsa simulate)")] = False,
+    range_cell_m: Annotated[float | None, Form(gt=0, le=100, description="the frames' range cell (m)")] = None,
+    cross_range_cell_m: Annotated[
+        float | None, Form(gt=0, le=100, description="the frames' cross-range cell (m)")
+    ] = None,
+) -> dict[str, Any]:
+    """Fit every frame of a pass, place each in the plan target's LVLH frame at its time, and fuse them; stored."""
+    cells_m = cells_from_form(range_cell_m, cross_range_cell_m)
+    checker = checker_for(checkers, target)
+    uploads: list[svc.Upload] = []
+    for f in files:
+        data = await read_upload(f, settings.max_upload_bytes)
+        uploads += await run_in_threadpool(svc.decode, data, f.filename or "upload", max_side=settings.max_image_side)
+    row = await run_in_threadpool(_fuse, session=session, operator_id=operator.id, settings=settings, est=est,
+                                  checker=checker, uploads=uploads, plan_id=plan_id, observed_at=observed_at,
+                                  cells_m=cells_m, normalised=normalised)  # fmt: skip
+    return PassPublic.row_json(row)
+
+
+@router.get("/{pass_id}", response_model=PassPublic, responses={404: {"description": "no pass with this id is yours"}})
+def read_pass(session: SessionDep, operator: CurrentOperator, pass_id: Annotated[Text, PathParam()]) -> dict[str, Any]:
+    """Return one of the caller's passes."""
+    row = crud.get_pass(session=session, operator_id=operator.id, pass_id=pass_id)
+    if row is None:
+        raise HTTPException(status_code=404, detail="Pass not found")
+    return PassPublic.row_json(row)
