@@ -144,6 +144,16 @@ def _tilted(axis_u: Vec, axis_v: Vec, tilt_deg: float) -> tuple[Vec, Vec]:
     return u, v * math.cos(t) + np.cross(u, v) * math.sin(t)
 
 
+def _assembled(name: str, parts_sc: list[tuple[Vec, Vec, int]], parts_surf: list[Vec], description: str) -> TargetModel:
+    """Join a built target's parts and centre it on its skin's centroid."""
+    sc = np.concatenate([p for p, _, _ in parts_sc])
+    normals = np.concatenate([n for _, n, _ in parts_sc])
+    kinds = np.concatenate([np.full(len(p), k, np.int8) for p, _, k in parts_sc])
+    surface = np.concatenate(parts_surf)
+    centroid = surface.mean(axis=0)
+    return TargetModel(name, surface - centroid, sc - centroid, normals, kinds, description)
+
+
 def tiangong_like(scatterer_spacing_m: float = 0.3, surface_spacing_m: float = 0.08) -> TargetModel:
     """Build the default target: a compact, deliberately asymmetric Tiangong-like station.
 
@@ -198,19 +208,8 @@ def tiangong_like(scatterer_spacing_m: float = 0.3, surface_spacing_m: float = 0
     add_plate(origin + [-1.5, 0, -2.1 - 2.25], ez, ex, 4.5, 2.2, -35.0)
     add_plate(node + [0, 6.0, 2.1 + 2.0], ez, ey, 4.0, 1.8, 10.0)
 
-    sc = np.concatenate([p for p, _, _ in parts_sc])
-    normals = np.concatenate([n for _, n, _ in parts_sc])
-    kinds = np.concatenate([np.full(len(p), k, np.int8) for p, _, k in parts_sc])
-    surface = np.concatenate(parts_surf)
-    centroid = surface.mean(axis=0)
-    return TargetModel(
-        "tiangong-like",
-        surface - centroid,
-        sc - centroid,
-        normals,
-        kinds,
-        "compact asymmetric Tiangong-like station (inference/targets.py: tiangong_like)",
-    )
+    return _assembled("tiangong-like", parts_sc, parts_surf,
+                      "compact asymmetric Tiangong-like station (inference/targets.py: tiangong_like)")  # fmt: skip
 
 
 def comsat_like(scatterer_spacing_m: float = 0.3, surface_spacing_m: float = 0.08) -> TargetModel:
@@ -255,19 +254,8 @@ def comsat_like(scatterer_spacing_m: float = 0.3, surface_spacing_m: float = 0.0
         add_cylinder(np.array([0.0, sign * ly / 2, 0.0]), sign * ey, 0.1, 0.6)
     add_cylinder(np.array([0.4, 0.0, lz / 2]), ez, 1.3, 0.35)
     add_cylinder(np.array([-lx / 2 - 1.2, 0.0, 0.0]), ex, 0.5, 1.2)
-    sc = np.concatenate([p for p, _, _ in parts_sc])
-    normals = np.concatenate([n for _, n, _ in parts_sc])
-    kinds = np.concatenate([np.full(len(p), k, np.int8) for p, _, k in parts_sc])
-    surface = np.concatenate(parts_surf)
-    centroid = surface.mean(axis=0)
-    return TargetModel(
-        "comsat-like",
-        surface - centroid,
-        sc - centroid,
-        normals,
-        kinds,
-        "box-wing communications satellite (inference/targets.py: comsat_like)",
-    )
+    return _assembled("comsat-like", parts_sc, parts_surf,
+                      "box-wing communications satellite (inference/targets.py: comsat_like)")  # fmt: skip
 
 
 BUILTIN_TARGETS = {"tiangong-like": tiangong_like, "comsat-like": comsat_like}

@@ -130,6 +130,19 @@ async def read_upload(upload: UploadFile, limit: int) -> bytes:
     return data
 
 
+async def read_uploads(files: list[UploadFile], settings: Settings) -> list[Any]:
+    """Read and decode every uploaded file (stacks allowed) into frames, each file checked against the limits."""
+    from fastapi.concurrency import run_in_threadpool
+
+    from app.services.estimation import decode
+
+    uploads: list[Any] = []
+    for f in files:
+        data = await read_upload(f, settings.max_upload_bytes)
+        uploads += await run_in_threadpool(decode, data, f.filename or "upload", max_side=settings.max_image_side)
+    return uploads
+
+
 def cells_from_form(range_cell_m: float | None, cross_range_cell_m: float | None) -> tuple[float, float] | None:
     if (range_cell_m is None) != (cross_range_cell_m is None):
         missing = "cross_range_cell_m" if cross_range_cell_m is None else "range_cell_m"

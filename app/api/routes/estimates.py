@@ -23,6 +23,7 @@ from app.api.deps import (
     check_page_size,
     checker_for,
     read_upload,
+    read_uploads,
 )
 from app.db.models import Estimate, utcnow
 from app.errors import InputError
@@ -177,10 +178,7 @@ async def create_estimates_batch(
     """Estimate several frames as one batch through the models, each fitted and checked; one stored row each."""
     cells_m = cells_from_form(range_cell_m, cross_range_cell_m)
     checker = checker_for(checkers, target)
-    uploads: list[svc.Upload] = []
-    for f in files:
-        data = await read_upload(f, settings.max_upload_bytes)
-        uploads += await run_in_threadpool(svc.decode, data, f.filename or "upload", max_side=settings.max_image_side)
+    uploads = await read_uploads(files, settings)
     rows = await run_in_threadpool(_estimate, session=session, operator_id=operator.id, settings=settings, est=est,
                                    uploads=uploads, resample=resample, plan_id=plan_id,
                                    observed_at=as_utc(observed_at), snr_db=None, normalised=normalised,

@@ -17,7 +17,7 @@ from app.api.deps import (
     SettingsDep,
     cells_from_form,
     checker_for,
-    read_upload,
+    read_uploads,
 )
 from app.db.models import Pass, utcnow
 from app.errors import InputError
@@ -91,10 +91,7 @@ async def create_pass(
     """Fit every frame of a pass, place each in the plan target's LVLH frame at its time, and fuse them; stored."""
     cells_m = cells_from_form(range_cell_m, cross_range_cell_m)
     checker = checker_for(checkers, target)
-    uploads: list[svc.Upload] = []
-    for f in files:
-        data = await read_upload(f, settings.max_upload_bytes)
-        uploads += await run_in_threadpool(svc.decode, data, f.filename or "upload", max_side=settings.max_image_side)
+    uploads = await read_uploads(files, settings)
     row = await run_in_threadpool(_fuse, session=session, operator_id=operator.id, settings=settings, est=est,
                                   checker=checker, uploads=uploads, plan_id=plan_id, observed_at=observed_at,
                                   cells_m=cells_m, normalised=normalised)  # fmt: skip
