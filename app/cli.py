@@ -287,6 +287,10 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     from app.errors import InputError
     from inference.errors import InferenceError
 
+    if (args.plan_id or args.observed_at) and not args.server:
+        raise CliError("--plan-id and --observed-at need --server: plans are stored by the service")
+    if bool(args.plan_id) != bool(args.observed_at):
+        raise CliError("give --plan-id and --observed-at together")
     if (args.range_cell_m is None) != (args.cross_range_cell_m is None):
         raise CliError("give --range-cell-m and --cross-range-cell-m together (the frame's cells in metres)")
     for name in ("range_cell_m", "cross_range_cell_m"):
@@ -305,6 +309,10 @@ def cmd_estimate(args: argparse.Namespace) -> int:
                 "refine": str(not args.no_refine).lower()}  # fmt: skip
         if args.target:
             form["target"] = args.target
+        if args.plan_id:
+            form["plan_id"] = args.plan_id
+        if args.observed_at:
+            form["observed_at"] = args.observed_at
         if cells:
             form.update({"range_cell_m": str(cells[0]), "cross_range_cell_m": str(cells[1])})
         try:
@@ -436,6 +444,8 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
     es.add_argument("--plot", metavar="PNG", help="draw the input and the enhanced frame with the fitted outline")
     es.add_argument("--no-refine", action="store_true", help="answer Swin's estimate, without the fit")
     es.add_argument("--target", help="the target the frame shows (default GSA_DEFAULT_TARGET: tiangong-like)")
+    es.add_argument("--plan-id", help="with --server: one of your plans, to place the attitude in LVLH and J2000")
+    es.add_argument("--observed-at", help="with --server and --plan-id: when the frame was observed (ISO 8601 UTC)")
     es.add_argument("--range-cell-m", type=float, help="the frame's range cell (rows) in metres: resample in metres")
     es.add_argument("--cross-range-cell-m", type=float, help="the frame's cross-range cell (columns) in metres")
     es.set_defaults(func=cmd_estimate)

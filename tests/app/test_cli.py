@@ -86,3 +86,16 @@ def test_estimate_locally_with_plot(tmp_path, smoke_models):
     np.save(tmp_path / "raw.npy", np.abs(frame))
     raw = _gsa("estimate", str(tmp_path / "raw.npy"), "--normalised", "--models", str(smoke_models), cwd=tmp_path)
     assert raw.returncode == 2 and "values in [0, 1]" in raw.stderr and raw.stderr.count("\n") == 1
+
+
+def test_estimate_options_that_need_each_other_are_one_line_errors(tmp_path):
+    (tmp_path / "f.npy").write_bytes(b"unused")
+    cases = [
+        (["--plan-id", "p"], "need --server"),
+        (["--server", "http://127.0.0.1:9", "--plan-id", "p"], "together"),
+        (["--range-cell-m", "0.1"], "together"),
+        (["--range-cell-m", "0", "--cross-range-cell-m", "0.1"], "over 0"),
+    ]
+    for extra, says in cases:
+        out = _gsa("estimate", str(tmp_path / "f.npy"), *extra, cwd=tmp_path)
+        assert out.returncode == 2 and says in out.stderr and out.stderr.count("\n") == 1, (extra, out.stderr)
