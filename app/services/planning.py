@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from datetime import datetime, timedelta
+from datetime import UTC, datetime, timedelta
 from typing import Any
 
 import numpy as np
@@ -241,3 +241,37 @@ def run_access(req: AccessCreate, max_epoch_gap_days: float | None = None) -> di
     except PlannerError as exc:
         raise InputError([exc.field or "request"], str(exc)) from None
     return {"epoch": epoch.isoformat(), "duration_days": req.duration_days, "access_windows": windows_json(epoch, w)}
+
+
+ACCESS_CSV_COLUMNS = (
+    "access", "rise_utc", "culmination_utc", "set_utc", "duration_s", "rise_azimuth_deg", "culmination_azimuth_deg",
+    "set_azimuth_deg", "max_elevation_deg", "min_range_km", "rise_clipped", "set_clipped",
+)  # fmt: skip
+
+
+def _z(iso: str) -> str:
+    """ISO 8601 UTC with a Z, milliseconds: the one time style of the exports."""
+    t = datetime.fromisoformat(iso).astimezone(UTC)
+    return t.strftime("%Y-%m-%dT%H:%M:%S.") + f"{t.microsecond // 1000:03d}Z"
+
+
+def access_csv(windows: list[dict[str, Any]]) -> str:
+    """The plan's access windows as an STK-style access report: one row a pass, times in UTC (Z), angles in degrees.
+
+    Azimuths are from north through east, elevations above the station's horizon (WGS84
+    normal), ranges in km; a window cut by the span's start or end says so in its clipped flags.
+    """
+    import csv
+    import io
+
+    out = io.StringIO()
+    w = csv.writer(out, lineterminator="\n")
+    w.writerow(ACCESS_CSV_COLUMNS)
+    for k, win in enumerate(windows, start=1):
+        w.writerow([
+            k, _z(win["rise"]), _z(win["culmination"]), _z(win["set"]), f"{win['duration_s']:.3f}",
+            f"{win['rise_azimuth_deg']:.4f}", f"{win['culmination_azimuth_deg']:.4f}", f"{win['set_azimuth_deg']:.4f}",
+            f"{win['max_elevation_deg']:.4f}", f"{win['min_range_km']:.3f}", str(win["rise_clipped"]).lower(),
+            str(win["set_clipped"]).lower(),
+        ])  # fmt: skip
+    return out.getvalue()

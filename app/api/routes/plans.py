@@ -7,13 +7,13 @@ import threading
 import time
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body, HTTPException, Path, Query, Request
+from fastapi import APIRouter, Body, HTTPException, Path, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
 
 from app import crud
 from app.api.deps import CurrentOperator, SessionDep, SettingsDep, as_utc, check_page_size, check_span
 from app.schemas import PAPER_EXAMPLE, IsoDateTime, PlanCreate, PlanPublic, PlansPublic, PlanSummary, Text
-from app.services.planning import run_plan
+from app.services.planning import access_csv, run_plan
 
 router = APIRouter(prefix="/plans", tags=["plans"])
 
@@ -129,3 +129,18 @@ def read_plan(session: SessionDep, operator: CurrentOperator, plan_id: Annotated
     if plan is None:
         raise HTTPException(status_code=404, detail="Plan not found")
     return _public(plan)
+
+
+@router.get(
+    "/{plan_id}/export/access.csv",
+    response_class=Response,
+    responses={**NOT_FOUND, 200: {"content": {"text/csv": {}}, "description": "one row a pass"}},
+)
+def export_access_csv(session: SessionDep, operator: CurrentOperator, plan_id: Annotated[Text, Path()]) -> Response:
+    """The plan's access windows as an STK-style access report (CSV; times ISO 8601 UTC with Z, azimuths from north)."""
+    plan = crud.get_plan(session=session, operator_id=operator.id, plan_id=plan_id)
+    if plan is None:
+        raise HTTPException(status_code=404, detail="Plan not found")
+    body = access_csv(plan.result.get("access_windows", []))
+    name = f"access-{plan.id}.csv"
+    return Response(body, media_type="text/csv", headers={"Content-Disposition": f'attachment; filename="{name}"'})

@@ -285,3 +285,27 @@ def test_405_lists_every_method_of_the_path(client):
     r = client.put("/v1/plans", headers=A)
     assert r.status_code == 405
     assert {m.strip() for m in r.headers["allow"].split(",")} >= {"GET", "POST"}
+
+
+def test_access_report_csv_matches_the_plan(client, paper_plan):
+    import csv
+    import io
+    from datetime import datetime
+
+    r = client.get(f"/v1/plans/{paper_plan['id']}/export/access.csv", headers=A)
+    assert r.status_code == 200 and r.headers["content-type"].startswith("text/csv")
+    assert "attachment" in r.headers["content-disposition"]
+    rows = list(csv.DictReader(io.StringIO(r.text)))
+    windows = paper_plan["access_windows"]
+    assert len(rows) == len(windows) > 0
+    for row, w in zip(rows, windows, strict=True):
+        for col, key in (("rise_utc", "rise"), ("culmination_utc", "culmination"), ("set_utc", "set")):
+            assert row[col].endswith("Z")
+            got = datetime.fromisoformat(row[col].replace("Z", "+00:00"))
+            assert abs((got - datetime.fromisoformat(w[key])).total_seconds()) < 1e-3
+        rise = datetime.fromisoformat(row["rise_utc"].replace("Z", "+00:00"))
+        end = datetime.fromisoformat(row["set_utc"].replace("Z", "+00:00"))
+        assert float(row["duration_s"]) == pytest.approx((end - rise).total_seconds(), abs=2e-3)
+        assert 0 <= float(row["rise_azimuth_deg"]) < 360 and float(row["max_elevation_deg"]) >= 0
+        assert float(row["min_range_km"]) == pytest.approx(w["min_range_km"], abs=1e-3)
+    assert client.get(f"/v1/plans/{paper_plan['id']}/export/access.csv", headers={"X-API-Key": KEY_B}).status_code == 404
