@@ -20,13 +20,12 @@ import numpy as np
 
 from bench.common import interleaved_medians, machine
 from bench.sections import replace_section
-from inference.catalogue import FRESH_SEED, KINDS, bad_frames, good_frames
-from inference.dataset import DatasetSpec, frame_truth
+from inference.catalogue import FRESH_SEED, KINDS, bad_frames, good_frames, simulated
+from inference.dataset import DatasetSpec
 from inference.evaluate import SNR_DB, snr_spec
-from inference.frames import geodesic_deg, normalise_frame
-from inference.isar import VARIANTS, Imager, Radar, simulate
+from inference.frames import geodesic_deg
+from inference.isar import VARIANTS
 from inference.runtime import Estimator
-from inference.targets import tiangong_like
 from inference.trust import load_checkers
 
 TITLE = "Attitude fit and trust"
@@ -58,22 +57,6 @@ def _run(est, checker, frames):
     return res, checks
 
 
-def _simulated(spec: DatasetSpec, scattering=None):
-    model, imager = tiangong_like(), Imager(Radar())
-    frames = np.empty((spec.n, 256, 256), np.float32)
-    truth = np.empty((spec.n, 3))
-    labels = np.empty((spec.n, 256, 256), bool)
-    for i in range(spec.n):
-        ang, snr, s = frame_truth(spec, i)
-        f = (
-            simulate(model, imager, ang, snr, s)
-            if scattering is None
-            else simulate(model, imager, ang, snr, s, scattering)
-        )
-        frames[i], truth[i], labels[i] = normalise_frame(np.abs(f.image)), ang, f.label
-    return frames, truth, labels
-
-
 def _row(pred, truth):
     err = np.abs(pred - truth).mean(axis=0)
     geo = geodesic_deg(pred, truth)
@@ -100,7 +83,7 @@ def main() -> None:
     latency_frame = None
     for snr in SNR_DB:
         _log(f"{snr:g} dB set")
-        frames, truth, _ = _simulated(snr_spec(snr, N_SNR))
+        frames, truth, _, _ = simulated(snr_spec(snr, N_SNR))
         res, checks = _run(est, checker, frames)
         if latency_frame is None:
             latency_frame = frames[:1]
@@ -164,7 +147,7 @@ def main() -> None:
     medians = {}
     for k, (name, sc) in enumerate(VARIANTS.items()):
         _log(f"variant: {name}")
-        frames, truth, labels = _simulated(DatasetSpec(n=N_VARIANT, seed=80_000 + 100 * k), sc)
+        frames, truth, _, labels = simulated(DatasetSpec(n=N_VARIANT, seed=80_000 + 100 * k), scattering=sc)
         res, checks = _run(est, checker, frames)
         fitted = np.array([c.angles_deg for c in checks])
         (_, gs), (mf, gf) = _row(res.angles_deg, truth), _row(fitted, truth)
@@ -182,15 +165,8 @@ def main() -> None:
 
     _log("second target, no networks")
     other = checkers.get("comsat-like")
-    model, imager = other.model, Imager(Radar())
     spec = DatasetSpec(n=N_VARIANT, seed=90_000)
-    frames = np.empty((spec.n, 256, 256), np.float32)
-    truth = np.empty((spec.n, 3))
-    labels = np.empty((spec.n, 256, 256), bool)
-    for i in range(spec.n):
-        ang, snr, sd = frame_truth(spec, i)
-        f = simulate(model, imager, ang, snr, sd)
-        frames[i], truth[i], labels[i] = normalise_frame(np.abs(f.image)), ang, f.label
+    frames, truth, _, labels = simulated(spec, model=other.model)
     res = est.estimate(frames)
     t0 = time.perf_counter()
     oc = [other.check(frames[k], res.enhanced[k], None) for k in range(spec.n)]

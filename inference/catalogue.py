@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 
 from inference.dataset import DatasetSpec, frame_truth
 from inference.frames import normalise_frame
-from inference.isar import Imager, Radar, simulate
+from inference.isar import DEFAULT_SCATTERING, Imager, Radar, Scattering, simulate
 from inference.targets import TargetModel, comsat_like, tiangong_like
 
 KINDS = (
@@ -40,20 +40,29 @@ FRESH_SEED = 60_000  # fresh good frames for the trust tests and benchmarks
 CALIBRATION_SEED = 70_000  # fresh good frames the shipped trust calibration was fitted on
 
 
-def good_frames(n: int, seed: int = FRESH_SEED, radar: Radar | None = None,
-                model: TargetModel | None = None) -> tuple[NDArray[np.float32], NDArray[np.float64], NDArray[np.float64]]:  # fmt: skip
-    """Return n fresh normalised frames of ``model`` (default: the default target), their angles and SNRs."""
+def simulated(spec: DatasetSpec, radar: Radar | None = None, model: TargetModel | None = None,
+              scattering: Scattering = DEFAULT_SCATTERING) -> tuple[NDArray[np.float32], NDArray[np.float64],
+                                                                    NDArray[np.float64], NDArray[np.bool_]]:  # fmt: skip
+    """Return a spec's frames (normalised), angles, SNRs and labels, of ``model`` (default: the default target)."""
     radar = radar or Radar()
     model = model or tiangong_like()
     imager = Imager(radar)
-    spec = DatasetSpec(n=n, seed=seed)
-    frames = np.empty((n, radar.n_range, radar.n_azimuth), np.float32)
-    angles = np.empty((n, 3))
-    snrs = np.empty(n)
-    for i in range(n):
+    frames = np.empty((spec.n, radar.n_range, radar.n_azimuth), np.float32)
+    labels = np.empty((spec.n, radar.n_range, radar.n_azimuth), bool)
+    angles = np.empty((spec.n, 3))
+    snrs = np.full(spec.n, np.nan)
+    for i in range(spec.n):
         ang, snr, s = frame_truth(spec, i)
-        frames[i] = normalise_frame(np.abs(simulate(model, imager, ang, snr, s).image))
-        angles[i], snrs[i] = ang, snr
+        f = simulate(model, imager, ang, snr, s, scattering)
+        frames[i], labels[i], angles[i] = normalise_frame(np.abs(f.image)), f.label, ang
+        snrs[i] = np.nan if snr is None else snr
+    return frames, angles, snrs, labels
+
+
+def good_frames(n: int, seed: int = FRESH_SEED, radar: Radar | None = None,
+                model: TargetModel | None = None) -> tuple[NDArray[np.float32], NDArray[np.float64], NDArray[np.float64]]:  # fmt: skip
+    """Return n fresh normalised frames of ``model`` (default: the default target), their angles and SNRs."""
+    frames, angles, snrs, _ = simulated(DatasetSpec(n=n, seed=seed), radar, model)
     return frames, angles, snrs
 
 

@@ -25,8 +25,8 @@ and renders the quadratic's minimum (at most 2 h away); it moves to the best poi
 seen and shrinks h from 1 deg (at most four iterations) to 0.35 and 0.12 deg (two each). Every render of an
 iteration is one batch. The cost is one minus the soft IoU with the enhanced frame,
 plus a weak Gaussian prior around Swin's answer (or, for library starts, each one's own), so a hypothesis stays
-a refinement of where it began. The last quadratic's Hessian is each answer's
-curvature, from which ``inference.trust`` makes the uncertainty.
+a refinement of where it began. ``curvature`` then measures the answer's Hessian on a
+wider stencil, from which ``inference.trust`` makes the uncertainty.
 """
 
 from __future__ import annotations
@@ -105,6 +105,23 @@ class Window:
     h: int
     w: int
 
+    def crop(self, frame: NDArray[Any]) -> NDArray[Any]:
+        return frame[self.r0 : self.r0 + self.h, self.c0 : self.c0 + self.w]
+
+
+def _splat(idx: NDArray[np.int64], stride: int, size: int, fu: F32, fv: F32, weight: F32 | None = None) -> Vec:
+    """Add each point's weight bilinearly to cells idx, idx + 1 (next column), idx + stride (next row) and both.
+
+    ``fu``, ``fv`` are the shares that go to the next row and column; ``size`` is the flat grid's length.
+    """
+    gu, gv = 1.0 - fu, 1.0 - fv
+    w = np.float32(1.0) if weight is None else weight
+    counts = np.bincount(idx.ravel(), (w * gu * gv).ravel(), size)
+    counts += np.bincount((idx + stride).ravel(), (w * fu * gv).ravel(), size)
+    counts += np.bincount((idx + 1).ravel(), (w * gu * fv).ravel(), size)
+    counts += np.bincount((idx + stride + 1).ravel(), (w * fu * fv).ravel(), size)
+    return np.asarray(counts, np.float64)
+
 
 def _cross(x: F32, op: Any, pad: float) -> F32:
     p = np.pad(x, ((0, 0), (1, 1), (1, 1)), constant_values=pad)
@@ -178,11 +195,7 @@ class Renderer:
         size = (win.h + 1) * stride
         base = (np.arange(h, dtype=np.int64) * size)[:, None]
         idx = base + np.clip(iu, 0, win.h - 1).astype(np.int64) * stride + np.clip(iv, 0, win.w - 1).astype(np.int64)
-        gu, gv = 1.0 - fu, 1.0 - fv
-        counts = np.bincount(idx.ravel(), (gu * gv).ravel(), h * size)
-        counts += np.bincount((idx + stride).ravel(), (fu * gv).ravel(), h * size)
-        counts += np.bincount((idx + 1).ravel(), (gu * fv).ravel(), h * size)
-        counts += np.bincount((idx + stride + 1).ravel(), (fu * fv).ravel(), h * size)
+        counts = _splat(idx, stride, h * size, fu, fv)
         grid = counts.reshape(h, win.h + 1, stride)[:, : win.h, : win.w].astype(np.float32)
         return grey_closing(1.0 - np.exp(grid * np.float32(-1.0 / COUNT_SCALE)))
 
@@ -206,10 +219,7 @@ class Renderer:
         base = (np.arange(h, dtype=np.int64) * size)[:, None]
         idx = base + (np.clip(iu, -1, nr).astype(np.int64) + 1) * stride + np.clip(iv, -1, na).astype(np.int64) + 1
         idx = np.minimum(idx, base + size - stride - 2)
-        counts = np.bincount(idx.ravel(), (w * (1 - fu) * (1 - fv)).ravel(), h * size)
-        counts += np.bincount((idx + stride).ravel(), (w * fu * (1 - fv)).ravel(), h * size)
-        counts += np.bincount((idx + 1).ravel(), (w * (1 - fu) * fv).ravel(), h * size)
-        counts += np.bincount((idx + stride + 1).ravel(), (w * fu * fv).ravel(), h * size)
+        counts = _splat(idx, stride, h * size, fu, fv, w)
         grid = counts.reshape(h, nr + 2, stride)[:, 1:-1, 1:-1]
         return np.minimum(grid, 1.0).astype(np.float32)
 
@@ -223,11 +233,6 @@ def soft_iou(occupancy: F32, target: NDArray[np.floating], target_total: float |
     total = float(target.sum()) if target_total is None else target_total
     union = occupancy.sum(axis=(1, 2), dtype=np.float64) + total - inter
     return np.asarray(inter / np.maximum(union, 1e-9))
-
-
-def hard_iou(a: NDArray[np.bool_], b: NDArray[np.bool_]) -> float:
-    union = int(np.count_nonzero(a | b))
-    return float(np.count_nonzero(a & b)) / union if union else 0.0
 
 
 def _stencil() -> Vec:
@@ -255,15 +260,12 @@ def quadratic(values: Vec) -> tuple[Vec, Vec]:
 
 @dataclass(frozen=True)
 class Fit:
-    """One refined hypothesis: attitude (deg), soft IoU, cost, curvature of the cost (per deg^2), where it began."""
+    """One refined hypothesis: attitude (deg), soft IoU, cost (with the prior), and the start it began from."""
 
     angles_deg: Vec
     iou: float
     cost: float
-    hessian: Vec
     start: str
-    start_deg: Vec
-    renders: int
 
 
 @dataclass(frozen=True)
@@ -294,23 +296,18 @@ def fit(renderer: Renderer, enhanced: Vec, starts: dict[str, Vec], options: FitO
     centre = origin if prior_at is None else np.broadcast_to(np.asarray(prior_at, float), origin.shape)
     best_cost = np.full(len(names), np.inf)
     best_iou = np.zeros(len(names))
-    hess = np.zeros((len(names), 3, 3))
     alive = np.ones(len(names), bool)
-    renders = 0
     silhouette = target > 0.5
     pooled = pool(target, COARSE_FACTOR) if opt.coarse else target
 
     def cost(points: Vec, live: NDArray[np.intp]) -> tuple[Vec, Vec]:
-        nonlocal renders
         flat = points.reshape(-1, 3)
-        renders += len(flat)
         if opt.coarse:
             iou = soft_iou(renderer.coverage(flat), pooled).reshape(points.shape[:-1])
         else:
             # The window: the frame's silhouette and where the centres put the target, with a margin.
             win = _window_for(renderer, silhouette, best[live])
-            crop = target[win.r0 : win.r0 + win.h, win.c0 : win.c0 + win.w]
-            iou = soft_iou(renderer.occupancy(flat, win), crop, total).reshape(points.shape[:-1])
+            iou = soft_iou(renderer.occupancy(flat, win), win.crop(target), total).reshape(points.shape[:-1])
         prior = opt.prior_weight * np.sum(((points - centre[live][:, None, :]) / opt.prior_sigma_deg) ** 2, axis=-1)
         return 1.0 - iou + prior, iou
 
@@ -330,7 +327,6 @@ def fit(renderer: Renderer, enhanced: Vec, starts: dict[str, Vec], options: FitO
                 if c[j, 0] < best_cost[k]:
                     best_cost[k], best_iou[k] = c[j, 0], iou[j, 0]
                 g, hk = quadratic(c[j])
-                hess[k] = hk / h**2
                 d = None
                 if np.all(np.linalg.eigvalsh(hk) > 1e-12):
                     d = -np.linalg.solve(hk, g)
@@ -351,13 +347,7 @@ def fit(renderer: Renderer, enhanced: Vec, starts: dict[str, Vec], options: FitO
             if not np.any(moved | better):
                 break
     order = np.argsort(np.where(alive, best_cost, np.inf))
-    return [
-        Fit(
-            best[k].copy(), float(best_iou[k]), float(best_cost[k]), hess[k].copy(), names[k], origin[k].copy(), renders
-        )
-        for k in order
-        if alive[k]
-    ]
+    return [Fit(best[k].copy(), float(best_iou[k]), float(best_cost[k]), names[k]) for k in order if alive[k]]
 
 
 CURVATURE_STEP_DEG = 0.6  # the stencil that measures the answer's curvature: wide enough to see past pixel steps
@@ -379,16 +369,20 @@ def _window_for(renderer: Renderer, silhouette: NDArray[np.bool_], angles_deg: V
     return Window(r0, c0, r1 - r0, c1 - c0)
 
 
+def _hard_ious(occupancy: F32, win: Window, silhouette: NDArray[np.bool_]) -> Vec:
+    """Hard IoU of labels (occupancy > 0.5, inside ``win``) with the whole frame's silhouette."""
+    label = occupancy > 0.5
+    inter = np.count_nonzero(label & win.crop(silhouette), axis=(1, 2))
+    union = np.count_nonzero(label, axis=(1, 2)) + int(silhouette.sum()) - inter
+    return np.asarray(inter / np.maximum(union, 1), float)
+
+
 def silhouette_iou(renderer: Renderer, angles_deg: Vec, enhanced: Vec) -> Vec:
     """Return the hard IoU of each attitude's label (occupancy > 0.5) with the enhanced silhouette (> 0.5)."""
     sil = np.asarray(enhanced) > 0.5
     angles = np.asarray(angles_deg, float).reshape(-1, 3)
     win = _window_for(renderer, sil, angles)
-    crop = sil[win.r0 : win.r0 + win.h, win.c0 : win.c0 + win.w]
-    occ = renderer.occupancy(angles, win) > 0.5
-    inter = np.count_nonzero(occ & crop, axis=(1, 2))
-    union = np.count_nonzero(occ, axis=(1, 2)) + int(sil.sum()) - inter
-    return np.asarray(inter / np.maximum(union, 1), float)
+    return _hard_ious(renderer.occupancy(angles, win), win, sil)
 
 
 def curvature(renderer: Renderer, enhanced: Vec, angles_deg: Vec,
@@ -402,22 +396,16 @@ def curvature(renderer: Renderer, enhanced: Vec, angles_deg: Vec,
     sil = target > 0.5
     pts = np.asarray(angles_deg, float) + step_deg * STENCIL
     win = _window_for(renderer, sil, pts)
-    crop = target[win.r0 : win.r0 + win.h, win.c0 : win.c0 + win.w]
     occ = renderer.occupancy(pts, win)
-    iou = soft_iou(occ, crop, float(target.sum(dtype=np.float64)))
+    iou = soft_iou(occ, win.crop(target), float(target.sum(dtype=np.float64)))
     _, hess = quadratic(1.0 - iou)
-    label = occ[0] > 0.5
-    inter = int(np.count_nonzero(label & (crop > 0.5)))
-    hard = inter / max(int(np.count_nonzero(label)) + int(sil.sum()) - inter, 1)
-    return hess / step_deg**2, float(iou[0]), float(hard)
+    return hess / step_deg**2, float(iou[0]), float(_hard_ious(occ[:1], win, sil)[0])
 
 
 BRIGHTNESS_BLUR_PX = 1.5
 
 
-def brightness_agreement(
-    model: TargetModel, radar: Radar, frame: Vec, angles_deg: Vec, mask: NDArray[np.bool_]
-) -> float:
+def brightness_agreement(renderer: Renderer, frame: Vec, angles_deg: Vec, mask: NDArray[np.bool_]) -> float:
     """Return how well an attitude explains which parts of the frame are bright: a correlation in [-1, 1].
 
     What the silhouette cannot show: the scatterers the radar sees at that attitude (facing
@@ -429,17 +417,17 @@ def brightness_agreement(
     """
     from scipy.ndimage import gaussian_filter
 
-    from inference.frames import rotation_matrix
-    from inference.isar import Imager, expected_magnitude, visible
+    from inference.isar import expected_magnitude, visible
 
-    rot = rotation_matrix(*(float(a) for a in angles_deg))
+    model, radar = renderer.model, renderer.radar
+    rot = rotation_matrices(np.asarray(angles_deg, float))[0]
     pts, normals = model.scatterers @ rot.T, model.normals @ rot.T
     los = projection_matrix(radar)[0]
     seen = visible(pts, normals, model.kinds, los)
     power = expected_magnitude(normals[seen], model.kinds[seen], los) ** 2
-    u, v = Imager(radar).pixel_coordinates(pts[seen])
-    iu = np.clip(np.rint(u).astype(np.int64), 0, radar.n_range - 1)
-    iv = np.clip(np.rint(v).astype(np.int64), 0, radar.n_azimuth - 1)
+    uv = pts[seen] @ renderer.rows.T  # the pixel mapping of the label and the simulator
+    iu = np.clip(np.rint(uv[:, 0] + radar.n_range / 2).astype(np.int64), 0, radar.n_range - 1)
+    iv = np.clip(np.rint(uv[:, 1] + radar.n_azimuth / 2).astype(np.int64), 0, radar.n_azimuth - 1)
     image = np.bincount(iu * radar.n_azimuth + iv, power, radar.n_range * radar.n_azimuth).reshape(
         radar.n_range, radar.n_azimuth
     )

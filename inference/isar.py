@@ -42,6 +42,15 @@ Vec = NDArray[np.float64]
 C_M_S = 299_792_458.0  # speed of light, SI definition
 
 
+def _refuse_unusable(obj: object, checks: tuple[tuple[str, bool], ...]) -> None:
+    """Raise RadarError naming the first field whose check failed (and where its meaning is written)."""
+    for name, ok in checks:
+        if not ok:
+            raise RadarError(
+                f"{name} = {getattr(obj, name)!r} is not usable (see inference.isar.{type(obj).__name__})", field=name
+            )
+
+
 @dataclass(frozen=True, slots=True)
 class Radar:
     """Radar and imaging parameters; the defaults are the paper's Table 3.
@@ -68,11 +77,7 @@ class Radar:
             ("pitch_deg", -90 < self.pitch_deg < 90),
             ("window_sidelobe_db", 13 <= self.window_sidelobe_db <= 100),
         )
-        for name, ok in checks:
-            if not ok:
-                raise RadarError(
-                    f"{name} = {getattr(self, name)!r} is not usable (see inference.isar.Radar)", field=name
-                )
+        _refuse_unusable(self, checks)
 
     @property
     def wavelength_m(self) -> float:
@@ -186,11 +191,15 @@ class Imager:
     def window_2d(self) -> Vec:
         return np.outer(self.window_r, self.window_a)
 
-    def image_from_echo(self, echo: NDArray[np.complex128]) -> NDArray[np.complex128]:
-        """Window a Cartesian echo (centred indices m = -N/2..N/2-1) and form the complex image."""
+    def image_from_echo(self, echo: NDArray[np.complex128], window: Vec | None = None) -> NDArray[np.complex128]:
+        """Window a Cartesian echo (centred indices m = -N/2..N/2-1) and form the complex image.
+
+        ``window`` (2-D) replaces the radar's Taylor window.
+        """
         import scipy.fft
 
-        return np.fft.fftshift(scipy.fft.ifft2(np.fft.ifftshift(self.window_2d() * echo)))
+        w = self.window_2d() if window is None else window
+        return np.fft.fftshift(scipy.fft.ifft2(np.fft.ifftshift(w * echo)))
 
     def render(self, points_obs: Vec, amplitudes: NDArray[np.complex128]) -> NDArray[np.complex128]:
         """Return the noise-free complex image of point scatterers."""
@@ -407,10 +416,7 @@ class Scattering:
             ("scale_error", 0.0 <= self.scale_error <= 0.2),
             ("blur_px", 0.0 <= self.blur_px <= 10.0),
         )
-        for name, ok in checks:
-            if not ok:
-                raise RadarError(f"{name} = {getattr(self, name)!r} is not usable (see inference.isar.Scattering)",
-                                 field=name)  # fmt: skip
+        _refuse_unusable(self, checks)
 
 
 DEFAULT_SCATTERING = Scattering()
@@ -558,10 +564,8 @@ def simulate(
     if sc.window == "taylor":
         image = imager.image_from_echo(echo)
     else:
-        import scipy.fft
-
         w = np.outer(window_1d(radar.n_range, sc.window, 0), window_1d(radar.n_azimuth, sc.window, 0))
-        image = np.fft.fftshift(scipy.fft.ifft2(np.fft.ifftshift(w * echo)))
+        image = imager.image_from_echo(echo, w)
     if sc.blur_px:
         from scipy.ndimage import gaussian_filter
 

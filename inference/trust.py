@@ -168,12 +168,10 @@ class Checker:
         features = {"median": frame_median(np.asarray(frame, np.float64)), "doubt": enhancer_doubt(enh)}
         fits = []
         if refine or net is None:
-            starts: dict[str, Vec] = {}
             if net is not None:
-                starts = {"network": net, "mirror": mirror(net)}
                 # The prior sits on Swin's answer for both: Swin saw the brightness, which tells the
                 # near-mirror apart where the silhouettes are alike, so the mirror must fit clearly better.
-                fits = fit(self.renderer, enh, starts, prior_at=net)
+                fits = fit(self.renderer, enh, {"network": net, "mirror": mirror(net)}, prior_at=net)
             if net is None or self._hard_iou(fits[0].angles_deg, enh) < cal.iou_min:
                 # No networks, or their answer does not fit: search the library too.
                 fits = sorted(fits + self.search(enh), key=lambda f: f.cost)
@@ -217,7 +215,7 @@ class Checker:
         if not rivals:
             return fits
         mask = enhanced > 0.5
-        score = {id(f): brightness_agreement(self.model, self.radar, np.asarray(frame, float), f.angles_deg, mask)
+        score = {id(f): brightness_agreement(self.renderer, np.asarray(frame, float), f.angles_deg, mask)
                  for f in [fits[0], *rivals]}  # fmt: skip
         winner = max([fits[0], *rivals], key=lambda f: score[id(f)])
         return [winner, *[f for f in fits if f is not winner]]

@@ -329,6 +329,13 @@ def blob_path(data_dir: Path, digest: str) -> Path:
     return Path(data_dir) / "images" / digest[:2] / f"{digest}.png"
 
 
+def matrix_attitude_json(r: NDArray[np.float64]) -> dict[str, Any]:
+    """``attitude_json`` of a rotation matrix, which it keeps as given (not rebuilt from its Euler angles)."""
+    out = attitude_json(np.array(euler_from_matrix(r)))
+    out["rotation_matrix"] = np.asarray(r).round(12).tolist()
+    return out
+
+
 def attitude_json(angles_deg: NDArray[np.floating]) -> dict[str, Any]:
     z, y, x = (float(a) for a in angles_deg)
     r = rotation_matrix(z, y, x)
@@ -438,10 +445,6 @@ def attitudes_in_frames(
     axes = frames_at(plan_request, observed_at)
     body_to_obs = rotation_matrix(*(float(a) for a in angles_deg))
     body_to_gcrs = axes["observation"] @ body_to_obs
-    out = {}
-    for name in ("lvlh", "j2000"):
-        r = axes[name].T @ body_to_gcrs
-        out[name] = attitude_json(np.array(euler_from_matrix(r)))
-        out[name]["rotation_matrix"] = r.round(12).tolist()
+    out = {name: matrix_attitude_json(axes[name].T @ body_to_gcrs) for name in ("lvlh", "j2000")}
     out["observation_axes_in_j2000"] = axes["observation"].round(12).tolist()
     return out

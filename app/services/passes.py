@@ -7,12 +7,11 @@ from datetime import datetime
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from app.errors import InputError
-from app.services.estimation import attitude_json, checked_json, frames_at
-from inference.frames import euler_from_matrix, rotation_matrix
-from inference.fusion import PassFrame, fuse
+from app.services.estimation import checked_json, frames_at, matrix_attitude_json
+from inference.frames import rotation_matrix
+from inference.fusion import PassFrame, angle_deg, fuse
 
 MIRROR = np.diag([1.0, 1.0, -1.0])  # M R M: a frame's near-mirror, a reflection through its own image plane
 NO_BOUND_DEG = 10.0  # a frame whose fit bounds nothing counts as this uncertain
@@ -39,7 +38,7 @@ def fuse_frames(
     """Place each checked frame's answer and alternatives in LVLH (``frames_at``), fuse them, and describe the pass."""
     t0 = min(observed_at)
     pass_frames = []
-    placed = []
+    lvlh_axes = []
     for k, (c, t) in enumerate(zip(checks, observed_at, strict=True)):
         axes = frames_at(plan_request, t)
         obs_in_lvlh = axes["lvlh"].T @ axes["observation"]
@@ -51,20 +50,20 @@ def fuse_frames(
         pass_frames.append(
             PassFrame(np.array([obs_in_lvlh @ r for r in cands]), bound, (t - t0).total_seconds(), names[k])
         )
-        placed.append((axes, obs_in_lvlh))
+        lvlh_axes.append(axes["lvlh"])
     fused = fuse(pass_frames)
-    t_mid = observed_at[len(observed_at) // 2]
-    lvlh_mid = frames_at(plan_request, t_mid)["lvlh"]
-    j2000 = lvlh_mid @ fused.rotation
+    mid = len(observed_at) // 2
+    t_mid = observed_at[mid]
+    j2000 = lvlh_axes[mid] @ fused.rotation
     frames_out = []
     for k, (pf, c) in enumerate(zip(pass_frames, checks, strict=True)):
-        chosen = int(np.argmin([_angle(fused.rotation, r) for r in pf.candidates]))
+        chosen = int(np.argmin([angle_deg(fused.rotation, r) for r in pf.candidates]))
         frames_out.append({
             "index": k,
             "name": names[k],
             "observed_at": observed_at[k],
             **checked_json(c),
-            "attitude_lvlh": _attitude(pf.candidates[chosen]),
+            "attitude_lvlh": matrix_attitude_json(pf.candidates[chosen]),
             "branch": ["answer", "near-mirror", *[f"alternative {j}" for j in range(len(c.alternatives))]][chosen],
             "used": k in fused.used,
             "rejected_because": fused.rejected.get(k),
@@ -73,8 +72,8 @@ def fuse_frames(
     speed = float(np.linalg.norm(fused.rate_deg_s))
     return {
         "frames": frames_out,
-        "attitude_lvlh": _attitude(fused.rotation),
-        "attitude_j2000": {**_attitude(j2000), "at": t_mid},
+        "attitude_lvlh": matrix_attitude_json(fused.rotation),
+        "attitude_j2000": {**matrix_attitude_json(j2000), "at": t_mid},
         "uncertainty_deg": [round(b, 4) for b in fused.uncertainty_deg],
         "used": len(fused.used),
         "rejected": len(fused.rejected),
@@ -87,13 +86,3 @@ def fuse_frames(
             else f"turning at about {speed:.3f} deg/s: the fused attitude is the pass's mean, not a fixed one"
         ),
     }
-
-
-def _angle(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
-    return math.degrees(math.acos(min(1.0, max(-1.0, (float(np.sum(a * b)) - 1.0) / 2.0))))
-
-
-def _attitude(r: NDArray[np.float64]) -> dict[str, Any]:
-    out = attitude_json(np.array(euler_from_matrix(r)))
-    out["rotation_matrix"] = np.asarray(r).round(12).tolist()
-    return out

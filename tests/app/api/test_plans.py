@@ -308,4 +308,6 @@ def test_access_report_csv_matches_the_plan(client, paper_plan):
         assert float(row["duration_s"]) == pytest.approx((end - rise).total_seconds(), abs=2e-3)
         assert 0 <= float(row["rise_azimuth_deg"]) < 360 and float(row["max_elevation_deg"]) >= 0
         assert float(row["min_range_km"]) == pytest.approx(w["min_range_km"], abs=1e-3)
-    assert client.get(f"/v1/plans/{paper_plan['id']}/export/access.csv", headers={"X-API-Key": KEY_B}).status_code == 404
+    assert (
+        client.get(f"/v1/plans/{paper_plan['id']}/export/access.csv", headers={"X-API-Key": KEY_B}).status_code == 404
+    )
