@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 from fastapi import FastAPI, Request
@@ -46,6 +47,35 @@ def _safe(value: Any, depth: int = 0) -> Any:
     return str(value)[:200]
 
 
+_UNION_TAG = re.compile(r"^[A-Z]\w*In$|^(str|int|float|bool)$|\[")
+
+
+def _without_union_tags(loc: Any) -> list[Any]:
+    """Drop pydantic's union-branch tags (``OmmIn``, ``list[...]``, ``str``) from an error's path: the JSON path stays."""
+    return [p for p in loc if not (isinstance(p, str) and _UNION_TAG.search(p))]
+
+
+def _without_null_branches(errors: list[Any]) -> list[Any]:
+    """Drop "Input should be None" beside another error of the same field: an optional field's null branch.
+
+    An optional field (``elements: ElementsIn | None``) that fails its own rules also fails the
+    union's None branch; that second error ("Input should be None", at ``[..., "none"]``) only
+    confuses, since the schema never offers null there.
+    """
+
+    def field(e: Any) -> tuple[Any, ...]:
+        loc = tuple(e.get("loc", ()))
+        return loc[:-1] if loc and loc[-1] == "none" else loc
+
+    others = {field(e)[: len(field(e))] for e in errors if e.get("type") != "none_required"}
+    kept = []
+    for e in errors:
+        if e.get("type") == "none_required" and any(o[: len(field(e))] == field(e) for o in others):
+            continue
+        kept.append(e)
+    return kept or errors
+
+
 def _allowed_methods(app: FastAPI, request: Request) -> list[str]:
     """Every method the OpenAPI document serves at this request's path (HEAD with GET, as Starlette does)."""
     import re
@@ -77,9 +107,9 @@ def install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(RequestValidationError)
     async def _validation_error(_request: Request, exc: RequestValidationError) -> JSONResponse:
         errors = [
-            {"loc": _safe(list(e.get("loc", ()))), "msg": _safe(e.get("msg", "")), "type": _safe(e.get("type", "")),
+            {"loc": _safe(_without_union_tags(e.get("loc", ()))), "msg": _safe(e.get("msg", "")), "type": _safe(e.get("type", "")),
              **({"input": _safe(e["input"])} if "input" in e else {})}
-            for e in exc.errors()
+            for e in _without_null_branches(list(exc.errors()))
         ]  # fmt: skip
         return JSONResponse(status_code=422, content={"detail": errors, "request_id": current_request_id()})
 

@@ -30,6 +30,27 @@ Every <code>/v1</code> call needs an <code>X-API-Key</code> header.</p>
 """
 
 
+def _forms_without_null(schema: dict[str, Any]) -> None:
+    """A form field cannot be null, only left out: drop the null branch of optional form fields (and say a
+    required list, files or times, holds at least one)."""
+    for name, comp in schema.get("components", {}).get("schemas", {}).items():
+        if not name.startswith("Body_"):
+            continue
+        comp["additionalProperties"] = False  # unknown form fields are refused (app.api.main)
+        required = set(comp.get("required", []))
+        for key, prop in comp.get("properties", {}).items():
+            if prop.get("type") == "array" and key in required:
+                prop.setdefault("minItems", 1)  # a form list of no items is the field left out: missing
+            branches = prop.get("anyOf")
+            if branches and {"type": "null"} in branches:
+                rest = [b for b in branches if b != {"type": "null"}]
+                prop.pop("anyOf")
+                if len(rest) == 1:
+                    prop.update(rest[0])
+                else:
+                    prop["anyOf"] = rest
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     """Build the service. The database must already be migrated (``gsa db upgrade``; ``gsa serve`` does it)."""
     settings = settings or get_settings()
@@ -107,6 +128,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                             for s in (param["schema"], *param["schema"].get("anyOf", [])):
                                 if s.get("type") == "integer":
                                     s["maximum"] = settings.max_page_size
+            _forms_without_null(schema)
             app.openapi_schema = schema
         return app.openapi_schema
 

@@ -77,26 +77,60 @@ class ElementsIn(Strict):
         return self
 
 
+class OmmIn(BaseModel):
+    """One CCSDS OMM (mean elements for SGP4) as CelesTrak serves it in JSON (``FORMAT=json``)."""
+
+    model_config = ConfigDict(extra="allow", allow_inf_nan=False)
+
+    OBJECT_NAME: Annotated[str, Field(max_length=80)] | None = None
+    OBJECT_ID: Annotated[str, Field(max_length=40)] | None = None
+    EPOCH: Annotated[str, Field(max_length=40, description="UTC, e.g. 2024-03-01T06:00:00.000000")]
+    MEAN_MOTION: Finite = Field(description="revolutions a day")
+    ECCENTRICITY: Finite
+    INCLINATION: Finite = Field(description="deg")
+    RA_OF_ASC_NODE: Finite = Field(description="deg")
+    ARG_OF_PERICENTER: Finite = Field(description="deg")
+    MEAN_ANOMALY: Finite = Field(description="deg")
+    EPHEMERIS_TYPE: int | None = None
+    CLASSIFICATION_TYPE: Annotated[str, Field(max_length=1)] | None = None
+    NORAD_CAT_ID: int | None = None
+    ELEMENT_SET_NO: int | None = None
+    REV_AT_EPOCH: int | None = None
+    BSTAR: Finite | None = None
+    MEAN_MOTION_DOT: Finite | None = None
+    MEAN_MOTION_DDOT: Finite | None = None
+
+
+ORBIT_SOURCES = ("elements", "tle", "omm", "omm_xml", "omm_csv")
+
+
 class OrbitIn(Strict):
-    """A satellite: a name and exactly one of ``elements`` or ``tle`` (two lines)."""
+    """A satellite: a name and exactly one of ``elements``, ``tle`` (2 lines, a 3LE, or a text block), ``omm`` (a
+    CelesTrak OMM JSON object), ``omm_xml`` or ``omm_csv`` (CelesTrak's OMM XML or CSV text, one element set)."""
 
     model_config = ConfigDict(
         extra="forbid",
         allow_inf_nan=False,
-        json_schema_extra={"oneOf": [{"required": ["elements"]}, {"required": ["tle"]}]},
+        json_schema_extra={"oneOf": [{"required": [k]} for k in ORBIT_SOURCES]},
     )
 
     name: Name
-    # Optional, but never null in the schema: oneOf below says which one is given.
+    # Optional, but never null in the schema: oneOf above says which one is given.
     elements: ElementsIn | SkipJsonSchema[None] = None
     tle: (
-        Annotated[list[Annotated[str, Field(max_length=80)]], Field(min_length=2, max_length=2)] | SkipJsonSchema[None]
-    ) = None
+        Annotated[list[Annotated[str, Field(max_length=80)]], Field(min_length=2, max_length=3)]
+        | Annotated[str, Field(max_length=300)]
+        | SkipJsonSchema[None]
+    ) = Field(default=None, description="two element lines, a 3LE (a name line first), or the same as one text block")
+    omm: OmmIn | SkipJsonSchema[None] = None
+    omm_xml: Annotated[str, Field(max_length=20_000)] | SkipJsonSchema[None] = None
+    omm_csv: Annotated[str, Field(max_length=5_000)] | SkipJsonSchema[None] = None
 
     @model_validator(mode="after")
     def _one_source(self) -> OrbitIn:
-        if (self.elements is None) == (self.tle is None):
-            raise ValueError("give exactly one of 'elements' or 'tle'")
+        given = [k for k in ORBIT_SOURCES if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError(f"give exactly one of {', '.join(repr(k) for k in ORBIT_SOURCES)}; got {len(given)}")
         return self
 
 
@@ -477,11 +511,20 @@ class PassPublic(BaseModel):
     )
     attitude_j2000: PassAttitudeJ2000
     uncertainty_deg: list[float] = Field(description="90 % bound on the fused LVLH Euler z, y, x (deg)")
+    trusted: bool = Field(
+        default=True,
+        description="false when fewer than 3 trusted frames agree: the fused attitude rests on too little",
+    )
     used: int
     rejected: int
     stable: bool = Field(description="false when the frames show a body rate beyond their scatter")
     rate_deg_s: list[float] = Field(description="the fitted body rate (deg/s, body axes)")
     rate_sigma_deg_s: list[float | None]
+    turning_chi2: float | None = Field(
+        default=None,
+        description="how much better (chi-square, 3 degrees of freedom) a constant-rate model fits the frames than a "
+        "still attitude; the target is called turning over 30",
+    )
     stability: str
     frames: list[PassFramePublic]
 

@@ -44,19 +44,29 @@ def simulated(spec: DatasetSpec, radar: Radar | None = None, model: TargetModel 
               scattering: Scattering = DEFAULT_SCATTERING) -> tuple[NDArray[np.float32], NDArray[np.float64],
                                                                     NDArray[np.float64], NDArray[np.bool_]]:  # fmt: skip
     """Return a spec's frames (normalised), angles, SNRs and labels, of ``model`` (default: the default target)."""
+    truths = [frame_truth(spec, i) for i in range(spec.n)]
+    angles = np.array([t[0] for t in truths], float).reshape(-1, 3)
+    snrs = np.array([np.nan if t[1] is None else t[1] for t in truths], float)
+    frames, labels = at_attitudes(angles, snrs, [t[2] for t in truths], radar, model, scattering)
+    return frames, angles, snrs, labels
+
+
+def at_attitudes(angles_deg: NDArray[np.float64], snrs_db: NDArray[np.float64], seeds: list[int],
+                 radar: Radar | None = None, model: TargetModel | None = None,
+                 scattering: Scattering = DEFAULT_SCATTERING) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:  # fmt: skip
+    """Return frames (normalised) and labels of ``model`` at given attitudes [N, 3] (z, y, x deg), SNRs (NaN: none)."""
     radar = radar or Radar()
     model = model or tiangong_like()
     imager = Imager(radar)
-    frames = np.empty((spec.n, radar.n_range, radar.n_azimuth), np.float32)
-    labels = np.empty((spec.n, radar.n_range, radar.n_azimuth), bool)
-    angles = np.empty((spec.n, 3))
-    snrs = np.full(spec.n, np.nan)
-    for i in range(spec.n):
-        ang, snr, s = frame_truth(spec, i)
-        f = simulate(model, imager, ang, snr, s, scattering)
-        frames[i], labels[i], angles[i] = normalise_frame(np.abs(f.image)), f.label, ang
-        snrs[i] = np.nan if snr is None else snr
-    return frames, angles, snrs, labels
+    n = len(angles_deg)
+    frames = np.empty((n, radar.n_range, radar.n_azimuth), np.float32)
+    labels = np.empty((n, radar.n_range, radar.n_azimuth), bool)
+    for i in range(n):
+        ang = (float(angles_deg[i][0]), float(angles_deg[i][1]), float(angles_deg[i][2]))
+        snr = None if not np.isfinite(snrs_db[i]) else float(snrs_db[i])
+        f = simulate(model, imager, ang, snr, int(seeds[i]), scattering)
+        frames[i], labels[i] = normalise_frame(np.abs(f.image)), f.label
+    return frames, labels
 
 
 def good_frames(n: int, seed: int = FRESH_SEED, radar: Radar | None = None,

@@ -14,22 +14,40 @@ to frame while the truth does not).
    candidate within ``agree_deg`` of it; the best-supported one seeds the mean.
 2. **Robust mean.** Each frame takes its candidate nearest the mean; the mean is the
    weighted chordal mean (the weighted sum of rotation matrices projected back onto SO(3)
-   by SVD), each frame weighted by 1 / sigma^2 with sigma its 90 % bound over 1.645.
-   A frame further than ``max(reject_sigma * sigma_k, reject_floor_deg)`` from the mean is
-   rejected (said why); repeat until nothing changes.
-3. **Bound.** Per LVLH Euler axis, the 90 % interval of the weighted mean of the frames
-   used: Student's t (n - 1 degrees of freedom) on their spread, never below the bound
-   their own per-frame bounds imply (1.645 / sqrt(sum of weights)).
-4. **Stability.** The residual rotations log(A^T A_k) (body frame, rad) against the
-   frames' times: a least-squares body rate, with its standard error from the residual
-   scatter. The target is called turning when the rate is over ``spin_sigma`` standard
-   errors and over ``min_rate_deg_s``.
+   by SVD), each frame weighted by 1 / sigma^2 with sigma its 90 % bound over 1.645. Where
+   the frames carry their geometry and per-axis bounds, the mean is then refined with each
+   frame's full information matrix (its per-axis bounds, through its own Euler axes and
+   observation frame, into LVLH): a frame counts most about the axes it sees best. A frame
+   further than ``max(reject_sigma * sigma_k, reject_floor_deg)`` from the mean is rejected
+   (said why); repeat until nothing changes. Frames their own checks did not trust are
+   rejected first (unless fewer than two are trusted).
+3. **Bound.** Per LVLH Euler axis, the 90 % interval of the mean: from the frames'
+   information (or Student's t on their spread without it), scaled up by their scatter
+   beyond it, plus the part of a frame's error the pass's frames share
+   (``SHARED_FRACTION`` of its variance), which no number of frames averages away.
+4. **Stability.** Two tests; either calls the target turning.
+
+   - *Drift*: the residual rotations log(A^T A_k) (body frame, rad) against the frames'
+     times: a least-squares body rate, with its standard error from the residual scatter,
+     over ``spin_sigma`` standard errors and over ``min_rate_deg_s``.
+   - *A turning model* (``fit_turning``, when the frames carry their line of sight): a
+     target spinning at a constant body rate w does not only change its attitude, it turns
+     each frame's image plane too, since the image forms from the line of sight's motion
+     *relative to the body* (its rate in LVLH less w x the line of sight). So a spinning
+     target's frames, placed in LVLH as if it were still, need not agree at all. The model
+     predicts every frame's body-to-observation rotation from (A at mid-pass, w) and the
+     pass geometry and is fitted to the frames' own answers (a grid over w seeded by the
+     lines of sight alone, then least squares on the whole rotations). The target is turning
+     when that model beats the still one by a chi-square of over ``turning_chi2`` (3 degrees
+     of freedom; each frame's term capped at ``reject_sigma`` squared, so outliers do not
+     decide) and its rate is over ``min_rate_deg_s`` and ``spin_sigma`` standard errors. The
+     answer is then the model's attitude at the middle of the frames' times and its rate.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,6 +56,11 @@ from inference.frames import euler_from_matrix
 
 Vec = NDArray[np.float64]
 Z90 = 1.6448536269514722  # the two-sided 90 % normal quantile
+# The share of a frame's error variance that the other frames of its pass share: a pass turns
+# the line of sight through the body in about one plane, so the out-of-plane view, and the fit's
+# error there, hardly change from frame to frame. Measured on 20 simulated passes (seeds
+# 40000-40019, not the benchmark's; bench/passes.py and BENCHMARKS.md "Pass fusion").
+SHARED_FRACTION = 0.1
 
 
 @dataclass(frozen=True)
@@ -48,6 +71,11 @@ class PassFrame:
     bound_deg: float
     time_s: float
     name: str = ""
+    los: Vec | None = None  # line of sight (target to radar) in LVLH, unit
+    los_rate: Vec | None = None  # its rate in LVLH (1/s)
+    trusted: bool = True
+    why_not: str = ""  # why the frame's own checks did not trust it
+    axis_bounds_deg: tuple[float, float, float] | None = None  # 90 % bounds on its own Euler z, y, x (obs frame)
 
 
 @dataclass(frozen=True)
@@ -64,6 +92,8 @@ class Fused:
     rate_sigma_deg_s: Vec
     stable: bool
     residual_deg: dict[int, float] = field(default_factory=dict)
+    turning_chi2: float | None = None  # how much better the turning model fits than the still one
+    reference_s: float | None = None  # a turning answer's time (s, the frames' clock); a still one holds throughout
 
 
 def so3_log(r: Vec) -> Vec:
@@ -93,37 +123,85 @@ def chordal_mean(rotations: Vec, weights: Vec) -> Vec:
     return np.asarray(u @ d @ vt)
 
 
+def euler_jacobian(r: Vec) -> Vec:
+    """Return J with d(rotation) = [J d(z, y, x)] r: the columns e_z, Rz e_y, Rz Ry e_x (rad, left perturbation)."""
+    z, y, _ = (math.radians(a) for a in euler_from_matrix(r))
+    cz, sz, cy, sy = math.cos(z), math.sin(z), math.cos(y), math.sin(y)
+    return np.array([[0.0, -sz, cz * cy], [0.0, cz, sz * cy], [1.0, 0.0, -sy]])
+
+
+def _informations(frames: list[PassFrame]) -> list[list[Vec]]:
+    """Each frame's information matrix (LVLH, left perturbation, 1/rad^2) for each of its candidates."""
+    out = []
+    for f in frames:
+        assert f.los is not None and f.los_rate is not None and f.axis_bounds_deg is not None
+        obs = observation_in_lvlh(f.los[None], f.los_rate[None])[0]
+        var = (np.radians(np.maximum(np.array(f.axis_bounds_deg, float), 1e-3)) / Z90) ** 2
+        mats = []
+        for c in f.candidates:
+            j = obs @ euler_jacobian(obs.T @ c)
+            mats.append(np.linalg.inv(j @ np.diag(var) @ j.T))
+        out.append(mats)
+    return out
+
+
+def information_mean(rotations: Vec, infos: Vec, start: Vec) -> Vec:
+    """Return the rotation minimising sum log(R_k A^T)^T I_k log(R_k A^T) (Gauss-Newton from ``start``)."""
+    a = start
+    for _ in range(20):
+        eps = np.array([so3_log(r @ a.T) for r in rotations])
+        step = np.linalg.solve(np.sum(infos, axis=0), np.einsum("kij,kj->i", infos, eps))
+        a = so3_exp(step) @ a
+        if float(np.linalg.norm(step)) < 1e-12:
+            break
+    return np.asarray(a)
+
+
 def fuse(frames: list[PassFrame], agree_deg: float = 3.0, reject_sigma: float = 4.0, reject_floor_deg: float = 2.0,
-         spin_sigma: float = 4.0, min_rate_deg_s: float = 0.02) -> Fused:  # fmt: skip
+         spin_sigma: float = 4.0, min_rate_deg_s: float = 0.02, turning_chi2: float = 30.0,
+         shared_fraction: float | None = None) -> Fused:  # fmt: skip
     """Fuse a pass's frames into one body-to-LVLH attitude (see the module's text)."""
+    shared_fraction = SHARED_FRACTION if shared_fraction is None else shared_fraction
     if len(frames) < 2:
         raise ValueError("a pass needs at least two frames to fuse")
     sigma = np.array([max(f.bound_deg, 1e-3) / Z90 for f in frames])
+    untrusted = {k: f"not trusted by its own checks ({f.why_not or 'see its quality'})"
+                 for k, f in enumerate(frames) if not f.trusted}  # fmt: skip
+    pool = [k for k in range(len(frames)) if k not in untrusted]
+    if len(pool) < 2:  # too few trusted frames: fuse them all, and say so through their quality
+        pool, untrusted = list(range(len(frames))), {}
+    infos = _informations(frames) if all(f.los is not None and f.los_rate is not None and f.axis_bounds_deg
+                                         for f in frames) else None  # fmt: skip
     # 1. The best-supported candidate seeds the mean.
-    best_support, seed = -1.0, frames[0].candidates[0]
-    for f in frames:
-        for c in f.candidates:
-            support = sum(1.0 for g in frames if min(angle_deg(c, d) for d in g.candidates) <= max(agree_deg, 0.0))
+    best_support, seed = -1.0, frames[pool[0]].candidates[0]
+    for k in pool:
+        for c in frames[k].candidates:
+            support = sum(
+                1.0 for j in pool if min(angle_deg(c, d) for d in frames[j].candidates) <= max(agree_deg, 0.0)
+            )
             if support > best_support:
                 best_support, seed = support, c
     mean = seed
-    rejected: dict[int, str] = {}
+    rejected: dict[int, str] = dict(untrusted)
     chosen = [0] * len(frames)
+    limit = np.maximum(reject_sigma * sigma, reject_floor_deg)
     for _ in range(20):
         chosen = [int(np.argmin([angle_deg(mean, c) for c in f.candidates])) for f in frames]
         dist = np.array([angle_deg(mean, f.candidates[j]) for f, j in zip(frames, chosen, strict=True)])
-        limit = np.maximum(reject_sigma * sigma, reject_floor_deg)
         new_rejected = {
             k: f"{dist[k]:.1f} deg from the pass's mean, over its limit of {limit[k]:.1f} deg"
-            for k in range(len(frames))
+            for k in pool
             if dist[k] > limit[k]
         }
-        used = [k for k in range(len(frames)) if k not in new_rejected]
+        used = [k for k in pool if k not in new_rejected]
         if len(used) < 2:
-            used = list(np.argsort(dist)[:2])
+            used = [pool[j] for j in np.argsort(dist[pool])[:2]]
             new_rejected = {k: v for k, v in new_rejected.items() if k not in used}
+        new_rejected.update(untrusted)
         rots = np.array([frames[k].candidates[chosen[k]] for k in used])
         new_mean = chordal_mean(rots, 1.0 / sigma[used] ** 2)
+        if infos is not None:
+            new_mean = information_mean(rots, np.array([infos[k][chosen[k]] for k in used]), new_mean)
         done = new_rejected == rejected and angle_deg(new_mean, mean) < 1e-6
         mean, rejected = new_mean, new_rejected
         if done:
@@ -142,14 +220,25 @@ def fuse(frames: list[PassFrame], agree_deg: float = 3.0, reject_sigma: float = 
     statistical = t * spread / math.sqrt(max(n_eff, 1.0))
     floor = Z90 / math.sqrt(float(np.sum(w)))
     bound = np.maximum(statistical, floor)
-    # 4. Stability: a body rate from the residual rotations over time.
+    if infos is not None:  # the information's own bound, scaled up by the scatter beyond it
+        h = np.sum([infos[k][chosen[k]] for k in used], axis=0)
+        eps = [so3_log(frames[k].candidates[chosen[k]] @ mean.T) for k in used]
+        chi2 = float(sum(e @ infos[k][chosen[k]] @ e for e, k in zip(eps, used, strict=True)))
+        scale = math.sqrt(max(1.0, chi2 / max(3 * n - 3, 1)))
+        j = np.linalg.inv(euler_jacobian(mean))
+        single = np.mean([j @ np.linalg.inv(infos[k][chosen[k]]) @ j.T for k in used], axis=0)
+        cov_e = j @ np.linalg.inv(h) @ j.T * scale**2 + shared_fraction * single
+        bound = np.degrees(Z90 * np.sqrt(np.maximum(np.diag(cov_e), 0.0)))
+    else:
+        bound = np.sqrt(bound**2 + shared_fraction * float(np.median(sigma[used] * Z90)) ** 2)
+    # 4. Stability: a body rate from the residual rotations over time (drift) ...
     times = np.array([frames[k].time_s for k in used])
     resid = np.array([so3_log(mean.T @ r) for r in rots])  # body frame, rad
     rate, rate_sigma = _rate(times, resid, w)
     speed = math.degrees(float(np.linalg.norm(rate)))
     z = float(np.linalg.norm(rate / np.maximum(rate_sigma, 1e-12))) / math.sqrt(3.0)
     stable = not (z > spin_sigma and speed > min_rate_deg_s)
-    return Fused(
+    still = Fused(
         rotation=mean,
         euler_zyx_deg=tuple(float(a) for a in euler),  # type: ignore[arg-type]
         uncertainty_deg=tuple(float(b) for b in bound),  # type: ignore[arg-type]
@@ -160,6 +249,179 @@ def fuse(frames: list[PassFrame], agree_deg: float = 3.0, reject_sigma: float = 
         rate_sigma_deg_s=np.degrees(rate_sigma),
         stable=stable,
         residual_deg={k: angle_deg(mean, frames[k].candidates[chosen[k]]) for k in range(len(frames))},
+    )
+    # ... and a turning model, where the frames carry their geometry.
+    if len(pool) < 4 or any(frames[k].los is None or frames[k].los_rate is None for k in pool):
+        return still
+    turn = fit_turning([frames[k] for k in pool], mean)
+    cap = reject_sigma**2
+    still_chi2 = sum(min((still.residual_deg[k] / sigma[k]) ** 2, cap) for k in pool)
+    gain = still_chi2 - float(np.sum(np.minimum(turn.chi2_terms, cap)))
+    turn_speed = float(np.linalg.norm(turn.rate_deg_s))
+    turning = gain > turning_chi2 and turn_speed > min_rate_deg_s and turn_speed > spin_sigma * turn.speed_sigma_deg_s
+    if not turning:
+        return replace(still, turning_chi2=gain)
+    resid_t = dict(zip(pool, (float(r) for r in turn.residual_deg), strict=True))
+    rejected_t = dict(untrusted)
+    for k in pool:
+        if resid_t[k] > limit[k]:
+            rejected_t[k] = f"{resid_t[k]:.1f} deg from the turning model, over its limit of {limit[k]:.1f} deg"
+    used_t = [k for k in range(len(frames)) if k not in rejected_t]
+    return Fused(
+        rotation=turn.rotation,
+        euler_zyx_deg=tuple(float(a) for a in euler_from_matrix(turn.rotation)),  # type: ignore[arg-type]
+        uncertainty_deg=turn.uncertainty_deg,
+        used=used_t,
+        rejected=rejected_t,
+        branch_changed=[pool[j] for j, c in enumerate(turn.chosen) if c != 0 and pool[j] in used_t],
+        rate_deg_s=turn.rate_deg_s,
+        rate_sigma_deg_s=turn.rate_sigma_deg_s,
+        stable=False,
+        residual_deg={**still.residual_deg, **resid_t},
+        turning_chi2=gain,
+        reference_s=turn.reference_s,
+    )
+
+
+@dataclass(frozen=True)
+class Turning:
+    """A constant-rate fit of a pass: body to LVLH at the frames' middle time, body rate, and how well it fits."""
+
+    rotation: Vec
+    rate_deg_s: Vec
+    rate_sigma_deg_s: Vec
+    speed_sigma_deg_s: float
+    uncertainty_deg: tuple[float, float, float]
+    residual_deg: Vec
+    chi2_terms: Vec
+    chosen: list[int]
+    reference_s: float
+
+
+def skew(w: Vec) -> Vec:
+    """Return the cross-product matrices [..., 3, 3] of vectors [..., 3]."""
+    z = np.zeros(w.shape[:-1])
+    return np.stack([np.stack([z, -w[..., 2], w[..., 1]], -1), np.stack([w[..., 2], z, -w[..., 0]], -1),
+                     np.stack([-w[..., 1], w[..., 0], z], -1)], -2)  # fmt: skip
+
+
+def so3_exp(w: Vec) -> Vec:
+    """Return the rotations [..., 3, 3] of rotation vectors [..., 3] (rad), by Rodrigues' formula."""
+    theta = np.linalg.norm(w, axis=-1)[..., None, None]
+    k = skew(w)
+    small = theta < 1e-9
+    safe = np.where(small, 1.0, theta)
+    a = np.where(small, 1.0, np.sin(safe) / safe)
+    b = np.where(small, 0.5, (1.0 - np.cos(safe)) / safe**2)
+    return np.eye(3) + a * k + b * (k @ k)
+
+
+def observation_in_lvlh(los: Vec, los_rate: Vec, spin_lvlh: Vec | None = None) -> Vec:
+    """Return observation axes in LVLH [N, 3, 3] (columns): X the line of sight, Y its rate relative to the body.
+
+    ``spin_lvlh`` (rad/s, [N, 3]) is the body's rotation in LVLH; the line of sight's rate as
+    the body sees it is its LVLH rate less spin x line of sight (``planner.frames``: the
+    same axes for a body still in LVLH).
+    """
+    rate = los_rate if spin_lvlh is None else los_rate - np.cross(spin_lvlh, los)
+    rate = rate - np.sum(rate * los, axis=-1, keepdims=True) * los
+    y = rate / np.linalg.norm(rate, axis=-1, keepdims=True)
+    return np.stack([los, y, np.cross(los, y)], axis=-1)
+
+
+def turning_prediction(a_ref: Vec, w_body: Vec, tau: Vec, los: Vec, los_rate: Vec) -> Vec:
+    """Return each frame's body-to-observation rotation [N, 3, 3] for a body turning at w (rad/s, body axes).
+
+    The body is ``a_ref`` (body to LVLH) at tau = 0 and ``a_ref exp(w tau)`` at tau (s).
+    """
+    a = a_ref @ so3_exp(np.outer(tau, w_body))
+    obs = observation_in_lvlh(los, los_rate, a @ w_body)
+    return np.asarray(np.swapaxes(obs, -1, -2) @ a)
+
+
+def fit_turning(frames: list[PassFrame], start: Vec, max_rate_deg_s: float = 1.2, grid_deg_s: float = 0.12) -> Turning:
+    """Fit a constant body rate to a pass's frames (each with ``los`` and ``los_rate``); see the module's text."""
+    from scipy.optimize import least_squares
+
+    los = np.array([f.los for f in frames], float)
+    los_rate = np.array([f.los_rate for f in frames], float)
+    tau = np.array([f.time_s for f in frames], float)
+    reference = 0.5 * float(tau.min() + tau.max())
+    tau = tau - reference
+    sigma = np.radians(np.array([max(f.bound_deg, 1e-3) / Z90 for f in frames]))
+    still = observation_in_lvlh(los, los_rate)
+    # The frames' own answers as body-to-observation rotations (the still placement undone).
+    measured = [np.swapaxes(still[k], 0, 1)[None] @ f.candidates for k, f in enumerate(frames)]
+    # Seeds: a grid over w, each scored by the lines of sight alone (the body-frame line of
+    # sight of frame k, X_k, is exp(-w tau) a^T los_k: Wahba's problem for a, per w).
+    x_body = np.array([m[0][0] for m in measured])  # first row of R: the line of sight in body axes
+    g = np.radians(np.arange(-max_rate_deg_s, max_rate_deg_s + 1e-9, grid_deg_s))
+    grid = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
+    u = np.einsum("gnij,nj->gni", so3_exp(grid[:, None, :] * tau[None, :, None]), x_body)
+    wts = 1.0 / sigma**2
+    b = np.einsum("n,ni,gnj->gij", wts, los, u)
+    uu, _, vt = np.linalg.svd(b)
+    d = np.sign(np.linalg.det(uu @ vt))
+    uu[:, :, 2] *= d[:, None]
+    a_grid = uu @ vt
+    cost = np.einsum("n,gni->g", wts, (los[None] - np.einsum("gij,gnj->gni", a_grid, u)) ** 2)
+    seeds = [(start, np.zeros(3))] + [(a_grid[i], grid[i]) for i in np.argsort(cost)[:6]]
+
+    def residuals(p: Vec, a0: Vec, pick: list[int]) -> Vec:
+        pred = turning_prediction(a0 @ so3_exp(p[:3]), p[3:], tau, los, los_rate)
+        return np.concatenate([so3_log(measured[k][pick[k]] @ pred[k].T) / sigma[k] for k in range(len(frames))])
+
+    def nearest(a0: Vec, p: Vec) -> list[int]:
+        pred = turning_prediction(a0 @ so3_exp(p[:3]), p[3:], tau, los, los_rate)
+        return [int(np.argmin([angle_deg(m, pred[k]) for m in measured[k]])) for k in range(len(frames))]
+
+    best = None
+    for a0, w0 in seeds:
+        p = np.concatenate([np.zeros(3), w0])
+        pick = nearest(a0, p)
+        for _ in range(3):
+            sol = least_squares(residuals, p, args=(a0, pick), loss="soft_l1", f_scale=4.0, x_scale=1.0)
+            p = sol.x
+            new_pick = nearest(a0, p)
+            if new_pick == pick:
+                break
+            pick = new_pick
+        robust = float(np.sum(np.minimum((sol.fun.reshape(-1, 3) ** 2).sum(1), 16.0)))
+        if best is None or robust < best[0]:
+            best = (robust, a0, p, pick, sol)
+    assert best is not None
+    _, a0, p, pick, sol = best
+    a_ref = a0 @ so3_exp(p[:3])
+    pred = turning_prediction(a_ref, p[3:], tau, los, los_rate)
+    resid = np.array([angle_deg(measured[k][pick[k]], pred[k]) for k in range(len(frames))])
+    terms = (resid / np.degrees(sigma)) ** 2
+    try:
+        cov = np.linalg.inv(sol.jac.T @ sol.jac)
+    except np.linalg.LinAlgError:
+        cov = np.full((6, 6), np.inf)
+    scale = max(1.0, float(np.sum(np.minimum(terms, 16.0))) / max(len(frames) * 3 - 6, 1))
+    cov = cov * scale
+    w_hat = p[3:] / max(float(np.linalg.norm(p[3:])), 1e-12)
+    speed_sigma = math.degrees(math.sqrt(max(float(w_hat @ cov[3:, 3:] @ w_hat), 0.0)))
+    # Per Euler axis: the attitude's covariance (rotation vector, body) through the Euler map.
+    e0 = np.array(euler_from_matrix(a_ref))
+    jac = np.empty((3, 3))
+    for i in range(3):
+        dv = np.zeros(3)
+        dv[i] = 1e-6
+        jac[:, i] = ((np.array(euler_from_matrix(a_ref @ so3_exp(dv))) - e0 + 180.0) % 360.0 - 180.0) / 1e-6
+    cov_e = jac @ cov[:3, :3] @ jac.T
+    bound = tuple(float(Z90 * math.sqrt(max(c, 0.0))) for c in np.diag(cov_e))
+    return Turning(
+        rotation=a_ref,
+        rate_deg_s=np.degrees(p[3:]),
+        rate_sigma_deg_s=np.degrees(np.sqrt(np.maximum(np.diag(cov[3:, 3:]), 0.0))),
+        speed_sigma_deg_s=speed_sigma,
+        uncertainty_deg=bound,  # type: ignore[arg-type]
+        residual_deg=resid,
+        chi2_terms=terms,
+        chosen=pick,
+        reference_s=reference,
     )
 
 

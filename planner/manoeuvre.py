@@ -203,6 +203,7 @@ class Encounter:
     target_angular_rate_deg_s: float
     closest_approach_km: float
     closest_approach_s: float
+    arc: Trajectory | None = None  # the observer after the burn (the exports' ephemeris)
 
 
 def encounter(
@@ -238,4 +239,5 @@ def encounter(
         target_angular_rate_deg_s=math.degrees(rate),
         closest_approach_km=float(cand_d[j]),
         closest_approach_s=float(cand_t[j]),
+        arc=arc,
     )

@@ -95,3 +95,105 @@ def parse_tle(line1: str, line2: str, field: str = "tle") -> TLE:
     if sat.error:
         raise TLEError(f"SGP4 rejects this TLE (error {sat.error})", field=field)
     return tle
+
+
+def tle_lines(text_or_lines: str | list[str], field: str = "tle") -> tuple[str, str, str | None]:
+    """Return the two element lines and the name (or None) of a TLE given as 2 lines, 3 lines (3LE), or a text block.
+
+    A 3LE's first line is the satellite's name, with or without CelesTrak's leading ``0 ``.
+
+    >>> tle_lines(["0 ISS (ZARYA)", "1 a", "2 b"])
+    ('1 a', '2 b', 'ISS (ZARYA)')
+    """
+    lines = text_or_lines.splitlines() if isinstance(text_or_lines, str) else list(text_or_lines)
+    lines = [ln.rstrip("\r\n ") for ln in lines if ln.strip()]
+    if len(lines) == 2:
+        return lines[0], lines[1], None
+    if len(lines) == 3:
+        name = lines[0][2:] if lines[0].startswith("0 ") else lines[0]
+        return lines[1], lines[2], name.strip()
+    raise TLEError(f"a TLE is 2 lines, or 3 with a name line first; this one has {len(lines)}", field=field)
+
+
+OMM_DEFAULTS = {
+    "CLASSIFICATION_TYPE": "U", "OBJECT_ID": "", "EPHEMERIS_TYPE": 0, "ELEMENT_SET_NO": 999, "REV_AT_EPOCH": 0,
+    "BSTAR": 0.0, "MEAN_MOTION_DOT": 0.0, "MEAN_MOTION_DDOT": 0.0, "NORAD_CAT_ID": 0,
+}  # fmt: skip
+OMM_REQUIRED = ("EPOCH", "MEAN_MOTION", "ECCENTRICITY", "INCLINATION", "RA_OF_ASC_NODE", "ARG_OF_PERICENTER",
+                "MEAN_ANOMALY")  # fmt: skip
+
+
+def tle_from_omm(fields: dict[str, object], field: str = "omm") -> TLE:
+    """Return the TLE of a CCSDS OMM's mean elements (SGP4 / TLE theory), as CelesTrak serves them.
+
+    sgp4's own OMM reader fills the satellite record; its TLE exporter writes the lines, so an
+    OMM propagates exactly as the TLE it came from. Raises TLEError naming the field.
+    """
+    from sgp4 import exporter, omm
+    from sgp4.api import Satrec
+
+    missing = [k for k in OMM_REQUIRED if k not in fields]
+    if missing:
+        raise TLEError(f"the OMM has no {missing[0]}: an OMM for SGP4 gives {', '.join(OMM_REQUIRED)}", field=missing[0])
+    values = {**OMM_DEFAULTS, **fields}
+    theory = str(fields.get("MEAN_ELEMENT_THEORY", "SGP4")).upper()
+    if theory not in ("SGP4", "SGP4-XP", "SDP4"):
+        raise TLEError(f"MEAN_ELEMENT_THEORY {theory!r}: only SGP4 mean elements can be used", field="MEAN_ELEMENT_THEORY")
+    epoch = str(values["EPOCH"]).rstrip("Z")
+    if "." not in epoch:
+        epoch += ".000000"
+    values["EPOCH"] = epoch
+    for key in OMM_REQUIRED[1:] + ("BSTAR", "MEAN_MOTION_DOT", "MEAN_MOTION_DDOT"):
+        try:
+            number = float(values[key])  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            raise TLEError(f"{key} {values[key]!r} is not a number", field=key) from None
+        if number != number or number in (float("inf"), float("-inf")):
+            raise TLEError(f"{key} must be finite", field=key)
+    checks = (
+        ("MEAN_MOTION", 0.05 < float(values["MEAN_MOTION"]) < 20.0, "revolutions a day, over 0.05 and under 20"),  # type: ignore[arg-type]
+        ("ECCENTRICITY", 0.0 <= float(values["ECCENTRICITY"]) < 1.0, "in [0, 1)"),  # type: ignore[arg-type]
+        ("INCLINATION", 0.0 <= float(values["INCLINATION"]) <= 180.0, "degrees in [0, 180]"),  # type: ignore[arg-type]
+    )
+    for key, ok, what in checks:
+        if not ok:
+            raise TLEError(f"{key} {values[key]} must be {what}", field=key)
+    try:
+        satnum = int(values["NORAD_CAT_ID"])  # type: ignore[call-overload]
+    except (TypeError, ValueError):
+        raise TLEError(f"NORAD_CAT_ID {values['NORAD_CAT_ID']!r} is not a whole number", field="NORAD_CAT_ID") from None
+    if not 0 <= satnum <= 339_999:
+        raise TLEError(f"NORAD_CAT_ID {satnum} does not fit a TLE (0 to 339999)", field="NORAD_CAT_ID")
+    sat = Satrec()
+    try:
+        omm.initialize(sat, {k: str(v) for k, v in values.items()})
+    except ValueError as exc:
+        raise TLEError(f"the OMM cannot be read: {exc}", field="EPOCH" if "time data" in str(exc) else field) from None
+    if sat.error:
+        raise TLEError(f"SGP4 refuses these elements (error {sat.error})", field=field)
+    line1, line2 = exporter.export_tle(sat)
+    return parse_tle(line1, line2, field=field)
+
+
+def omm_fields_from_text(text: str, kind: str) -> dict[str, object]:
+    """Return the one OMM in CelesTrak's XML (``kind`` "xml") or CSV ("csv") text, as a field dict."""
+    import io
+
+    from sgp4 import omm
+
+    try:
+        records = list(omm.parse_xml(io.StringIO(text)) if kind == "xml" else omm.parse_csv(io.StringIO(text)))
+    except Exception as exc:  # the readers raise whatever their parsers do  # noqa: BLE001
+        raise TLEError(f"not a readable OMM {kind.upper()}: {str(exc)[:200]}", field=f"omm_{kind}") from None
+    if len(records) != 1:
+        raise TLEError(f"the OMM {kind.upper()} holds {len(records)} element sets; send one", field=f"omm_{kind}")
+    version = records[0].get("CCSDS_OMM_VERS")
+    if kind == "xml":
+        import xml.etree.ElementTree as ET
+
+        root = ET.fromstring(text)
+        node = root if root.tag == "omm" else root.find(".//omm")
+        version = None if node is None else node.get("version")
+    if version not in (None, "", "2.0", "3.0"):
+        raise TLEError(f"CCSDS_OMM_VERS {version!r}: this reads OMM 2.0 and 3.0", field="CCSDS_OMM_VERS")
+    return dict(records[0])

@@ -32,7 +32,21 @@ def reject_unknown_query(request: Request, _operator: CurrentOperator) -> None:
         )
 
 
-api_router = APIRouter(responses=ERROR_RESPONSES, dependencies=[Depends(reject_unknown_query)])
+async def reject_unknown_form_fields(request: Request, _operator: CurrentOperator) -> None:
+    """Refuse form fields a route does not take: a misspelt ``plan_id`` must not be silently ignored."""
+    route = request.scope.get("route")
+    if not isinstance(route, APIRoute) or not request.headers.get("content-type", "").startswith("multipart/"):
+        return
+    allowed = {p.alias for p in route.dependant.body_params}
+    unknown = sorted(set((await request.form()).keys()) - allowed)
+    if unknown:
+        raise InputError([unknown[0][:100]], f"unknown form field {unknown[0][:100]!r}; this route takes: "
+                                             f"{', '.join(sorted(allowed))}")  # fmt: skip
+
+
+api_router = APIRouter(
+    responses=ERROR_RESPONSES, dependencies=[Depends(reject_unknown_query), Depends(reject_unknown_form_fields)]
+)
 api_router.include_router(plans.router)
 api_router.include_router(access.router)
 api_router.include_router(estimates.router)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import re
 import sys
 import time
@@ -179,3 +180,14 @@ class RequestContextMiddleware:
                        "duration_ms": round((time.perf_counter() - t0) * 1000.0, 2)},
             )  # fmt: skip
             request_id_var.reset(token)
+
+
+def resident_mb() -> float:
+    """Return this process's resident memory (MiB): /proc/self/statm, or the peak where there is no /proc."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    except (OSError, ValueError, IndexError):
+        import resource
+
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0

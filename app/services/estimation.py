@@ -391,13 +391,8 @@ def checked_json(checked: Any) -> dict[str, Any]:
     }
 
 
-def frames_at(plan_request: dict[str, Any], observed_at: datetime) -> dict[str, NDArray[np.float64]]:
-    """Return the observation, LVLH and J2000 (GCRS) axes at ``observed_at`` for a stored plan's target and station.
-
-    Each is a matrix whose columns are the frame's axes in GCRS. Observation frame: X from the
-    target toward the radar, Y along the rate of change of that line of sight, Z = X x Y.
-    LVLH: x radial (out), y along-track, z along the orbit normal.
-    """
+def target_track(plan_request: dict[str, Any], epoch: datetime, t0_s: float, t1_s: float) -> tuple[Any, Any, Any]:
+    """Return a stored plan's target trajectory over ``[t0_s, t1_s]`` after ``epoch``, its station and Earth frames."""
     from app.schemas import PlanCreate
     from app.services.planning import plan_options, to_orbit, to_station
     from planner.plan import target_trajectory
@@ -407,35 +402,46 @@ def frames_at(plan_request: dict[str, Any], observed_at: datetime) -> dict[str, 
     target = to_orbit(req.target, "target")
     station = to_station(req.ground_station)
     reading = plan_options(req).reading
-    epoch = as_utc(observed_at)
-    frames = EarthFrames(epoch, -3600.0, 3600.0)
-    traj = target_trajectory(target, epoch, frames, 10.0, reading) if target.tle else None
-    if traj is None:
-        from planner.propagation import NumericalJ2Trajectory, SecularJ2Trajectory
+    epoch = as_utc(epoch)
+    frames = EarthFrames(epoch, t0_s - 3600.0, t1_s + 3600.0)
+    if target.tle is None and reading != "mean":
+        assert target.elements is not None
+        if abs(seconds_between(epoch, target.elements.epoch)) > 60 * 86400:
+            raise InputError(["observed_at"], "observed_at is more than 60 days from the target's epoch")
+    if target.tle is None and reading == "mean":
+        from planner.propagation import SecularJ2Trajectory
 
         assert target.elements is not None
-        if reading == "mean":
-            traj = SecularJ2Trajectory(target.elements, epoch)
-        else:
-            offset = seconds_between(epoch, target.elements.epoch)
-            if abs(offset) > 60 * 86400:
-                raise InputError(["observed_at"], "observed_at is more than 60 days from the target's epoch")
-            traj = NumericalJ2Trajectory.from_elements(target.elements, epoch, -1.0, 1.0)
+        return SecularJ2Trajectory(target.elements, epoch), station, frames
+    if target.tle is None:
+        from planner.propagation import NumericalJ2Trajectory
+
+        assert target.elements is not None
+        return NumericalJ2Trajectory.from_elements(target.elements, epoch, t0_s - 1.0, t1_s + 1.0), station, frames
+    return target_trajectory(target, epoch, frames, t1_s, reading), station, frames
+
+
+def frames_at(plan_request: dict[str, Any], observed_at: datetime) -> dict[str, NDArray[np.float64]]:
+    """Return the observation, LVLH and J2000 (GCRS) axes at ``observed_at`` for a stored plan's target and station.
+
+    Each is a matrix whose columns are the frame's axes in GCRS (``planner.frames``: the
+    observation frame's Y follows the line of sight's rate in the target's LVLH frame).
+    """
+    from planner.frames import observation_axes, pass_geometry
+
+    traj, station, frames = target_track(plan_request, observed_at, 0.0, 0.0)
     t = np.array([-0.5, 0.0, 0.5])
-    r, v = traj.state(t)
-    site_itrs = station.itrs_km()
-    site = np.stack([frames.gcrs_to_itrs(np.array([tk]))[:, :, 0].T @ site_itrs for tk in t], axis=1)
-    los = site - r
-    x_axis = los[:, 1] / np.linalg.norm(los[:, 1])
-    rate = (los[:, 2] / np.linalg.norm(los[:, 2]) - los[:, 0] / np.linalg.norm(los[:, 0])) / 1.0
-    rate -= (rate @ x_axis) * x_axis
-    y_axis = rate / np.linalg.norm(rate)
-    obs = np.stack([x_axis, y_axis, np.cross(x_axis, y_axis)], axis=1)
-    rr, vv = r[:, 1], v[:, 1]
-    radial = rr / np.linalg.norm(rr)
-    normal = np.cross(rr, vv) / np.linalg.norm(np.cross(rr, vv))
-    lvlh = np.stack([radial, np.cross(normal, radial), normal], axis=1)
-    return {"observation": obs, "lvlh": lvlh, "j2000": np.eye(3)}
+    geo = pass_geometry(traj, station, frames, t)
+    lvlh = geo.lvlh[1]
+    obs = lvlh @ observation_axes(geo.los_lvlh, t)[1]
+    los_rate = (geo.los_lvlh[:, 2] - geo.los_lvlh[:, 0]) / (t[2] - t[0])
+    return {
+        "observation": obs,
+        "lvlh": lvlh,
+        "j2000": np.eye(3),
+        "los_lvlh": geo.los_lvlh[:, 1],
+        "los_rate_lvlh": los_rate,
+    }
 
 
 def attitudes_in_frames(
@@ -445,6 +451,6 @@ def attitudes_in_frames(
     axes = frames_at(plan_request, observed_at)
     body_to_obs = rotation_matrix(*(float(a) for a in angles_deg))
     body_to_gcrs = axes["observation"] @ body_to_obs
-    out = {name: matrix_attitude_json(axes[name].T @ body_to_gcrs) for name in ("lvlh", "j2000")}
+    out: dict[str, Any] = {name: matrix_attitude_json(axes[name].T @ body_to_gcrs) for name in ("lvlh", "j2000")}
     out["observation_axes_in_j2000"] = axes["observation"].round(12).tolist()
     return out

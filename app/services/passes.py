@@ -1,20 +1,273 @@
-"""A pass's frames to one attitude in the target's orbital frame: each frame fitted, placed in LVLH, then fused."""
+"""A pass: simulate the frames a radar forms over one, and fuse a pass's frames into one attitude in LVLH.
+
+Simulation (``pass_geometry_frames`` then ``render_pass``): the plan's target over one of its
+access windows, the line of sight from the station in the target's LVLH frame
+(``planner.frames``), and the target held at a fixed LVLH attitude or spinning about a
+body axis. The line of sight *in the body* sweeps an angle over the pass; each frame is a
+sub-aperture of ``aperture_deg`` of that sweep (the paper's 5.1 deg), so its integration
+time follows the real rotation rate and its cross-range cell stays lambda / (2 aperture).
+Its observation frame is the simulator's (X toward the radar at mid-aperture, Y the line
+of sight's rate in the body), and its attitude there is what the frame is rendered at.
+
+Fusion (``fuse_frames``): each checked frame's answer and alternatives placed in LVLH
+through the plan's geometry, then ``inference.fusion.fuse``.
+"""
 
 from __future__ import annotations
 
 import math
-from datetime import datetime
+from dataclasses import asdict, dataclass
+from datetime import datetime, timedelta
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from app.errors import InputError
-from app.services.estimation import checked_json, frames_at, matrix_attitude_json
-from inference.frames import rotation_matrix
+from app.services.estimation import checked_json, frames_at, matrix_attitude_json, target_track
+from inference.frames import euler_from_matrix, rotation_matrix
 from inference.fusion import PassFrame, angle_deg, fuse
 
+Vec = NDArray[np.float64]
+
 MIRROR = np.diag([1.0, 1.0, -1.0])  # M R M: a frame's near-mirror, a reflection through its own image plane
+MIN_TRUSTED_FRAMES = 3  # a pass answer rests on at least this many trusted frames that agree
 NO_BOUND_DEG = 10.0  # a frame whose fit bounds nothing counts as this uncertain
+
+
+@dataclass(frozen=True)
+class PassOptions:
+    """How to simulate a pass (``gsa simulate --pass``); see the module's text."""
+
+    window: int | None = None  # which of the plan's access windows (None: the one that culminates highest)
+    aperture_deg: float = 5.1  # each frame's sub-aperture: the angle the line of sight sweeps in the body
+    step_deg: float | None = None  # between frame centres (None: the aperture, frames side by side)
+    max_frames: int = 60
+    attitude_lvlh_deg: tuple[float, float, float] | None = None  # body to LVLH, z y x (None: drawn)
+    max_angle_deg: float = 40.0  # a drawn attitude: the middle frame's observation-frame angles within this
+    spin_deg_s: float = 0.0
+    spin_axis: tuple[float, float, float] = (0.0, 0.0, 1.0)  # body axis of the spin
+    snr_db: tuple[float, float] | None = (-3.0, 15.0)  # drawn per frame, or None for noise-free
+    snr_reference: tuple[float, float] | None = None  # (dB, km): SNR = dB - 40 log10(range / km), the radar equation
+    within_deg: float | None = None  # keep only frames whose observation-frame angles are within this (trained range)
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        checks = (
+            ("aperture_deg", 0.5 <= self.aperture_deg <= 30.0),
+            ("step_deg", self.step_deg is None or 0.5 <= self.step_deg <= 90.0),
+            ("max_frames", 2 <= self.max_frames <= 1000),
+            ("max_angle_deg", 0.0 <= self.max_angle_deg <= 89.0),
+            ("spin_deg_s", abs(self.spin_deg_s) <= 10.0),
+            ("spin_axis", len(self.spin_axis) == 3 and float(np.linalg.norm(self.spin_axis)) > 0),
+            ("within_deg", self.within_deg is None or 0.0 < self.within_deg <= 180.0),
+            ("snr_db", self.snr_db is None or (-30.0 <= self.snr_db[0] <= self.snr_db[1] <= 60.0)),
+            ("snr_reference", self.snr_reference is None or self.snr_reference[1] > 0),
+        )
+        for name, ok in checks:
+            if not ok:
+                raise InputError([name], f"{name} = {getattr(self, name)!r} is out of range")
+
+
+def choose_window(windows: list[dict[str, Any]], index: int | None) -> tuple[int, dict[str, Any]]:
+    """Return the access window asked for, or the one that culminates highest."""
+    if not windows:
+        raise InputError(["window"], "the plan has no access windows: the station never sees the target in its span")
+    if index is None:
+        index = int(np.argmax([w["max_elevation_deg"] for w in windows]))
+    if not 0 <= index < len(windows):
+        raise InputError(
+            ["window"], f"window {index} does not exist: the plan has {len(windows)} (0..{len(windows) - 1})"
+        )
+    return index, windows[index]
+
+
+def spin_rotation(axis: Vec, rate_deg_s: float, t: Vec) -> Vec:
+    """Return rotations (N, 3, 3) by rate * t about a unit axis (Rodrigues)."""
+    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    a = np.radians(rate_deg_s * np.asarray(t, float))[:, None, None]
+    return np.eye(3) + np.sin(a) * k + (1.0 - np.cos(a)) * (k @ k)
+
+
+def pass_geometry_frames(plan_request: dict[str, Any], window: dict[str, Any], opts: PassOptions,
+                         rng: np.random.Generator) -> list[dict[str, Any]]:  # fmt: skip
+    """Return each frame of a simulated pass over ``window``: its time, geometry and true attitudes (no image yet)."""
+    from planner.frames import observation_axes, pass_geometry, swept_deg
+
+    rise, end = datetime.fromisoformat(window["rise"]), datetime.fromisoformat(window["set"])
+    duration = (end - rise).total_seconds()
+    traj, station, frames = target_track(plan_request, rise, 0.0, duration)
+    t = np.arange(0.0, duration, 0.5)
+    t = np.append(t, duration) if t[-1] < duration else t
+    geo = pass_geometry(traj, station, frames, t)
+    axis = np.asarray(opts.spin_axis, float) / np.linalg.norm(opts.spin_axis)
+
+    def body_attitude(a0: Vec, times: Vec) -> Vec:  # body to LVLH at ``times`` (spin about the body axis)
+        return np.asarray(a0 @ spin_rotation(axis, opts.spin_deg_s, times - t_mid))
+
+    def los_body(a0: Vec, times: Vec) -> Vec:
+        g = pass_geometry(traj, station, frames, times)
+        return np.einsum("nji,jn->in", body_attitude(a0, times), g.los_lvlh)
+
+    sweep = swept_deg(geo.los_lvlh)
+    t_mid = float(np.interp(0.5 * sweep[-1], sweep, t))  # the middle of the sweep (a still target's middle frame)
+    obs_mid = observation_axes(pass_geometry(traj, station, frames, t_mid + np.array([-0.5, 0.0, 0.5])).los_lvlh,
+                               np.array([-0.5, 0.0, 0.5]))[1]  # fmt: skip
+    if opts.attitude_lvlh_deg is not None:
+        a0 = rotation_matrix(*opts.attitude_lvlh_deg)
+    else:  # the middle of the pass seen at angles the networks know
+        wanted = rotation_matrix(*(float(v) for v in rng.uniform(-opts.max_angle_deg, opts.max_angle_deg, 3)))
+        a0 = obs_mid @ wanted
+        mid3 = t_mid + np.array([-0.5, 0.0, 0.5])
+        for _ in range(8):  # a spin turns the image plane too: settle a0 so the middle frame sees ``wanted``
+            a0 = a0 @ observation_axes(los_body(a0, mid3), mid3)[1] @ wanted
+    theta = swept_deg(los_body(a0, t))
+    half = opts.aperture_deg / 2.0
+    if theta[-1] < opts.aperture_deg:
+        raise InputError(["window"], f"the line of sight sweeps only {theta[-1]:.1f} deg of the target over this "
+                                     f"pass, less than one {opts.aperture_deg} deg sub-aperture")  # fmt: skip
+    step = opts.step_deg or opts.aperture_deg
+    centres = np.arange(half, theta[-1] - half + 1e-9, step)
+    centres += (theta[-1] - half - centres[-1]) / 2.0  # centre the frames on the pass
+    out = []
+    for c in centres:
+        t_c = float(np.interp(c, theta, t))
+        t0, t1 = float(np.interp(c - half, theta, t)), float(np.interp(c + half, theta, t))
+        near = t_c + np.array([-0.5, 0.0, 0.5])
+        obs_body = observation_axes(los_body(a0, near), near)[1]
+        body_to_obs = obs_body.T
+        angles = euler_from_matrix(body_to_obs)
+        if opts.within_deg is not None and max(abs(a) for a in angles) > opts.within_deg:
+            continue
+        g = pass_geometry(traj, station, frames, np.array([t_c]))
+        a = body_attitude(a0, np.array([t_c]))[0]
+        lvlh = g.lvlh[0]
+        out.append({
+            "observed_at": rise + timedelta(seconds=t_c),
+            "t_s": t_c,
+            "integration_s": t1 - t0,
+            "range_km": float(g.range_km[0]),
+            "attitude_deg": [float(v) for v in angles],
+            "body_to_lvlh": a,
+            "observation_in_lvlh": a @ obs_body,
+            "lvlh_in_gcrs": lvlh,
+        })  # fmt: skip
+    if len(out) > opts.max_frames:  # evenly thinned
+        keep = np.unique(np.linspace(0, len(out) - 1, opts.max_frames).round().astype(int))
+        out = [out[k] for k in keep]
+    if len(out) < 2:
+        raise InputError(["within_deg"], f"only {len(out)} frame(s) of this pass fall within the angles asked for; "
+                                         "widen within_deg, choose another window, or give the attitude")  # fmt: skip
+    return out
+
+
+def render_pass(frames_meta: list[dict[str, Any]], opts: PassOptions, rng: np.random.Generator,
+                radar: Any = None, model: Any = None, scattering: Any = None) -> tuple[Vec, Vec]:  # fmt: skip
+    """Render each frame at its attitude; return the normalised frames [N, H, W] and their SNRs (dB, NaN: none)."""
+    from inference.catalogue import at_attitudes
+    from inference.isar import DEFAULT_SCATTERING
+
+    n = len(frames_meta)
+    if opts.snr_reference is not None:
+        ref_db, ref_km = opts.snr_reference
+        snrs = np.array([ref_db - 40.0 * math.log10(f["range_km"] / ref_km) for f in frames_meta])
+    elif opts.snr_db is not None:
+        snrs = rng.uniform(opts.snr_db[0], opts.snr_db[1], n)
+    else:
+        snrs = np.full(n, np.nan)
+    seeds = [int(s) for s in rng.integers(0, 2**62, n)]
+    angles = np.array([f["attitude_deg"] for f in frames_meta])
+    images, _ = at_attitudes(angles, snrs, seeds, radar, model, scattering or DEFAULT_SCATTERING)
+    return images.astype(np.float64), np.asarray(snrs, np.float64)
+
+
+def pass_record(frames_meta: list[dict[str, Any]], snrs: Vec, opts: PassOptions, window_index: int,
+                window: dict[str, Any], plan_request: dict[str, Any], cells_m: tuple[float, float]) -> dict[str, Any]:  # fmt: skip
+    """Return the JSON record (``pass.json``) of a simulated pass: each frame's time, geometry and truth."""
+
+    def att(r: Vec) -> dict[str, Any]:
+        return matrix_attitude_json(np.asarray(r))
+
+    return {
+        "format": "gsa-isar pass 1",
+        "frames_file": "frames.npz (member 'image': [N, H, W] normalised frames, upload with normalised=true)",
+        "plan_request": plan_request,
+        "window_index": window_index,
+        "window": window,
+        "options": asdict(opts),
+        "range_cell_m": cells_m[0],
+        "frames": [
+            {
+                "index": k,
+                "observed_at": _iso_z(f["observed_at"]),
+                "integration_s": round(f["integration_s"], 3),
+                "range_km": round(f["range_km"], 3),
+                "snr_db": None if not math.isfinite(snrs[k]) else round(float(snrs[k]), 3),
+                "cross_range_cell_m": cells_m[1],
+                "attitude_observation": att(rotation_matrix(*f["attitude_deg"])),
+                "attitude_lvlh": att(f["body_to_lvlh"]),
+                "attitude_j2000": att(f["lvlh_in_gcrs"] @ f["body_to_lvlh"]),
+                "observation_axes_in_lvlh": np.asarray(f["observation_in_lvlh"]).round(12).tolist(),
+                "observation_axes_in_j2000": (f["lvlh_in_gcrs"] @ f["observation_in_lvlh"]).round(12).tolist(),
+            }
+            for k, f in enumerate(frames_meta)
+        ],
+    }
+
+
+def _iso_z(t: datetime) -> str:
+    """ISO 8601 UTC with a Z (microseconds kept)."""
+    from datetime import UTC
+
+    return t.astimezone(UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
+
+REVERSED = np.diag([1.0, -1.0, -1.0])  # Rx(180): a frame read reversed in cross-range is the body turned half about X
+REVERSED_NOTE = ("read reversed in cross-range (the target turns against the line of sight faster than it sweeps): "
+                 "answered from the mirrored frame")  # fmt: skip
+
+
+def recheck_reversed(*, est: Any, checker: Any, frames: Vec, checks: list[Any]) -> list[Any]:
+    """Give each untrusted frame a second reading, mirrored in cross-range; keep it where its checks trust it.
+
+    A radar forms the image from the line of sight's motion relative to the body. A target
+    turning against that motion faster than the line of sight sweeps reverses the cross-range
+    axis: the frame shows the body turned by 180 deg about the line of sight, outside the
+    networks' range. Mirrored back, it reads as an ordinary frame R', and the body is Rx(180) R'.
+    Only where most of the pass's frames are untrusted (a pass that reads as it is keeps its
+    time); single frames are never given this reading (a flipped single frame must be flagged),
+    but a pass can afford it, since the fusion's turning model predicts which way each frame reads.
+    """
+    from inference.trust import Alternative, Checked, Quality
+
+    todo = [k for k, c in enumerate(checks) if not c.quality.trusted]
+    if len(todo) <= len(checks) // 2:  # most frames read as they are: the pass is not reversed
+        return checks
+    # y -> -y about the centre column n/2: column j -> (n - j) mod n
+    mirrored = np.ascontiguousarray(np.roll(frames[todo][:, :, ::-1], 1, axis=2))
+    res = est.estimate(mirrored)
+    out = list(checks)
+    for j, k in enumerate(todo):
+        c = checker.check(mirrored[j], res.enhanced[j], res.angles_deg[j] if checker.networks else None)
+        if not c.quality.trusted:
+            continue
+
+        def back(angles: Any) -> tuple[float, float, float]:
+            return euler_from_matrix(REVERSED @ rotation_matrix(*(float(a) for a in angles)))
+
+        q = c.quality
+        out[k] = Checked(
+            angles_deg=np.array(back(c.angles_deg)),
+            network_deg=None if c.network_deg is None else np.array(back(c.network_deg)),
+            refined=c.refined,
+            quality=Quality(q.silhouette_iou, q.uncertainty_deg, True, [REVERSED_NOTE]),
+            alternatives=[
+                Alternative(back(a.angles_deg), a.silhouette_iou, a.fit_gap, a.distance_deg, a.start)
+                for a in c.alternatives
+            ],  # fmt: skip
+            features={**c.features, "reversed": 1.0},
+        )
+    return out
 
 
 def check_times(plan_result: dict[str, Any], observed_at: list[datetime]) -> None:
@@ -47,14 +300,20 @@ def fuse_frames(
         cands += [rotation_matrix(*a.angles_deg) for a in c.alternatives]
         finite = [b for b in c.quality.uncertainty_deg if math.isfinite(b)]
         bound = max(finite) if len(finite) == 3 else NO_BOUND_DEG
-        pass_frames.append(
-            PassFrame(np.array([obs_in_lvlh @ r for r in cands]), bound, (t - t0).total_seconds(), names[k])
-        )
+        q = c.quality
+        pass_frames.append(PassFrame(np.array([obs_in_lvlh @ r for r in cands]), bound, (t - t0).total_seconds(),
+                                     names[k], axes["los_lvlh"], axes["los_rate_lvlh"], bool(q.trusted),
+                                     "; ".join(q.reasons), tuple(q.uncertainty_deg) if len(finite) == 3 else None))  # fmt: skip
         lvlh_axes.append(axes["lvlh"])
     fused = fuse(pass_frames)
-    mid = len(observed_at) // 2
-    t_mid = observed_at[mid]
-    j2000 = lvlh_axes[mid] @ fused.rotation
+    if fused.reference_s is None:  # a still attitude holds all pass: given in J2000 at the frame nearest mid-pass
+        span = [(t - t0).total_seconds() for t in observed_at]
+        mid = int(np.argmin(np.abs(np.array(span) - 0.5 * (min(span) + max(span)))))
+        t_mid, lvlh_mid = observed_at[mid], lvlh_axes[mid]
+    else:  # a turning one is the attitude at the middle of the frames' times
+        t_mid = t0 + timedelta(seconds=fused.reference_s)
+        lvlh_mid = frames_at(plan_request, t_mid)["lvlh"]
+    j2000 = lvlh_mid @ fused.rotation
     frames_out = []
     for k, (pf, c) in enumerate(zip(pass_frames, checks, strict=True)):
         chosen = int(np.argmin([angle_deg(fused.rotation, r) for r in pf.candidates]))
@@ -70,7 +329,10 @@ def fuse_frames(
             "residual_deg": round(fused.residual_deg[k], 4),
         })  # fmt: skip
     speed = float(np.linalg.norm(fused.rate_deg_s))
+    trusted_used = sum(1 for k in fused.used if checks[k].quality.trusted)
+    enough = trusted_used >= MIN_TRUSTED_FRAMES
     return {
+        "trusted": enough,
         "frames": frames_out,
         "attitude_lvlh": matrix_attitude_json(fused.rotation),
         "attitude_j2000": {**matrix_attitude_json(j2000), "at": t_mid},
@@ -80,9 +342,16 @@ def fuse_frames(
         "stable": fused.stable,
         "rate_deg_s": [round(float(r), 5) for r in fused.rate_deg_s],
         "rate_sigma_deg_s": [round(float(r), 5) if math.isfinite(r) else None for r in fused.rate_sigma_deg_s],
+        "turning_chi2": None if fused.turning_chi2 is None else round(fused.turning_chi2, 2),
+        "attitude_at": t_mid,
         "stability": (
-            "three-axis stable over the pass (no body rate beyond the frames' scatter)"
+            f"too few frames to tell: {trusted_used} trusted frames agree, and a pass needs {MIN_TRUSTED_FRAMES} "
+            "(frames outside the networks' range, another target, or a target that turns too fast)"
+            if not enough
+            else "three-axis stable over the pass (no body rate beyond the frames' scatter)"
             if fused.stable
-            else f"turning at about {speed:.3f} deg/s: the fused attitude is the pass's mean, not a fixed one"
+            else f"turning at about {speed:.3f} deg/s about body axis "
+            f"({', '.join(f'{v:.2f}' for v in fused.rate_deg_s / max(speed, 1e-12))}): the attitude given is the "
+            f"{'turning model' if fused.reference_s is not None else 'mean'}'s at attitude_at"
         ),
     }

@@ -17,14 +17,21 @@ from planner.elements import Elements
 from planner.errors import PlannerError, PlanningStopped
 from planner.plan import Feasibility, Orbit, Plan, PlanOptions, StopCheck, make_plan, utc
 from planner.propagation import EarthFrames, Station, as_utc
-from planner.tle import parse_tle
+from planner.tle import omm_fields_from_text, parse_tle, tle_from_omm, tle_lines
 
 
 def to_orbit(orbit: OrbitIn, where: str) -> Orbit:
     """Build a planner Orbit, re-raising domain errors with the JSON path of the bad field."""
     try:
         if orbit.tle is not None:
-            return Orbit(orbit.name, tle=parse_tle(orbit.tle[0], orbit.tle[1]))
+            line1, line2, _ = tle_lines(orbit.tle)
+            return Orbit(orbit.name, tle=parse_tle(line1, line2))
+        if orbit.omm is not None:
+            return Orbit(orbit.name, tle=tle_from_omm(orbit.omm.model_dump(exclude_none=True)))
+        if orbit.omm_xml is not None or orbit.omm_csv is not None:
+            kind, text = ("xml", orbit.omm_xml) if orbit.omm_xml is not None else ("csv", orbit.omm_csv)
+            assert text is not None
+            return Orbit(orbit.name, tle=tle_from_omm(omm_fields_from_text(text, kind), field=f"omm_{kind}"))
         assert orbit.elements is not None
         e = orbit.elements
         el = Elements(
@@ -38,11 +45,17 @@ def to_orbit(orbit: OrbitIn, where: str) -> Orbit:
         )
         return Orbit(orbit.name, elements=el)
     except PlannerError as exc:
-        sub = "tle" if orbit.tle is not None else "elements"
+        sub = source_of(orbit)
         loc: list[str | int] = [where, sub]
         if exc.field and exc.field != sub:
             loc.append(exc.field)
         raise InputError(loc, str(exc)) from None
+
+
+def source_of(orbit: OrbitIn) -> str:
+    """Which of an orbit's sources the request gave (``elements``, ``tle``, ``omm``, ``omm_xml``, ``omm_csv``)."""
+    return next(k for k in ("tle", "omm", "omm_xml", "omm_csv") if getattr(orbit, k) is not None) \
+        if orbit.elements is None else "elements"  # fmt: skip
 
 
 def to_station(st: StationIn) -> Station:
@@ -183,7 +196,7 @@ def check_epoch_gap(
     gap_s = max((start - epoch).total_seconds(), (epoch - end).total_seconds(), 0.0)
     if gap_s <= limit_days * 86400.0:
         return
-    loc: list[str | int] = [where, "tle"] if orbit_in.tle is not None else [where, "elements", "epoch"]
+    loc: list[str | int] = [where, source_of(orbit_in)] if orbit_in.elements is None else [where, "elements", "epoch"]
     raise InputError(
         loc,
         f"the epoch {epoch:%Y-%m-%dT%H:%M:%SZ} is {gap_s / 86400.0:.1f} days from the search span, over the limit "

@@ -99,3 +99,56 @@ def test_estimate_options_that_need_each_other_are_one_line_errors(tmp_path):
     for extra, says in cases:
         out = _gsa("estimate", str(tmp_path / "f.npy"), *extra, cwd=tmp_path)
         assert out.returncode == 2 and says in out.stderr and out.stderr.count("\n") == 1, (extra, out.stderr)
+
+
+def test_simulate_a_pass_then_fuse_it(tmp_path, smoke_models):
+    """gsa simulate --pass writes a pass the way a radar would form it; gsa pass fuses it (smoke models)."""
+    req = tmp_path / "paper.json"
+    req.write_text(json.dumps(PAPER_EXAMPLE))
+    radar = ["--n-range", "64", "--n-azimuth", "64", "--bandwidth-hz", "0.4e9", "--aperture-deg", str(5.1 / 4)]
+    out = _gsa("simulate", "--pass", str(req), "--out", str(tmp_path / "pass"), "--frames", "5", *radar, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    rec = json.loads((tmp_path / "pass" / "pass.json").read_text())
+    assert len(rec["frames"]) == 5 and (tmp_path / "pass" / "frames.png").stat().st_size > 5000
+    f0 = rec["frames"][0]
+    assert f0["observed_at"].endswith("Z") and f0["cross_range_cell_m"] > 0
+    for key in ("attitude_observation", "attitude_lvlh", "attitude_j2000", "observation_axes_in_lvlh"):
+        assert key in f0
+    fused = _gsa("pass", str(tmp_path / "pass"), "--models", str(smoke_models), "--plot", str(tmp_path / "p.png"),
+                 cwd=tmp_path)  # fmt: skip
+    assert fused.returncode == 0, fused.stderr
+    assert "fused, body to LVLH" in fused.stdout and (tmp_path / "p.png").stat().st_size > 10_000
+    as_json = _gsa("pass", str(tmp_path / "pass"), "--models", str(smoke_models), "--json", cwd=tmp_path)
+    assert len(json.loads(as_json.stdout)["frames"]) == 5
+
+
+def test_bad_pass_requests_are_one_line_errors(tmp_path):
+    req = tmp_path / "paper.json"
+    req.write_text(json.dumps(PAPER_EXAMPLE))
+    cases = [
+        (["--window", "999"], "window 999 does not exist"),
+        (["--attitude-lvlh", "1,2"], "--attitude-lvlh"),
+        (["--spin-deg-s", "50"], "spin_deg_s"),
+        (["--snr-reference", "12"], "--snr-reference"),
+    ]
+    for extra, message in cases:
+        out = _gsa("simulate", "--pass", str(req), "--out", str(tmp_path / "p"), *extra, cwd=tmp_path)
+        assert out.returncode == 2 and out.stderr.count("\n") == 1 and message in out.stderr, (extra, out.stderr)
+        assert not (tmp_path / "p").exists() and not (tmp_path / "p.partial").exists()
+    (tmp_path / "taken").mkdir()
+    taken = _gsa("simulate", "--pass", str(req), "--out", str(tmp_path / "taken"), cwd=tmp_path)
+    assert taken.returncode == 2 and "exists" in taken.stderr
+    empty = _gsa("pass", str(tmp_path / "taken"), cwd=tmp_path)
+    assert empty.returncode == 2 and empty.stderr.count("\n") == 1 and "pass.json" in empty.stderr
+
+
+def test_plan_export_writes_every_format(tmp_path):
+    req = tmp_path / "paper.json"
+    req.write_text(json.dumps(PAPER_EXAMPLE))
+    out = _gsa("plan", str(req), "--export", str(tmp_path / "x"), cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    names = sorted(p.name for p in (tmp_path / "x").iterdir())
+    assert names == ["access.csv", "oem.txt", "opm.txt", "plan.czml", "pointing.csv"]
+    assert (tmp_path / "x" / "opm.txt").read_text().startswith("CCSDS_OPM_VERS = 3.0")
+    again = _gsa("plan", str(req), "--export", str(tmp_path / "x"), cwd=tmp_path)
+    assert again.returncode == 2 and "not empty" in again.stderr and again.stderr.count("\n") == 1

@@ -44,8 +44,9 @@ def _fuse(*, session: Any, operator_id: str, settings: Any, est: Any, checker: A
     if plan is None:
         raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
     pass_svc.check_times(plan.result, observed_at)
-    _, _, checks, per_frame = svc.check_frames(est=est, checker=checker, uploads=uploads, resample=False,
-                                               normalised=normalised, cells_m=cells_m)  # fmt: skip
+    frames, _, checks, per_frame = svc.check_frames(est=est, checker=checker, uploads=uploads, resample=False,
+                                                    normalised=normalised, cells_m=cells_m)  # fmt: skip
+    checks = pass_svc.recheck_reversed(est=est, checker=checker, frames=frames, checks=checks)
     result = pass_svc.fuse_frames(plan_request=plan.request, checks=checks, observed_at=observed_at,
                                   names=[u.name for u in uploads])  # fmt: skip
     result = {**result, "target": checker.model.name, "timings_s": per_frame}

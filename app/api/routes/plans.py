@@ -12,6 +12,7 @@ from fastapi.concurrency import run_in_threadpool
 
 from app import crud
 from app.api.deps import CurrentOperator, SessionDep, SettingsDep, as_utc, check_page_size, check_span
+from app.core.observability import resident_mb
 from app.schemas import PAPER_EXAMPLE, IsoDateTime, PlanCreate, PlanPublic, PlansPublic, PlanSummary, Text
 from app.services.planning import access_csv, run_plan
 
@@ -46,11 +47,13 @@ async def create_plan(
 ) -> dict[str, Any]:
     """Plan a GSA scene: access windows, ranked node alignments, the phasing burn and its verification.
 
-    Planning runs in a worker thread under a time budget (``GSA_PLAN_TIMEOUT_S``) and stops
-    when the caller disconnects; either way nothing is stored.
+    Planning runs in a worker thread under a time budget (``GSA_PLAN_TIMEOUT_S``) and a memory
+    budget (``GSA_PLAN_MEMORY_MB``: the worker's resident memory may grow by that much while it
+    plans) and stops when the caller disconnects; in each case nothing is stored.
     """
     check_span(plan_in.search.duration_days, settings, ["search", "duration_days"])
     deadline = time.monotonic() + settings.plan_timeout_s
+    memory_limit = resident_mb() + settings.plan_memory_mb
     gone = threading.Event()
 
     def stop() -> str | None:
@@ -58,6 +61,9 @@ async def create_plan(
             return "the client disconnected"
         if time.monotonic() > deadline:
             return f"over the {settings.plan_timeout_s:g}-s budget (GSA_PLAN_TIMEOUT_S); plan a shorter span or a coarser box"
+        if resident_mb() > memory_limit:
+            return (f"over the {settings.plan_memory_mb:g}-MB memory budget (GSA_PLAN_MEMORY_MB); plan a shorter span "
+                    "or a coarser box")  # fmt: skip
         return None
 
     async def watch() -> None:
@@ -144,3 +150,62 @@ def export_access_csv(session: SessionDep, operator: CurrentOperator, plan_id: A
     body = access_csv(plan.result.get("access_windows", []))
     name = f"access-{plan.id}.csv"
     return Response(body, media_type="text/csv", headers={"Content-Disposition": f'attachment; filename="{name}"'})
+
+
+EXPORT_TYPES = {
+    "opm": ("text/plain", "CCSDS OPM 3.0 (KVN): the observer before its burn, and the burn (GCRF, UTC)", "opm.txt"),
+    "oem": ("text/plain", "CCSDS OEM 3.0 (KVN): target and observer over the planned arc (GCRF, UTC, 60 s)", "oem.txt"),
+    "czml": ("application/json", "CZML for Cesium: both satellites, the station, access intervals, T_access", "czml"),
+    "pointing.csv": ("text/csv", "the radar's azimuth, elevation, range and range rate over each pass, 1 s steps",
+                     "pointing.csv"),
+}  # fmt: skip
+
+
+def _export(kind: str, plan_id: str, session: Any, operator: Any, settings: Any) -> Response:
+    from app.services import exports
+
+    row = crud.get_plan(session=session, operator_id=operator.id, plan_id=plan_id)
+    if row is None:
+        raise HTTPException(status_code=404, detail="Plan not found")
+    deadline = time.monotonic() + settings.plan_timeout_s
+
+    def stop() -> str | None:
+        return (
+            None
+            if time.monotonic() < deadline
+            else f"over the {settings.plan_timeout_s:g}-s budget (GSA_PLAN_TIMEOUT_S)"
+        )
+
+    plan, _ = run_plan(PlanCreate.model_validate(row.request), max_grid_points=settings.max_grid_points, stop=stop)
+    names = {"target": row.target_name, "observer": row.observer_name, "station": row.station_name}
+    windows = row.result.get("access_windows", [])
+    if kind == "pointing.csv":
+        body = exports.pointing_csv(plan, windows)
+    else:
+        arc = exports.plan_arc(plan, row.result)
+        if kind == "opm":
+            body = exports.opm(arc, row.id, row.observer_name)
+        elif kind == "oem":
+            body = exports.oem(arc, row.id, row.target_name, row.observer_name)
+        else:
+            body = exports.czml(arc, row.id, names, row.request["ground_station"], windows)
+    media, _, suffix = EXPORT_TYPES[kind]
+    name = f"plan-{row.id}.{suffix}"
+    return Response(body, media_type=media, headers={"Content-Disposition": f'attachment; filename="{name}"'})
+
+
+def _export_route(kind: str) -> None:
+    media, what, _ = EXPORT_TYPES[kind]
+
+    def export(session: SessionDep, operator: CurrentOperator, settings: SettingsDep,
+               plan_id: Annotated[Text, Path()]) -> Response:  # fmt: skip
+        return _export(kind, plan_id, session, operator, settings)
+
+    export.__doc__ = f"The plan as {what}. Recomputed from the stored request; 422 if the plan has no burn."
+    export.__name__ = f"export_{kind.replace('.', '_')}"
+    router.add_api_route(f"/{{plan_id}}/export/{kind}", export, methods=["GET"], response_class=Response,
+                         responses={**NOT_FOUND, 200: {"content": {media: {}}, "description": what}})  # fmt: skip
+
+
+for _kind in EXPORT_TYPES:
+    _export_route(_kind)

@@ -30,8 +30,38 @@ REPORT = os.environ.get("GSA_FUZZ_REPORT")
 # Small limits so that no generated request can tie the worker up (they are what an operator would set).
 LIMITS = {"max_span_days": 1.0, "max_grid_points": 2_000, "max_batch_frames": 4, "max_upload_bytes": 300_000,
           "max_batch_bytes": 1_200_000, "max_image_side": 512, "max_page_size": 50}  # fmt: skip
+
+# What a schema-valid request may be answered besides 2xx: 404 (an id that is well formed but not
+# yours or not there), 413 (over the operator's upload limits, declared per route) and a 422 for a
+# rule the schema cannot state (a cross-field rule such as dhp_min_km <= dhp_max_km, or physics:
+# two orbits with no line of nodes, a perigee under 100 km, a span over the operator's limit).
+# Those answer type "value_error"; any other 422 type (missing, *_type, greater_than, literal_error,
+# extra_forbidden, ...) is a rule the validator has and the schema does not declare.
+DOMAIN_ERROR_TYPES = {"value_error"}
+
+
+@schemathesis.check
+def positive_data_acceptance_told_apart(ctx, response, case):
+    """schemathesis' positive_data_acceptance, with the refusals a schema cannot express told apart."""
+    if case.meta is None or case.meta.generation.mode != GenerationMode.POSITIVE:
+        return None
+    status = response.status_code
+    if status < 300 or status in (404, 413):
+        return None
+    if status == 422:
+        errors = response.json().get("detail", [])
+        undeclared = [e for e in errors if not isinstance(e, dict) or e.get("type") not in DOMAIN_ERROR_TYPES]
+        if errors and not undeclared:
+            return None
+        raise AssertionError(
+            f"a schema-valid request was refused by a rule the schema does not declare: {undeclared[:3]}"
+        )
+    raise AssertionError(f"a schema-valid request answered {status}: {response.text[:300]}")
+
+
 CHECKS = [
     schemathesis.checks.not_a_server_error,
+    positive_data_acceptance_told_apart,
     oa.status_code_conformance,
     oa.content_type_conformance,
     oa.response_headers_conformance,

@@ -94,3 +94,36 @@ def test_bad_passes_are_422_and_store_nothing(client, settings, plan, case, fiel
     assert r.status_code == 422, r.text
     assert field in str(r.json()["detail"][0]["loc"])
     assert _count(settings) == before
+
+
+def test_a_simulated_pass_goes_in_as_it_is(client, plan):
+    """gsa simulate --pass's frames.npz and times, uploaded as they are (normalised), fuse over the stored plan."""
+    from app.services import passes as pass_svc
+
+    opts = pass_svc.PassOptions(aperture_deg=SMOKE_RADAR.aperture_deg, max_frames=6, seed=3)
+    rng = np.random.default_rng(3)
+    _, window = pass_svc.choose_window(plan["access_windows"], None)
+    meta = pass_svc.pass_geometry_frames(PAPER_EXAMPLE, window, opts, rng)
+    images, _ = pass_svc.render_pass(meta, opts, rng, SMOKE_RADAR)
+    buf = io.BytesIO()
+    np.savez(buf, image=images)
+    times = [f["observed_at"].isoformat() for f in meta]
+    r = client.post("/v1/passes", files=[("files", ("frames.npz", buf.getvalue()))],
+                    data={"plan_id": plan["id"], "observed_at": times, "normalised": "true"}, headers=A)  # fmt: skip
+    assert r.status_code == 201, r.text
+    body = r.json()
+    assert len(body["frames"]) == len(meta) and body["turning_chi2"] is not None
+    assert body["attitude_j2000"]["at"]
+    assert client.get(f"/v1/passes/{body['id']}", headers=A).json()["turning_chi2"] == body["turning_chi2"]
+
+
+def test_an_unknown_form_field_is_refused_by_name(client, plan, settings):
+    """A misspelt field (planid for plan_id) must not be ignored: 422 naming it, nothing stored."""
+    before = _count(settings)
+    r = client.post("/v1/passes", files=[("files", ("pass.npz", _stack(2)))],
+                    data={"plan_id": plan["id"], "observed_at": _times(plan, 2), "planid": "x"}, headers=A)  # fmt: skip
+    assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "planid"], r.text
+    assert "plan_id" in r.json()["detail"][0]["msg"]
+    assert _count(settings) == before
+    one = client.post("/v1/estimates", files={"file": ("f.npz", _stack(1))}, data={"obsreved_at": "x"}, headers=A)
+    assert one.status_code == 422 and one.json()["detail"][0]["loc"] == ["body", "obsreved_at"]

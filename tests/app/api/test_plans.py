@@ -242,7 +242,7 @@ def test_the_openapi_document_says_what_the_service_enforces(client, settings):
     r = client.get("/v1/plans", params={"limit": settings.max_page_size + 1}, headers=A)
     assert r.status_code == 422
     orbit = spec["components"]["schemas"]["OrbitIn"]
-    assert orbit["oneOf"] == [{"required": ["elements"]}, {"required": ["tle"]}]
+    assert orbit["oneOf"] == [{"required": [k]} for k in ("elements", "tle", "omm", "omm_xml", "omm_csv")]
     assert client.get("/v1/plans", params={"colour": "red"}).status_code == 401
     assert client.get("/v1/plans", params={"colour": "red"}, headers=A).status_code == 422
 
@@ -258,6 +258,37 @@ def test_a_plan_over_its_time_budget_is_503_and_stores_nothing(settings):
         r = c.post("/v1/plans", json=PAPER_EXAMPLE, headers=A)
         assert r.status_code == 503, r.text
         assert "GSA_PLAN_TIMEOUT_S" in r.json()["detail"]
+        assert c.get("/v1/plans", headers=A).json()["count"] == before
+
+
+def test_resident_memory_reading_sees_an_allocation():
+    import numpy as np
+
+    from app.core.observability import resident_mb
+
+    before = resident_mb()
+    block = np.ones(40_000_000)  # 305 MiB, every page touched
+    assert resident_mb() - before > 250
+    del block
+
+
+def test_a_plan_over_its_memory_budget_is_503_and_stores_nothing(settings, monkeypatch):
+    """The worker's resident memory growing past GSA_PLAN_MEMORY_MB stops the plan at its next step."""
+    import itertools
+
+    from fastapi.testclient import TestClient
+
+    import app.api.routes.plans as plans_route
+    from app.main import create_app
+
+    grows = itertools.count(100.0, 40.0)  # each reading 40 MiB above the last
+    monkeypatch.setattr(plans_route, "resident_mb", lambda: next(grows))
+    tight = settings.model_copy(update={"plan_memory_mb": 100.0})
+    with TestClient(create_app(tight)) as c:
+        before = c.get("/v1/plans", headers=A).json()["count"]
+        r = c.post("/v1/plans", json=PAPER_EXAMPLE, headers=A)
+        assert r.status_code == 503, r.text
+        assert "GSA_PLAN_MEMORY_MB" in r.json()["detail"]
         assert c.get("/v1/plans", headers=A).json()["count"] == before
 
 

@@ -1,0 +1,253 @@
+"""A plan in the formats operators' tools read: CCSDS OPM and OEM (KVN), CZML, an access report and a pointing file.
+
+Every time is ISO 8601 UTC (a Z in the CSV files and CZML; CCSDS KVN writes UTC without a zone
+designator and states TIME_SYSTEM = UTC), every frame is named: GCRF for the CCSDS messages
+(the planner's GCRS axes), INERTIAL (ICRF axes, Cesium's name) for CZML, and azimuth from north
+through east with elevation above the station's horizon (WGS-84) for the pointing file.
+
+The OPM, OEM and CZML need the plan's trajectories, which are not stored: the plan is recomputed
+from its stored request (the planner is deterministic), and the recomputed burn is checked
+against the stored one before anything is written.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+from dataclasses import dataclass
+from datetime import UTC, datetime, timedelta
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from app.errors import InputError
+from planner.plan import Plan, utc
+
+Vec = NDArray[np.float64]
+ORIGINATOR = "GSA-ISAR"
+ARC_MARGIN_S = 3600.0  # the ephemerides run from an hour before the burn to an hour after T_access
+OEM_STEP_S = 60.0
+POINTING_STEP_S = 1.0
+
+
+def kvn_time(t: datetime) -> str:
+    """CCSDS KVN time: ISO 8601 UTC without a zone designator, milliseconds."""
+    t = t.astimezone(UTC)
+    return t.strftime("%Y-%m-%dT%H:%M:%S.") + f"{t.microsecond // 1000:03d}"
+
+
+def z_time(t: datetime) -> str:
+    """ISO 8601 UTC with a Z, milliseconds: the one time style of the CSV and CZML exports."""
+    return kvn_time(t) + "Z"
+
+
+@dataclass(frozen=True)
+class Arc:
+    """The plan's exported arc: times (s after the plan epoch) and the states (GCRS, km, km/s) on it."""
+
+    plan: Plan
+    t_burn_s: float
+    t_access_s: float
+    t0_s: float
+    t1_s: float
+
+    def target(self, t_s: Vec) -> tuple[Vec, Vec]:
+        assert self.plan.target_trajectory is not None
+        return self.plan.target_trajectory.state(t_s)
+
+    def observer(self, t_s: Vec) -> tuple[Vec, Vec]:
+        """The observer on its planned path: before the burn as changed for the alignment, after it the burn's arc."""
+        assert self.plan.observer_trajectory is not None and self.plan.encounter is not None
+        assert self.plan.encounter.arc is not None
+        t = np.atleast_1d(np.asarray(t_s, float))
+        before = t < self.t_burn_s
+        r = np.empty((3, t.size))
+        v = np.empty((3, t.size))
+        if before.any():
+            r[:, before], v[:, before] = self.plan.observer_trajectory.state(t[before])
+        if (~before).any():
+            r[:, ~before], v[:, ~before] = self.plan.encounter.arc.state(t[~before])
+        return r, v
+
+
+def plan_arc(plan: Plan, stored: dict[str, Any]) -> Arc:
+    """Return the exported arc of a recomputed plan, after checking it is the stored one."""
+    if plan.phasing is None or plan.encounter is None or plan.encounter.arc is None:
+        raise InputError(["plan"], "the plan has no phasing burn (no candidate was planned), so there is no "
+                                   "manoeuvre or planned arc to export; the access report still is", where="path")  # fmt: skip
+    ph = plan.phasing
+    stored_burn = (stored.get("phasing") or {}).get("t_burn")
+    if stored_burn is not None:
+        drift = abs((utc(plan.epoch, ph.t_burn_s) - datetime.fromisoformat(stored_burn)).total_seconds())
+        if drift > 1e-3:
+            raise InputError(["plan"], f"recomputing the plan moved its burn by {drift:.3f} s (a newer planner?): plan "
+                                       "it again to export it", where="path")  # fmt: skip
+    t0 = max(ph.t_burn_s - ARC_MARGIN_S, 0.0)
+    t1 = min(ph.t_access_s + ARC_MARGIN_S, plan.duration_s)
+    return Arc(plan, ph.t_burn_s, ph.t_access_s, t0, t1)
+
+
+def _grid(t0: float, t1: float, step: float, must: tuple[float, ...] = ()) -> Vec:
+    t = np.arange(t0, t1, step)
+    return np.unique(np.concatenate([t, [t1], [m for m in must if t0 <= m <= t1]]))
+
+
+def _header(kind: str, version: str, now: datetime) -> list[str]:
+    return [f"CCSDS_{kind}_VERS = {version}", f"CREATION_DATE = {kvn_time(now)}", f"ORIGINATOR = {ORIGINATOR}", ""]
+
+
+def _state_lines(r: Vec, v: Vec) -> list[str]:
+    return [
+        f"X = {r[0]:.6f} [km]", f"Y = {r[1]:.6f} [km]", f"Z = {r[2]:.6f} [km]",
+        f"X_DOT = {v[0]:.9f} [km/s]", f"Y_DOT = {v[1]:.9f} [km/s]", f"Z_DOT = {v[2]:.9f} [km/s]",
+    ]  # fmt: skip
+
+
+def opm(arc: Arc, plan_id: str, observer_name: str, now: datetime | None = None) -> str:
+    """CCSDS OPM 3.0 (502.0-B-3, KVN) of the observer just before the burn, with the burn as one impulsive manoeuvre."""
+    now = now or datetime.now(UTC)
+    ph = arc.plan.phasing
+    assert ph is not None
+    r, v = arc.plan.observer_trajectory.state(arc.t_burn_s)  # type: ignore[union-attr]
+    dv = np.asarray(ph.dv_km_s, float)
+    rtn = np.asarray(ph.dv_rtn_km_s, float) * 1000.0
+    lines = _header("OPM", "3.0", now) + [
+        "META_START",
+        f"OBJECT_NAME = {observer_name}",
+        f"OBJECT_ID = GSA-{plan_id}",
+        "CENTER_NAME = EARTH",
+        "REF_FRAME = GCRF",
+        "TIME_SYSTEM = UTC",
+        "META_STOP",
+        "",
+        f"COMMENT The observer just before its phasing burn, plan {plan_id}; the target is met at "
+        f"{kvn_time(utc(arc.plan.epoch, arc.t_access_s))} UTC",
+        f"EPOCH = {kvn_time(utc(arc.plan.epoch, arc.t_burn_s))}",
+        *_state_lines(r[:, 0], v[:, 0]),
+        "",
+        "COMMENT Impulsive phasing burn (two-body Lambert corrected for J2). The same in RTN (radial, "
+        f"along-track, normal) at the burn: {rtn[0]:.4f} / {rtn[1]:.4f} / {rtn[2]:.4f} m/s. The observer's "
+        "mass is not planned: MAN_DELTA_MASS is 0",
+        f"MAN_EPOCH_IGNITION = {kvn_time(utc(arc.plan.epoch, arc.t_burn_s))}",
+        "MAN_DURATION = 0.000 [s]",
+        "MAN_DELTA_MASS = 0.000 [kg]",
+        "MAN_REF_FRAME = GCRF",
+        f"MAN_DV_1 = {dv[0]:.9f} [km/s]",
+        f"MAN_DV_2 = {dv[1]:.9f} [km/s]",
+        f"MAN_DV_3 = {dv[2]:.9f} [km/s]",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def oem(arc: Arc, plan_id: str, target_name: str, observer_name: str, now: datetime | None = None) -> str:
+    """CCSDS OEM 3.0 (KVN): the target over the arc, the observer in two segments (before and after the burn)."""
+    now = now or datetime.now(UTC)
+    epoch = arc.plan.epoch
+    assert arc.plan.observer_trajectory is not None and arc.plan.encounter is not None
+    assert arc.plan.encounter.arc is not None
+    segments = [  # the burn's own instant ends the first observer segment (before it) and starts the second
+        (target_name, f"GSA-{plan_id}-TARGET", arc.t0_s, arc.t1_s, arc.target, "the target"),
+        (observer_name, f"GSA-{plan_id}-OBSERVER", arc.t0_s, arc.t_burn_s, arc.plan.observer_trajectory.state,
+         "the observer before the burn"),
+        (observer_name, f"GSA-{plan_id}-OBSERVER", arc.t_burn_s, arc.t1_s, arc.plan.encounter.arc.state,
+         "the observer after the burn"),
+    ]  # fmt: skip
+    lines = _header("OEM", "3.0", now)
+    for name, object_id, t0, t1, states, what in segments:
+        if t1 - t0 < 1e-6:
+            continue
+        t = _grid(t0, t1, OEM_STEP_S, (arc.t_access_s,))
+        r, v = states(t)
+        lines += [
+            "META_START", f"OBJECT_NAME = {name}", f"OBJECT_ID = {object_id}", "CENTER_NAME = EARTH",
+            "REF_FRAME = GCRF", "TIME_SYSTEM = UTC", f"START_TIME = {kvn_time(utc(epoch, t[0]))}",
+            f"USEABLE_START_TIME = {kvn_time(utc(epoch, t[0]))}", f"USEABLE_STOP_TIME = {kvn_time(utc(epoch, t[-1]))}",
+            f"STOP_TIME = {kvn_time(utc(epoch, t[-1]))}", "INTERPOLATION = LAGRANGE", "INTERPOLATION_DEGREE = 7",
+            "META_STOP", "", f"COMMENT {what}, plan {plan_id}: km and km/s",
+        ]  # fmt: skip
+        for k in range(t.size):
+            lines.append(f"{kvn_time(utc(epoch, t[k]))} " + " ".join(f"{x:.6f}" for x in r[:, k]) + " "
+                         + " ".join(f"{x:.9f}" for x in v[:, k]))  # fmt: skip
+        lines.append("")
+    return "\n".join(lines)
+
+
+def czml(arc: Arc, plan_id: str, names: dict[str, str], station: dict[str, Any],
+         windows: list[dict[str, Any]]) -> str:  # fmt: skip
+    """CZML for Cesium: both satellites over the arc, the station, its access intervals, the imaging moment."""
+    epoch = arc.plan.epoch
+    t0, t1 = utc(epoch, arc.t0_s), utc(epoch, arc.t1_s)
+    t_access = utc(epoch, arc.t_access_s)
+    t = _grid(arc.t0_s, arc.t1_s, OEM_STEP_S, (arc.t_burn_s, arc.t_access_s))
+
+    def samples(states: Any) -> list[float]:
+        r, _ = states(t)
+        out: list[float] = []
+        for k in range(t.size):
+            out += [round(float(t[k] - arc.t0_s), 3), *(round(float(x) * 1000.0, 2) for x in r[:, k])]
+        return out
+
+    interval = f"{z_time(t0)}/{z_time(t1)}"
+
+    def satellite(key: str, states: Any, colour: list[int]) -> dict[str, Any]:
+        return {
+            "id": key, "name": names[key], "availability": interval,
+            "position": {"epoch": z_time(t0), "referenceFrame": "INERTIAL", "interpolationAlgorithm": "LAGRANGE",
+                         "interpolationDegree": 5, "cartesian": samples(states)},
+            "point": {"pixelSize": 8, "color": {"rgba": colour}},
+            "label": {"text": names[key], "font": "12px sans-serif", "pixelOffset": {"cartesian2": [10, -10]}},
+            "path": {"width": 1.5, "leadTime": 0, "trailTime": arc.t1_s - arc.t0_s, "material": {"solidColor": {"color": {"rgba": colour}}}},
+        }  # fmt: skip
+
+    access = [f"{z_time(datetime.fromisoformat(w['rise']))}/{z_time(datetime.fromisoformat(w['set']))}"
+              for w in windows if datetime.fromisoformat(w["set"]) >= t0 and datetime.fromisoformat(w["rise"]) <= t1]  # fmt: skip
+    r_access, _ = arc.target(np.array([arc.t_access_s]))
+    packets: list[dict[str, Any]] = [
+        {"id": "document", "name": f"GSA-ISAR plan {plan_id}", "version": "1.0",
+         "clock": {"interval": interval, "currentTime": z_time(t_access), "multiplier": 10, "range": "CLAMPED"}},
+        satellite("target", arc.target, [255, 127, 14, 255]),
+        satellite("observer", arc.observer, [31, 119, 180, 255]),
+        {"id": "station", "name": names["station"],
+         "position": {"cartographicDegrees": [station["longitude_deg"], station["latitude_deg"], station.get("altitude_m", 0.0)]},
+         "point": {"pixelSize": 9, "color": {"rgba": [44, 160, 44, 255]}}, "label": {"text": names["station"]}},
+        {"id": "access", "name": "the station sees the target", "availability": access or interval,
+         "polyline": {"positions": {"references": ["station#position", "target#position"]}, "width": 1,
+                      "material": {"solidColor": {"color": {"rgba": [44, 160, 44, 200]}}}}},
+        {"id": "imaging", "name": "T_access: the imaging moment",
+         "availability": f"{z_time(t_access - timedelta(seconds=60))}/{z_time(t_access + timedelta(seconds=60))}",
+         "position": {"referenceFrame": "INERTIAL", "cartesian": [round(float(x) * 1000.0, 2) for x in r_access[:, 0]]},
+         "point": {"pixelSize": 14, "color": {"rgba": [214, 39, 40, 255]}}, "label": {"text": f"T_access {z_time(t_access)}"}},
+    ]  # fmt: skip
+    return json.dumps(packets, indent=1)
+
+
+POINTING_COLUMNS = ("access", "time_utc", "azimuth_deg", "elevation_deg", "range_km", "range_rate_km_s")
+
+
+def pointing_csv(plan: Plan, windows: list[dict[str, Any]]) -> str:
+    """The radar's pointing over each pass, 1-s steps: azimuth (from north, through east), elevation, range and its rate."""
+    from planner.access import look_angles
+
+    assert plan.target_trajectory is not None and plan.frames is not None and plan.station is not None
+    buf = io.StringIO()
+    buf.write(",".join(POINTING_COLUMNS) + "\n")
+    epoch = plan.epoch
+    for k, w in enumerate(windows):
+        rise = (datetime.fromisoformat(w["rise"]) - epoch).total_seconds()
+        end = (datetime.fromisoformat(w["set"]) - epoch).total_seconds()
+        t = np.arange(math.ceil(rise), math.floor(end) + 1e-9, POINTING_STEP_S)
+        if t.size == 0:
+            continue
+        r, v = plan.target_trajectory.state(t)
+        look = look_angles(r, t, plan.station, plan.frames)
+        dt = 0.5
+        rp, _ = plan.target_trajectory.state(t + dt)
+        rm, _ = plan.target_trajectory.state(t - dt)
+        rate = (look_angles(rp, t + dt, plan.station, plan.frames).range_km
+                - look_angles(rm, t - dt, plan.station, plan.frames).range_km) / (2 * dt)  # fmt: skip
+        for j in range(t.size):
+            buf.write(f"{k},{z_time(utc(epoch, t[j]))},{look.azimuth_deg[j]:.4f},{look.elevation_deg[j]:.4f},"
+                      f"{look.range_km[j]:.3f},{rate[j]:.5f}\n")  # fmt: skip
+    return buf.getvalue()

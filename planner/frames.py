@@ -1,0 +1,79 @@
+"""Frames a radar pass is described in: the target's orbital frame (LVLH) and each moment's observation frame.
+
+Vectors follow the planner's convention, (3, N); a frame is a matrix whose columns are its
+axes, stacked (N, 3, 3).
+
+- **LVLH** of the target: x radial (out), y along-track (z cross x), z along the orbit
+  normal (r cross v).
+- **Observation frame** of an ISAR frame: X from the target toward the radar, Y along
+  the rate of change of that line of sight *as the target sees it* (in its own LVLH frame:
+  a target held fixed in LVLH turns with that frame, and only the line of sight's motion
+  relative to the body forms the image), Z = X cross Y. This is the frame the simulator
+  images in (``inference.isar``: the line of sight sweeps from -Y to +Y through X).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.propagation import EarthFrames, Station, Trajectory
+
+Vec = NDArray[np.float64]
+
+
+def lvlh_axes(r_km: Vec, v_km_s: Vec) -> Vec:
+    """Return the LVLH axes (N, 3, 3), columns radial, along-track, normal, of states (3, N) in their frame."""
+    radial = r_km / np.linalg.norm(r_km, axis=0)
+    h = np.cross(r_km, v_km_s, axis=0)
+    normal = h / np.linalg.norm(h, axis=0)
+    along = np.cross(normal, radial, axis=0)
+    return np.stack([radial, along, normal], axis=1).transpose(2, 0, 1)
+
+
+def site_gcrs(station: Station, frames: EarthFrames, t_s: Vec) -> Vec:
+    """Return the station's GCRS position (3, N) at ``t_s``."""
+    m = frames.gcrs_to_itrs(t_s)  # (3, 3, N), GCRS to ITRS
+    return np.asarray(np.einsum("jin,j->in", m, station.itrs_km()))
+
+
+@dataclass(frozen=True)
+class PassGeometry:
+    """The line of sight over a pass, sampled at ``t_s``: in the target's LVLH frame, with range and the LVLH axes."""
+
+    t_s: Vec
+    los_lvlh: Vec  # (3, N) unit vectors, target to radar, in LVLH
+    range_km: Vec  # (N,)
+    lvlh: Vec  # (N, 3, 3) LVLH axes in GCRS (columns)
+
+
+def pass_geometry(traj: Trajectory, station: Station, frames: EarthFrames, t_s: Vec) -> PassGeometry:
+    """Return the target-to-station line of sight at ``t_s`` (s after the frames' epoch) in the target's LVLH."""
+    t = np.atleast_1d(np.asarray(t_s, float))
+    r, v = traj.state(t)
+    lvlh = lvlh_axes(r, v)
+    los = site_gcrs(station, frames, t) - r
+    rng = np.linalg.norm(los, axis=0)
+    los_lvlh = np.einsum("nji,jn->in", lvlh, los / rng)
+    return PassGeometry(t, los_lvlh, rng, lvlh)
+
+
+def observation_axes(los: Vec, t_s: Vec) -> Vec:
+    """Return observation axes (N, 3, 3) from unit lines of sight (3, N) at times ``t_s``, in the lines' frame.
+
+    X is the line of sight, Y its rate (by central differences, one-sided at the ends) with the
+    part along X removed, Z = X cross Y. Needs at least two times, increasing.
+    """
+    t = np.asarray(t_s, float)
+    rate = np.gradient(los, t, axis=1)
+    rate = rate - np.sum(rate * los, axis=0) * los
+    y = rate / np.linalg.norm(rate, axis=0)
+    return np.stack([los, y, np.cross(los, y, axis=0)], axis=1).transpose(2, 0, 1)
+
+
+def swept_deg(los: Vec) -> Vec:
+    """Return the cumulative angle (deg) the unit lines of sight (3, N) sweep, 0 at the first."""
+    cos = np.clip(np.sum(los[:, 1:] * los[:, :-1], axis=0), -1.0, 1.0)
+    return np.concatenate([[0.0], np.cumsum(np.degrees(np.arccos(cos)))])

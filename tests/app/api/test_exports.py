@@ -1,0 +1,169 @@
+"""GET /v1/plans/{id}/export/{opm,oem,czml,pointing.csv}: read back by an independent CCSDS reader (ccsds-ndm),
+flown by an independent J2 integrator (tests/utils/j2.py), and pointed against skyfield."""
+
+import csv
+import io
+import json
+from datetime import UTC, datetime
+
+import numpy as np
+import pytest
+from ccsds_ndm.ndm_io import NdmIo
+from skyfield.api import EarthSatellite, wgs84
+
+from app.schemas import PAPER_EXAMPLE
+from planner.elements import elements_to_state
+from planner.propagation import skyfield_times, timescale
+from tests.conftest import KEY_A, KEY_B
+from tests.utils.j2 import propagate_tod_j2
+from tests.utils.orbits import ISS_EPOCH, ISS_L1, ISS_L2, PAPER_TARGET
+
+A = {"X-API-Key": KEY_A}
+
+
+@pytest.fixture(scope="module")
+def plan(client):
+    r = client.post("/v1/plans", json=PAPER_EXAMPLE, headers=A)
+    assert r.status_code == 201, r.text
+    return r.json()
+
+
+def _read(tmp_path, text, name):
+    path = tmp_path / f"{name}.kvn"
+    path.write_text(text)
+    return NdmIo().from_path(str(path))
+
+
+def _t(kvn_time):
+    return datetime.fromisoformat(str(kvn_time).rstrip("Z")).replace(tzinfo=UTC)
+
+
+def test_opm_is_read_back_and_its_burn_meets_the_target(client, plan, tmp_path):
+    r = client.get(f"/v1/plans/{plan['id']}/export/opm", headers=A)
+    assert r.status_code == 200 and r.headers["content-type"].startswith("text/plain")
+    text = r.text
+    assert text.startswith("CCSDS_OPM_VERS = 3.0\n")
+    for key in ("CREATION_DATE", "ORIGINATOR", "OBJECT_NAME", "OBJECT_ID", "CENTER_NAME = EARTH", "REF_FRAME = GCRF",
+                "TIME_SYSTEM = UTC", "EPOCH", "X_DOT", "MAN_EPOCH_IGNITION", "MAN_DURATION", "MAN_DELTA_MASS",
+                "MAN_REF_FRAME = GCRF", "MAN_DV_1", "MAN_DV_2", "MAN_DV_3"):  # fmt: skip
+        assert key in text, key
+    opm = _read(tmp_path, text, "plan_opm")
+    seg = opm.body.segment
+    assert seg.metadata.ref_frame == "GCRF" and seg.metadata.time_system == "UTC"
+    assert seg.metadata.object_name == "Sat_Obs"
+    sv = seg.data.state_vector
+    man = seg.data.maneuver_parameters[0]
+    ph = plan["phasing"]
+    t_burn = datetime.fromisoformat(ph["t_burn"])
+    assert abs((_t(sv.epoch) - t_burn).total_seconds()) < 1e-3
+    assert abs((_t(man.man_epoch_ignition) - t_burn).total_seconds()) < 1e-3
+    dv = np.array([man.man_dv_1.value, man.man_dv_2.value, man.man_dv_3.value]) * 1000.0
+    np.testing.assert_allclose(dv, ph["dv_m_s"], atol=1e-5)
+    # Fly the OPM's state and burn with the independent integrator; the target from its elements likewise.
+    epoch = datetime.fromisoformat(plan["epoch"])
+    t_access = datetime.fromisoformat(ph["t_access"])
+    tb, ta = (t_burn - epoch).total_seconds(), (t_access - epoch).total_seconds()
+    r0 = np.array([sv.x.value, sv.y.value, sv.z.value])
+    v0 = np.array([sv.x_dot.value, sv.y_dot.value, sv.z_dot.value]) + dv / 1000.0
+    obs = propagate_tod_j2(epoch, r0, v0, tb, [ta])[:, 0]
+    rt, vt = elements_to_state(*PAPER_TARGET.radians())
+    t_el = (PAPER_TARGET.epoch - epoch).total_seconds()
+    tgt = propagate_tod_j2(epoch, rt, vt, t_el, [ta])[:, 0]
+    separation = float(np.linalg.norm(obs - tgt))
+    assert abs(separation - ph["verification"]["separation_km"]) < 0.2, separation
+
+
+def test_oem_is_read_back_with_the_burn_between_segments(client, plan, tmp_path):
+    r = client.get(f"/v1/plans/{plan['id']}/export/oem", headers=A)
+    assert r.status_code == 200
+    oem = _read(tmp_path, r.text, "plan_oem")
+    segs = oem.body.segment
+    assert len(segs) == 3
+    for s in segs:
+        assert s.metadata.ref_frame == "GCRF" and s.metadata.time_system == "UTC" and s.metadata.center_name == "EARTH"
+    t_burn = datetime.fromisoformat(plan["phasing"]["t_burn"])
+    assert abs((_t(segs[1].metadata.stop_time) - t_burn).total_seconds()) < 1e-3
+    assert abs((_t(segs[2].metadata.start_time) - t_burn).total_seconds()) < 1e-3
+    # Before the burn the observer's position is continuous, its velocity jumps by the burn.
+    last, first = segs[1].data.state_vector[-1], segs[2].data.state_vector[0]
+    dr = np.array([first.x.value - last.x.value, first.y.value - last.y.value, first.z.value - last.z.value])
+    dv = np.array([first.x_dot.value - last.x_dot.value, first.y_dot.value - last.y_dot.value,
+                   first.z_dot.value - last.z_dot.value]) * 1000.0  # fmt: skip
+    assert np.linalg.norm(dr) < 1e-5
+    np.testing.assert_allclose(dv, plan["phasing"]["dv_m_s"], atol=1e-4)
+    # The target's ephemeris against the independent integrator, from the target's elements.
+    epoch = datetime.fromisoformat(plan["epoch"])
+    states = segs[0].data.state_vector
+    times = np.array([(_t(s.epoch) - epoch).total_seconds() for s in states[::20]])
+    ours = np.array([[s.x.value, s.y.value, s.z.value] for s in states[::20]]).T
+    rt, vt = elements_to_state(*PAPER_TARGET.radians())
+    ref = propagate_tod_j2(epoch, rt, vt, (PAPER_TARGET.epoch - epoch).total_seconds(), times)
+    assert np.max(np.linalg.norm(ours - ref, axis=0)) < 0.05
+    # At T_access the two ephemerides are the planned separation apart.
+    t_access = plan["phasing"]["t_access"]
+    at = {s.metadata.object_id: next(v for v in s.data.state_vector if abs((_t(v.epoch) - datetime.fromisoformat(t_access)).total_seconds()) < 1e-3)
+          for s in (segs[0], segs[2])}  # fmt: skip
+    a, b = at.values()
+    gap = np.linalg.norm([a.x.value - b.x.value, a.y.value - b.y.value, a.z.value - b.z.value])
+    assert abs(gap - plan["phasing"]["verification"]["separation_km"]) < 1e-3
+
+
+def test_czml_holds_both_satellites_the_station_and_the_moment(client, plan):
+    r = client.get(f"/v1/plans/{plan['id']}/export/czml", headers=A)
+    assert r.status_code == 200 and r.headers["content-type"].startswith("application/json")
+    packets = {p["id"]: p for p in json.loads(r.text)}
+    assert set(packets) == {"document", "target", "observer", "station", "access", "imaging"}
+    assert packets["document"]["version"] == "1.0"
+    t_access = datetime.fromisoformat(plan["phasing"]["t_access"])
+    assert datetime.fromisoformat(packets["document"]["clock"]["currentTime"].replace("Z", "+00:00")) - t_access < \
+        __import__("datetime").timedelta(milliseconds=1)  # fmt: skip
+    for key in ("target", "observer"):
+        pos = packets[key]["position"]
+        assert pos["referenceFrame"] == "INERTIAL" and pos["epoch"].endswith("Z")
+        assert len(pos["cartesian"]) % 4 == 0 and len(pos["cartesian"]) >= 4 * 100
+    gs = PAPER_EXAMPLE["ground_station"]
+    assert packets["station"]["position"]["cartographicDegrees"][:2] == [gs["longitude_deg"], gs["latitude_deg"]]
+    assert all(iv.endswith("Z") for iv in "/".join(np.atleast_1d(packets["access"]["availability"])).split("/"))
+
+
+ISS_PLAN = {
+    "target": {"name": "ISS", "tle": [ISS_L1, ISS_L2]},
+    "observer": PAPER_EXAMPLE["observer"],
+    "ground_station": {"name": "GS", "latitude_deg": 40.0, "longitude_deg": -75.0, "altitude_m": 100.0},
+    "search": {"start": ISS_EPOCH.isoformat(), "duration_days": 1.0},
+}
+
+
+def test_pointing_file_against_skyfield(client):
+    body = dict(ISS_PLAN, observer=dict(PAPER_EXAMPLE["observer"]))
+    body["observer"]["elements"] = dict(body["observer"]["elements"], epoch=ISS_EPOCH.isoformat())
+    plan = client.post("/v1/plans", json=body, headers=A)
+    assert plan.status_code == 201, plan.text
+    plan = plan.json()
+    r = client.get(f"/v1/plans/{plan['id']}/export/pointing.csv", headers=A)
+    assert r.status_code == 200 and r.headers["content-type"].startswith("text/csv")
+    rows = list(csv.DictReader(io.StringIO(r.text)))
+    windows = plan["access_windows"]
+    assert {int(x["access"]) for x in rows} == set(range(len(windows)))
+    for k, w in enumerate(windows):
+        mine = [x for x in rows if int(x["access"]) == k]
+        span = (datetime.fromisoformat(w["set"]) - datetime.fromisoformat(w["rise"])).total_seconds()
+        assert abs(len(mine) - span) <= 2  # one row a second
+        assert abs(max(float(x["elevation_deg"]) for x in mine) - w["max_elevation_deg"]) < 0.01
+    sat = EarthSatellite(ISS_L1, ISS_L2, ts=timescale())
+    site = wgs84.latlon(40.0, -75.0, 100.0)
+    sample = rows[:: max(1, len(rows) // 40)]
+    when = [datetime.fromisoformat(x["time_utc"].replace("Z", "+00:00")) for x in sample]
+    assert all(x["time_utc"].endswith("Z") for x in sample)
+    t = skyfield_times(ISS_EPOCH, np.array([(w - ISS_EPOCH).total_seconds() for w in when]))
+    alt, az, dist = (sat - site).at(t).altaz()
+    np.testing.assert_allclose([float(x["elevation_deg"]) for x in sample], alt.degrees, atol=2e-3)
+    d_az = (np.array([float(x["azimuth_deg"]) for x in sample]) - az.degrees + 180) % 360 - 180
+    assert np.max(np.abs(d_az * np.cos(alt.radians))) < 2e-3
+    np.testing.assert_allclose([float(x["range_km"]) for x in sample], dist.km, atol=2e-3)
+
+
+def test_exports_are_the_operators_own(client, plan):
+    for kind in ("opm", "oem", "czml", "pointing.csv"):
+        assert client.get(f"/v1/plans/{plan['id']}/export/{kind}", headers={"X-API-Key": KEY_B}).status_code == 404
+        assert client.get(f"/v1/plans/no-such-plan/export/{kind}", headers=A).status_code == 404

@@ -1,0 +1,178 @@
+"""A simulated pass (gsa simulate --pass): its geometry against skyfield, and its fusion (still and spinning).
+
+The frames here carry their true attitude plus noise instead of a network's answer, so the
+fusion is tested on the pass geometry alone: the simulator builds each frame's observation
+frame numerically from the body-frame line of sight (``planner.frames``); the fusion's turning
+model predicts it in closed form (``inference.fusion.turning_prediction``). The two are
+written independently.
+"""
+
+import math
+from datetime import datetime
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+from skyfield.api import EarthSatellite, wgs84
+
+from app.errors import InputError
+from app.schemas import PAPER_EXAMPLE, AccessCreate
+from app.services import passes as pass_svc
+from app.services.estimation import frames_at
+from app.services.planning import run_access
+from inference.frames import euler_from_matrix, rotation_matrix
+from inference.fusion import angle_deg
+from inference.trust import Checked, Quality
+from planner.propagation import skyfield_times, timescale
+from tests.utils.orbits import ISS_EPOCH, ISS_L1, ISS_L2
+
+ISS_REQUEST = {
+    "target": {"name": "ISS", "tle": [ISS_L1, ISS_L2]},
+    "observer": PAPER_EXAMPLE["observer"],
+    "ground_station": {"name": "GS", "latitude_deg": 40.0, "longitude_deg": -75.0, "altitude_m": 100.0},
+    "search": {"start": ISS_EPOCH.isoformat(), "duration_days": 1.0},
+}
+
+
+def _windows(req):
+    acc = {"target": req["target"], "ground_station": req["ground_station"], "duration_days": 1.0}
+    if "search" in req:
+        acc["start"] = req["search"]["start"]
+    return run_access(AccessCreate.model_validate(acc))["access_windows"]
+
+
+@pytest.fixture(scope="module")
+def iss_windows():
+    return _windows(ISS_REQUEST)
+
+
+@pytest.fixture(scope="module")
+def paper_windows():
+    return _windows(PAPER_EXAMPLE)
+
+
+def test_frames_are_one_aperture_apart_by_skyfield(iss_windows):
+    """For a still target the line of sight turns in the body as in LVLH: 5.1 deg between frame centres."""
+    _, w = pass_svc.choose_window(iss_windows, None)
+    meta = pass_svc.pass_geometry_frames(ISS_REQUEST, w, pass_svc.PassOptions(), np.random.default_rng(0))
+    assert len(meta) >= 5
+    sat = EarthSatellite(ISS_L1, ISS_L2, ts=timescale())
+    site = wgs84.latlon(40.0, -75.0, 100.0)
+    t = np.array([(f["observed_at"] - ISS_EPOCH).total_seconds() for f in meta])
+    times = skyfield_times(ISS_EPOCH, t)
+    los = -(sat - site).at(times).position.km
+    state = sat.at(times)
+    r, v = state.position.km, state.velocity.km_per_s
+    in_lvlh = []
+    for k in range(len(t)):
+        x = r[:, k] / np.linalg.norm(r[:, k])
+        z = np.cross(r[:, k], v[:, k])
+        z /= np.linalg.norm(z)
+        axes = np.stack([x, np.cross(z, x), z], axis=1)
+        in_lvlh.append(axes.T @ los[:, k] / np.linalg.norm(los[:, k]))
+        # and the frame's X axis (toward the radar) is that line of sight
+        np.testing.assert_allclose(meta[k]["observation_in_lvlh"][:, 0], in_lvlh[-1], atol=1e-5)
+    steps = [math.degrees(math.acos(np.clip(a @ b, -1, 1))) for a, b in zip(in_lvlh, in_lvlh[1:], strict=False)]
+    # Centres are 5.1 deg apart along the sweep; a chord of the curved path is at most that.
+    assert all(4.9 < s <= 5.1 + 1e-3 for s in steps), steps
+    assert all(f["range_km"] > 300 for f in meta)
+
+
+def test_each_frame_is_rendered_where_the_service_places_it(paper_windows):
+    """The attitude a frame is rendered at, placed back in LVLH through the service's frames_at, is the truth."""
+    _, w = pass_svc.choose_window(paper_windows, None)
+    meta = pass_svc.pass_geometry_frames(PAPER_EXAMPLE, w, pass_svc.PassOptions(), np.random.default_rng(1))
+    for f in meta[:: max(1, len(meta) // 6)]:
+        axes = frames_at(PAPER_EXAMPLE, f["observed_at"])
+        obs_in_lvlh = axes["lvlh"].T @ axes["observation"]
+        placed = obs_in_lvlh @ rotation_matrix(*f["attitude_deg"])
+        assert angle_deg(placed, f["body_to_lvlh"]) < 0.02
+        assert angle_deg(f["body_to_lvlh"], meta[0]["body_to_lvlh"]) < 1e-9  # still in LVLH
+
+
+def _checked(angles, bound):
+    q = Quality(silhouette_iou=0.99, uncertainty_deg=(bound, bound, bound), trusted=True, reasons=[])
+    return Checked(np.array(angles), None, True, q, [], {})
+
+
+def _noisy_pass(windows, rng, spin_deg_s, noise_deg=0.25, flips=0.0):
+    k = int(rng.integers(len(windows)))
+    opts = pass_svc.PassOptions(spin_deg_s=spin_deg_s, max_frames=40, seed=int(rng.integers(1 << 30)))
+    meta = pass_svc.pass_geometry_frames(PAPER_EXAMPLE, windows[k], opts, rng)
+    checks = []
+    for f in meta:
+        r = rotation_matrix(*f["attitude_deg"])
+        r = r @ Rotation.from_rotvec(np.radians(noise_deg) * rng.standard_normal(3) / math.sqrt(3)).as_matrix()
+        if rng.random() < flips:
+            m = np.diag([1.0, 1.0, -1.0])
+            r = m @ r @ m
+        checks.append(_checked(euler_from_matrix(r), 1.645 * noise_deg))
+    return meta, checks
+
+
+def _fuse(meta, checks):
+    return pass_svc.fuse_frames(plan_request=PAPER_EXAMPLE, checks=checks, observed_at=[f["observed_at"] for f in meta],
+                                names=[str(k) for k in range(len(meta))])  # fmt: skip
+
+
+def test_a_still_pass_is_stable_and_beats_its_frames(paper_windows):
+    rng = np.random.default_rng(5)
+    windows = [w for w in paper_windows if w["max_elevation_deg"] > 10]
+    for _ in range(4):
+        meta, checks = _noisy_pass(windows, rng, 0.0, flips=0.2)
+        out = _fuse(meta, checks)
+        assert out["stable"] and out["trusted"], out["stability"]
+        fused = rotation_matrix(*out["attitude_lvlh"]["euler_zyx_deg"])
+        assert angle_deg(fused, meta[0]["body_to_lvlh"]) < 0.25  # 0.25 deg per frame, independent noise
+        assert out["turning_chi2"] is not None and out["turning_chi2"] < 30
+
+
+@pytest.mark.parametrize("sense", [1.0, -1.0])
+def test_a_spinning_target_is_found_turning_with_its_rate(paper_windows, sense):
+    rng = np.random.default_rng(11 if sense > 0 else 12)
+    windows = [w for w in paper_windows if w["max_elevation_deg"] > 10]
+    found = 0
+    for _ in range(4):
+        try:
+            meta, checks = _noisy_pass(windows, rng, sense * 0.5)
+        except InputError:  # too few frames of this pass within the networks' range
+            continue
+        out = _fuse(meta, checks)
+        if out["stable"]:
+            continue
+        found += 1
+        rate = np.array(out["rate_deg_s"])
+        assert abs(np.linalg.norm(rate) - 0.5) <= 0.1, rate  # within 20 %
+        assert abs(rate[2]) / np.linalg.norm(rate) > 0.95  # about body z
+        at = out["attitude_at"]
+        assert isinstance(at, datetime)
+        times = np.array([(f["observed_at"] - at).total_seconds() for f in meta])
+        k = int(np.argmin(np.abs(times)))
+        truth = meta[k]["body_to_lvlh"] @ pass_svc.spin_rotation(np.array([0.0, 0.0, 1.0]), sense * 0.5,
+                                                                   np.array([-times[k]]))[0]  # fmt: skip
+        assert angle_deg(rotation_matrix(*out["attitude_lvlh"]["euler_zyx_deg"]), truth) < 1.0
+    assert found >= 3
+
+
+def test_a_pass_of_untrusted_frames_says_so(paper_windows):
+    rng = np.random.default_rng(8)
+    meta, checks = _noisy_pass([w for w in paper_windows if w["max_elevation_deg"] > 10], rng, 0.0)
+    doubtful = []
+    for c in checks:
+        q = Quality(c.quality.silhouette_iou, c.quality.uncertainty_deg, False, ["the silhouette fits poorly"])
+        doubtful.append(Checked(c.angles_deg, None, True, q, [], {}))
+    doubtful[0] = checks[0]  # one trusted frame is not a pass
+    out = _fuse(meta, doubtful)
+    assert not out["trusted"] and "too few frames" in out["stability"]
+
+
+def test_bad_pass_options_name_the_field(paper_windows):
+    with pytest.raises(InputError) as e:
+        pass_svc.PassOptions(aperture_deg=0.0)
+    assert e.value.loc == ["aperture_deg"]
+    with pytest.raises(InputError) as e:
+        pass_svc.choose_window(paper_windows, len(paper_windows))
+    assert e.value.loc == ["window"]
+    with pytest.raises(InputError) as e:
+        pass_svc.choose_window([], None)
+    assert e.value.loc == ["window"]
