@@ -602,10 +602,9 @@ def cmd_pass(args: argparse.Namespace) -> int:
         t0 = time.perf_counter()
         frames, _, checks, _ = svc.check_frames(est=est, checker=checker, uploads=uploads, resample=False,
                                                 normalised=True, cells_m=None)  # fmt: skip
-        checks = pass_svc.recheck_reversed(est=est, checker=checker, frames=frames, checks=checks)
         t1 = time.perf_counter()
-        result = pass_svc.fuse_frames(plan_request=request, checks=checks, observed_at=times,
-                                      names=[f"frame {k}" for k in range(len(times))])  # fmt: skip
+        result, _ = pass_svc.fuse_pass(est=est, checker=checker, frames=frames, checks=checks, plan_request=request,
+                                       observed_at=times, names=[f"frame {k}" for k in range(len(times))])  # fmt: skip
         t2 = time.perf_counter()
     except InputError as exc:
         raise CliError(".".join(str(x) for x in exc.loc) + ": " + exc.message) from None

@@ -64,9 +64,10 @@ def one_pass(est: Any, checker: Any, window: dict[str, Any], opts: pass_svc.Pass
     t0 = time.perf_counter()
     frames, _, checks, _ = svc.check_frames(est=est, checker=checker, uploads=uploads, resample=False,
                                             normalised=True, cells_m=None)  # fmt: skip
-    checks = pass_svc.recheck_reversed(est=est, checker=checker, frames=frames, checks=checks)
-    result = pass_svc.fuse_frames(plan_request=PAPER_EXAMPLE, checks=checks, observed_at=[f["observed_at"] for f in meta],
-                                  names=[u.name for u in uploads])  # fmt: skip
+    result, checks = pass_svc.fuse_pass(est=est, checker=checker, frames=frames, checks=checks,
+                                        plan_request=PAPER_EXAMPLE, observed_at=[f["observed_at"] for f in meta],
+                                        names=[u.name for u in uploads])  # fmt: skip
+
     seconds = time.perf_counter() - t0
     inside = [k for k, f in enumerate(meta) if max(abs(a) for a in f["attitude_deg"]) <= 45.0]
     single = [

@@ -134,11 +134,15 @@ def tle_from_omm(fields: dict[str, object], field: str = "omm") -> TLE:
 
     missing = [k for k in OMM_REQUIRED if k not in fields]
     if missing:
-        raise TLEError(f"the OMM has no {missing[0]}: an OMM for SGP4 gives {', '.join(OMM_REQUIRED)}", field=missing[0])
+        raise TLEError(
+            f"the OMM has no {missing[0]}: an OMM for SGP4 gives {', '.join(OMM_REQUIRED)}", field=missing[0]
+        )
     values = {**OMM_DEFAULTS, **fields}
     theory = str(fields.get("MEAN_ELEMENT_THEORY", "SGP4")).upper()
     if theory not in ("SGP4", "SGP4-XP", "SDP4"):
-        raise TLEError(f"MEAN_ELEMENT_THEORY {theory!r}: only SGP4 mean elements can be used", field="MEAN_ELEMENT_THEORY")
+        raise TLEError(
+            f"MEAN_ELEMENT_THEORY {theory!r}: only SGP4 mean elements can be used", field="MEAN_ELEMENT_THEORY"
+        )
     epoch = str(values["EPOCH"]).rstrip("Z")
     if "." not in epoch:
         epoch += ".000000"

@@ -234,14 +234,14 @@ def recheck_reversed(*, est: Any, checker: Any, frames: Vec, checks: list[Any]) 
     turning against that motion faster than the line of sight sweeps reverses the cross-range
     axis: the frame shows the body turned by 180 deg about the line of sight, outside the
     networks' range. Mirrored back, it reads as an ordinary frame R', and the body is Rx(180) R'.
-    Only where most of the pass's frames are untrusted (a pass that reads as it is keeps its
-    time); single frames are never given this reading (a flipped single frame must be flagged),
+    ``fuse_pass`` asks for it only when the frames as they are do not make a trusted, still
+    pass; single frames are never given this reading (a flipped single frame must be flagged),
     but a pass can afford it, since the fusion's turning model predicts which way each frame reads.
     """
     from inference.trust import Alternative, Checked, Quality
 
     todo = [k for k, c in enumerate(checks) if not c.quality.trusted]
-    if len(todo) <= len(checks) // 2:  # most frames read as they are: the pass is not reversed
+    if not todo:
         return checks
     # y -> -y about the centre column n/2: column j -> (n - j) mod n
     mirrored = np.ascontiguousarray(np.roll(frames[todo][:, :, ::-1], 1, axis=2))
@@ -268,6 +268,28 @@ def recheck_reversed(*, est: Any, checker: Any, frames: Vec, checks: list[Any]) 
             features={**c.features, "reversed": 1.0},
         )
     return out
+
+
+def fuse_pass(*, est: Any, checker: Any, frames: Vec, checks: list[Any], plan_request: dict[str, Any],
+              observed_at: list[datetime], names: list[str]) -> tuple[dict[str, Any], list[Any]]:  # fmt: skip
+    """Fuse a checked pass; where it is not a trusted still one, re-read its untrusted frames mirrored and fuse again.
+
+    Returns the answer with the more trusted frames used, and the checks it rests on.
+    """
+    first = fuse_frames(plan_request=plan_request, checks=checks, observed_at=observed_at, names=names)
+    if first["trusted"] and first["stable"]:
+        return first, checks
+    again = recheck_reversed(est=est, checker=checker, frames=frames, checks=checks)
+    if again is checks:
+        return first, checks
+    second = fuse_frames(plan_request=plan_request, checks=again, observed_at=observed_at, names=names)
+
+    def trusted_used(result: dict[str, Any], cs: list[Any]) -> int:
+        return sum(1 for f in result["frames"] if f["used"] and cs[f["index"]].quality.trusted)
+
+    if trusted_used(second, again) > trusted_used(first, checks):
+        return second, again
+    return first, checks
 
 
 def check_times(plan_result: dict[str, Any], observed_at: list[datetime]) -> None:

@@ -46,9 +46,8 @@ def _fuse(*, session: Any, operator_id: str, settings: Any, est: Any, checker: A
     pass_svc.check_times(plan.result, observed_at)
     frames, _, checks, per_frame = svc.check_frames(est=est, checker=checker, uploads=uploads, resample=False,
                                                     normalised=normalised, cells_m=cells_m)  # fmt: skip
-    checks = pass_svc.recheck_reversed(est=est, checker=checker, frames=frames, checks=checks)
-    result = pass_svc.fuse_frames(plan_request=plan.request, checks=checks, observed_at=observed_at,
-                                  names=[u.name for u in uploads])  # fmt: skip
+    result, _ = pass_svc.fuse_pass(est=est, checker=checker, frames=frames, checks=checks, plan_request=plan.request,
+                                   observed_at=observed_at, names=[u.name for u in uploads])  # fmt: skip
     result = {**result, "target": checker.model.name, "timings_s": per_frame}
     row = Pass(operator_id=operator_id, created_at=utcnow(), plan_id=plan_id, result=_jsonable(result))
     session.add(row)

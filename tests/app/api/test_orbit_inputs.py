@@ -28,11 +28,32 @@ XML = (
     + "".join(f"<{k}>{OMM[k]}</{k}>" for k in META)
     + "<CENTER_NAME>EARTH</CENTER_NAME><REF_FRAME>TEME</REF_FRAME><TIME_SYSTEM>UTC</TIME_SYSTEM>"
     "<MEAN_ELEMENT_THEORY>SGP4</MEAN_ELEMENT_THEORY></metadata><data><meanElements>"
-    + "".join(f"<{k}>{OMM[k]}</{k}>" for k in ("EPOCH", "MEAN_MOTION", "ECCENTRICITY", "INCLINATION", "RA_OF_ASC_NODE",
-                                                "ARG_OF_PERICENTER", "MEAN_ANOMALY"))  # fmt: skip
+    + "".join(
+        f"<{k}>{OMM[k]}</{k}>"
+        for k in (
+            "EPOCH",
+            "MEAN_MOTION",
+            "ECCENTRICITY",
+            "INCLINATION",
+            "RA_OF_ASC_NODE",
+            "ARG_OF_PERICENTER",
+            "MEAN_ANOMALY",
+        )
+    )  # fmt: skip
     + "</meanElements><tleParameters>"
-    + "".join(f"<{k}>{OMM[k]}</{k}>" for k in ("EPHEMERIS_TYPE", "CLASSIFICATION_TYPE", "NORAD_CAT_ID", "ELEMENT_SET_NO",
-                                                "REV_AT_EPOCH", "BSTAR", "MEAN_MOTION_DOT", "MEAN_MOTION_DDOT"))  # fmt: skip
+    + "".join(
+        f"<{k}>{OMM[k]}</{k}>"
+        for k in (
+            "EPHEMERIS_TYPE",
+            "CLASSIFICATION_TYPE",
+            "NORAD_CAT_ID",
+            "ELEMENT_SET_NO",
+            "REV_AT_EPOCH",
+            "BSTAR",
+            "MEAN_MOTION_DOT",
+            "MEAN_MOTION_DDOT",
+        )
+    )  # fmt: skip
     + "</tleParameters></data></segment></body></omm></ndm>"
 )
 CSV = ",".join(OMM) + "\n" + ",".join(str(v) for v in OMM.values()) + "\n"
