@@ -23,6 +23,7 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m bench.run
 	$(BIN)/python -m bench.trust
+	$(BIN)/python -m bench.passes
 	$(BIN)/python -m bench.load
 
 # 5000+ generated requests per database (313 per route); the counts go to BENCHMARKS.md.

@@ -312,6 +312,18 @@ def _print_checked(body: dict[str, Any], prefix: str = "") -> None:
               f"IoU {alt['silhouette_iou']:.3f}, fit {alt['fit_gap']:+.4f})")  # fmt: skip
 
 
+def _local_models(args: argparse.Namespace, settings: Any) -> tuple[Any, Any]:
+    """The estimator and the checker of the target asked for (``--models``, ``--target``), loaded here."""
+    from inference.runtime import Estimator
+    from inference.trust import load_checkers
+
+    model_dir = args.models or settings.model_dir
+    est = Estimator.load(model_dir)
+    checkers = load_checkers(model_dir, est.img_size, settings.target_model, settings.target_scale,
+                             settings.default_target)  # fmt: skip
+    return est, checkers.get(args.target or checkers.default)
+
+
 def cmd_estimate(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -359,16 +371,10 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         _print_checked(body, prefix=f"estimate {body['id']}: ")
         return 0
     from app.services import estimation as svc
-    from inference.runtime import Estimator
-    from inference.trust import load_checkers
 
     settings = _settings()
     try:
-        model_dir = args.models or settings.model_dir
-        est = Estimator.load(model_dir)
-        checkers = load_checkers(model_dir, est.img_size, settings.target_model, settings.target_scale,
-                                 settings.default_target)  # fmt: skip
-        checker = checkers.get(args.target or checkers.default)
+        est, checker = _local_models(args, settings)
         (up,) = svc.decode(data, Path(args.file).name, allow_stack=False)
         model_cells = (checker.radar.range_cell_m, checker.radar.cross_range_cell_m)
         frame = svc.prepare(up, est.img_size, args.resample, args.normalised, cells, model_cells)
@@ -476,8 +482,8 @@ def cmd_simulate_pass(args: argparse.Namespace) -> int:
 
     from app.errors import InputError
     from app.services import passes as pass_svc
-    from inference.dataset import parse_snr
-    from inference.isar import Radar
+    from inference.simulation.dataset import parse_snr
+    from inference.simulation.isar import Radar
 
     if not args.out:
         raise CliError("give --out DIR for the pass's frames")
@@ -510,7 +516,7 @@ def cmd_simulate_pass(args: argparse.Namespace) -> int:
         meta = pass_svc.pass_geometry_frames(request, window, opts, rng)
         model = None
         if args.model:
-            from inference.dataset import DatasetSpec, build_model
+            from inference.simulation.dataset import DatasetSpec, build_model
 
             model = build_model(DatasetSpec(n=1, model_path=args.model, model_scale=args.model_scale), radar)
         print(f"window {index}: {window['rise']} to {window['set']}, culminating at "
@@ -581,8 +587,6 @@ def cmd_pass(args: argparse.Namespace) -> int:
         return _pass_on_server(args, data, rec)
     from app.services import estimation as svc
     from app.services import passes as pass_svc
-    from inference.runtime import Estimator
-    from inference.trust import load_checkers
 
     settings = _settings()
     request = rec.get("plan_request")
@@ -591,17 +595,13 @@ def cmd_pass(args: argparse.Namespace) -> int:
     if request is None:
         raise CliError("give --plan PLAN.json: the pass record names no plan")
     try:
-        model_dir = args.models or settings.model_dir
-        est = Estimator.load(model_dir)
-        checkers = load_checkers(model_dir, est.img_size, settings.target_model, settings.target_scale,
-                                 settings.default_target)  # fmt: skip
-        checker = checkers.get(args.target or checkers.default)
+        est, checker = _local_models(args, settings)
         uploads = svc.decode(data, "frames.npz")
         if len(uploads) != len(times):
             raise CliError(f"frames.npz holds {len(uploads)} frames and pass.json {len(times)} times")
         t0 = time.perf_counter()
         frames, _, checks, _ = svc.check_frames(est=est, checker=checker, uploads=uploads, resample=False,
-                                                normalised=True, cells_m=None)  # fmt: skip
+                                                normalised=True, cells_m=None, search=False)  # fmt: skip
         t1 = time.perf_counter()
         result, _ = pass_svc.fuse_pass(est=est, checker=checker, frames=frames, checks=checks, plan_request=request,
                                        observed_at=times, names=[f"frame {k}" for k in range(len(times))])  # fmt: skip
@@ -738,13 +738,13 @@ def _plot_pass(result: dict[str, Any], rec: dict[str, Any], path: str) -> None:
 
 # The inference commands: name, module of inference (its add_arguments and run), help.
 INFERENCE_COMMANDS = (
-    ("simulate", "dataset", "simulate a labelled ISAR data set (or --preview a few frames)"),
-    ("train", "train", "train UNet++ and Swin on a simulated data set"),
-    ("finetune", "finetune", "fine-tune Swin's last stage of a trained run on cached features (CPU)"),
+    ("simulate", "simulation.dataset", "simulate a labelled ISAR data set (or --preview a few frames)"),
+    ("train", "training.train", "train UNet++ and Swin on a simulated data set"),
+    ("finetune", "training.finetune", "fine-tune Swin's last stage of a trained run on cached features (CPU)"),
     ("export", "export", "export a training run to ONNX with a model card"),
     ("calibrate", "trust", "fit the attitude checks' thresholds and 90-percent bounds on fresh frames (trust.json)"),
-    ("compare", "compare", "set training runs side by side: Swin's test error per epoch"),
-    ("evaluate", "evaluate", "the paper's Tables 4 and 7 for the ONNX models"),
+    ("compare", "evaluation.compare", "set training runs side by side: Swin's test error per epoch"),
+    ("evaluate", "evaluation.evaluate", "the paper's Tables 4 and 7 for the ONNX models"),
 )
 
 

@@ -10,9 +10,17 @@ from pathlib import Path
 
 import numpy as np
 
-from inference.dataset import DatasetSpec, generate, render_frames
-from inference.isar import Imager, Radar, polar_echo_direct, polar_format, projection_matrix, rotation_matrix, visible
-from inference.targets import tiangong_like
+from inference.simulation.dataset import DatasetSpec, generate, render_frames
+from inference.simulation.isar import (
+    Imager,
+    Radar,
+    polar_echo_direct,
+    polar_format,
+    projection_matrix,
+    rotation_matrix,
+    visible,
+)
+from inference.simulation.targets import tiangong_like
 
 
 def bench_isar() -> list[str]:

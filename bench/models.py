@@ -11,7 +11,7 @@ import torch
 
 from bench.common import interleaved_medians
 from inference.export import export_onnx, quantize_int8
-from inference.models.build import build_models, get_config
+from inference.networks.build import build_models, get_config
 from inference.runtime import session_options
 
 

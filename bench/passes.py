@@ -63,7 +63,7 @@ def one_pass(est: Any, checker: Any, window: dict[str, Any], opts: pass_svc.Pass
     uploads = [svc.Upload(f"frame {k}", "", im.shape, "float32", im.astype(np.float64)) for k, im in enumerate(images)]
     t0 = time.perf_counter()
     frames, _, checks, _ = svc.check_frames(est=est, checker=checker, uploads=uploads, resample=False,
-                                            normalised=True, cells_m=None)  # fmt: skip
+                                            normalised=True, cells_m=None, search=False)  # fmt: skip
     result, checks = pass_svc.fuse_pass(est=est, checker=checker, frames=frames, checks=checks,
                                         plan_request=PAPER_EXAMPLE, observed_at=[f["observed_at"] for f in meta],
                                         names=[u.name for u in uploads])  # fmt: skip
@@ -99,7 +99,7 @@ def one_pass(est: Any, checker: Any, window: dict[str, Any], opts: pass_svc.Pass
 
 
 def main() -> int:
-    from inference.isar import Radar
+    from inference.simulation.isar import Radar
 
     est = Estimator.load()
     checker = load_checkers(est.model_dir, est.img_size).get("tiangong-like")
@@ -271,7 +271,7 @@ def _plot(single: np.ndarray, fused: np.ndarray, rates: np.ndarray) -> None:
 
 if __name__ == "__main__":
     if sys.argv[1:] == ["--write"]:
-        from inference.isar import Radar
+        from inference.simulation.isar import Radar
 
         saved = json.loads(RESULTS.read_text())
         write(saved["still"], saved["spin"], saved["thirty"], Radar())

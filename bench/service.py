@@ -19,9 +19,9 @@ def bench_service(model_dir: Path, clients: int = 8, per_client: int = 12) -> li
     import httpx
 
     from bench.common import median_time
-    from inference.isar import Imager, Radar, normalise_frame, simulate
     from inference.runtime import Estimator
-    from inference.targets import tiangong_like
+    from inference.simulation.isar import Imager, Radar, normalise_frame, simulate
+    from inference.simulation.targets import tiangong_like
     from tests.utils.server import Server
 
     est = Estimator.load(model_dir)

@@ -3,10 +3,10 @@
 Writes the "Attitude fit and trust" section of BENCHMARKS.md and bench/attitude-fit.png.
 Run with `python -m bench.trust` (part of `make bench`; about 8 minutes on 2 cores).
 
-Frames: the fresh SNR sets of Table 7 (inference.evaluate.snr_spec, never trained on), the
-simulator variants of inference.isar.VARIANTS (none was used in training; seed 80000 + 100 k
+Frames: the fresh SNR sets of Table 7 (inference.evaluation.evaluate.snr_spec, never trained on), the
+simulator variants of inference.simulation.isar.VARIANTS (none was used in training; seed 80000 + 100 k
 for variant k, SNR uniform in -3..15 dB), and the catalogue of frames that must be flagged
-(inference.catalogue). The truth is the simulator's.
+(inference.simulation.catalogue). The truth is the simulator's.
 """
 
 from __future__ import annotations
@@ -20,12 +20,12 @@ import numpy as np
 
 from bench.common import interleaved_medians, machine
 from bench.sections import replace_section
-from inference.catalogue import FRESH_SEED, KINDS, bad_frames, good_frames, simulated
-from inference.dataset import DatasetSpec
-from inference.evaluate import SNR_DB, snr_spec
+from inference.evaluation.evaluate import SNR_DB, snr_spec
 from inference.frames import geodesic_deg
-from inference.isar import VARIANTS
 from inference.runtime import Estimator
+from inference.simulation.catalogue import FRESH_SEED, KINDS, bad_frames, good_frames, simulated
+from inference.simulation.dataset import DatasetSpec
+from inference.simulation.isar import VARIANTS
 from inference.trust import load_checkers
 
 TITLE = "Attitude fit and trust"

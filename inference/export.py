@@ -25,7 +25,7 @@ import torch
 
 from inference.errors import InferenceError, ModelFileError, module_main
 from inference.frames import ANGLE_SCALE_DEG
-from inference.models.build import build_models, get_config
+from inference.networks.build import build_models, get_config
 from inference.runtime import sha256_file
 
 OPSET = 17
@@ -225,7 +225,7 @@ def _export_into(
         "name": f"gsa-isar-{cfg['name']}",
         "exported": datetime.now(UTC).isoformat(timespec="seconds"),
         "opset": OPSET,
-        "input": "frame [batch, 1, H, W] float32: inference.isar.normalise_frame output",
+        "input": "frame [batch, 1, H, W] float32: inference.simulation.isar.normalise_frame output",
         "outputs": {"unetpp": "enhanced frame [batch, 1, H, W]", "swin": f"Euler z, y, x / {ANGLE_SCALE_DEG} deg"},
         "angle_scale_deg": ANGLE_SCALE_DEG,
         "enhance": bool(enhance),
@@ -285,12 +285,12 @@ def calibration_frames(data_dir: str | Path, n: int) -> tuple[np.ndarray, str]:
 
     Also returns the data set's content sha256, for the model card.
     """
-    from inference.dataset import load_manifest, load_range
+    from inference.simulation.dataset import load_manifest, load_range
 
     if n < INT8_MIN_FRAMES:
         raise InferenceError(f"--n-frames {n} is too few: give at least {INT8_MIN_FRAMES}")
     manifest = load_manifest(data_dir)
-    from inference.dataset import split_ranges
+    from inference.simulation.dataset import split_ranges
 
     (_, train_end), _ = split_ranges(manifest)
     if train_end < INT8_MIN_FRAMES:

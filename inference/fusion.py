@@ -19,8 +19,8 @@ to frame while the truth does not).
    frame's full information matrix (its per-axis bounds, through its own Euler axes and
    observation frame, into LVLH): a frame counts most about the axes it sees best. A frame
    further than ``max(reject_sigma * sigma_k, reject_floor_deg)`` from the mean is rejected
-   (said why); repeat until nothing changes. Frames their own checks did not trust are
-   rejected first (unless fewer than two are trusted).
+   (said why); repeat until nothing changes. Frames marked not ``trusted`` (the caller decides;
+   the service lets in frames doubted only for a lookalike) are rejected first, unless fewer than two are left.
 3. **Bound.** Per LVLH Euler axis, the 90 % interval of the mean: from the frames'
    information (or Student's t on their spread without it), scaled up by their scatter
    beyond it, plus the part of a frame's error the pass's frames share

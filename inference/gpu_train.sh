@@ -19,7 +19,7 @@
 # weights (--ema GSA_GPU_EMA, default 0.999; 0 turns it off) and hand back the averaged weights.
 # GSA_GPU_COMPILE=1 runs compact under torch.compile: its log shows s/step within the first 90 s, to
 # set against the 0.105 s/step measured in eager mode on an H100 (2026-11-23). Only numpy, scipy, torch and onnxruntime are needed.
-# Back home: tar xzf records.tgz; python -m inference.pipeline join --pieces DIR --run runs/gpu-compact
+# Back home: tar xzf records.tgz; python -m inference.training.pipeline join --pieces DIR --run runs/gpu-compact
 #
 # To continue the shipped compact weights instead of starting afresh, point GSA_GPU_FROM at their
 # float16 pieces (records/checkpoints/compact-e15-cpu-tail: the H100's epoch 15 with Swin's
@@ -61,7 +61,7 @@ watch() {  # until $1 seconds have passed or both runs have ended; stops early i
     done
 }
 
-records() {  # every run's small records (inference.pipeline.RECORDS), the logs and the data manifest, in one archive
+records() {  # every run's small records (inference.training.pipeline.RECORDS), the logs and the data manifest, in one archive
     mkdir -p "$OUT"
     local files=() r f
     for r in $RUNS; do
@@ -74,7 +74,7 @@ records() {  # every run's small records (inference.pipeline.RECORDS), the logs 
 
 pieces() {  # the compact run's newest weights: float16 pieces and pieces.json (its records go in records.tgz)
     rm -rf "$W/pack"; mkdir -p "$OUT"
-    python3 -m inference.pipeline pack --run "$W/compact" --out "$W/pack" && mv "$W"/pack/*.part* "$W/pack/pieces.json" "$OUT"/
+    python3 -m inference.training.pipeline pack --run "$W/compact" --out "$W/pack" && mv "$W"/pack/*.part* "$W/pack/pieces.json" "$OUT"/
 }
 
 case "$SECOND" in paper | noenhance | twostage | none) ;; *)
@@ -85,30 +85,30 @@ launch)
     nvidia-smi --query-gpu=name,memory.total,memory.used,clocks.max.sm --format=csv
     python3 -c "import torch, onnxruntime, scipy, numpy; print('torch', torch.__version__, 'ort', onnxruntime.__version__, 'cuda', torch.cuda.is_available())"
     mkdir -p "$W"
-    python3 -m inference.pipeline prepare --work "$W" --n "$N" --n-train "$((N - TEST))" --n-snr "$SNR_N" 2>&1 | grep -E '000/|error' | tail -4
+    python3 -m inference.training.pipeline prepare --work "$W" --n "$N" --n-train "$((N - TEST))" --n-snr "$SNR_N" 2>&1 | grep -E '000/|error' | tail -4
     echo "[$(( $(date +%s) - T0 )) s] data ready"
     extra=()
     if [ -n "${GSA_GPU_FROM:-}" ]; then
-        python3 -m inference.pipeline join --pieces "$GSA_GPU_FROM" --run "$W/from" || exit 2
+        python3 -m inference.training.pipeline join --pieces "$GSA_GPU_FROM" --run "$W/from" || exit 2
         extra+=(--from "$W/from")
     fi
     [ -n "${GSA_GPU_COMPACT_LR:-}" ] && extra+=(--lr "$GSA_GPU_COMPACT_LR")
     [ "${GSA_GPU_COMPILE:-0}" = 1 ] && extra+=(--compile)
-    setsid nohup python3 -m inference.pipeline run --work "$W" --name compact --config compact --n "$N" \
+    setsid nohup python3 -m inference.training.pipeline run --work "$W" --name compact --config compact --n "$N" \
         --batch-size 32 --epochs "${GSA_GPU_COMPACT_EPOCHS:-20}" --lr-decay "${GSA_GPU_COMPACT_DECAY:-0.9}" \
         --max-minutes "$MINUTES" "${EMA[@]}" "${extra[@]}" >"$W/compact.log" 2>&1 </dev/null &
     echo $! >"$W/compact.pid"
     if [ "$SECOND" = paper ]; then
-        setsid nohup python3 -m inference.pipeline run --work "$W" --name paper --config paper --n "$N" \
+        setsid nohup python3 -m inference.training.pipeline run --work "$W" --name paper --config paper --n "$N" \
             --max-train-frames 4000 --max-minutes "$MINUTES" >"$W/paper.log" 2>&1 </dev/null &
         echo $! >"$W/paper.pid"
     elif [ "$SECOND" = noenhance ]; then
-        setsid nohup python3 -m inference.pipeline run --work "$W" --name noenhance --config compact --n "$N" \
+        setsid nohup python3 -m inference.training.pipeline run --work "$W" --name noenhance --config compact --n "$N" \
             --no-enhance --batch-size 32 --epochs "${GSA_GPU_NOENHANCE_EPOCHS:-20}" --lr-decay 0.9 \
             --max-minutes "$MINUTES" "${EMA[@]}" >"$W/noenhance.log" 2>&1 </dev/null &
         echo $! >"$W/noenhance.pid"
     elif [ "$SECOND" = twostage ]; then
-        setsid nohup python3 -m inference.pipeline run --work "$W" --name twostage --config compact --n "$N" \
+        setsid nohup python3 -m inference.training.pipeline run --work "$W" --name twostage --config compact --n "$N" \
             --mode two-stage --batch-size 32 --epochs "${GSA_GPU_TWOSTAGE_EPOCHS:-20}" --lr-decay 0.9 \
             --max-minutes "$MINUTES" >"$W/twostage.log" 2>&1 </dev/null &
         echo $! >"$W/twostage.pid"

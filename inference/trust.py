@@ -49,13 +49,14 @@ from inference.fit import (
     silhouette_iou,
 )
 from inference.frames import geodesic_deg
-from inference.isar import Radar
-from inference.targets import TargetModel
+from inference.simulation.isar import Radar
+from inference.simulation.targets import TargetModel
 
 Vec = NDArray[np.float64]
 
 TRUST_FILE = "trust.json"
 ALTERNATIVE_MARGIN = 0.02  # soft-IoU cost within which another attitude is listed
+AMBIGUOUS = "fits nearly as well: the frame cannot tell them apart"  # the end of the one reason a pass can resolve
 BRIGHTNESS_MARGIN = 0.01  # silhouettes this close (soft IoU) are told apart by their bright parts
 DISTINCT_DEG = 5.0  # an alternative is at least this far from the answer
 # From library starts: first the coarse coverage (smooth, within a degree or two), then the fine label.
@@ -160,8 +161,12 @@ class Checker:
         return self._library
 
     def check(self, frame: NDArray[np.floating], enhanced: NDArray[np.floating], network_deg: NDArray[np.floating] | None,
-              refine: bool = True) -> Checked:  # fmt: skip
-        """Fit (unless ``refine`` is off), bound, and check one frame; ``network_deg`` None means no networks."""
+              refine: bool = True, search: bool = True) -> Checked:  # fmt: skip
+        """Fit (unless ``refine`` is off), bound, and check one frame; ``network_deg`` None means no networks.
+
+        ``search`` off skips the library search where Swin's answer does not fit (a pass, whose
+        other frames stand in for one that fails, saves its cost: 0.3 s a frame).
+        """
         cal = self.calibration
         net = None if network_deg is None else np.asarray(network_deg, float)
         enh = np.asarray(enhanced, np.float64)
@@ -172,7 +177,7 @@ class Checker:
                 # The prior sits on Swin's answer for both: Swin saw the brightness, which tells the
                 # near-mirror apart where the silhouettes are alike, so the mirror must fit clearly better.
                 fits = fit(self.renderer, enh, {"network": net, "mirror": mirror(net)}, prior_at=net)
-            if net is None or self._hard_iou(fits[0].angles_deg, enh) < cal.iou_min:
+            if net is None or (search and self._hard_iou(fits[0].angles_deg, enh) < cal.iou_min):
                 # No networks, or their answer does not fit: search the library too.
                 fits = sorted(fits + self.search(enh), key=lambda f: f.cost)
             fits = self._by_brightness(frame, enh, fits)
@@ -264,7 +269,7 @@ class Checker:
             a = close[0]
             out.append(
                 f"another attitude {a.distance_deg:.0f} deg away (z {a.angles_deg[0]:.1f}, y {a.angles_deg[1]:.1f}, "
-                f"x {a.angles_deg[2]:.1f}) fits nearly as well: the frame cannot tell them apart"
+                f"x {a.angles_deg[2]:.1f}) {AMBIGUOUS}"
             )
         if not np.all(np.isfinite(bound)) or np.max(bound) > cal.max_bound_deg:
             worst = "z y x".split()[int(np.argmax(np.where(np.isfinite(bound), bound, 1e9)))]
@@ -348,7 +353,7 @@ def calibrate(checker: Checker, frames: NDArray[np.floating], enhanced: NDArray[
 class Checkers:
     """The service's targets, each with its lazily built ``Checker``; thread-safe.
 
-    The built-in targets (``inference.targets.BUILTIN_TARGETS``) and, with ``extra``, an
+    The built-in targets (``inference.simulation.targets.BUILTIN_TARGETS``) and, with ``extra``, an
     operator's own mesh. The calibration in ``model_dir/trust.json`` belongs to the target
     it names; the networks' own target (``trained_target``) starts from Swin's answer, any
     other from the library.
@@ -358,7 +363,7 @@ class Checkers:
                  extra: TargetModel | None = None) -> None:  # fmt: skip
         import threading
 
-        from inference.targets import BUILTIN_TARGETS
+        from inference.simulation.targets import BUILTIN_TARGETS
 
         self.radar = radar or Radar()
         self.trained_target = trained_target
@@ -377,7 +382,7 @@ class Checkers:
 
     def get(self, name: str) -> Checker:
         from inference.errors import ModelFileError
-        from inference.isar import check_fits
+        from inference.simulation.isar import check_fits
 
         with self._lock:
             if name in self._built:
@@ -396,7 +401,7 @@ class Checkers:
 
 
 def add_arguments(p: Any) -> None:
-    from inference.catalogue import CALIBRATION_SEED
+    from inference.simulation.catalogue import CALIBRATION_SEED
 
     p.add_argument("--models", default=None, help="model directory (default: the shipped models)")
     p.add_argument("--frames", type=int, default=300, help="fresh frames to calibrate on (default 300)")
@@ -410,10 +415,10 @@ def run(args: Any) -> int:
     import time
     from datetime import UTC, datetime
 
-    from inference.catalogue import good_frames
     from inference.errors import DatasetError
     from inference.runtime import DEFAULT_MODEL_DIR, Estimator
-    from inference.targets import builtin_target
+    from inference.simulation.catalogue import good_frames
+    from inference.simulation.targets import builtin_target
 
     if args.frames < 50:
         raise DatasetError(f"--frames {args.frames}: calibrating needs at least 50 frames", field="frames")
@@ -443,7 +448,7 @@ def card_radar_and_target(model_dir: str | Path, img_size: int = 256) -> tuple[R
     Cards exported before they recorded these (the shipped models') were trained on the
     paper's radar (Table 3) and the default target.
     """
-    from inference.targets import DEFAULT_TARGET
+    from inference.simulation.targets import DEFAULT_TARGET
 
     path = Path(model_dir) / "model_card.json"
     card = json.loads(path.read_text()) if path.is_file() else {}
@@ -459,8 +464,8 @@ def load_checkers(model_dir: str | Path, img_size: int = 256, target_model: str 
     not fit the frame, takes a built-in target's name, or the default target is unknown.
     """
     from inference.errors import ModelFileError
-    from inference.isar import check_fits
-    from inference.targets import BUILTIN_TARGETS, load_model
+    from inference.simulation.isar import check_fits
+    from inference.simulation.targets import BUILTIN_TARGETS, load_model
 
     radar, trained = card_radar_and_target(model_dir, img_size)
     extra = None

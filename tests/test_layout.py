@@ -57,9 +57,28 @@ def _package_files(package: str) -> list[Path]:
     return sorted((ROOT / package).rglob("*.py"))
 
 
-@pytest.mark.parametrize("module", ["inference.isar", "inference.targets", "inference.dataset", "inference.frames"])
+def _modules(folder: str) -> list[str]:
+    return [".".join(p.relative_to(ROOT).with_suffix("").parts) for p in sorted((ROOT / folder).glob("*.py"))
+            if p.name != "__init__.py"]  # fmt: skip
+
+
+@pytest.mark.parametrize("module", [*_modules("inference/simulation"), "inference.frames"])
 def test_the_simulator_imports_no_torch(module):
     assert not any(m.split(".")[0] in ("torch", "onnxruntime") for m in _closure(module)), module
+
+
+@pytest.mark.parametrize("module", _modules("inference/networks"))
+def test_the_networks_are_torch_alone(module):
+    """A network module needs torch and numpy, never the simulator, training, onnxruntime or the service."""
+    shared = {module, "inference", "inference.networks", "inference.errors", "inference.frames"}
+    inner = {m for m in _closure(module) if m.startswith("inference.")} - shared
+    assert all(m.startswith("inference.networks") for m in inner), (module, inner)
+    assert not any(m.split(".")[0] == "onnxruntime" for m in _closure(module))
+
+
+def test_each_inference_folder_holds_one_kind():
+    assert _modules("inference/simulation") and _modules("inference/networks") and _modules("inference/training")
+    assert sorted(p.name for p in (ROOT / "inference/models").glob("*.py")) == ["__init__.py"]  # code lives elsewhere
 
 
 @pytest.mark.parametrize("module", ["inference.runtime", "inference.frames", "inference.fit", "inference.trust"])
@@ -108,7 +127,7 @@ def test_light_entry_points_leave_torch_and_the_simulator_out():
         "import app.main\n"
         "from app.cli import build_parser\n"
         "build_parser().format_help()\n"
-        "heavy = ('torch', 'inference.isar', 'inference.targets', 'inference.dataset', 'inference.train', 'scipy.ndimage')\n"
+        "heavy = ('torch', 'inference.simulation.isar', 'inference.simulation.targets', 'inference.simulation.dataset', 'inference.training.train', 'scipy.ndimage')\n"
         "print(json.dumps([m for m in heavy if m in sys.modules]))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)

@@ -347,7 +347,8 @@ def attitude_json(angles_deg: NDArray[np.floating]) -> dict[str, Any]:
 
 
 def check_frames(*, est: Any, checker: Any, uploads: list[Upload], resample: bool, normalised: bool,
-                 cells_m: tuple[float, float] | None, refine: bool = True) -> tuple[Any, Any, list[Any], dict[str, float]]:  # fmt: skip
+                 cells_m: tuple[float, float] | None, refine: bool = True,
+                 search: bool = True) -> tuple[Any, Any, list[Any], dict[str, float]]:  # fmt: skip
     """Prepare uploads, run the models on them as one batch and fit and check each; return frames, models' output,
     checks and the seconds per frame of each stage."""
     import time
@@ -358,7 +359,7 @@ def check_frames(*, est: Any, checker: Any, uploads: list[Upload], resample: boo
     t_prep = time.perf_counter() - t0
     res = est.estimate(frames)
     t1 = time.perf_counter()
-    checks = [checker.check(frames[k], res.enhanced[k], res.angles_deg[k] if checker.networks else None, refine)
+    checks = [checker.check(frames[k], res.enhanced[k], res.angles_deg[k] if checker.networks else None, refine, search)
               for k in range(len(uploads))]  # fmt: skip
     t_fit = time.perf_counter() - t1
     n = len(uploads)

@@ -164,8 +164,8 @@ def pass_geometry_frames(plan_request: dict[str, Any], window: dict[str, Any], o
 def render_pass(frames_meta: list[dict[str, Any]], opts: PassOptions, rng: np.random.Generator,
                 radar: Any = None, model: Any = None, scattering: Any = None) -> tuple[Vec, Vec]:  # fmt: skip
     """Render each frame at its attitude; return the normalised frames [N, H, W] and their SNRs (dB, NaN: none)."""
-    from inference.catalogue import at_attitudes
-    from inference.isar import DEFAULT_SCATTERING
+    from inference.simulation.catalogue import at_attitudes
+    from inference.simulation.isar import DEFAULT_SCATTERING
 
     n = len(frames_meta)
     if opts.snr_reference is not None:
@@ -285,7 +285,7 @@ def fuse_pass(*, est: Any, checker: Any, frames: Vec, checks: list[Any], plan_re
     second = fuse_frames(plan_request=plan_request, checks=again, observed_at=observed_at, names=names)
 
     def trusted_used(result: dict[str, Any], cs: list[Any]) -> int:
-        return sum(1 for f in result["frames"] if f["used"] and cs[f["index"]].quality.trusted)
+        return sum(1 for f in result["frames"] if f["used"] and usable(cs[f["index"]]))
 
     if trusted_used(second, again) > trusted_used(first, checks):
         return second, again
@@ -307,6 +307,18 @@ def check_times(plan_result: dict[str, Any], observed_at: list[datetime]) -> Non
             )
 
 
+def usable(checked: Any) -> bool:
+    """Whether a pass may use a frame: trusted, or doubted only because another attitude fits as well.
+
+    A lookalike is what a pass resolves (the other frames pick the branch), so such a frame goes
+    into the fusion with its alternatives; a frame that fails any other check does not.
+    """
+    from inference.trust import AMBIGUOUS
+
+    q = checked.quality
+    return bool(q.trusted or (checked.alternatives and q.reasons and all(r.endswith(AMBIGUOUS) for r in q.reasons)))
+
+
 def fuse_frames(
     *, plan_request: dict[str, Any], checks: list[Any], observed_at: list[datetime], names: list[str]
 ) -> dict[str, Any]:
@@ -324,7 +336,7 @@ def fuse_frames(
         bound = max(finite) if len(finite) == 3 else NO_BOUND_DEG
         q = c.quality
         pass_frames.append(PassFrame(np.array([obs_in_lvlh @ r for r in cands]), bound, (t - t0).total_seconds(),
-                                     names[k], axes["los_lvlh"], axes["los_rate_lvlh"], bool(q.trusted),
+                                     names[k], axes["los_lvlh"], axes["los_rate_lvlh"], usable(c),
                                      "; ".join(q.reasons), tuple(q.uncertainty_deg) if len(finite) == 3 else None))  # fmt: skip
         lvlh_axes.append(axes["lvlh"])
     fused = fuse(pass_frames)
@@ -351,7 +363,7 @@ def fuse_frames(
             "residual_deg": round(fused.residual_deg[k], 4),
         })  # fmt: skip
     speed = float(np.linalg.norm(fused.rate_deg_s))
-    trusted_used = sum(1 for k in fused.used if checks[k].quality.trusted)
+    trusted_used = sum(1 for k in fused.used if usable(checks[k]))
     enough = trusted_used >= MIN_TRUSTED_FRAMES
     return {
         "trusted": enough,

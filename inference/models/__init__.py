@@ -1,1 +1,2 @@
-"""The networks: UNet++ (frame enhancement) and a Swin transformer (attitude regression)."""
+"""The shipped models: ``shipped/`` holds the ONNX files, their card and trust.json (no code; the networks'
+code is ``inference.networks``)."""

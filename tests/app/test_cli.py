@@ -55,8 +55,8 @@ def test_estimate_locally_with_plot(tmp_path, smoke_models):
 
     import numpy as np
 
-    from inference.isar import Imager, simulate
-    from inference.targets import tiangong_like
+    from inference.simulation.isar import Imager, simulate
+    from inference.simulation.targets import tiangong_like
     from tests.utils.models import SMOKE_RADAR
 
     frame = simulate(tiangong_like(), Imager(SMOKE_RADAR), (5.0, 5.0, 5.0), 10.0, 0).image
@@ -78,7 +78,7 @@ def test_estimate_locally_with_plot(tmp_path, smoke_models):
     bad = _gsa("estimate", str(tmp_path / "bad.npy"), "--models", str(smoke_models), cwd=tmp_path)
     assert bad.returncode == 2 and "2-D" in bad.stderr and bad.stderr.count("\n") == 1
     # --normalised takes a data set's (already normalised) frame as sent, and refuses one that is not.
-    from inference.isar import normalise_frame
+    from inference.simulation.isar import normalise_frame
 
     np.save(tmp_path / "n.npy", normalise_frame(np.abs(frame)))
     ok = _gsa("estimate", str(tmp_path / "n.npy"), "--normalised", "--models", str(smoke_models), cwd=tmp_path)

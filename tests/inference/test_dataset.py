@@ -7,9 +7,9 @@ import sys
 import numpy as np
 import pytest
 
-from inference.dataset import DatasetSpec, frame_truth, generate, load_arrays, load_manifest, parse_snr
 from inference.errors import DatasetError
-from inference.isar import Radar
+from inference.simulation.dataset import DatasetSpec, frame_truth, generate, load_arrays, load_manifest, parse_snr
+from inference.simulation.isar import Radar
 
 SMALL = Radar(n_range=64, n_azimuth=64, bandwidth_hz=0.4e9, aperture_deg=5.1 / 4)  # 24 m x 29 m at 64 x 64
 
@@ -121,8 +121,8 @@ def test_model_far_larger_than_the_frame(tmp_path):
 def test_one_split_rule_for_training_export_and_evaluation():
     """Training, int8 calibration and gsa evaluate read one rule: for 7 frames without a stored split,
     frames 0-5 train and frame 6 tests everywhere (evaluate used to score [5, 7): a training frame)."""
-    from inference.dataset import split_ranges
-    from inference.train import split_indices
+    from inference.simulation.dataset import split_ranges
+    from inference.training.train import split_indices
 
     manifest = {"frames": 7}
     train, test = split_indices(manifest, 7)
@@ -134,8 +134,8 @@ def test_one_split_rule_for_training_export_and_evaluation():
 
 
 def test_variety_changes_the_scattering_but_not_the_truth(tmp_path):
-    from inference.dataset import DatasetSpec, render_frames
-    from inference.isar import Radar
+    from inference.simulation.dataset import DatasetSpec, render_frames
+    from inference.simulation.isar import Radar
 
     radar = Radar(n_range=64, n_azimuth=64, bandwidth_hz=0.4e9, aperture_deg=5.1 / 4)
     plain = render_frames(DatasetSpec(n=4, seed=3), radar, 0, 4)
@@ -148,8 +148,8 @@ def test_variety_changes_the_scattering_but_not_the_truth(tmp_path):
 
 
 def test_bad_variety_is_refused_before_any_work():
-    from inference.dataset import DatasetSpec
     from inference.errors import InferenceError
+    from inference.simulation.dataset import DatasetSpec
 
     with pytest.raises(InferenceError, match="unknown variety preset"):
         DatasetSpec(n=4, variety="fancy")

@@ -7,13 +7,13 @@ import pytest
 import torch
 
 from app.cli import main as gsa
-from inference.dataset import DatasetSpec, generate, load_manifest, render_frames
 from inference.errors import InferenceError, ModelFileError
 from inference.export import export, load_trained
-from inference.finetune import finetune, front, tail, validation_spec
-from inference.isar import Radar
-from inference.models.build import build_models, get_config
-from inference.train import train
+from inference.networks.build import build_models, get_config
+from inference.simulation.dataset import DatasetSpec, generate, load_manifest, render_frames
+from inference.simulation.isar import Radar
+from inference.training.finetune import finetune, front, tail, validation_spec
+from inference.training.train import train
 
 SMALL = Radar(n_range=64, n_azimuth=64, bandwidth_hz=0.4e9, aperture_deg=5.1 / 4)
 
@@ -127,7 +127,7 @@ def test_finetune_refuses_bad_input(run, tmp_path, capsys):
 
 
 def test_a_finetuned_run_packs_into_pieces_that_reuse_the_unchanged_unet(run, tmp_path):
-    from inference.pipeline import join, pack
+    from inference.training.pipeline import join, pack
 
     ft = run / "ft2"
     finetune(run / "run", run / "data", ft, epochs=1, lr=3e-3, batch_size=8, n_val=16)

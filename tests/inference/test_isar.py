@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from inference.errors import ModelFileError, RadarError
-from inference.isar import (
+from inference.simulation.isar import (
     C_M_S,
     Imager,
     Radar,
@@ -23,7 +23,7 @@ from inference.isar import (
     rotation_matrix,
     simulate,
 )
-from inference.targets import FLAT, TargetModel, cylinder, load_model, tiangong_like
+from inference.simulation.targets import FLAT, TargetModel, cylinder, load_model, tiangong_like
 
 RADAR = Radar()
 IMAGER = Imager(RADAR)
@@ -214,10 +214,10 @@ def test_model_files(tmp_path):
 
 
 def test_default_frames_are_unchanged_by_the_scattering_options():
-    """The hash of three default frames, recorded on the commit before inference.isar.Scattering existed."""
+    """The hash of three default frames, recorded on the commit before inference.simulation.isar.Scattering existed."""
     import hashlib
 
-    from inference.dataset import DatasetSpec, render_frames
+    from inference.simulation.dataset import DatasetSpec, render_frames
 
     a = render_frames(DatasetSpec(n=3, seed=0), RADAR, 0, 3)
     digest = hashlib.sha256(a["image"].tobytes() + a["label"].tobytes()).hexdigest()
@@ -225,7 +225,7 @@ def test_default_frames_are_unchanged_by_the_scattering_options():
 
 
 def test_fast_polar_echo_matches_the_direct_sum():
-    from inference.isar import polar_echo
+    from inference.simulation.isar import polar_echo
 
     pts = np.random.default_rng(3).uniform(-10, 10, (40, 3))
     amps = np.exp(2j * np.pi * np.random.default_rng(4).random(40))
@@ -235,7 +235,7 @@ def test_fast_polar_echo_matches_the_direct_sum():
 
 
 def test_every_variant_images_the_target_where_its_label_is():
-    from inference.isar import VARIANTS
+    from inference.simulation.isar import VARIANTS
 
     model = tiangong_like()
     for name, sc in VARIANTS.items():
@@ -247,7 +247,7 @@ def test_every_variant_images_the_target_where_its_label_is():
 
 
 def test_bad_scattering_options_are_refused():
-    from inference.isar import Scattering
+    from inference.simulation.isar import Scattering
 
     for kw in ({"window": "kaiser"}, {"edge_gain": -1}, {"scatterers": "mesh"}, {"scale_error": 0.5}):
         with pytest.raises(RadarError, match=next(iter(kw))):

@@ -7,16 +7,16 @@ import numpy as np
 import pytest
 import torch
 
-from inference.dataset import DatasetSpec, generate
 from inference.errors import DatasetError, InferenceError, ModelFileError
 from inference.export import export
 from inference.frames import euler_to_quaternion
-from inference.isar import Radar
-from inference.models.build import build_models, get_config
-from inference.models.swin import SwinTransformer, window_partition, window_reverse
-from inference.models.unetpp import UNetPlusPlus, relative_frobenius_loss
+from inference.networks.build import build_models, get_config
+from inference.networks.swin import SwinTransformer, window_partition, window_reverse
+from inference.networks.unetpp import UNetPlusPlus, relative_frobenius_loss
 from inference.runtime import Estimator
-from inference.train import train
+from inference.simulation.dataset import DatasetSpec, generate
+from inference.simulation.isar import Radar
+from inference.training.train import train
 
 SMALL = Radar(n_range=64, n_azimuth=64, bandwidth_hz=0.4e9, aperture_deg=5.1 / 4)
 
@@ -83,8 +83,8 @@ def test_resume_continues_from_the_checkpoint(smoke_data, smoke_run, tmp_path):
 
 
 def test_averaged_weights_are_scored_saved_resumed_and_packed(smoke_data, tmp_path):
-    from inference.pipeline import pack
-    from inference.train import averaged_weights
+    from inference.training.pipeline import pack
+    from inference.training.train import averaged_weights
 
     out = tmp_path / "ema"
     rec = train(smoke_data, out, "smoke", epochs=2, ema=0.5, log_every=0)
@@ -109,7 +109,7 @@ def test_averaged_weights_are_scored_saved_resumed_and_packed(smoke_data, tmp_pa
 
 
 def test_enhance_all_enhances_only_the_rows_asked_for():
-    from inference.train import enhance_all
+    from inference.training.train import enhance_all
 
     unet, _ = build_models(get_config("smoke"))
     images = np.random.default_rng(0).random((6, 64, 64)).astype(np.float16)
@@ -180,7 +180,7 @@ def test_a_smaller_swin_behind_a_trained_unet_trains_exports_and_runs(smoke_data
 
 
 def test_train_command_shape_flags(smoke_data, tmp_path):
-    from inference.train import main
+    from inference.training.train import main
 
     assert main(["--data", str(smoke_data), "--config", "smoke", "--out", str(tmp_path / "r"), "--epochs", "1",
                  "--swin-dim", "8", "--swin-heads", "1,1,2,2", "--unet-filters", "2,4,8,16,32"]) == 0  # fmt: skip
@@ -194,7 +194,7 @@ def test_train_command_shape_flags(smoke_data, tmp_path):
 
 
 def test_compare_counts_swin_epochs_and_writes_table_and_plot(smoke_data, smoke_run, tmp_path):
-    from inference.compare import compare, main
+    from inference.evaluation.compare import compare, main
 
     out, joint = smoke_run
     two = train(smoke_data, tmp_path / "two", "smoke", epochs=3, mode="two-stage", unet_epochs=2, log_every=0)
@@ -222,7 +222,7 @@ def _train_fresh(data, out):
 
 def test_export_parity_and_runtime(smoke_run, smoke_data, tmp_path):
     out, _ = smoke_run
-    from inference.dataset import load_arrays
+    from inference.simulation.dataset import load_arrays
 
     frames = load_arrays(smoke_data)["image"][:4].astype(np.float32)
     card = export(out, tmp_path / "models", frames=frames)
@@ -268,8 +268,8 @@ def test_export_parity_and_runtime(smoke_run, smoke_data, tmp_path):
 def test_int8_export_quantises_unet_and_keeps_the_angles(smoke_run, smoke_data, tmp_path, capsys):
     import onnx
 
-    from inference.dataset import load_arrays
     from inference.export import INT8_ANGLE_TOL_DEG, main
+    from inference.simulation.dataset import load_arrays
 
     out, _ = smoke_run
     # The command line: UNet++ calibrated on the data set's 16 training frames (8 calibrate, 8 check).
@@ -300,8 +300,8 @@ def test_int8_export_quantises_unet_and_keeps_the_angles(smoke_run, smoke_data, 
 
 def test_a_failed_export_leaves_the_models_in_place(smoke_run, smoke_data, tmp_path, monkeypatch):
     import inference.export as ex
-    from inference.dataset import load_arrays
     from inference.runtime import sha256_file
+    from inference.simulation.dataset import load_arrays
 
     out, _ = smoke_run
     frames = load_arrays(smoke_data)["image"][:16].astype(np.float32)
@@ -330,8 +330,8 @@ def test_int8_export_refuses_without_enough_real_frames(smoke_run, smoke_data, t
 
 
 def test_evaluate_writes_the_tables_and_skips_unet_for_a_raw_frame_model(smoke_run, smoke_data, tmp_path):
-    from inference.dataset import load_arrays
-    from inference.evaluate import evaluate
+    from inference.evaluation.evaluate import evaluate
+    from inference.simulation.dataset import load_arrays
 
     out, _ = smoke_run
     export(out, tmp_path / "m")
@@ -405,7 +405,7 @@ def test_training_refuses_bad_data(smoke_data, tmp_path):
 
 
 def test_quaternion_matches_rotation_matrix():
-    from inference.isar import rotation_matrix
+    from inference.simulation.isar import rotation_matrix
 
     z, y, x = 30.0, -20.0, 10.0
     w, qx, qy, qz = euler_to_quaternion(z, y, x)
@@ -419,7 +419,7 @@ def test_quaternion_matches_rotation_matrix():
 
 def test_training_batches_are_the_same_from_numpy_and_from_device_tensors():
     """On a GPU the data set lives on the device as tensors; a batch must not depend on where it came from."""
-    from inference.train import _tensors
+    from inference.training.train import _tensors
 
     rng = np.random.default_rng(0)
     data = {"image": rng.random((10, 8, 8)).astype(np.float16), "label": rng.random((10, 8, 8)) > 0.5,
@@ -437,8 +437,8 @@ def test_training_batches_are_the_same_from_numpy_and_from_device_tensors():
 
 def test_gpu_pipeline_at_toy_size(tmp_path):
     """The GPU commands end to end on a CPU: simulate, train, evaluate, pieces out, join back, export."""
-    from inference.pipeline import join, pack
-    from inference.pipeline import run as pipeline_run
+    from inference.training.pipeline import join, pack
+    from inference.training.pipeline import run as pipeline_run
 
     work = tmp_path / "work"
     manifest = pipeline_run("smoke", 12, work, tmp_path / "out", max_minutes=5, epochs=1, radar=SMALL, name="a",

@@ -1,15 +1,15 @@
 """The shipped models' checked answers on fresh frames: accuracy, calibrated bounds, and what gets flagged.
 
 Fresh frames come from seeds no training, validation, test or calibration set used
-(inference/catalogue.py); the truth is the simulator's. The calibration (trust.json) was
+(inference/simulation/catalogue.py); the truth is the simulator's. The calibration (trust.json) was
 fitted on other frames (seed 70000), so these tests hold it against data it never saw.
 """
 
 import numpy as np
 import pytest
 
-from inference.catalogue import FRESH_SEED, KINDS, bad_frames, good_frames
 from inference.runtime import Estimator
+from inference.simulation.catalogue import FRESH_SEED, KINDS, bad_frames, good_frames
 from inference.trust import load_checkers
 
 N_GOOD = 200

@@ -2,10 +2,10 @@
 
 from pathlib import Path
 
-from inference.dataset import DatasetSpec, generate
 from inference.export import export
-from inference.isar import Radar
-from inference.train import train
+from inference.simulation.dataset import DatasetSpec, generate
+from inference.simulation.isar import Radar
+from inference.training.train import train
 
 SMOKE_RADAR = Radar(n_range=64, n_azimuth=64, bandwidth_hz=0.4e9, aperture_deg=5.1 / 4)
 

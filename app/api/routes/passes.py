@@ -45,7 +45,7 @@ def _fuse(*, session: Any, operator_id: str, settings: Any, est: Any, checker: A
         raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
     pass_svc.check_times(plan.result, observed_at)
     frames, _, checks, per_frame = svc.check_frames(est=est, checker=checker, uploads=uploads, resample=False,
-                                                    normalised=normalised, cells_m=cells_m)  # fmt: skip
+                                                    normalised=normalised, cells_m=cells_m, search=False)  # fmt: skip
     result, _ = pass_svc.fuse_pass(est=est, checker=checker, frames=frames, checks=checks, plan_request=plan.request,
                                    observed_at=observed_at, names=[u.name for u in uploads])  # fmt: skip
     result = {**result, "target": checker.model.name, "timings_s": per_frame}

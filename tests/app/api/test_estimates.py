@@ -13,8 +13,8 @@ from app.main import create_app
 from app.schemas import PAPER_EXAMPLE
 from app.services.estimation import decode, prepare
 from inference.errors import ModelFileError
-from inference.isar import Imager, normalise_frame, simulate
-from inference.targets import tiangong_like
+from inference.simulation.isar import Imager, normalise_frame, simulate
+from inference.simulation.targets import tiangong_like
 from tests.conftest import KEY_A, KEY_B
 from tests.utils.models import SMOKE_RADAR
 

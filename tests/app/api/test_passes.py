@@ -9,8 +9,8 @@ from sqlalchemy import create_engine, func, select
 
 from app.db.models import Pass
 from app.schemas import PAPER_EXAMPLE
-from inference.isar import Imager, simulate
-from inference.targets import tiangong_like
+from inference.simulation.isar import Imager, simulate
+from inference.simulation.targets import tiangong_like
 from tests.conftest import KEY_A, KEY_B
 from tests.utils.models import SMOKE_RADAR
 

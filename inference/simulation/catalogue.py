@@ -26,10 +26,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from inference.dataset import DatasetSpec, frame_truth
 from inference.frames import normalise_frame
-from inference.isar import DEFAULT_SCATTERING, Imager, Radar, Scattering, simulate
-from inference.targets import TargetModel, comsat_like, tiangong_like
+from inference.simulation.dataset import DatasetSpec, frame_truth
+from inference.simulation.isar import DEFAULT_SCATTERING, Imager, Radar, Scattering, simulate
+from inference.simulation.targets import TargetModel, comsat_like, tiangong_like
 
 KINDS = (
     "other-satellite", "range-flipped", "cross-range-flipped", "transposed", "normalised-twice",

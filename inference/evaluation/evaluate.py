@@ -17,11 +17,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from inference.dataset import DatasetSpec, load_manifest, load_range, render_frames, split_ranges
 from inference.errors import InferenceError, module_main
 from inference.frames import geodesic_deg
-from inference.isar import Radar
 from inference.runtime import Estimator
+from inference.simulation.dataset import DatasetSpec, load_manifest, load_range, render_frames, split_ranges
+from inference.simulation.isar import Radar
 
 PAPER = {
     "without enhancement": (1.387, 1.223, 1.797),
@@ -209,7 +209,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return module_main("evaluate", "evaluate", add_arguments, run, argv)
+    return module_main("evaluation.evaluate", "evaluate", add_arguments, run, argv)
 
 
 if __name__ == "__main__":

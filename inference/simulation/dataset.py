@@ -8,7 +8,7 @@ content hash over them. Frame i's seed is derived from (seed, i) alone, so the d
 are the same whatever the number of workers. The set is written to ``DIR.partial``
 and renamed at the end: an interrupted run never leaves a set that looks complete.
 
-Runs with numpy and scipy only (``python -m inference.dataset ...``), so a bare GPU
+Runs with numpy and scipy only (``python -m inference.simulation.dataset ...``), so a bare GPU
 machine can make its own training data.
 """
 
@@ -32,9 +32,9 @@ from numpy.typing import NDArray
 
 from inference.errors import DatasetError, module_main
 from inference.frames import normalise_frame
-from inference.isar import Imager, Radar, check_fits, draw_scattering, simulate
 from inference.runtime import sha256_file
-from inference.targets import TargetModel, load_model, tiangong_like
+from inference.simulation.isar import Imager, Radar, check_fits, draw_scattering, simulate
+from inference.simulation.targets import TargetModel, load_model, tiangong_like
 
 FORMAT_VERSION = 1
 
@@ -180,7 +180,7 @@ def generate(spec: DatasetSpec, out: str | Path, radar: Radar | None = None, wor
                   "scatterers": int(len(model.scatterers)), "mirror_planes": model.mirror_planes},
         "frames": spec.n,
         "split": {"train": [0, spec.n_train], "test": [spec.n_train, spec.n]} if spec.n_train is not None else None,
-        "normalisation": "inference.isar.normalise_frame (40 dB below the 99.5th percentile)",
+        "normalisation": "inference.simulation.isar.normalise_frame (40 dB below the 99.5th percentile)",
         "shards": shards,
         "content_sha256": hashlib.sha256("".join(s["sha256"] for s in shards).encode()).hexdigest(),
         "generated_in_s": round(elapsed, 2),
@@ -349,7 +349,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--n-azimuth", type=int, default=256)
     p.add_argument("--aperture-deg", type=float, default=5.1)
     p.add_argument(
-        "--variety", help="draw each frame's scattering from a preset (robust: inference.isar.VARIETY_PRESETS)"
+        "--variety",
+        help="draw each frame's scattering from a preset (robust: inference.simulation.isar.VARIETY_PRESETS)",
     )
     p.add_argument("--variety-set", action="append", default=[], metavar="NAME=VALUE",
                    help="fix one scattering parameter under --variety, e.g. window=none or edge_gain=0 (repeatable)")  # fmt: skip
@@ -398,7 +399,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return module_main("dataset", "simulate", add_arguments, run, argv, description="simulate a labelled ISAR data set")
+    return module_main(
+        "simulation.dataset", "simulate", add_arguments, run, argv, description="simulate a labelled ISAR data set"
+    )
 
 
 if __name__ == "__main__":

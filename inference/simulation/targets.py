@@ -3,7 +3,7 @@
 A model is two point sets in its body frame (metres, centred on the centroid):
 ``surface`` samples the skin densely (the label is its projection), and the
 scatterers sample it coarsely, each with an outward normal and a kind that sets how
-its echo depends on aspect (see ``inference.isar.scatterer_amplitudes``).
+its echo depends on aspect (see ``inference.simulation.isar.scatterer_amplitudes``).
 
 The default is a compact, asymmetric Tiangong-like station; ``load_model`` reads an
 operator's own OBJ or PLY mesh, or a PLY point cloud.
@@ -209,7 +209,7 @@ def tiangong_like(scatterer_spacing_m: float = 0.3, surface_spacing_m: float = 0
     add_plate(node + [0, 6.0, 2.1 + 2.0], ez, ey, 4.0, 1.8, 10.0)
 
     return _assembled("tiangong-like", parts_sc, parts_surf,
-                      "compact asymmetric Tiangong-like station (inference/targets.py: tiangong_like)")  # fmt: skip
+                      "compact asymmetric Tiangong-like station (inference/simulation/targets.py: tiangong_like)")  # fmt: skip
 
 
 def comsat_like(scatterer_spacing_m: float = 0.3, surface_spacing_m: float = 0.08) -> TargetModel:
@@ -255,7 +255,7 @@ def comsat_like(scatterer_spacing_m: float = 0.3, surface_spacing_m: float = 0.0
     add_cylinder(np.array([0.4, 0.0, lz / 2]), ez, 1.3, 0.35)
     add_cylinder(np.array([-lx / 2 - 1.2, 0.0, 0.0]), ex, 0.5, 1.2)
     return _assembled("comsat-like", parts_sc, parts_surf,
-                      "box-wing communications satellite (inference/targets.py: comsat_like)")  # fmt: skip
+                      "box-wing communications satellite (inference/simulation/targets.py: comsat_like)")  # fmt: skip
 
 
 BUILTIN_TARGETS = {"tiangong-like": tiangong_like, "comsat-like": comsat_like}

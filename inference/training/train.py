@@ -34,16 +34,16 @@ from typing import Any
 import numpy as np
 import torch
 
-from inference.dataset import load_arrays, load_manifest, split_ranges
 from inference.errors import DatasetError, InferenceError, module_main
 from inference.frames import ANGLE_SCALE_DEG
-from inference.models.build import ModelConfig, build_models, get_config
-from inference.models.swin import angle_loss
-from inference.models.unetpp import relative_frobenius_loss
+from inference.networks.build import ModelConfig, build_models, get_config
+from inference.networks.swin import angle_loss
+from inference.networks.unetpp import relative_frobenius_loss
+from inference.simulation.dataset import load_arrays, load_manifest, split_ranges
 
 
 def split_indices(manifest: dict[str, Any], n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Return train and test indices (``inference.dataset.split_ranges``, the one split rule)."""
+    """Return train and test indices (``inference.simulation.dataset.split_ranges``, the one split rule)."""
     (a, b), (c, d) = split_ranges({**manifest, "frames": n})
     return np.arange(a, b), np.arange(c, d)
 
@@ -498,7 +498,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return module_main("train", "train", add_arguments, run, argv)
+    return module_main("training.train", "train", add_arguments, run, argv)
 
 
 if __name__ == "__main__":

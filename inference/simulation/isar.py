@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 
 from inference.errors import ModelFileError, RadarError
 from inference.frames import euler_from_matrix, normalise_frame, rotation_matrix  # noqa: F401 (part of the simulator's API)
-from inference.targets import CURVED, EDGE, FLAT, ISOTROPIC, TargetModel
+from inference.simulation.targets import CURVED, EDGE, FLAT, ISOTROPIC, TargetModel
 
 Vec = NDArray[np.float64]
 C_M_S = 299_792_458.0  # speed of light, SI definition
@@ -47,7 +47,8 @@ def _refuse_unusable(obj: object, checks: tuple[tuple[str, bool], ...]) -> None:
     for name, ok in checks:
         if not ok:
             raise RadarError(
-                f"{name} = {getattr(obj, name)!r} is not usable (see inference.isar.{type(obj).__name__})", field=name
+                f"{name} = {getattr(obj, name)!r} is not usable (see inference.simulation.isar.{type(obj).__name__})",
+                field=name,
             )
 
 
@@ -466,7 +467,9 @@ def draw_scattering(preset: str, rng: np.random.Generator, overrides: dict[str, 
             values[name] = float(rng.uniform(spec[0], spec[1]))
     for name, value in (overrides or {}).items():
         if name not in Scattering.__dataclass_fields__:
-            raise RadarError(f"unknown scattering parameter {name!r} (see inference.isar.Scattering)", field="variety")
+            raise RadarError(
+                f"unknown scattering parameter {name!r} (see inference.simulation.isar.Scattering)", field="variety"
+            )
         values[name] = value
     return Scattering(**values)
 
@@ -476,7 +479,7 @@ _DENSE: dict[int, tuple[Vec, Vec]] = {}
 
 def _dense_skin(model: TargetModel) -> tuple[Vec, Vec]:
     """The model's skin and its normals (computed once per model)."""
-    from inference.targets import surface_normals
+    from inference.simulation.targets import surface_normals
 
     key = id(model.surface)
     if key not in _DENSE:

@@ -6,8 +6,8 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from inference.errors import InferenceError
-from inference.models.swin import SwinTransformer
-from inference.models.unetpp import UNetPlusPlus
+from inference.networks.swin import SwinTransformer
+from inference.networks.unetpp import UNetPlusPlus
 
 
 @dataclass(frozen=True)

@@ -33,14 +33,14 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from inference.dataset import DatasetSpec, frame_truth, load_manifest, load_range, render_frames
 from inference.errors import DatasetError, InferenceError, module_main
 from inference.export import load_trained
 from inference.frames import ANGLE_SCALE_DEG
-from inference.isar import Radar
-from inference.models.swin import SwinTransformer
+from inference.networks.swin import SwinTransformer
 from inference.runtime import sha256_file
-from inference.train import _save, averaged_weights, check_schedule, split_indices
+from inference.simulation.dataset import DatasetSpec, frame_truth, load_manifest, load_range, render_frames
+from inference.simulation.isar import Radar
+from inference.training.train import _save, averaged_weights, check_schedule, split_indices
 
 VAL_SEED = 20_000  # the fresh validation set: no training set (seed 0..) or SNR test set (10,000 + dB) uses it
 CHUNK = 64  # frames per cached chunk (and per progress line)
@@ -408,7 +408,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return module_main("finetune", "finetune", add_arguments, run, argv)
+    return module_main("training.finetune", "finetune", add_arguments, run, argv)
 
 
 if __name__ == "__main__":

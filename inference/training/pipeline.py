@@ -2,8 +2,8 @@
 
 On the GPU machine (numpy, scipy, torch and onnxruntime only)::
 
-    python -m inference.pipeline prepare --work W --n 13000 --n-train 12000 --n-snr 300
-    python -m inference.pipeline run --work W --name compact --config compact --max-minutes 20 --out OUT
+    python -m inference.training.pipeline prepare --work W --n 13000 --n-train 12000 --n-snr 300
+    python -m inference.training.pipeline run --work W --name compact --config compact --max-minutes 20 --out OUT
 
 ``prepare`` simulates the data set into ``W/data`` and Table 7's fresh SNR sets into
 ``W/snr-0``, ``W/snr-5``, ``W/snr-10`` (each once, on every core). ``run`` trains
@@ -15,7 +15,7 @@ training record and the plots into ``OUT``. ``pack --run W/NAME --out OUT`` does
 last step alone, from the newest epoch's checkpoint, while a run is still going.
 Back home::
 
-    python -m inference.pipeline join --pieces DIR --run runs/gpu
+    python -m inference.training.pipeline join --pieces DIR --run runs/gpu
     gsa export --run runs/gpu
 
 rebuilds ``unetpp.pt`` and ``swin.pt`` (float32) and exports them.
@@ -35,11 +35,11 @@ from typing import Any
 
 import torch
 
-from inference.dataset import DatasetSpec, default_train_frames, generate, load_arrays, load_manifest
 from inference.errors import InferenceError, ModelFileError
-from inference.evaluate import PAPER, SNR_DB, held_out, plot_errors, row_name, score, snr_spec, table
+from inference.evaluation.evaluate import PAPER, SNR_DB, held_out, plot_errors, row_name, score, snr_spec, table
 from inference.export import load_trained
-from inference.train import averaged_weights, predict, train
+from inference.simulation.dataset import DatasetSpec, default_train_frames, generate, load_arrays, load_manifest
+from inference.training.train import averaged_weights, predict, train
 
 PIECE_BYTES = 15 * 1024 * 1024
 # A run's records, carried beside its pieces.
@@ -195,7 +195,7 @@ def join(pieces: Path, run_dir: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m inference.pipeline")
+    p = argparse.ArgumentParser(prog="python -m inference.training.pipeline")
     sub = p.add_subparsers(dest="cmd", required=True)
     g = sub.add_parser("prepare", help="simulate the data set and the SNR test sets into WORK")
     r = sub.add_parser("run", help="prepare, train WORK/NAME (resuming), evaluate, pack into OUT")

@@ -141,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return module_main("compare", "compare", add_arguments, run, argv)
+    return module_main("evaluation.compare", "compare", add_arguments, run, argv)
 
 
 if __name__ == "__main__":
