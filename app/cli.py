@@ -626,13 +626,12 @@ def _pass_on_server(args: argparse.Namespace, data: bytes, rec: dict[str, Any]) 
 
     if not args.plan_id:
         raise CliError("--server needs --plan-id: the stored plan the pass belongs to")
-    form = [("plan_id", args.plan_id), ("normalised", "true")] + [
-        ("observed_at", f["observed_at"]) for f in rec["frames"]
-    ]
+    form: dict[str, Any] = {"plan_id": args.plan_id, "normalised": "true",
+                            "observed_at": [f["observed_at"] for f in rec["frames"]]}  # fmt: skip
     if args.target:
-        form.append(("target", args.target))
+        form["target"] = args.target
     try:
-        r = httpx.post(args.server.rstrip("/") + "/v1/passes", files={"files": ("frames.npz", data)}, data=form,  # type: ignore[arg-type]
+        r = httpx.post(args.server.rstrip("/") + "/v1/passes", files={"files": ("frames.npz", data)}, data=form,
                        headers={"X-API-Key": args.api_key or ""}, timeout=300)  # fmt: skip
     except httpx.HTTPError as exc:
         raise CliError(f"cannot reach {args.server}: {exc}") from None

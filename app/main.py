@@ -41,6 +41,8 @@ def _forms_without_null(schema: dict[str, Any]) -> None:
         for key, prop in comp.get("properties", {}).items():
             if prop.get("type") == "array" and key in required:
                 prop.setdefault("minItems", 1)  # a form list of no items is the field left out: missing
+            if prop.get("type") == "string" and key in required and "contentMediaType" not in prop:
+                prop.setdefault("minLength", 1)  # so is an empty required text field
             branches = prop.get("anyOf")
             if branches and {"type": "null"} in branches:
                 rest = [b for b in branches if b != {"type": "null"}]

@@ -127,3 +127,32 @@ def test_an_unknown_form_field_is_refused_by_name(client, plan, settings):
     assert _count(settings) == before
     one = client.post("/v1/estimates", files={"file": ("f.npz", _stack(1))}, data={"obsreved_at": "x"}, headers=A)
     assert one.status_code == 422 and one.json()["detail"][0]["loc"] == ["body", "obsreved_at"]
+
+
+def test_gsa_pass_sends_a_simulated_pass_to_the_service(client, plan, tmp_path, monkeypatch, capsys):
+    """gsa pass DIR --server: the frames and each frame's time go up as the route takes them (repeated fields)."""
+    import json
+
+    import httpx
+
+    from app.cli import main
+    from app.services import passes as pass_svc
+
+    opts = pass_svc.PassOptions(aperture_deg=SMOKE_RADAR.aperture_deg, max_frames=4, seed=5)
+    rng = np.random.default_rng(5)
+    _, window = pass_svc.choose_window(plan["access_windows"], None)
+    meta = pass_svc.pass_geometry_frames(PAPER_EXAMPLE, window, opts, rng)
+    images, snrs = pass_svc.render_pass(meta, opts, rng, SMOKE_RADAR)
+    np.savez(tmp_path / "frames.npz", image=images.astype(np.float32))
+    cells = (SMOKE_RADAR.range_cell_m, SMOKE_RADAR.cross_range_cell_m)
+    record = pass_svc.pass_record(meta, snrs, opts, 0, window, PAPER_EXAMPLE, cells)
+    (tmp_path / "pass.json").write_text(json.dumps(record))
+
+    def post(url, **kwargs):  # the service in-process, reached the way httpx.post reaches a real one
+        return client.post(url.replace("http://gsa.test", ""), **{k: v for k, v in kwargs.items() if k != "timeout"})
+
+    monkeypatch.setattr(httpx, "post", post)
+    rc = main(["pass", str(tmp_path), "--server", "http://gsa.test", "--api-key", KEY_A, "--plan-id", plan["id"]])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    assert out.startswith("pass ") and "fused, body to LVLH" in out
