@@ -137,6 +137,11 @@ def _read_json(path: str) -> Any:
         raise CliError(f"{path} is not JSON: {exc.msg} at line {exc.lineno}") from None
 
 
+def _input_line(exc: Any) -> str:
+    """One line for an ``app.errors.InputError``: the field's path, then what is wrong."""
+    return ".".join(str(x) for x in exc.loc) + ": " + exc.message
+
+
 def _validation_line(exc: ValidationError) -> str:
     err = exc.errors()[0]
     loc = ".".join(str(x) for x in err["loc"])
@@ -156,7 +161,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     except ValidationError as exc:
         raise CliError(_validation_line(exc)) from None
     except InputError as exc:
-        raise CliError(".".join(str(x) for x in exc.loc) + ": " + exc.message) from None
+        raise CliError(_input_line(exc)) from None
     if args.json:
         print(json.dumps(result, indent=2))
     else:
@@ -205,7 +210,7 @@ def cmd_access(args: argparse.Namespace) -> int:
     except ValidationError as exc:
         raise CliError(_validation_line(exc)) from None
     except InputError as exc:
-        raise CliError(".".join(str(x) for x in exc.loc) + ": " + exc.message) from None
+        raise CliError(_input_line(exc)) from None
     print(json.dumps(result, indent=2) if args.json else format_windows(result["access_windows"]))
     return 0
 
@@ -473,7 +478,7 @@ def _plan_for_pass(request: Any) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     except ValidationError as exc:
         raise CliError(_validation_line(exc)) from None
     except InputError as exc:
-        raise CliError(".".join(str(x) for x in exc.loc) + ": " + exc.message) from None
+        raise CliError(_input_line(exc)) from None
     return req.model_dump(mode="json", exclude_none=True), windows
 
 
@@ -523,7 +528,7 @@ def cmd_simulate_pass(args: argparse.Namespace) -> int:
               f"{window['max_elevation_deg']:.1f} deg; rendering {len(meta)} frames", file=sys.stderr)  # fmt: skip
         images, snrs = pass_svc.render_pass(meta, opts, rng, radar, model)
     except InputError as exc:
-        raise CliError(".".join(str(x) for x in exc.loc) + ": " + exc.message) from None
+        raise CliError(_input_line(exc)) from None
     record = pass_svc.pass_record(meta, snrs, opts, index, window, request,
                                   (radar.range_cell_m, radar.cross_range_cell_m))  # fmt: skip
     partial = out.with_name(out.name + ".partial")
@@ -607,7 +612,7 @@ def cmd_pass(args: argparse.Namespace) -> int:
                                        observed_at=times, names=[f"frame {k}" for k in range(len(times))])  # fmt: skip
         t2 = time.perf_counter()
     except InputError as exc:
-        raise CliError(".".join(str(x) for x in exc.loc) + ": " + exc.message) from None
+        raise CliError(_input_line(exc)) from None
     except InferenceError as exc:
         raise CliError(str(exc)) from None
     if args.json:

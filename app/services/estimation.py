@@ -428,21 +428,30 @@ def frames_at(plan_request: dict[str, Any], observed_at: datetime) -> dict[str, 
     Each is a matrix whose columns are the frame's axes in GCRS (``planner.frames``: the
     observation frame's Y follows the line of sight's rate in the target's LVLH frame).
     """
+    return frames_at_times(plan_request, [observed_at])[0]
+
+
+def frames_at_times(plan_request: dict[str, Any], times: list[datetime]) -> list[dict[str, NDArray[np.float64]]]:
+    """``frames_at`` for several moments, from one propagation of the target over their span."""
     from planner.frames import observation_axes, pass_geometry
 
-    traj, station, frames = target_track(plan_request, observed_at, 0.0, 0.0)
-    t = np.array([-0.5, 0.0, 0.5])
-    geo = pass_geometry(traj, station, frames, t)
-    lvlh = geo.lvlh[1]
-    obs = lvlh @ observation_axes(geo.los_lvlh, t)[1]
-    los_rate = (geo.los_lvlh[:, 2] - geo.los_lvlh[:, 0]) / (t[2] - t[0])
-    return {
-        "observation": obs,
-        "lvlh": lvlh,
-        "j2000": np.eye(3),
-        "los_lvlh": geo.los_lvlh[:, 1],
-        "los_rate_lvlh": los_rate,
-    }
+    t0 = min(times)
+    offsets = np.array([(t - t0).total_seconds() for t in times])
+    traj, station, frames = target_track(plan_request, t0, 0.0, float(offsets.max()))
+    near = np.array([-0.5, 0.0, 0.5])
+    geo = pass_geometry(traj, station, frames, (offsets[:, None] + near).ravel())
+    out = []
+    for k in range(len(times)):
+        los = geo.los_lvlh[:, 3 * k : 3 * k + 3]
+        lvlh = geo.lvlh[3 * k + 1]
+        out.append({
+            "observation": lvlh @ observation_axes(los, near)[1],
+            "lvlh": lvlh,
+            "j2000": np.eye(3),
+            "los_lvlh": los[:, 1],
+            "los_rate_lvlh": (los[:, 2] - los[:, 0]) / (near[2] - near[0]),
+        })  # fmt: skip
+    return out
 
 
 def attitudes_in_frames(

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.errors import InputError
-from app.services.estimation import checked_json, frames_at, matrix_attitude_json, target_track
+from app.services.estimation import checked_json, frames_at, frames_at_times, matrix_attitude_json, target_track
 from inference.frames import euler_from_matrix, rotation_matrix
 from inference.fusion import PassFrame, angle_deg, fuse
 
@@ -105,23 +105,21 @@ def pass_geometry_frames(plan_request: dict[str, Any], window: dict[str, Any], o
     def body_attitude(a0: Vec, times: Vec) -> Vec:  # body to LVLH at ``times`` (spin about the body axis)
         return np.asarray(a0 @ spin_rotation(axis, opts.spin_deg_s, times - t_mid))
 
-    def los_body(a0: Vec, times: Vec) -> Vec:
-        g = pass_geometry(traj, station, frames, times)
-        return np.einsum("nji,jn->in", body_attitude(a0, times), g.los_lvlh)
+    def los_body(a0: Vec, g: Any) -> Vec:  # the line of sight in body axes, from a pass_geometry's samples
+        return np.einsum("nji,jn->in", body_attitude(a0, g.t_s), g.los_lvlh)
 
     sweep = swept_deg(geo.los_lvlh)
     t_mid = float(np.interp(0.5 * sweep[-1], sweep, t))  # the middle of the sweep (a still target's middle frame)
-    obs_mid = observation_axes(pass_geometry(traj, station, frames, t_mid + np.array([-0.5, 0.0, 0.5])).los_lvlh,
-                               np.array([-0.5, 0.0, 0.5]))[1]  # fmt: skip
+    step3 = np.array([-0.5, 0.0, 0.5])
+    g_mid = pass_geometry(traj, station, frames, t_mid + step3)
     if opts.attitude_lvlh_deg is not None:
         a0 = rotation_matrix(*opts.attitude_lvlh_deg)
     else:  # the middle of the pass seen at angles the networks know
         wanted = rotation_matrix(*(float(v) for v in rng.uniform(-opts.max_angle_deg, opts.max_angle_deg, 3)))
-        a0 = obs_mid @ wanted
-        mid3 = t_mid + np.array([-0.5, 0.0, 0.5])
+        a0 = observation_axes(g_mid.los_lvlh, g_mid.t_s)[1] @ wanted
         for _ in range(8):  # a spin turns the image plane too: settle a0 so the middle frame sees ``wanted``
-            a0 = a0 @ observation_axes(los_body(a0, mid3), mid3)[1] @ wanted
-    theta = swept_deg(los_body(a0, t))
+            a0 = a0 @ observation_axes(los_body(a0, g_mid), g_mid.t_s)[1] @ wanted
+    theta = swept_deg(los_body(a0, geo))
     half = opts.aperture_deg / 2.0
     if theta[-1] < opts.aperture_deg:
         raise InputError(["window"], f"the line of sight sweeps only {theta[-1]:.1f} deg of the target over this "
@@ -133,20 +131,18 @@ def pass_geometry_frames(plan_request: dict[str, Any], window: dict[str, Any], o
     for c in centres:
         t_c = float(np.interp(c, theta, t))
         t0, t1 = float(np.interp(c - half, theta, t)), float(np.interp(c + half, theta, t))
-        near = t_c + np.array([-0.5, 0.0, 0.5])
-        obs_body = observation_axes(los_body(a0, near), near)[1]
-        body_to_obs = obs_body.T
-        angles = euler_from_matrix(body_to_obs)
+        g = pass_geometry(traj, station, frames, t_c + step3)
+        obs_body = observation_axes(los_body(a0, g), g.t_s)[1]
+        angles = euler_from_matrix(obs_body.T)  # body to observation frame
         if opts.within_deg is not None and max(abs(a) for a in angles) > opts.within_deg:
             continue
-        g = pass_geometry(traj, station, frames, np.array([t_c]))
         a = body_attitude(a0, np.array([t_c]))[0]
-        lvlh = g.lvlh[0]
+        lvlh = g.lvlh[1]
         out.append({
             "observed_at": rise + timedelta(seconds=t_c),
             "t_s": t_c,
             "integration_s": t1 - t0,
-            "range_km": float(g.range_km[0]),
+            "range_km": float(g.range_km[1]),
             "attitude_deg": [float(v) for v in angles],
             "body_to_lvlh": a,
             "observation_in_lvlh": a @ obs_body,
@@ -247,14 +243,14 @@ def recheck_reversed(*, est: Any, checker: Any, frames: Vec, checks: list[Any]) 
     mirrored = np.ascontiguousarray(np.roll(frames[todo][:, :, ::-1], 1, axis=2))
     res = est.estimate(mirrored)
     out = list(checks)
+
+    def back(angles: Any) -> tuple[float, float, float]:
+        return euler_from_matrix(REVERSED @ rotation_matrix(*(float(a) for a in angles)))
+
     for j, k in enumerate(todo):
         c = checker.check(mirrored[j], res.enhanced[j], res.angles_deg[j] if checker.networks else None)
         if not c.quality.trusted:
             continue
-
-        def back(angles: Any) -> tuple[float, float, float]:
-            return euler_from_matrix(REVERSED @ rotation_matrix(*(float(a) for a in angles)))
-
         q = c.quality
         out[k] = Checked(
             angles_deg=np.array(back(c.angles_deg)),
@@ -276,13 +272,15 @@ def fuse_pass(*, est: Any, checker: Any, frames: Vec, checks: list[Any], plan_re
 
     Returns the answer with the more trusted frames used, and the checks it rests on.
     """
-    first = fuse_frames(plan_request=plan_request, checks=checks, observed_at=observed_at, names=names)
+    placed = frames_at_times(plan_request, observed_at)
+    first = fuse_frames(plan_request=plan_request, checks=checks, observed_at=observed_at, names=names, placed=placed)
     if first["trusted"] and first["stable"]:
         return first, checks
     again = recheck_reversed(est=est, checker=checker, frames=frames, checks=checks)
     if again is checks:
         return first, checks
-    second = fuse_frames(plan_request=plan_request, checks=again, observed_at=observed_at, names=names)
+    second = fuse_frames(plan_request=plan_request, checks=again, observed_at=observed_at, names=names,
+                         placed=placed)  # fmt: skip
 
     def trusted_used(result: dict[str, Any], cs: list[Any]) -> int:
         return sum(1 for f in result["frames"] if f["used"] and usable(cs[f["index"]]))
@@ -320,14 +318,20 @@ def usable(checked: Any) -> bool:
 
 
 def fuse_frames(
-    *, plan_request: dict[str, Any], checks: list[Any], observed_at: list[datetime], names: list[str]
+    *,
+    plan_request: dict[str, Any],
+    checks: list[Any],
+    observed_at: list[datetime],
+    names: list[str],
+    placed: list[dict[str, Vec]] | None = None,
 ) -> dict[str, Any]:
-    """Place each checked frame's answer and alternatives in LVLH (``frames_at``), fuse them, and describe the pass."""
+    """Place each checked frame's answer and alternatives in LVLH (``frames_at_times``, unless ``placed`` gives
+    those axes already), fuse them, and describe the pass."""
     t0 = min(observed_at)
+    placed = placed or frames_at_times(plan_request, observed_at)
     pass_frames = []
-    lvlh_axes = []
-    for k, (c, t) in enumerate(zip(checks, observed_at, strict=True)):
-        axes = frames_at(plan_request, t)
+    for k, (c, axes) in enumerate(zip(checks, placed, strict=True)):
+        t = observed_at[k]
         obs_in_lvlh = axes["lvlh"].T @ axes["observation"]
         answer = rotation_matrix(*(float(a) for a in c.angles_deg))
         cands = [answer, MIRROR @ answer @ MIRROR]
@@ -338,12 +342,11 @@ def fuse_frames(
         pass_frames.append(PassFrame(np.array([obs_in_lvlh @ r for r in cands]), bound, (t - t0).total_seconds(),
                                      names[k], axes["los_lvlh"], axes["los_rate_lvlh"], usable(c),
                                      "; ".join(q.reasons), tuple(q.uncertainty_deg) if len(finite) == 3 else None))  # fmt: skip
-        lvlh_axes.append(axes["lvlh"])
     fused = fuse(pass_frames)
     if fused.reference_s is None:  # a still attitude holds all pass: given in J2000 at the frame nearest mid-pass
         span = [(t - t0).total_seconds() for t in observed_at]
         mid = int(np.argmin(np.abs(np.array(span) - 0.5 * (min(span) + max(span)))))
-        t_mid, lvlh_mid = observed_at[mid], lvlh_axes[mid]
+        t_mid, lvlh_mid = observed_at[mid], placed[mid]["lvlh"]
     else:  # a turning one is the attitude at the middle of the frames' times
         t_mid = t0 + timedelta(seconds=fused.reference_s)
         lvlh_mid = frames_at(plan_request, t_mid)["lvlh"]

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from app.errors import InputError
-from app.schemas import AccessCreate, OrbitIn, PlanCreate, StationIn
+from app.schemas import ORBIT_SOURCES, AccessCreate, OrbitIn, PlanCreate, StationIn
 from planner.access import AccessWindows, access_windows
 from planner.alignment import Candidate, HeightBox
 from planner.elements import Elements
@@ -54,8 +54,7 @@ def to_orbit(orbit: OrbitIn, where: str) -> Orbit:
 
 def source_of(orbit: OrbitIn) -> str:
     """Which of an orbit's sources the request gave (``elements``, ``tle``, ``omm``, ``omm_xml``, ``omm_csv``)."""
-    return next(k for k in ("tle", "omm", "omm_xml", "omm_csv") if getattr(orbit, k) is not None) \
-        if orbit.elements is None else "elements"  # fmt: skip
+    return next(k for k in ORBIT_SOURCES if getattr(orbit, k) is not None)
 
 
 def to_station(st: StationIn) -> Station:

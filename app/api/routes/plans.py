@@ -15,6 +15,7 @@ from app.api.deps import CurrentOperator, SessionDep, SettingsDep, as_utc, check
 from app.core.observability import resident_mb
 from app.schemas import PAPER_EXAMPLE, IsoDateTime, PlanCreate, PlanPublic, PlansPublic, PlanSummary, Text
 from app.services.planning import access_csv, run_plan
+from planner.plan import StopCheck
 
 router = APIRouter(prefix="/plans", tags=["plans"])
 
@@ -30,6 +31,27 @@ def _public(plan: Any) -> dict[str, Any]:
         "observer_name": plan.observer_name,
         "station_name": plan.station_name,
     }
+
+
+def _budget(settings: Any, gone: threading.Event | None = None) -> StopCheck:
+    """A plan's stop check: the caller gone, or over its time (GSA_PLAN_TIMEOUT_S) or memory (GSA_PLAN_MEMORY_MB) budget.
+
+    Creating a plan and recomputing one for an export are the same work, under the same budget.
+    """
+    deadline = time.monotonic() + settings.plan_timeout_s
+    memory_limit = resident_mb() + settings.plan_memory_mb
+
+    def stop() -> str | None:
+        if gone is not None and gone.is_set():
+            return "the client disconnected"
+        if time.monotonic() > deadline:
+            return f"over the {settings.plan_timeout_s:g}-s budget (GSA_PLAN_TIMEOUT_S); plan a shorter span or a coarser box"
+        if resident_mb() > memory_limit:
+            return (f"over the {settings.plan_memory_mb:g}-MB memory budget (GSA_PLAN_MEMORY_MB); plan a shorter span "
+                    "or a coarser box")  # fmt: skip
+        return None
+
+    return stop
 
 
 @router.post(
@@ -52,19 +74,8 @@ async def create_plan(
     plans) and stops when the caller disconnects; in each case nothing is stored.
     """
     check_span(plan_in.search.duration_days, settings, ["search", "duration_days"])
-    deadline = time.monotonic() + settings.plan_timeout_s
-    memory_limit = resident_mb() + settings.plan_memory_mb
     gone = threading.Event()
-
-    def stop() -> str | None:
-        if gone.is_set():
-            return "the client disconnected"
-        if time.monotonic() > deadline:
-            return f"over the {settings.plan_timeout_s:g}-s budget (GSA_PLAN_TIMEOUT_S); plan a shorter span or a coarser box"
-        if resident_mb() > memory_limit:
-            return (f"over the {settings.plan_memory_mb:g}-MB memory budget (GSA_PLAN_MEMORY_MB); plan a shorter span "
-                    "or a coarser box")  # fmt: skip
-        return None
+    stop = _budget(settings, gone)
 
     async def watch() -> None:
         while not gone.is_set():
@@ -167,16 +178,8 @@ def _export(kind: str, plan_id: str, session: Any, operator: Any, settings: Any)
     row = crud.get_plan(session=session, operator_id=operator.id, plan_id=plan_id)
     if row is None:
         raise HTTPException(status_code=404, detail="Plan not found")
-    deadline = time.monotonic() + settings.plan_timeout_s
-
-    def stop() -> str | None:
-        return (
-            None
-            if time.monotonic() < deadline
-            else f"over the {settings.plan_timeout_s:g}-s budget (GSA_PLAN_TIMEOUT_S)"
-        )
-
-    plan, _ = run_plan(PlanCreate.model_validate(row.request), max_grid_points=settings.max_grid_points, stop=stop)
+    plan, _ = run_plan(PlanCreate.model_validate(row.request), max_grid_points=settings.max_grid_points,
+                       stop=_budget(settings))  # fmt: skip
     names = {"target": row.target_name, "observer": row.observer_name, "station": row.station_name}
     windows = row.result.get("access_windows", [])
     if kind == "pointing.csv":
