@@ -74,7 +74,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
     from app.core.db import upgrade_database
     from app.core.observability import configure_logging, uvicorn_log_config
-    from app.services.estimation import sweep_blobs
+    from app.services.images import sweep_blobs
 
     settings = _settings()
     configure_logging(settings.log_level, settings.log_json)
@@ -96,9 +96,17 @@ def cmd_serve(args: argparse.Namespace) -> int:
     from app.core.server import raise_descriptor_limit, uvicorn_limits
 
     raise_descriptor_limit(settings.max_connections)
-    uvicorn.run("app.main:create_app", factory=True, host=host, port=port, workers=args.workers,
-                log_level=settings.log_level, log_config=log_config, access_log=not settings.log_json,
-                **uvicorn_limits(settings))  # fmt: skip
+    uvicorn.run(
+        "app.main:create_app",
+        factory=True,
+        host=host,
+        port=port,
+        workers=args.workers,
+        log_level=settings.log_level,
+        log_config=log_config,
+        access_log=not settings.log_json,
+        **uvicorn_limits(settings),
+    )
     return 0
 
 
@@ -162,6 +170,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
         raise CliError(_validation_line(exc)) from None
     except InputError as exc:
         raise CliError(_input_line(exc)) from None
+    assert not isinstance(req.ground_station, str)  # run_plan refuses a station name: only the server resolves one
     if args.json:
         print(json.dumps(result, indent=2))
     else:
@@ -184,8 +193,10 @@ def _export_plan(plan: Any, result: dict[str, Any], req: Any, folder: Path) -> N
 
     folder.mkdir(parents=True, exist_ok=True)
     name = "local"
-    files = {"access.csv": access_csv(result["access_windows"]),
-             "pointing.csv": exports.pointing_csv(plan, result["access_windows"])}  # fmt: skip
+    files = {
+        "access.csv": access_csv(result["access_windows"]),
+        "pointing.csv": exports.pointing_csv(plan, result["access_windows"]),
+    }
     try:
         arc = exports.plan_arc(plan, result)
     except InputError as exc:
@@ -298,8 +309,10 @@ def _print_checked(body: dict[str, Any], prefix: str = "") -> None:
     z, y, x = body["attitude"]["euler_zyx_deg"]
     q = body["attitude"]["quaternion_wxyz"]
     kind = "fitted" if body.get("refined") else "network"
-    print(f"{prefix}z {z:.2f} y {y:.2f} x {x:.2f} deg ({kind}, observation frame, target {body.get('target')}); "
-          f"quaternion w x y z {', '.join(f'{v:.5f}' for v in q)}")  # fmt: skip
+    print(
+        f"{prefix}z {z:.2f} y {y:.2f} x {x:.2f} deg ({kind}, observation frame, target {body.get('target')}); "
+        f"quaternion w x y z {', '.join(f'{v:.5f}' for v in q)}"
+    )
     net = body.get("attitude_network")
     if net and body.get("refined"):
         nz, ny, nx = net["euler_zyx_deg"]
@@ -313,8 +326,10 @@ def _print_checked(body: dict[str, Any], prefix: str = "") -> None:
             print(f"  - {r}")
     for alt in body.get("alternatives", []):
         az, ay, ax = alt["euler_zyx_deg"]
-        print(f"also fits: z {az:.2f} y {ay:.2f} x {ax:.2f} deg ({alt['distance_deg']:.0f} deg away, "
-              f"IoU {alt['silhouette_iou']:.3f}, fit {alt['fit_gap']:+.4f})")  # fmt: skip
+        print(
+            f"also fits: z {az:.2f} y {ay:.2f} x {ax:.2f} deg ({alt['distance_deg']:.0f} deg away, "
+            f"IoU {alt['silhouette_iou']:.3f}, fit {alt['fit_gap']:+.4f})"
+        )
 
 
 def _local_models(args: argparse.Namespace, settings: Any) -> tuple[Any, Any]:
@@ -324,8 +339,9 @@ def _local_models(args: argparse.Namespace, settings: Any) -> tuple[Any, Any]:
 
     model_dir = args.models or settings.model_dir
     est = Estimator.load(model_dir)
-    checkers = load_checkers(model_dir, est.img_size, settings.target_model, settings.target_scale,
-                             settings.default_target)  # fmt: skip
+    checkers = load_checkers(
+        model_dir, est.img_size, settings.target_model, settings.target_scale, settings.default_target
+    )
     return est, checkers.get(args.target or checkers.default)
 
 
@@ -353,8 +369,11 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     if args.server:
         import httpx
 
-        form = {"resample": str(args.resample).lower(), "normalised": str(args.normalised).lower(),
-                "refine": str(not args.no_refine).lower()}  # fmt: skip
+        form = {
+            "resample": str(args.resample).lower(),
+            "normalised": str(args.normalised).lower(),
+            "refine": str(not args.no_refine).lower(),
+        }
         if args.target:
             form["target"] = args.target
         if args.plan_id:
@@ -365,9 +384,12 @@ def cmd_estimate(args: argparse.Namespace) -> int:
             form.update({"range_cell_m": str(cells[0]), "cross_range_cell_m": str(cells[1])})
         try:
             r = httpx.post(
-                args.server.rstrip("/") + "/v1/estimates", files={"file": (Path(args.file).name, data)},
-                data=form, headers={"X-API-Key": args.api_key or ""}, timeout=60,
-            )  # fmt: skip
+                args.server.rstrip("/") + "/v1/estimates",
+                files={"file": (Path(args.file).name, data)},
+                data=form,
+                headers={"X-API-Key": args.api_key or ""},
+                timeout=60,
+            )
         except httpx.HTTPError as exc:
             raise CliError(f"cannot reach {args.server}: {exc}") from None
         if r.status_code >= 400:
@@ -376,17 +398,19 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         _print_checked(body, prefix=f"estimate {body['id']}: ")
         return 0
     from app.services import estimation as svc
+    from app.services import uploads as upload_svc
 
     settings = _settings()
     try:
         est, checker = _local_models(args, settings)
-        (up,) = svc.decode(data, Path(args.file).name, allow_stack=False)
+        (up,) = upload_svc.decode(data, Path(args.file).name, allow_stack=False)
         model_cells = (checker.radar.range_cell_m, checker.radar.cross_range_cell_m)
-        frame = svc.prepare(up, est.img_size, args.resample, args.normalised, cells, model_cells)
+        frame = upload_svc.prepare(up, est.img_size, args.resample, args.normalised, cells, model_cells)
         res = est.estimate(frame[None])
         t0 = time.perf_counter()
-        checked = checker.check(frame, res.enhanced[0], res.angles_deg[0] if checker.networks else None,
-                                not args.no_refine)  # fmt: skip
+        checked = checker.check(
+            frame, res.enhanced[0], res.angles_deg[0] if checker.networks else None, not args.no_refine
+        )
         t_fit = time.perf_counter() - t0
     except InputError as exc:
         raise CliError(exc.message) from None
@@ -394,8 +418,10 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from None
     body = {**svc.checked_json(checked), "target": checker.model.name}
     _print_checked(body)
-    print(f"UNet++ {res.timings_s['unetpp'] * 1000:.0f} ms, Swin {res.timings_s['swin'] * 1000:.0f} ms, "
-          f"fit and checks {t_fit * 1000:.0f} ms")  # fmt: skip
+    print(
+        f"UNet++ {res.timings_s['unetpp'] * 1000:.0f} ms, Swin {res.timings_s['swin'] * 1000:.0f} ms, "
+        f"fit and checks {t_fit * 1000:.0f} ms"
+    )
     if args.plot:
         import matplotlib
 
@@ -409,8 +435,11 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         ax[0].set_title("input (normalised) and the fitted projection")
         ax[1].imshow(np.clip(res.enhanced[0], 0, 1), cmap="gray", vmin=0, vmax=1)
         q = checked.quality
-        ax[1].set_title(f"enhanced; fitted z {z:.1f} y {y:.1f} x {x:.1f} deg\n"
-                        f"IoU {q.silhouette_iou:.3f}, {'trusted' if q.trusted else 'NOT trusted'}", fontsize=10)  # fmt: skip
+        ax[1].set_title(
+            f"enhanced; fitted z {z:.1f} y {y:.1f} x {x:.1f} deg\n"
+            f"IoU {q.silhouette_iou:.3f}, {'trusted' if q.trusted else 'NOT trusted'}",
+            fontsize=10,
+        )
         for a in ax:
             a.contour(outline, levels=[0.5], colors=["#ff7f0e"], linewidths=0.9)
             a.set_xlabel("cross-range cell (column)")
@@ -425,24 +454,37 @@ def cmd_estimate(args: argparse.Namespace) -> int:
 def add_pass_arguments(p: argparse.ArgumentParser) -> None:
     """``gsa simulate --pass``: the frames of one radar pass instead of a data set."""
     g = p.add_argument_group("a radar pass (--pass REQUEST.json): the frames the station's radar forms over one pass")
-    g.add_argument("--pass", dest="pass_request", metavar="REQUEST.json",
-                   help="a plan request (the body of POST /v1/plans): its target over one of its access windows to its "
-                        "station; with --out DIR writes DIR/frames.npz, DIR/pass.json and DIR/frames.png")  # fmt: skip
+    g.add_argument(
+        "--pass",
+        dest="pass_request",
+        metavar="REQUEST.json",
+        help="a plan request (the body of POST /v1/plans): its target over one of its access windows to its "
+        "station; with --out DIR writes DIR/frames.npz, DIR/pass.json and DIR/frames.png",
+    )
     g.add_argument("--window", type=int, help="which of the plan's access windows (default: the highest)")
     g.add_argument("--frames", type=int, default=60, help="at most this many frames, thinned evenly (default 60)")
     g.add_argument(
         "--step-deg", type=float, help="between frame centres, in line-of-sight sweep (default: the aperture)"
     )
-    g.add_argument("--attitude-lvlh", metavar="Z,Y,X",
-                   help="the target's attitude, body to LVLH, deg (default: drawn so mid-pass looks within --max-angle-deg)")  # fmt: skip
+    g.add_argument(
+        "--attitude-lvlh",
+        metavar="Z,Y,X",
+        help="the target's attitude, body to LVLH, deg (default: drawn so mid-pass looks within --max-angle-deg)",
+    )
     g.add_argument(
         "--spin-deg-s", type=float, default=0.0, help="spin about --spin-axis (deg/s, default 0: still in LVLH)"
     )
     g.add_argument("--spin-axis", default="0,0,1", metavar="X,Y,Z", help="the spin's body axis (default 0,0,1)")
-    g.add_argument("--snr-reference", metavar="DB@KM",
-                   help="SNR from range by the radar equation: DB at KM, falling as range to the fourth power")  # fmt: skip
-    g.add_argument("--within-deg", type=float,
-                   help="keep only frames whose observation-frame angles are within this (the networks' range: 45)")  # fmt: skip
+    g.add_argument(
+        "--snr-reference",
+        metavar="DB@KM",
+        help="SNR from range by the radar equation: DB at KM, falling as range to the fourth power",
+    )
+    g.add_argument(
+        "--within-deg",
+        type=float,
+        help="keep only frames whose observation-frame angles are within this (the networks' range: 45)",
+    )
 
 
 def _pass_or_data_set(data_set: Any) -> Any:
@@ -472,8 +514,13 @@ def _plan_for_pass(request: Any) -> tuple[dict[str, Any], list[dict[str, Any]]]:
 
     try:
         req = PlanCreate.model_validate(request)
-        acc = AccessCreate(target=req.target, ground_station=req.ground_station, start=req.search.start,
-                           duration_days=req.search.duration_days, reading=req.search.reading)  # fmt: skip
+        acc = AccessCreate(
+            target=req.target,
+            ground_station=req.ground_station,
+            start=req.search.start,
+            duration_days=req.search.duration_days,
+            reading=req.search.reading,
+        )
         windows = run_access(acc)["access_windows"]
     except ValidationError as exc:
         raise CliError(_validation_line(exc)) from None
@@ -509,13 +556,19 @@ def cmd_simulate_pass(args: argparse.Namespace) -> int:
         radar = Radar(args.carrier_hz, args.bandwidth_hz, args.n_range, args.n_azimuth, args.aperture_deg)
         request, windows = _plan_for_pass(_read_json(args.pass_request))
         opts = pass_svc.PassOptions(
-            window=args.window, aperture_deg=args.aperture_deg, step_deg=args.step_deg, max_frames=args.frames,
+            window=args.window,
+            aperture_deg=args.aperture_deg,
+            step_deg=args.step_deg,
+            max_frames=args.frames,
             attitude_lvlh_deg=_floats(args.attitude_lvlh, 3, "--attitude-lvlh") if args.attitude_lvlh else None,  # type: ignore[arg-type]
-            max_angle_deg=min(args.max_angle_deg, 89.0), spin_deg_s=args.spin_deg_s,
+            max_angle_deg=min(args.max_angle_deg, 89.0),
+            spin_deg_s=args.spin_deg_s,
             spin_axis=_floats(args.spin_axis, 3, "--spin-axis"),  # type: ignore[arg-type]
-            snr_db=None if lo is None or hi is None else (lo, hi), snr_reference=ref, within_deg=args.within_deg,
+            snr_db=None if lo is None or hi is None else (lo, hi),
+            snr_reference=ref,
+            within_deg=args.within_deg,
             seed=args.seed,
-        )  # fmt: skip
+        )
         index, window = pass_svc.choose_window(windows, opts.window)
         rng = np.random.default_rng(opts.seed)
         meta = pass_svc.pass_geometry_frames(request, window, opts, rng)
@@ -524,13 +577,17 @@ def cmd_simulate_pass(args: argparse.Namespace) -> int:
             from inference.simulation.dataset import DatasetSpec, build_model
 
             model = build_model(DatasetSpec(n=1, model_path=args.model, model_scale=args.model_scale), radar)
-        print(f"window {index}: {window['rise']} to {window['set']}, culminating at "
-              f"{window['max_elevation_deg']:.1f} deg; rendering {len(meta)} frames", file=sys.stderr)  # fmt: skip
+        print(
+            f"window {index}: {window['rise']} to {window['set']}, culminating at "
+            f"{window['max_elevation_deg']:.1f} deg; rendering {len(meta)} frames",
+            file=sys.stderr,
+        )
         images, snrs = pass_svc.render_pass(meta, opts, rng, radar, model)
     except InputError as exc:
         raise CliError(_input_line(exc)) from None
-    record = pass_svc.pass_record(meta, snrs, opts, index, window, request,
-                                  (radar.range_cell_m, radar.cross_range_cell_m))  # fmt: skip
+    record = pass_svc.pass_record(
+        meta, snrs, opts, index, window, request, (radar.range_cell_m, radar.cross_range_cell_m)
+    )
     partial = out.with_name(out.name + ".partial")
     partial.mkdir(parents=True, exist_ok=False)
     np.savez_compressed(partial / "frames.npz", image=images.astype(np.float32))
@@ -538,8 +595,10 @@ def cmd_simulate_pass(args: argparse.Namespace) -> int:
     _contact_sheet(images, record, partial / "frames.png")
     partial.rename(out)
     inside = sum(max(abs(a) for a in f["attitude_observation"]["euler_zyx_deg"]) <= 45.0 for f in record["frames"])
-    print(f"{len(meta)} frames in {out} ({inside} within the networks' 45 deg range); upload frames.npz with "
-          "normalised=true and each frame's observed_at from pass.json")  # fmt: skip
+    print(
+        f"{len(meta)} frames in {out} ({inside} within the networks' 45 deg range); upload frames.npz with "
+        "normalised=true and each frame's observed_at from pass.json"
+    )
     return 0
 
 
@@ -563,8 +622,11 @@ def _contact_sheet(images: Any, record: dict[str, Any], path: Path, most: int = 
         snr = "noise-free" if f["snr_db"] is None else f"{f['snr_db']:.0f} dB"
         ax.set_title(f"{f['observed_at'][11:19]}Z, {snr}\n{z:.0f} / {y:.0f} / {x:.0f} deg", fontsize=7)
     w = record["window"]
-    fig.suptitle(f"pass {w['rise'][:19]} to {w['set'][11:19]} UTC, max elevation {w['max_elevation_deg']:.0f} deg "
-                 "(frame time, SNR, attitude in its observation frame)", fontsize=9)  # fmt: skip
+    fig.suptitle(
+        f"pass {w['rise'][:19]} to {w['set'][11:19]} UTC, max elevation {w['max_elevation_deg']:.0f} deg "
+        "(frame time, SNR, attitude in its observation frame)",
+        fontsize=9,
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
@@ -592,6 +654,7 @@ def cmd_pass(args: argparse.Namespace) -> int:
         return _pass_on_server(args, data, rec)
     from app.services import estimation as svc
     from app.services import passes as pass_svc
+    from app.services import uploads as upload_svc
 
     settings = _settings()
     request = rec.get("plan_request")
@@ -601,15 +664,23 @@ def cmd_pass(args: argparse.Namespace) -> int:
         raise CliError("give --plan PLAN.json: the pass record names no plan")
     try:
         est, checker = _local_models(args, settings)
-        uploads = svc.decode(data, "frames.npz")
+        uploads = upload_svc.decode(data, "frames.npz")
         if len(uploads) != len(times):
             raise CliError(f"frames.npz holds {len(uploads)} frames and pass.json {len(times)} times")
         t0 = time.perf_counter()
-        frames, _, checks, _ = svc.check_frames(est=est, checker=checker, uploads=uploads, resample=False,
-                                                normalised=True, cells_m=None, search=False)  # fmt: skip
+        frames, _, checks, _ = svc.check_frames(
+            est=est, checker=checker, uploads=uploads, resample=False, normalised=True, cells_m=None, search=False
+        )
         t1 = time.perf_counter()
-        result, _ = pass_svc.fuse_pass(est=est, checker=checker, frames=frames, checks=checks, plan_request=request,
-                                       observed_at=times, names=[f"frame {k}" for k in range(len(times))])  # fmt: skip
+        result, _ = pass_svc.fuse_pass(
+            est=est,
+            checker=checker,
+            frames=frames,
+            checks=checks,
+            plan_request=request,
+            observed_at=times,
+            names=[f"frame {k}" for k in range(len(times))],
+        )
         t2 = time.perf_counter()
     except InputError as exc:
         raise CliError(_input_line(exc)) from None
@@ -631,13 +702,21 @@ def _pass_on_server(args: argparse.Namespace, data: bytes, rec: dict[str, Any]) 
 
     if not args.plan_id:
         raise CliError("--server needs --plan-id: the stored plan the pass belongs to")
-    form: dict[str, Any] = {"plan_id": args.plan_id, "normalised": "true",
-                            "observed_at": [f["observed_at"] for f in rec["frames"]]}  # fmt: skip
+    form: dict[str, Any] = {
+        "plan_id": args.plan_id,
+        "normalised": "true",
+        "observed_at": [f["observed_at"] for f in rec["frames"]],
+    }
     if args.target:
         form["target"] = args.target
     try:
-        r = httpx.post(args.server.rstrip("/") + "/v1/passes", files={"files": ("frames.npz", data)}, data=form,
-                       headers={"X-API-Key": args.api_key or ""}, timeout=300)  # fmt: skip
+        r = httpx.post(
+            args.server.rstrip("/") + "/v1/passes",
+            files={"files": ("frames.npz", data)},
+            data=form,
+            headers={"X-API-Key": args.api_key or ""},
+            timeout=300,
+        )
     except httpx.HTTPError as exc:
         raise CliError(f"cannot reach {args.server}: {exc}") from None
     if r.status_code >= 400:
@@ -668,9 +747,11 @@ def _print_pass(result: dict[str, Any], rec: dict[str, Any]) -> None:
 
     z, y, x = result["attitude_lvlh"]["euler_zyx_deg"]
     bz, by, bx = result["uncertainty_deg"]
-    print(f"fused, body to LVLH: z {z:.2f} y {y:.2f} x {x:.2f} deg (90 % bound {bz:.2f} / {by:.2f} / {bx:.2f}); "
-          f"{result['used']} frames used, {result['rejected']} rejected"
-          f"{'' if result.get('trusted', True) else '; NOT TRUSTED'}")  # fmt: skip
+    print(
+        f"fused, body to LVLH: z {z:.2f} y {y:.2f} x {x:.2f} deg (90 % bound {bz:.2f} / {by:.2f} / {bx:.2f}); "
+        f"{result['used']} frames used, {result['rejected']} rejected"
+        f"{'' if result.get('trusted', True) else '; NOT TRUSTED'}"
+    )
     print(result["stability"])
     errors = []
     for f in result["frames"]:
@@ -733,8 +814,11 @@ def _plot_pass(result: dict[str, Any], rec: dict[str, Any], path: str) -> None:
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8, ncol=4)
     axes[-1].set_xlabel(f"seconds after {t0:%Y-%m-%d %H:%M:%S} UTC")
-    fig.suptitle(f"pass attitude, body to LVLH: {result['used']} used, {result['rejected']} rejected; "
-                 f"{'stable' if result['stable'] else 'TURNING'}", fontsize=10)  # fmt: skip
+    fig.suptitle(
+        f"pass attitude, body to LVLH: {result['used']} used, {result['rejected']} rejected; "
+        f"{'stable' if result['stable'] else 'TURNING'}",
+        fontsize=10,
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
@@ -782,8 +866,11 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
     pl.add_argument("file")
     pl.add_argument("--json", action="store_true", help="print JSON instead of a table")
     pl.add_argument("--plot", metavar="PNG", help="draw ground track, elevation and alignment error")
-    pl.add_argument("--export", metavar="DIR",
-                    help="also write the plan as opm.txt, oem.txt (CCSDS KVN), plan.czml, access.csv and pointing.csv")  # fmt: skip
+    pl.add_argument(
+        "--export",
+        metavar="DIR",
+        help="also write the plan as opm.txt, oem.txt (CCSDS KVN), plan.czml, access.csv and pointing.csv",
+    )
     pl.set_defaults(func=cmd_plan)
     ac = sub.add_parser("access", help="access windows from a JSON request (the body of POST /v1/access-windows)")
     ac.add_argument("file")
@@ -802,8 +889,11 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
     es.add_argument("file")
     es.add_argument("--models", help="model directory (default: GSA_MODEL_DIR or the shipped models)")
     es.add_argument("--resample", action="store_true", help="resample a frame of another size")
-    es.add_argument("--normalised", action="store_true",
-                    help="the frame is already normalised (a frame of a gsa simulate data set): take it as sent")  # fmt: skip
+    es.add_argument(
+        "--normalised",
+        action="store_true",
+        help="the frame is already normalised (a frame of a gsa simulate data set): take it as sent",
+    )
     es.add_argument("--server", help="send it to a running service instead, e.g. http://127.0.0.1:8000")
     es.add_argument("--api-key")
     es.add_argument("--plot", metavar="PNG", help="draw the input and the enhanced frame with the fitted outline")

@@ -10,7 +10,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from app.core.security import HMAC_SCHEME, LEGACY_SCHEME, digests_equal, key_digest, key_prefix, new_api_key
-from app.db.models import ApiKey, Estimate, Operator, Pass, Plan, utcnow
+from app.db.models import ApiKey, Estimate, GroundStation, Operator, Pass, Plan, utcnow
 
 
 def get_or_create_operator(*, session: Session, name: str) -> Operator:
@@ -40,8 +40,13 @@ def create_api_key(
     """Create a key for an operator (created if new); return the row and the plain key (shown once)."""
     op = get_or_create_operator(session=session, name=operator_name)
     plain = key or new_api_key()
-    row = ApiKey(operator_id=op.id, name=key_name, prefix=key_prefix(plain), key_hash=key_digest(plain, secret),
-                 hash_scheme=HMAC_SCHEME)  # fmt: skip
+    row = ApiKey(
+        operator_id=op.id,
+        name=key_name,
+        prefix=key_prefix(plain),
+        key_hash=key_digest(plain, secret),
+        hash_scheme=HMAC_SCHEME,
+    )
     session.add(row)
     session.commit()
     return row, plain
@@ -186,3 +191,35 @@ def blob_in_use(*, session: Session, digest: str) -> bool:
 
 def get_pass(*, session: Session, operator_id: str, pass_id: str) -> Pass | None:
     return session.scalar(select(Pass).where(Pass.id == pass_id, Pass.operator_id == operator_id))
+
+
+def create_station(*, session: Session, operator_id: str, station: dict[str, Any]) -> GroundStation | None:
+    """Store a named station; None where the operator already has one of that name (nothing changes)."""
+    row = GroundStation(operator_id=operator_id, name=station["name"], station=station)
+    session.add(row)
+    try:
+        session.commit()
+    except IntegrityError:
+        session.rollback()
+        return None
+    return row
+
+
+def get_station(*, session: Session, operator_id: str, name: str) -> GroundStation | None:
+    return session.scalar(
+        select(GroundStation).where(GroundStation.operator_id == operator_id, GroundStation.name == name)
+    )
+
+
+def list_stations(*, session: Session, operator_id: str, limit: int, offset: int) -> tuple[list[GroundStation], int]:
+    where = GroundStation.operator_id == operator_id
+    total = int(session.scalar(select(func.count()).select_from(GroundStation).where(where)) or 0)
+    rows = session.scalars(
+        select(GroundStation).where(where).order_by(GroundStation.name).limit(limit).offset(offset)
+    ).all()
+    return list(rows), total
+
+
+def delete_station(*, session: Session, station: GroundStation) -> None:
+    session.delete(station)
+    session.commit()

@@ -107,10 +107,14 @@ def install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(RequestValidationError)
     async def _validation_error(_request: Request, exc: RequestValidationError) -> JSONResponse:
         errors = [
-            {"loc": _safe(_without_union_tags(e.get("loc", ()))), "msg": _safe(e.get("msg", "")), "type": _safe(e.get("type", "")),
-             **({"input": _safe(e["input"])} if "input" in e else {})}
+            {
+                "loc": _safe(_without_union_tags(e.get("loc", ()))),
+                "msg": _safe(e.get("msg", "")),
+                "type": _safe(e.get("type", "")),
+                **({"input": _safe(e["input"])} if "input" in e else {}),
+            }
             for e in _without_null_branches(list(exc.errors()))
-        ]  # fmt: skip
+        ]
         return JSONResponse(status_code=422, content={"detail": errors, "request_id": current_request_id()})
 
     @app.exception_handler(StarletteHTTPException)

@@ -76,8 +76,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # frame, stops the service here, naming the file. The default target's renderer is built now.
     from inference.trust import load_checkers
 
-    app.state.checkers = load_checkers(settings.model_dir, app.state.estimator.img_size, settings.target_model,
-                                       settings.target_scale, settings.default_target)  # fmt: skip
+    app.state.checkers = load_checkers(
+        settings.model_dir,
+        app.state.estimator.img_size,
+        settings.target_model,
+        settings.target_scale,
+        settings.default_target,
+    )
     app.state.settings = settings
     app.state.key_secret = load_key_secret(settings.key_secret, settings.data_dir)
     app.state.engine = engine

@@ -6,9 +6,11 @@ import re
 from datetime import datetime
 from typing import Annotated, Any, Literal, overload
 
-from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, model_validator
+from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Discriminator, Field, Tag, model_validator
 from pydantic.json_schema import SkipJsonSchema
 
+from planner.access import validate_mask
+from planner.errors import PlannerError
 from planner.propagation import as_utc
 
 _ISO_DATE = re.compile(r"^\d{4}-\d{2}-\d{2}")
@@ -134,15 +136,98 @@ class OrbitIn(Strict):
         return self
 
 
+def _mask_in_order(mask: list[list[float]] | None) -> list[list[float]] | None:
+    """Azimuths increasing within [0, 360), elevations within [-5, 89]: the planner's own check, with its words."""
+    if mask is not None:
+        try:
+            validate_mask(tuple((float(a), float(e)) for a, e in mask))
+        except PlannerError as exc:
+            raise ValueError(str(exc)) from None
+    return mask
+
+
+# [azimuth_deg, elevation_deg]: a two-number array, not a tuple (whose prefixItems OpenAPI 3.0 tools misread).
+MaskPoint = Annotated[list[Finite], Field(min_length=2, max_length=2)]
+
+
 class StationIn(Strict):
-    """A ground radar site on the WGS-84 ellipsoid."""
+    """A ground radar site on the WGS-84 ellipsoid, its horizon and whether elevations are refracted."""
 
     name: Name = "GS"
     latitude_deg: Finite = Field(ge=-90.0, le=90.0)
     longitude_deg: Finite = Field(ge=-180.0, le=360.0)
     altitude_m: Finite = Field(default=0.0, ge=-500.0, le=9000.0)
-    min_elevation_deg: Finite = Field(default=0.0, ge=-5.0, le=89.0, description="elevation mask")
-    max_range_km: Finite | None = Field(default=None, gt=0.0, le=1.0e5)
+    min_elevation_deg: Finite = Field(
+        default=0.0, ge=-5.0, le=89.0, description="the lowest elevation the radar tracks at, in every direction (deg)"
+    )
+    max_range_km: Finite | None = Field(default=None, gt=0.0, le=1.0e5, description="the radar's longest slant range")
+    mask: Annotated[list[MaskPoint] | None, AfterValidator(_mask_in_order)] = Field(
+        default=None,
+        max_length=720,
+        description="the horizon the site sees (hills, buildings): [azimuth_deg, elevation_deg] pairs with the "
+        "azimuths increasing in [0, 360) from north through east, linear between points and around north; "
+        "a target is in view above both this and min_elevation_deg",
+        examples=[[[0, 5], [90, 2], [180, 8], [270, 15]]],
+    )
+    refraction: bool = Field(
+        default=False,
+        description="add atmospheric refraction to every elevation (optical, Saemundsson's formula at 10 C and "
+        "1010 hPa: 0.48 deg at the horizon); off (the default), elevations are geometric",
+    )
+
+
+StationName = Annotated[
+    str,
+    Field(
+        min_length=1,
+        max_length=200,
+        pattern=r"^[^/\\\x00-\x1f]+$",
+        description="the name of a station stored under /v1/stations",
+    ),
+]
+
+
+def _station_kind(value: Any) -> str:
+    return "str" if isinstance(value, str) else "StationIn"
+
+
+# A site, or a stored site's name: told apart by the JSON type, so a bad site's errors are its own
+# (not also "Input should be a valid string" from the name branch).
+GroundStationIn = Annotated[
+    Annotated[StationIn, Tag("StationIn")] | Annotated[StationName, Tag("str")], Discriminator(_station_kind)
+]
+
+
+class StationCreate(StationIn):
+    """A station to store under /v1/stations and name in plans (``"ground_station": "NAME"``)."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        allow_inf_nan=False,
+        json_schema_extra={
+            "examples": [
+                {
+                    "name": "Shanghai",
+                    "latitude_deg": 31.1,
+                    "longitude_deg": 121.3,
+                    "altitude_m": 4.0,
+                    "min_elevation_deg": 3.0,
+                    "mask": [[0, 5], [90, 2], [180, 8], [270, 15]],
+                }
+            ]
+        },
+    )
+
+    name: Name
+
+
+class StationPublic(StationIn):
+    created_at: datetime
+
+
+class StationsPublic(BaseModel):
+    data: list[StationPublic]
+    count: int
 
 
 class SearchIn(Strict):
@@ -226,7 +311,9 @@ class PlanCreate(Strict):
 
     target: OrbitIn
     observer: OrbitIn
-    ground_station: StationIn
+    ground_station: GroundStationIn = Field(
+        description="the radar site, or the name of one stored under /v1/stations (the plan keeps a copy)"
+    )
     search: SearchIn = Field(default_factory=SearchIn)
 
 
@@ -242,7 +329,7 @@ class AccessCreate(Strict):
     )
 
     target: OrbitIn
-    ground_station: StationIn
+    ground_station: GroundStationIn = Field(description="the radar site, or the name of one stored under /v1/stations")
     start: IsoDateTime | None = None
     duration_days: Finite = Field(default=7.0, gt=0.0, le=30.0)
     reading: Literal["osculating", "mean"] = "osculating"

@@ -23,14 +23,19 @@ def main(report: str) -> None:
     errors5 = sum(n for v in by_op.values() for code, n in v.items() if code >= 500)
     modes = ", ".join(f"{n} {m}" for m, n in sorted(rep.get("modes", {}).items()))
     today = datetime.now(UTC).strftime("%Y-%m-%d")
-    lines = ["## Fuzzing", "",
-             f"Machine: {machine()}. Date: {today}. Command: `make fuzz` (schemathesis from the app's OpenAPI schema,",
-             f"{rep['examples_per_route']} generated requests per route on each of SQLite and PostgreSQL; {modes}).",
-             f"{total} requests, {errors5} server errors; every response passed the status-code, content-type,",
-             "header and body-schema checks, every schema-violating request was refused, and every schema-valid one",
-             "was accepted or refused only by a rule a schema cannot state (positive-data acceptance with those told",
-             "apart: a cross-field or physical rule, error type value_error; tests/app/api/test_fuzz.py).", "",
-             "| route | responses by status |", "|---|---|"]  # fmt: skip
+    lines = [
+        "## Fuzzing",
+        "",
+        f"Machine: {machine()}. Date: {today}. Command: `make fuzz` (schemathesis from the app's OpenAPI schema,",
+        f"{rep['examples_per_route']} generated requests per route on each of SQLite and PostgreSQL; {modes}).",
+        f"{total} requests, {errors5} server errors; every response passed the status-code, content-type,",
+        "header and body-schema checks, every schema-violating request was refused, and every schema-valid one",
+        "was accepted or refused only by a rule a schema cannot state (positive-data acceptance with those told",
+        "apart: a cross-field or physical rule, error type value_error; tests/app/api/test_fuzz.py).",
+        "",
+        "| route | responses by status |",
+        "|---|---|",
+    ]
     for op, codes in sorted(by_op.items()):
         lines.append(f"| {op} | " + ", ".join(f"{c}: {n}" for c, n in sorted(codes.items())) + " |")
     lines.append("")

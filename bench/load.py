@@ -26,9 +26,14 @@ CLIENTS, EACH = 16, 50
 def one(backend: str, root: Path) -> dict:
     data = root / backend
     data.mkdir(parents=True)
-    env = {"GSA_DATA_DIR": str(data), "GSA_DATABASE_URL": database_url(backend, data, root / "pg"),
-           "GSA_MODEL_DIR": str(DEFAULT_MODEL_DIR), "GSA_API_KEYS": ",".join(KEYS), "GSA_ORT_THREADS": "1",
-           "GSA_LOG_LEVEL": "warning"}  # fmt: skip
+    env = {
+        "GSA_DATA_DIR": str(data),
+        "GSA_DATABASE_URL": database_url(backend, data, root / "pg"),
+        "GSA_MODEL_DIR": str(DEFAULT_MODEL_DIR),
+        "GSA_API_KEYS": ",".join(KEYS),
+        "GSA_ORT_THREADS": "1",
+        "GSA_LOG_LEVEL": "warning",
+    }
     srv = Server(env, workers=2, log_path=root / f"{backend}.log").start()
     try:
         res = run_load(srv.url, KEYS, clients=CLIENTS, requests_each=EACH, frame_size=256)
@@ -42,8 +47,14 @@ def one(backend: str, root: Path) -> dict:
         srv.stop()
     errors5 = sum(n for s in res.statuses.values() for code, n in s.items() if code >= 500)
     writes = sum(len(v["plan"]) + len(v["estimate"]) for v in res.acked.values())
-    return {"res": res, "lost": lost, "dup": dup, "5xx": errors5, "writes": writes,
-            "locked": sum("locked" in e for e in res.errors)}  # fmt: skip
+    return {
+        "res": res,
+        "lost": lost,
+        "dup": dup,
+        "5xx": errors5,
+        "writes": writes,
+        "locked": sum("locked" in e for e in res.errors),
+    }
 
 
 def _rss_mb(pid: int) -> float:
@@ -66,8 +77,13 @@ def soak(root: Path, plans: int = 500) -> list[str]:
 
     data = root / "soak"
     data.mkdir(parents=True)
-    env = {"GSA_DATA_DIR": str(data), "GSA_MODEL_DIR": str(DEFAULT_MODEL_DIR), "GSA_API_KEYS": KEYS[0],
-           "GSA_ORT_THREADS": "1", "GSA_LOG_LEVEL": "warning"}  # fmt: skip
+    env = {
+        "GSA_DATA_DIR": str(data),
+        "GSA_MODEL_DIR": str(DEFAULT_MODEL_DIR),
+        "GSA_API_KEYS": KEYS[0],
+        "GSA_ORT_THREADS": "1",
+        "GSA_LOG_LEVEL": "warning",
+    }
     srv = Server(env, workers=1, log_path=root / "soak.log").start()
     marks = {}
     try:
@@ -90,34 +106,45 @@ def soak(root: Path, plans: int = 500) -> list[str]:
         srv.stop()
     steps = sorted(marks)
     return [
-        "### Soak and held connections", "",
+        "### Soak and held connections",
+        "",
         f"One worker, {plans} one-day plans in a row after 20 to warm up (resident memory of the server process):",
         ", ".join(f"{marks[s]:.0f} MB after {s}" for s in steps)
         + f"; growth {marks[steps[-1]] - marks[steps[0]]:.1f} MB (goal: under 50 MB).",
         f"With 1,000 idle connections held, `/healthz` answered {'200' if ok else 'not 200'} in {held_ms:.0f} ms"
-        " (idle sockets are closed after GSA_HEADER_TIMEOUT_S, 10 s).", "",
-    ]  # fmt: skip
+        " (idle sockets are closed after GSA_HEADER_TIMEOUT_S, 10 s).",
+        "",
+    ]
 
 
 def main() -> None:
     today = datetime.now(UTC).strftime("%Y-%m-%d")
-    lines = ["## Load", "",
-             f"Machine: {machine()}. Date: {today}. Command: `make load` (bench/load.py).",
-             f"`gsa serve --workers 2`, shipped models, 256 x 256 frames, {CLIENTS} concurrent clients x {EACH} mixed requests",
-             "(15 % one-day plans, 30 % single estimates, 5 % 4-frame batches, 15 % plan listings, 15 % estimate listings,",
-             "15 % reads of the client's own records, 5 % scenes). Every acknowledged write is read back afterwards.",
-             "On 2 cores the model and planner work saturates the machine, so writes queue (one estimate alone: the raw two-model time",
-             "under 'Estimation service'); uploads run in worker threads, so reads and listings are still answered meanwhile.", ""]  # fmt: skip
+    lines = [
+        "## Load",
+        "",
+        f"Machine: {machine()}. Date: {today}. Command: `make load` (bench/load.py).",
+        f"`gsa serve --workers 2`, shipped models, 256 x 256 frames, {CLIENTS} concurrent clients x {EACH} mixed requests",
+        "(15 % one-day plans, 30 % single estimates, 5 % 4-frame batches, 15 % plan listings, 15 % estimate listings,",
+        "15 % reads of the client's own records, 5 % scenes). Every acknowledged write is read back afterwards.",
+        "On 2 cores the model and planner work saturates the machine, so writes queue (one estimate alone: the raw two-model time",
+        "under 'Estimation service'); uploads run in worker threads, so reads and listings are still answered meanwhile.",
+        "",
+    ]
     with tempfile.TemporaryDirectory() as tmp:
         for backend in ("sqlite", "postgresql"):
             print(f"load: {backend} ...", flush=True)
             r = one(backend, Path(tmp))
             res = r["res"]
-            lines += [f"### {backend}", "",
-                      f"{CLIENTS * EACH} requests in {res.wall_s:.1f} s ({CLIENTS * EACH / res.wall_s:.1f} requests/s); "
-                      f"{r['writes']} acknowledged writes: {r['lost']} lost, {r['dup']} duplicated; {r['5xx']} server errors; "
-                      f"{r['locked']} 'database is locked' seen by a client; {len(res.errors)} client-side errors.", "",
-                      "| request | n | p50 | p95 | p99 | max |", "|---|---|---|---|---|---|"]  # fmt: skip
+            lines += [
+                f"### {backend}",
+                "",
+                f"{CLIENTS * EACH} requests in {res.wall_s:.1f} s ({CLIENTS * EACH / res.wall_s:.1f} requests/s); "
+                f"{r['writes']} acknowledged writes: {r['lost']} lost, {r['dup']} duplicated; {r['5xx']} server errors; "
+                f"{r['locked']} 'database is locked' seen by a client; {len(res.errors)} client-side errors.",
+                "",
+                "| request | n | p50 | p95 | p99 | max |",
+                "|---|---|---|---|---|---|",
+            ]
             for op, p in res.percentiles().items():
                 lines.append(
                     f"| {op} | {p['n']} | {p['p50_ms']:.0f} ms | {p['p95_ms']:.0f} ms | {p['p99_ms']:.0f} ms | {p['max_ms']:.0f} ms |"

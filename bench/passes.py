@@ -29,6 +29,7 @@ import numpy as np
 from app.schemas import PAPER_EXAMPLE, AccessCreate
 from app.services import estimation as svc
 from app.services import passes as pass_svc
+from app.services import uploads as upload_svc
 from app.services.planning import run_access
 from bench.common import machine
 from bench.sections import replace_section
@@ -50,8 +51,9 @@ def _log(msg: str) -> None:
 
 
 def _windows() -> list[dict[str, Any]]:
-    req = AccessCreate.model_validate({"target": PAPER_EXAMPLE["target"],
-                                       "ground_station": PAPER_EXAMPLE["ground_station"], "duration_days": 3})  # fmt: skip
+    req = AccessCreate.model_validate(
+        {"target": PAPER_EXAMPLE["target"], "ground_station": PAPER_EXAMPLE["ground_station"], "duration_days": 3}
+    )
     return [w for w in run_access(req)["access_windows"] if w["max_elevation_deg"] >= 10.0]
 
 
@@ -60,13 +62,22 @@ def one_pass(est: Any, checker: Any, window: dict[str, Any], opts: pass_svc.Pass
     rng = np.random.default_rng(opts.seed)
     meta = pass_svc.pass_geometry_frames(PAPER_EXAMPLE, window, opts, rng)
     images, _ = pass_svc.render_pass(meta, opts, rng)
-    uploads = [svc.Upload(f"frame {k}", "", im.shape, "float32", im.astype(np.float64)) for k, im in enumerate(images)]
+    uploads = [
+        upload_svc.Upload(f"frame {k}", "", im.shape, "float32", im.astype(np.float64)) for k, im in enumerate(images)
+    ]
     t0 = time.perf_counter()
-    frames, _, checks, _ = svc.check_frames(est=est, checker=checker, uploads=uploads, resample=False,
-                                            normalised=True, cells_m=None, search=False)  # fmt: skip
-    result, checks = pass_svc.fuse_pass(est=est, checker=checker, frames=frames, checks=checks,
-                                        plan_request=PAPER_EXAMPLE, observed_at=[f["observed_at"] for f in meta],
-                                        names=[u.name for u in uploads])  # fmt: skip
+    frames, _, checks, _ = svc.check_frames(
+        est=est, checker=checker, uploads=uploads, resample=False, normalised=True, cells_m=None, search=False
+    )
+    result, checks = pass_svc.fuse_pass(
+        est=est,
+        checker=checker,
+        frames=frames,
+        checks=checks,
+        plan_request=PAPER_EXAMPLE,
+        observed_at=[f["observed_at"] for f in meta],
+        names=[u.name for u in uploads],
+    )
 
     seconds = time.perf_counter() - t0
     inside = [k for k, f in enumerate(meta) if max(abs(a) for a in f["attitude_deg"]) <= 45.0]
@@ -82,8 +93,9 @@ def one_pass(est: Any, checker: Any, window: dict[str, Any], opts: pass_svc.Pass
     if opts.spin_deg_s:  # carry the truth from the nearest frame to the answer's moment
         axis = np.asarray(opts.spin_axis, float) / np.linalg.norm(opts.spin_axis)
         truth = truth @ pass_svc.spin_rotation(axis, opts.spin_deg_s, np.array([dt]))[0]
-    err_axes = np.abs((np.array(result["attitude_lvlh"]["euler_zyx_deg"]) - np.array(euler_from_matrix(truth)) + 180)
-                      % 360 - 180)  # fmt: skip
+    err_axes = np.abs(
+        (np.array(result["attitude_lvlh"]["euler_zyx_deg"]) - np.array(euler_from_matrix(truth)) + 180) % 360 - 180
+    )
     return {
         "frames": len(meta),
         "inside": len(inside),
@@ -111,8 +123,10 @@ def main() -> int:
         w = windows[int(rng.integers(len(windows)))]
         still.append(one_pass(est, checker, w, pass_svc.PassOptions(seed=10_000 + i)))
         r = still[-1]
-        _log(f"still pass {i + 1}/{N_PASSES}: {r['frames']} frames ({r['inside']} in range, {r['used']} used), "
-             f"fused {r['fused']:.3f} deg, single median {r['single_median']:.3f} deg, {r['seconds']:.1f} s")  # fmt: skip
+        _log(
+            f"still pass {i + 1}/{N_PASSES}: {r['frames']} frames ({r['inside']} in range, {r['used']} used), "
+            f"fused {r['fused']:.3f} deg, single median {r['single_median']:.3f} deg, {r['seconds']:.1f} s"
+        )
     for i in range(N_SPINNING):
         rng = np.random.default_rng(3026_12 + i)
         w = windows[int(rng.integers(len(windows)))]
@@ -125,8 +139,10 @@ def main() -> int:
             spin.append({"sense": sense, "stable": None, "rate": math.nan, "frames": 0, "used": 0})
             continue
         r = spin[-1]
-        _log(f"spinning pass {i + 1}/{N_SPINNING} ({sense * SPIN_DEG_S:+.1f} deg/s): {r['frames']} frames, "
-             f"{r['used']} used, stable={r['stable']}, rate {r['rate']:.3f} deg/s")  # fmt: skip
+        _log(
+            f"spinning pass {i + 1}/{N_SPINNING} ({sense * SPIN_DEG_S:+.1f} deg/s): {r['frames']} frames, "
+            f"{r['used']} used, stable={r['stable']}, rate {r['rate']:.3f} deg/s"
+        )
     # Throughput: a 30-frame pass (sub-apertures 4 deg apart over the highest pass).
     top = max(windows, key=lambda w: w["max_elevation_deg"])
     thirty = one_pass(est, checker, top, pass_svc.PassOptions(seed=99, step_deg=4.0, max_frames=30))
@@ -183,8 +199,11 @@ def write(still: list[dict[str, Any]], spin: list[dict[str, Any]], thirty: dict[
     ]
     for s, rows in by_sense.items():
         det = [r for r in rows if r["stable"] is False]
-        lines.append(f"- sense {s:+.0f}: {len(det)} of {len(rows)} called turning, rates "
-                     + ", ".join(f"{r['rate']:.2f}" for r in det) + " deg/s")  # fmt: skip
+        lines.append(
+            f"- sense {s:+.0f}: {len(det)} of {len(rows)} called turning, rates "
+            + ", ".join(f"{r['rate']:.2f}" for r in det)
+            + " deg/s"
+        )
     lines += [
         "",
         f"Throughput: a {thirty['frames']}-frame pass was estimated, fitted and fused in **{thirty['seconds']:.1f} s** "
@@ -220,8 +239,9 @@ def geometry_figure(window: dict[str, Any], path: Path = GEOMETRY_PLOT) -> None:
         o = meta[k]["observation_in_lvlh"]
         for j, colour in enumerate(("tab:red", "tab:green", "tab:blue")):
             ax.quiver(*o[:, 0], *(0.35 * o[:, j]), color=colour, lw=1, arrow_length_ratio=0.2)
-    ax.set_title("line of sight of each frame in LVLH (dots: time);\nobservation axes X red, Y green, Z blue",
-                 fontsize=9)  # fmt: skip
+    ax.set_title(
+        "line of sight of each frame in LVLH (dots: time);\nobservation axes X red, Y green, Z blue", fontsize=9
+    )
     ax.set_box_aspect((1, 1, 1))
     ax.view_init(elev=25, azim=-150)
     ax.set_axis_off()
@@ -233,8 +253,11 @@ def geometry_figure(window: dict[str, Any], path: Path = GEOMETRY_PLOT) -> None:
     ax2.axhspan(-45, 45, color="k", alpha=0.06, label="the networks' range")
     ax2.set_xlabel("seconds into the pass")
     ax2.set_ylabel("attitude in the frame's observation frame (deg)")
-    ax2.set_title(f"a target still in LVLH, seen at 0 / 0 / 0 mid-pass: {len(meta)} frames of 5.1 deg;\n"
-                  f"pass culminating at {window['max_elevation_deg']:.0f} deg", fontsize=9)  # fmt: skip
+    ax2.set_title(
+        f"a target still in LVLH, seen at 0 / 0 / 0 mid-pass: {len(meta)} frames of 5.1 deg;\n"
+        f"pass culminating at {window['max_elevation_deg']:.0f} deg",
+        fontsize=9,
+    )
     ax2.grid(alpha=0.3)
     ax2.legend(fontsize=8)
     fig.tight_layout()

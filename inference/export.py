@@ -24,9 +24,9 @@ import numpy as np
 import torch
 
 from inference.errors import InferenceError, ModelFileError, module_main
+from inference.files import sha256_file, write_json
 from inference.frames import ANGLE_SCALE_DEG
-from inference.networks.build import build_models, get_config
-from inference.runtime import sha256_file
+from inference.networks.build import build_models, config_from_dict
 
 OPSET = 17
 PARITY_RTOL = 1e-4  # relative difference, float32, ORT against torch
@@ -61,7 +61,7 @@ def load_trained(run_dir: str | Path) -> tuple[torch.nn.Module, torch.nn.Module,
         models.append(ck["state_dict"])
         if name == "swin.pt":
             enhance = bool(ck.get("enhance", True))
-    cfg = get_config(cfg_dict["name"], **{k: v for k, v in cfg_dict.items() if k != "name"})
+    cfg = config_from_dict(cfg_dict)
     unet, swin = build_models(cfg)
     unet.load_state_dict(models[0])
     swin.load_state_dict(models[1])
@@ -76,9 +76,15 @@ def export_onnx(model: torch.nn.Module, path: Path, img_size: int) -> None:
 
     dummy = torch.zeros(2, 1, img_size, img_size)
     torch.onnx.export(
-        model, (dummy,), str(path), input_names=["frame"], output_names=["out"], opset_version=OPSET,
-        dynamic_axes={"frame": {0: "batch"}, "out": {0: "batch"}}, dynamo=False,
-    )  # fmt: skip
+        model,
+        (dummy,),
+        str(path),
+        input_names=["frame"],
+        output_names=["out"],
+        opset_version=OPSET,
+        dynamic_axes={"frame": {0: "batch"}, "out": {0: "batch"}},
+        dynamo=False,
+    )
     onnx.checker.check_model(onnx.load(str(path)), full_check=True)
 
 
@@ -133,8 +139,15 @@ def quantize_int8(src: Path, dst: Path, frames: np.ndarray) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         pre = Path(tmp) / "pre.onnx"
         quant_pre_process(str(src), str(pre))  # shape inference and graph fusions, as the quantiser asks
-        quantize_static(str(pre), str(dst), Frames(), quant_format=QuantFormat.QDQ, per_channel=True,
-                        activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8)  # fmt: skip
+        quantize_static(
+            str(pre),
+            str(dst),
+            Frames(),
+            quant_format=QuantFormat.QDQ,
+            per_channel=True,
+            activation_type=QuantType.QUInt8,
+            weight_type=QuantType.QInt8,
+        )
     model = onnx.load(str(dst))
     onnx.checker.check_model(model, full_check=True)
     return sum(n.op_type == "QuantizeLinear" for n in model.graph.node)
@@ -152,9 +165,13 @@ def parity(model: torch.nn.Module, path: Path, frames: np.ndarray) -> float:
 
 
 def export(
-    run_dir: str | Path, out_dir: str | Path, frames: np.ndarray | None = None, extra: dict[str, Any] | None = None,
-    half: bool = False, int8: bool = False,
-) -> dict[str, Any]:  # fmt: skip
+    run_dir: str | Path,
+    out_dir: str | Path,
+    frames: np.ndarray | None = None,
+    extra: dict[str, Any] | None = None,
+    half: bool = False,
+    int8: bool = False,
+) -> dict[str, Any]:
     """Export a training run's networks to ``out_dir`` with a model card; return the card.
 
     Parity is checked on random frames and on up to PARITY_FRAMES of ``frames`` (real ones,
@@ -190,9 +207,17 @@ def export(
 
 
 def _export_into(
-    out: Path, unet: torch.nn.Module, swin: torch.nn.Module, cfg: dict[str, Any], enhance: bool, run_dir: Path,
-    frames: np.ndarray | None, extra: dict[str, Any] | None, half: bool, int8: bool,
-) -> dict[str, Any]:  # fmt: skip
+    out: Path,
+    unet: torch.nn.Module,
+    swin: torch.nn.Module,
+    cfg: dict[str, Any],
+    enhance: bool,
+    run_dir: Path,
+    frames: np.ndarray | None,
+    extra: dict[str, Any] | None,
+    half: bool,
+    int8: bool,
+) -> dict[str, Any]:
     """Write both ONNX files and the model card into ``out``, checking each step; return the card."""
     size = cfg["img_size"]
     rng = np.random.default_rng(0)
@@ -216,8 +241,10 @@ def _export_into(
             entry["half_max_rel_diff"] = max(parity(model, path, t) for t in inputs)
             entry["weights"] = "float16 (computed in float32)"
             if entry["half_max_rel_diff"] > HALF_RTOL:
-                raise InferenceError(f"{path.name}: float16 weights change the output by {entry['half_max_rel_diff']:.2e} "
-                                     f"(> {HALF_RTOL}); export without --half")  # fmt: skip
+                raise InferenceError(
+                    f"{path.name}: float16 weights change the output by {entry['half_max_rel_diff']:.2e} "
+                    f"(> {HALF_RTOL}); export without --half"
+                )
         report[role] = {"file": path.name, "sha256": sha256_file(path), "bytes": path.stat().st_size, **entry}
     training_path = Path(run_dir) / "training.json"
     training = json.loads(training_path.read_text()) if training_path.is_file() else {}
@@ -231,16 +258,29 @@ def _export_into(
         "enhance": bool(enhance),
         "config": cfg,
         "files": {k: report[k] for k in ("unetpp", "swin")},
-        "training": {k: training.get(k) for k in ("mode", "unet_epochs", "unet_from", "swin_from", "enhance", "seed", "complete", "data",
-                                                  "hardware", "train_seconds")},
+        "training": {
+            k: training.get(k)
+            for k in (
+                "mode",
+                "unet_epochs",
+                "unet_from",
+                "swin_from",
+                "enhance",
+                "seed",
+                "complete",
+                "data",
+                "hardware",
+                "train_seconds",
+            )
+        },
         **({"finetune": training["finetune"]} if "finetune" in training else {}),
         "final_epoch": (training.get("history") or [{}])[-1],
         # The radar and target the training frames were simulated with: what the fit renders.
         "radar": (training.get("data") or {}).get("radar"),
         "target": (training.get("data") or {}).get("target"),
         **(extra or {}),
-    }  # fmt: skip
-    (out / "model_card.json").write_text(json.dumps(card, indent=2))
+    }
+    write_json(out / "model_card.json", card)
     return card
 
 
@@ -274,10 +314,12 @@ def int8_unet(path: Path, swin: torch.nn.Module, unet: torch.nn.Module, frames: 
         "int8_calibration_frames": len(calib),
         "int8_check_frames": len(check),
         "int8_enhanced_mean_abs_diff": float(np.abs(enh8 - enh.numpy()).mean()),
-        "int8_angle_change_deg": {"mean": mean.round(4).tolist(),
-                                  "p95": np.percentile(change, 95, axis=0).round(4).tolist(),
-                                  "max": change.max(axis=0).round(4).tolist()},
-    }  # fmt: skip
+        "int8_angle_change_deg": {
+            "mean": mean.round(4).tolist(),
+            "p95": np.percentile(change, 95, axis=0).round(4).tolist(),
+            "max": change.max(axis=0).round(4).tolist(),
+        },
+    }
 
 
 def calibration_frames(data_dir: str | Path, n: int) -> tuple[np.ndarray, str]:
@@ -302,12 +344,19 @@ def calibration_frames(data_dir: str | Path, n: int) -> tuple[np.ndarray, str]:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--run", required=True, help="training run directory (unetpp.pt, swin.pt)")
     p.add_argument("--out", help="output directory (default: the package's shipped models)")
-    p.add_argument("--half", action="store_true",
-                   help="store the large weights in float16, computed in float32 (half the file size)")  # fmt: skip
-    p.add_argument("--int8", action="store_true",
-                   help="quantise UNet++ to int8, calibrated on --frames (about 2x faster on the CPU)")  # fmt: skip
-    p.add_argument("--frames", metavar="DATA",
-                   help="data set whose first training frames check parity (and calibrate --int8)")  # fmt: skip
+    p.add_argument(
+        "--half",
+        action="store_true",
+        help="store the large weights in float16, computed in float32 (half the file size)",
+    )
+    p.add_argument(
+        "--int8",
+        action="store_true",
+        help="quantise UNet++ to int8, calibrated on --frames (about 2x faster on the CPU)",
+    )
+    p.add_argument(
+        "--frames", metavar="DATA", help="data set whose first training frames check parity (and calibrate --int8)"
+    )
     p.add_argument("--n-frames", type=int, default=256, help="how many of its frames (default 256)")
 
 
@@ -322,8 +371,14 @@ def run(args: argparse.Namespace) -> int:
     if args.frames:
         frames, sha = calibration_frames(args.frames, args.n_frames)
         options["frames"] = {"data": str(args.frames), "content_sha256": sha, "first_training_frames": len(frames)}
-    card = export(args.run, args.out or DEFAULT_MODEL_DIR, frames=frames, half=args.half, int8=args.int8,
-                  extra={"export_options": options})  # fmt: skip
+    card = export(
+        args.run,
+        args.out or DEFAULT_MODEL_DIR,
+        frames=frames,
+        half=args.half,
+        int8=args.int8,
+        extra={"export_options": options},
+    )
     for role, f in card["files"].items():
         extra = f" (float16 weights: {f['half_max_rel_diff']:.1e})" if "half_max_rel_diff" in f else ""
         if "int8_angle_change_deg" in f:

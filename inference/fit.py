@@ -280,8 +280,13 @@ class FitOptions:
     coarse: bool = False  # fit the 4x-pooled coverage instead (Renderer.coverage): smooth but biased, for far starts
 
 
-def fit(renderer: Renderer, enhanced: Vec, starts: dict[str, Vec], options: FitOptions | None = None,
-        prior_at: Vec | None = None) -> list[Fit]:  # fmt: skip
+def fit(
+    renderer: Renderer,
+    enhanced: Vec,
+    starts: dict[str, Vec],
+    options: FitOptions | None = None,
+    prior_at: Vec | None = None,
+) -> list[Fit]:
     """Refine each start (name -> (z, y, x) deg) against the enhanced frame; return the fits, best first.
 
     The prior pulls each hypothesis toward its own start, or toward ``prior_at`` for all of
@@ -385,8 +390,9 @@ def silhouette_iou(renderer: Renderer, angles_deg: Vec, enhanced: Vec) -> Vec:
     return _hard_ious(renderer.occupancy(angles, win), win, sil)
 
 
-def curvature(renderer: Renderer, enhanced: Vec, angles_deg: Vec,
-              step_deg: float = CURVATURE_STEP_DEG) -> tuple[Vec, float, float]:  # fmt: skip
+def curvature(
+    renderer: Renderer, enhanced: Vec, angles_deg: Vec, step_deg: float = CURVATURE_STEP_DEG
+) -> tuple[Vec, float, float]:
     """Return the Hessian (per deg^2) of 1 - soft IoU at an attitude, the soft IoU and the hard IoU there.
 
     The Hessian is the quadratic's through the 10-point stencil at ``step_deg``; the hard
@@ -457,13 +463,20 @@ class Library:
     totals: Vec
 
     @staticmethod
-    def build(renderer: Renderer, step_deg: float = LIBRARY_STEP_DEG, half_range_deg: float = LIBRARY_HALF_RANGE_DEG,
-              batch: int = 128) -> Library:  # fmt: skip
+    def build(
+        renderer: Renderer,
+        step_deg: float = LIBRARY_STEP_DEG,
+        half_range_deg: float = LIBRARY_HALF_RANGE_DEG,
+        batch: int = 128,
+    ) -> Library:
         g = np.arange(-half_range_deg, half_range_deg + 1e-9, step_deg)
         angles = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
-        parts = [renderer.coverage(angles[k : k + batch]).reshape(-1, (renderer.shape[0] // COARSE_FACTOR)
-                                                                   * (renderer.shape[1] // COARSE_FACTOR))
-                 for k in range(0, len(angles), batch)]  # fmt: skip
+        parts = [
+            renderer.coverage(angles[k : k + batch]).reshape(
+                -1, (renderer.shape[0] // COARSE_FACTOR) * (renderer.shape[1] // COARSE_FACTOR)
+            )
+            for k in range(0, len(angles), batch)
+        ]
         sil = np.concatenate(parts)
         return Library(angles, sil.astype(np.float16), sil.sum(axis=1, dtype=np.float64))
 

@@ -157,21 +157,34 @@ def information_mean(rotations: Vec, infos: Vec, start: Vec) -> Vec:
     return np.asarray(a)
 
 
-def fuse(frames: list[PassFrame], agree_deg: float = 3.0, reject_sigma: float = 4.0, reject_floor_deg: float = 2.0,
-         spin_sigma: float = 4.0, min_rate_deg_s: float = 0.02, turning_chi2: float = 30.0,
-         shared_fraction: float | None = None) -> Fused:  # fmt: skip
+def fuse(
+    frames: list[PassFrame],
+    agree_deg: float = 3.0,
+    reject_sigma: float = 4.0,
+    reject_floor_deg: float = 2.0,
+    spin_sigma: float = 4.0,
+    min_rate_deg_s: float = 0.02,
+    turning_chi2: float = 30.0,
+    shared_fraction: float | None = None,
+) -> Fused:
     """Fuse a pass's frames into one body-to-LVLH attitude (see the module's text)."""
     shared_fraction = SHARED_FRACTION if shared_fraction is None else shared_fraction
     if len(frames) < 2:
         raise ValueError("a pass needs at least two frames to fuse")
     sigma = np.array([max(f.bound_deg, 1e-3) / Z90 for f in frames])
-    untrusted = {k: f"not trusted by its own checks ({f.why_not or 'see its quality'})"
-                 for k, f in enumerate(frames) if not f.trusted}  # fmt: skip
+    untrusted = {
+        k: f"not trusted by its own checks ({f.why_not or 'see its quality'})"
+        for k, f in enumerate(frames)
+        if not f.trusted
+    }
     pool = [k for k in range(len(frames)) if k not in untrusted]
     if len(pool) < 2:  # too few trusted frames: fuse them all, and say so through their quality
         pool, untrusted = list(range(len(frames))), {}
-    infos = _informations(frames) if all(f.los is not None and f.los_rate is not None and f.axis_bounds_deg
-                                         for f in frames) else None  # fmt: skip
+    infos = (
+        _informations(frames)
+        if all(f.los is not None and f.los_rate is not None and f.axis_bounds_deg for f in frames)
+        else None
+    )
     # 1. The best-supported candidate seeds the mean.
     best_support, seed = -1.0, frames[pool[0]].candidates[0]
     for k in pool:
@@ -301,8 +314,14 @@ class Turning:
 def skew(w: Vec) -> Vec:
     """Return the cross-product matrices [..., 3, 3] of vectors [..., 3]."""
     z = np.zeros(w.shape[:-1])
-    return np.stack([np.stack([z, -w[..., 2], w[..., 1]], -1), np.stack([w[..., 2], z, -w[..., 0]], -1),
-                     np.stack([-w[..., 1], w[..., 0], z], -1)], -2)  # fmt: skip
+    return np.stack(
+        [
+            np.stack([z, -w[..., 2], w[..., 1]], -1),
+            np.stack([w[..., 2], z, -w[..., 0]], -1),
+            np.stack([-w[..., 1], w[..., 0], z], -1),
+        ],
+        -2,
+    )
 
 
 def so3_exp(w: Vec) -> Vec:

@@ -92,27 +92,23 @@ launch)
         python3 -m inference.training.pipeline join --pieces "$GSA_GPU_FROM" --run "$W/from" || exit 2
         extra+=(--from "$W/from")
     fi
+    # Each run is a recipe (inference/training/options.py) plus machine knobs; the GSA_GPU_COMPACT_* overrides
+    # exist only for continuing the shipped weights with the rest of a schedule.
     [ -n "${GSA_GPU_COMPACT_LR:-}" ] && extra+=(--lr "$GSA_GPU_COMPACT_LR")
+    [ -n "${GSA_GPU_COMPACT_EPOCHS:-}" ] && extra+=(--epochs "$GSA_GPU_COMPACT_EPOCHS")
     [ "${GSA_GPU_COMPILE:-0}" = 1 ] && extra+=(--compile)
-    setsid nohup python3 -m inference.training.pipeline run --work "$W" --name compact --config compact --n "$N" \
-        --batch-size 32 --epochs "${GSA_GPU_COMPACT_EPOCHS:-20}" --lr-decay "${GSA_GPU_COMPACT_DECAY:-0.9}" \
-        --max-minutes "$MINUTES" "${EMA[@]}" "${extra[@]}" >"$W/compact.log" 2>&1 </dev/null &
-    echo $! >"$W/compact.pid"
-    if [ "$SECOND" = paper ]; then
-        setsid nohup python3 -m inference.training.pipeline run --work "$W" --name paper --config paper --n "$N" \
-            --max-train-frames 4000 --max-minutes "$MINUTES" >"$W/paper.log" 2>&1 </dev/null &
-        echo $! >"$W/paper.pid"
-    elif [ "$SECOND" = noenhance ]; then
-        setsid nohup python3 -m inference.training.pipeline run --work "$W" --name noenhance --config compact --n "$N" \
-            --no-enhance --batch-size 32 --epochs "${GSA_GPU_NOENHANCE_EPOCHS:-20}" --lr-decay 0.9 \
-            --max-minutes "$MINUTES" "${EMA[@]}" >"$W/noenhance.log" 2>&1 </dev/null &
-        echo $! >"$W/noenhance.pid"
-    elif [ "$SECOND" = twostage ]; then
-        setsid nohup python3 -m inference.training.pipeline run --work "$W" --name twostage --config compact --n "$N" \
-            --mode two-stage --batch-size 32 --epochs "${GSA_GPU_TWOSTAGE_EPOCHS:-20}" --lr-decay 0.9 \
-            --max-minutes "$MINUTES" >"$W/twostage.log" 2>&1 </dev/null &
-        echo $! >"$W/twostage.pid"
-    fi
+    launch_run() {  # NAME RECIPE [FLAGS...]: one recipe in the background, its log and pid in $W
+        local name=$1 recipe=$2; shift 2
+        setsid nohup python3 -m inference.training.pipeline run --work "$W" --name "$name" --recipe "$recipe" \
+            --n "$N" --max-minutes "$MINUTES" "$@" >"$W/$name.log" 2>&1 </dev/null &
+        echo $! >"$W/$name.pid"
+    }
+    launch_run compact shipped "${EMA[@]}" "${extra[@]}"
+    case "$SECOND" in
+        paper) launch_run paper paper --max-train-frames 4000 ;;
+        noenhance) launch_run noenhance noenhance "${EMA[@]}" ;;
+        twostage) launch_run twostage twostage ;;
+    esac
     sleep 90; for r in $RUNS; do grep -sE 's/step' "$W/$r.log" | tail -2; done
     watch "${2:-560}"; rc=$?
     nvidia-smi --query-gpu=utilization.gpu,memory.used --format=csv

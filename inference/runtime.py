@@ -17,7 +17,6 @@ of eight competing batches of 1, and an idle one adds no wait at all.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import threading
 import time
@@ -29,17 +28,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from inference.errors import ModelFileError
+from inference.files import sha256_file
 
 DEFAULT_MODEL_DIR = Path(__file__).resolve().parent / "models" / "shipped"
 DEFAULT_RUN_BATCH = 4
-
-
-def sha256_file(path: str | Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def read_card(model_dir: str | Path) -> dict[str, Any]:
@@ -232,8 +224,11 @@ class Estimator:
                 n = len(j.frames)
                 if res is not None:
                     share = n / max(len(frames), 1)
-                    j.result = Estimate(res.angles_deg[k : k + n], res.enhanced[k : k + n],
-                                        {stage: t * share for stage, t in res.timings_s.items()})  # fmt: skip
+                    j.result = Estimate(
+                        res.angles_deg[k : k + n],
+                        res.enhanced[k : k + n],
+                        {stage: t * share for stage, t in res.timings_s.items()},
+                    )
                 j.error = error
                 j.done = True
                 k += n

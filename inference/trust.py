@@ -37,6 +37,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from inference.errors import ModelFileError
+from inference.files import read_json, write_json
 from inference.fit import (
     Fit,
     FitOptions,
@@ -83,7 +85,7 @@ class Calibration:
 
     @staticmethod
     def load(path: str | Path) -> Calibration:
-        raw = json.loads(Path(path).read_text())
+        raw = read_json(path, ModelFileError, "model")
         known = {k: v for k, v in raw.items() if k in Calibration.__dataclass_fields__}
         for k in ("median_range", "scale", "floor_deg", "network_bound_deg"):
             if k in known:
@@ -91,7 +93,7 @@ class Calibration:
         return Calibration(**known)
 
     def write(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(asdict(self), indent=2) + "\n")
+        write_json(path, asdict(self))
 
 
 @dataclass(frozen=True)
@@ -145,8 +147,13 @@ def raw_uncertainty(hessian: Vec, soft_iou: float) -> Vec:
 class Checker:
     """The fit and the checks for one target and radar."""
 
-    def __init__(self, model: TargetModel, radar: Radar | None = None, calibration: Calibration | None = None,
-                 networks: bool = True) -> None:  # fmt: skip
+    def __init__(
+        self,
+        model: TargetModel,
+        radar: Radar | None = None,
+        calibration: Calibration | None = None,
+        networks: bool = True,
+    ) -> None:
         self.model = model
         self.radar = radar or Radar()
         self.renderer = Renderer(model, self.radar)
@@ -160,8 +167,14 @@ class Checker:
             self._library = Library.build(self.renderer)
         return self._library
 
-    def check(self, frame: NDArray[np.floating], enhanced: NDArray[np.floating], network_deg: NDArray[np.floating] | None,
-              refine: bool = True, search: bool = True) -> Checked:  # fmt: skip
+    def check(
+        self,
+        frame: NDArray[np.floating],
+        enhanced: NDArray[np.floating],
+        network_deg: NDArray[np.floating] | None,
+        refine: bool = True,
+        search: bool = True,
+    ) -> Checked:
         """Fit (unless ``refine`` is off), bound, and check one frame; ``network_deg`` None means no networks.
 
         ``search`` off skips the library search where Swin's answer does not fit (a pass, whose
@@ -205,8 +218,15 @@ class Checker:
                     and gap <= ALTERNATIVE_MARGIN
                     and all(geodesic_deg(f.angles_deg, np.array(a.angles_deg))[0] >= DISTINCT_DEG for a in alternatives)
                 ):
-                    alternatives.append(Alternative(tuple(float(x) for x in f.angles_deg),  # type: ignore[arg-type]
-                                                    self._hard_iou(f.angles_deg, enh), float(gap), dist, f.start))  # fmt: skip
+                    alternatives.append(
+                        Alternative(
+                            tuple(float(x) for x in f.angles_deg),  # type: ignore[arg-type]
+                            self._hard_iou(f.angles_deg, enh),
+                            float(gap),
+                            dist,
+                            f.start,
+                        )
+                    )
         if net is not None:
             features["moved_deg"] = float(geodesic_deg(angles, net)[0])
         reasons = self._reasons(features, angles, bound, alternatives, net is not None and refine)
@@ -215,13 +235,19 @@ class Checker:
 
     def _by_brightness(self, frame: NDArray[np.floating], enhanced: Vec, fits: list[Fit]) -> list[Fit]:
         """Where a distinct attitude's silhouette fits within ``BRIGHTNESS_MARGIN``, let the bright parts choose."""
-        rivals = [f for f in fits[1:] if fits[0].iou - f.iou < BRIGHTNESS_MARGIN
-                  and geodesic_deg(f.angles_deg, fits[0].angles_deg)[0] >= DISTINCT_DEG]  # fmt: skip
+        rivals = [
+            f
+            for f in fits[1:]
+            if fits[0].iou - f.iou < BRIGHTNESS_MARGIN
+            and geodesic_deg(f.angles_deg, fits[0].angles_deg)[0] >= DISTINCT_DEG
+        ]
         if not rivals:
             return fits
         mask = enhanced > 0.5
-        score = {id(f): brightness_agreement(self.renderer, np.asarray(frame, float), f.angles_deg, mask)
-                 for f in [fits[0], *rivals]}  # fmt: skip
+        score = {
+            id(f): brightness_agreement(self.renderer, np.asarray(frame, float), f.angles_deg, mask)
+            for f in [fits[0], *rivals]
+        }
         winner = max([fits[0], *rivals], key=lambda f: score[id(f)])
         return [winner, *[f for f in fits if f is not winner]]
 
@@ -234,8 +260,14 @@ class Checker:
     def _hard_iou(self, angles: Vec, enhanced: Vec) -> float:
         return float(silhouette_iou(self.renderer, angles, enhanced)[0])
 
-    def _reasons(self, features: dict[str, float], angles: Vec, bound: Vec, alternatives: list[Alternative],
-                 compare_network: bool) -> list[str]:  # fmt: skip
+    def _reasons(
+        self,
+        features: dict[str, float],
+        angles: Vec,
+        bound: Vec,
+        alternatives: list[Alternative],
+        compare_network: bool,
+    ) -> list[str]:
         cal = self.calibration
         out = []
         lo, hi = cal.median_range
@@ -308,9 +340,15 @@ def fit_bounds(raw: Vec, errors: Vec, coverage: float = 0.9) -> tuple[float, flo
     return best[1], best[2]
 
 
-def calibrate(checker: Checker, frames: NDArray[np.floating], enhanced: NDArray[np.floating],
-              network_deg: NDArray[np.floating], truth: Vec, made: dict[str, Any] | None = None,
-              progress: bool = False) -> tuple[Calibration, list[Checked]]:  # fmt: skip
+def calibrate(
+    checker: Checker,
+    frames: NDArray[np.floating],
+    enhanced: NDArray[np.floating],
+    network_deg: NDArray[np.floating],
+    truth: Vec,
+    made: dict[str, Any] | None = None,
+    progress: bool = False,
+) -> tuple[Calibration, list[Checked]]:
     """Fit the thresholds and the uncertainty model on fresh good frames with known attitudes.
 
     Thresholds sit just outside what the good frames show (1st/99th percentiles with a
@@ -319,8 +357,15 @@ def calibrate(checker: Checker, frames: NDArray[np.floating], enhanced: NDArray[
     """
     import sys
 
-    loose = Calibration(target=checker.model.name, iou_min=0.0, doubt_max=math.inf, median_range=(0.0, 1.0),
-                        moved_max_deg=math.inf, angle_limit_deg=math.inf, max_bound_deg=math.inf)  # fmt: skip
+    loose = Calibration(
+        target=checker.model.name,
+        iou_min=0.0,
+        doubt_max=math.inf,
+        median_range=(0.0, 1.0),
+        moved_max_deg=math.inf,
+        angle_limit_deg=math.inf,
+        max_bound_deg=math.inf,
+    )
     checker.calibration = loose
     checks = []
     for k in range(len(frames)):
@@ -339,7 +384,7 @@ def calibrate(checker: Checker, frames: NDArray[np.floating], enhanced: NDArray[
         median_range=(
             round(float(np.quantile(feats["median"], 0.005)) * 0.8, 4),
             round(float(np.quantile(feats["median"], 0.995)) + 0.05, 4),
-        ),  # fmt: skip
+        ),
         moved_max_deg=round(max(float(np.quantile(feats["moved_deg"], 0.99)) * 1.5, 3.0), 3),
         scale=tuple(round(p[0], 4) for p in pairs),  # type: ignore[arg-type]
         floor_deg=tuple(round(p[1], 4) for p in pairs),  # type: ignore[arg-type]
@@ -359,8 +404,13 @@ class Checkers:
     other from the library.
     """
 
-    def __init__(self, model_dir: str | Path, radar: Radar | None = None, trained_target: str = "tiangong-like",
-                 extra: TargetModel | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        model_dir: str | Path,
+        radar: Radar | None = None,
+        trained_target: str = "tiangong-like",
+        extra: TargetModel | None = None,
+    ) -> None:
         import threading
 
         from inference.simulation.targets import BUILTIN_TARGETS
@@ -429,10 +479,15 @@ def run(args: Any) -> int:
     print(f"calibrate: simulating {args.frames} fresh frames (seed {args.seed})", file=sys.stderr, flush=True)
     frames, truth, _ = good_frames(args.frames, args.seed, radar, builtin_target(target))
     res = est.estimate(frames)
-    made = {"command": f"gsa calibrate --frames {args.frames} --seed {args.seed}", "seed": args.seed,
-            "date": datetime.now(UTC).date().isoformat(), "models": est.identity}  # fmt: skip
-    cal, checks = calibrate(Checker(builtin_target(target), radar), frames, res.enhanced, res.angles_deg,
-                            truth, made, progress=True)  # fmt: skip
+    made = {
+        "command": f"gsa calibrate --frames {args.frames} --seed {args.seed}",
+        "seed": args.seed,
+        "date": datetime.now(UTC).date().isoformat(),
+        "models": est.identity,
+    }
+    cal, checks = calibrate(
+        Checker(builtin_target(target), radar), frames, res.enhanced, res.angles_deg, truth, made, progress=True
+    )
     out = Path(args.out) if args.out else model_dir / TRUST_FILE
     cal.write(out)
     flagged = np.mean([not c.quality.trusted for c in checks])
@@ -456,8 +511,13 @@ def card_radar_and_target(model_dir: str | Path, img_size: int = 256) -> tuple[R
     return radar, str(card.get("target") or DEFAULT_TARGET)
 
 
-def load_checkers(model_dir: str | Path, img_size: int = 256, target_model: str | Path | None = None,
-                  target_scale: float = 1.0, default_target: str | None = None) -> Checkers:  # fmt: skip
+def load_checkers(
+    model_dir: str | Path,
+    img_size: int = 256,
+    target_model: str | Path | None = None,
+    target_scale: float = 1.0,
+    default_target: str | None = None,
+) -> Checkers:
     """The service's targets: the built-in ones and an operator's mesh, checked now; the default one built now.
 
     Raises ModelFileError naming the file or the target when the mesh cannot be read, does

@@ -58,6 +58,11 @@ class AccessWindows:
         return int(self.rise_s.size)
 
 
+MAX_MASK_POINTS = 720
+# Saemundsson's refraction (Meeus, Astronomical Algorithms, eq. 16.4) is for 10 C and 1010 hPa.
+REFRACTION_CONDITIONS = "10 C, 1010 hPa (Saemundsson 1986)"
+
+
 def validate_station(station: Station) -> None:
     """Raise StationError naming the field for coordinates or masks out of range."""
     checks = (
@@ -71,30 +76,81 @@ def validate_station(station: Station) -> None:
             raise StationError(f"{name} {value} is outside [{lo}, {hi}]", field=name)
     if station.max_range_km is not None and not (math.isfinite(station.max_range_km) and station.max_range_km > 0):
         raise StationError(f"max_range_km {station.max_range_km} must be positive", field="max_range_km")
+    validate_mask(station.mask)
 
 
-def look_angles(r_sat_km: Vec, t_s: Vec, station: Station, frames: EarthFrames) -> LookAngles:
-    """Return the look angles from ``station`` to GCRS positions ``r_sat_km`` (3, N) at ``t_s``."""
-    r_itrs = frames.to_itrs(t_s, r_sat_km)
-    rho = r_itrs - station.itrs_km()[:, None]
-    enu = station.enu_itrs() @ rho
-    rng = np.linalg.norm(rho, axis=0)
+def validate_mask(mask: tuple[tuple[float, float], ...]) -> None:
+    """Refuse a mask whose azimuths do not increase within [0, 360) or whose elevations are out of range."""
+    if len(mask) > MAX_MASK_POINTS:
+        raise StationError(f"mask has {len(mask)} points; at most {MAX_MASK_POINTS}", field="mask")
+    previous = -math.inf
+    for k, (az, el) in enumerate(mask):
+        if not (math.isfinite(az) and 0.0 <= az < 360.0):
+            raise StationError(f"mask point {k}: azimuth {az} is outside [0, 360)", field="mask")
+        if not (math.isfinite(el) and -5.0 <= el <= 89.0):
+            raise StationError(f"mask point {k}: elevation {el} is outside [-5, 89]", field="mask")
+        if az <= previous:
+            raise StationError(
+                f"mask point {k}: azimuth {az} does not increase on {previous}; list the points from north through east",
+                field="mask",
+            )
+        previous = az
+
+
+def refraction_deg(elevation_deg: Vec) -> Vec:
+    """Atmospheric refraction (deg) to add to geometric elevations (deg): Saemundsson's formula.
+
+    R = 1.02' / tan(h + 10.3 / (h + 5.11)) at 10 C and 1010 hPa, 0.48 deg at the horizon and
+    under 0.01 deg above 80 deg; zero below -1 deg, as skyfield's own refraction is. That is the
+    optical refraction: a radar's (radio) bending also depends on humidity and is larger near the
+    horizon, which this does not model.
+    """
+    h = np.asarray(elevation_deg, float)
+    hh = np.clip(h, -1.0, 90.0)
+    r = 1.02 / 60.0 / np.tan(np.radians(hh + 10.3 / (hh + 5.11)))
+    return np.where((h >= -1.0) & (h <= 89.9), r, 0.0)
+
+
+def mask_deg(station: Station, azimuth_deg: Vec) -> Vec:
+    """The lowest elevation (deg) in view at each azimuth: the station's mask, and never below its minimum."""
+    az = np.asarray(azimuth_deg, float)
+    if not station.mask:
+        return np.full(az.shape, station.min_elevation_deg)
+    pts = np.asarray(station.mask, float)
+    return np.maximum(station.min_elevation_deg, np.interp(az, pts[:, 0], pts[:, 1], period=360.0))
+
+
+def _look(rho_itrs: Vec, station: Station) -> LookAngles:
+    enu = station.enu_itrs() @ rho_itrs
+    rng = np.linalg.norm(rho_itrs, axis=0)
     el = np.degrees(np.arcsin(np.clip(enu[2] / rng, -1.0, 1.0)))
+    if station.refraction:
+        el = el + refraction_deg(el)
     az = np.mod(np.degrees(np.arctan2(enu[0], enu[1])), 360.0)
     return LookAngles(az, el, rng)
 
 
-def look_function(traj: Trajectory, station: Station, frames: EarthFrames):  # type: ignore[no-untyped-def]
-    """Return ``f(t_s) -> (elevation above the mask in deg, slant range in km)``, both shape (N,)."""
-    up = station.enu_itrs()[2]
+def look_angles(r_sat_km: Vec, t_s: Vec, station: Station, frames: EarthFrames) -> LookAngles:
+    """Return the look angles from ``station`` to GCRS positions ``r_sat_km`` (3, N) at ``t_s``.
+
+    Elevations are as the station sees them: refracted when ``station.refraction`` is on.
+    """
+    return _look(frames.to_itrs(t_s, r_sat_km) - station.itrs_km()[:, None], station)
+
+
+def look_function(traj: Trajectory, station: Station, frames: EarthFrames, above_mask: bool = True):  # type: ignore[no-untyped-def]
+    """Return ``f(t_s) -> (elevation in deg, slant range in km)``, both shape (N,).
+
+    The elevation is measured from the mask at the satellite's azimuth (``above_mask``), or from
+    the horizon; refracted when the station asks for it.
+    """
     site = station.itrs_km()
-    mask = station.min_elevation_deg
 
     def f(t_s: Vec) -> tuple[Vec, Vec]:
         r, _ = traj.state(t_s)
-        rho = frames.to_itrs(t_s, r) - site[:, None]
-        rng = np.linalg.norm(rho, axis=0)
-        return np.degrees(np.arcsin(np.clip(up @ rho / rng, -1.0, 1.0))) - mask, rng
+        look = _look(frames.to_itrs(t_s, r) - site[:, None], station)
+        el = look.elevation_deg - mask_deg(station, look.azimuth_deg) if above_mask else look.elevation_deg
+        return el, look.range_km
 
     return f
 
@@ -219,7 +275,15 @@ def access_windows(
             f_in, t, limit - rng, np.concatenate([t_near, t_far]), np.concatenate([limit + near, -far]), tol_s
         )
         windows = intersect(windows, in_range)
-    return _describe(traj, station, frames, windows, t_max[g_max > 0.0], t_near)
+    t_peaks = t_max[g_max > 0.0]
+    if station.mask:  # above a mask that varies in azimuth the highest point is not the furthest above it
+        sky = look_function(traj, station, frames, above_mask=False)
+
+        def f_sky(t_s: Vec) -> Vec:
+            return sky(t_s)[0]
+
+        t_peaks, _ = grid_maxima(f_sky, t, sky(t)[0], ext_tol, include_ends=True)
+    return _describe(traj, station, frames, windows, t_peaks, t_near)
 
 
 def _inside(times: Vec, start: float, end: float) -> Vec:
@@ -237,7 +301,7 @@ def _describe(
         )
     # Each window's highest point and least range lie at an interior extremum or at an end:
     # one look at those moments gives both.
-    look = look_function(traj, station, frames)
+    look = look_function(traj, station, frames, above_mask=False)
     culm = np.empty(n)
     nearest = np.empty(n)
     for k in range(n):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from planner.access import look_angles
+from planner.access import look_angles, mask_deg
 from planner.alignment import node_miss_km
 
 
@@ -28,7 +28,8 @@ def plot_plan(plan, path: str, title: str = "") -> None:  # type: ignore[no-unty
     r_itrs = frames.to_itrs(t, r)
     lat = np.degrees(np.arctan2(r_itrs[2], np.hypot(r_itrs[0], r_itrs[1])))
     lon = np.degrees(np.arctan2(r_itrs[1], r_itrs[0]))
-    visible = look_angles(r, t, station, frames).elevation_deg >= station.min_elevation_deg
+    look = look_angles(r, t, station, frames)
+    visible = look.elevation_deg >= mask_deg(station, look.azimuth_deg)
     ax = axes[0]
     lon_plot = np.where(np.abs(np.diff(lon, prepend=lon[0])) > 180, np.nan, lon)
     ax.plot(lon_plot, lat, color="0.6", lw=1, label="target ground track")

@@ -237,13 +237,21 @@ class EarthFrames:
 
 @dataclass(frozen=True, slots=True)
 class Station:
-    """A ground site on the WGS-84 ellipsoid (degrees, metres) with an elevation mask."""
+    """A ground site on the WGS-84 ellipsoid (degrees, metres) with an elevation mask.
+
+    ``mask`` is the horizon the site sees, as (azimuth, elevation) pairs in degrees with the
+    azimuths increasing in [0, 360), interpolated linearly (around north too); a satellite is
+    in view above both it and ``min_elevation_deg``. ``refraction`` adds the atmosphere's
+    bending to every elevation (``planner.access.refraction_deg``); off, elevations are geometric.
+    """
 
     latitude_deg: float
     longitude_deg: float
     altitude_m: float = 0.0
     min_elevation_deg: float = 0.0
     max_range_km: float | None = None
+    mask: tuple[tuple[float, float], ...] = ()
+    refraction: bool = False
 
     def itrs_km(self) -> Vec:
         """Return the site's ITRS position, shape (3,)."""

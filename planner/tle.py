@@ -116,11 +116,25 @@ def tle_lines(text_or_lines: str | list[str], field: str = "tle") -> tuple[str, 
 
 
 OMM_DEFAULTS = {
-    "CLASSIFICATION_TYPE": "U", "OBJECT_ID": "", "EPHEMERIS_TYPE": 0, "ELEMENT_SET_NO": 999, "REV_AT_EPOCH": 0,
-    "BSTAR": 0.0, "MEAN_MOTION_DOT": 0.0, "MEAN_MOTION_DDOT": 0.0, "NORAD_CAT_ID": 0,
-}  # fmt: skip
-OMM_REQUIRED = ("EPOCH", "MEAN_MOTION", "ECCENTRICITY", "INCLINATION", "RA_OF_ASC_NODE", "ARG_OF_PERICENTER",
-                "MEAN_ANOMALY")  # fmt: skip
+    "CLASSIFICATION_TYPE": "U",
+    "OBJECT_ID": "",
+    "EPHEMERIS_TYPE": 0,
+    "ELEMENT_SET_NO": 999,
+    "REV_AT_EPOCH": 0,
+    "BSTAR": 0.0,
+    "MEAN_MOTION_DOT": 0.0,
+    "MEAN_MOTION_DDOT": 0.0,
+    "NORAD_CAT_ID": 0,
+}
+OMM_REQUIRED = (
+    "EPOCH",
+    "MEAN_MOTION",
+    "ECCENTRICITY",
+    "INCLINATION",
+    "RA_OF_ASC_NODE",
+    "ARG_OF_PERICENTER",
+    "MEAN_ANOMALY",
+)
 
 
 def tle_from_omm(fields: dict[str, object], field: str = "omm") -> TLE:

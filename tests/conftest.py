@@ -40,8 +40,12 @@ def settings(tmp_path_factory: pytest.TempPathFactory, smoke_models: Path, backe
     from tests.utils.databases import database_url
 
     data: Path = tmp_path_factory.mktemp("data")
-    s = Settings(data_dir=data, api_keys=f"{KEY_A},{KEY_B}", model_dir=smoke_models,
-                 database_url=database_url(backend, data, pg_root))  # fmt: skip
+    s = Settings(
+        data_dir=data,
+        api_keys=f"{KEY_A},{KEY_B}",
+        model_dir=smoke_models,
+        database_url=database_url(backend, data, pg_root),
+    )
     upgrade_database(s.database_url)
     return s
 

@@ -58,8 +58,11 @@ def _package_files(package: str) -> list[Path]:
 
 
 def _modules(folder: str) -> list[str]:
-    return [".".join(p.relative_to(ROOT).with_suffix("").parts) for p in sorted((ROOT / folder).glob("*.py"))
-            if p.name != "__init__.py"]  # fmt: skip
+    return [
+        ".".join(p.relative_to(ROOT).with_suffix("").parts)
+        for p in sorted((ROOT / folder).glob("*.py"))
+        if p.name != "__init__.py"
+    ]
 
 
 @pytest.mark.parametrize("module", [*_modules("inference/simulation"), "inference.frames"])

@@ -134,7 +134,7 @@ async def read_uploads(files: list[UploadFile], settings: Settings) -> list[Any]
     """Read and decode every uploaded file (stacks allowed) into frames, each file checked against the limits."""
     from fastapi.concurrency import run_in_threadpool
 
-    from app.services.estimation import decode
+    from app.services.uploads import decode
 
     uploads: list[Any] = []
     for f in files:

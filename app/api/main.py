@@ -3,7 +3,7 @@ from fastapi.dependencies.models import Dependant
 from fastapi.routing import APIRoute
 
 from app.api.deps import CurrentOperator
-from app.api.routes import access, estimates, passes, plans, scenes
+from app.api.routes import access, estimates, passes, plans, scenes, stations
 from app.errors import InputError
 from app.schemas import ERROR_RESPONSES
 
@@ -40,8 +40,10 @@ async def reject_unknown_form_fields(request: Request, _operator: CurrentOperato
     allowed = {p.alias for p in route.dependant.body_params}
     unknown = sorted(set((await request.form()).keys()) - allowed)
     if unknown:
-        raise InputError([unknown[0][:100]], f"unknown form field {unknown[0][:100]!r}; this route takes: "
-                                             f"{', '.join(sorted(allowed))}")  # fmt: skip
+        raise InputError(
+            [unknown[0][:100]],
+            f"unknown form field {unknown[0][:100]!r}; this route takes: {', '.join(sorted(allowed))}",
+        )
 
 
 api_router = APIRouter(
@@ -52,3 +54,4 @@ api_router.include_router(access.router)
 api_router.include_router(estimates.router)
 api_router.include_router(scenes.router)
 api_router.include_router(passes.router)
+api_router.include_router(stations.router)

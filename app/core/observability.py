@@ -108,10 +108,15 @@ class BodyTooLarge(HTTPException):
 
 def _json_response(status: int, body: dict[str, Any], rid: str) -> list[Message]:
     payload = json.dumps(body).encode()
-    headers = [(b"content-type", b"application/json"), (b"content-length", str(len(payload)).encode()),
-               (REQUEST_ID_HEADER.lower().encode(), rid.encode())]  # fmt: skip
-    return [{"type": "http.response.start", "status": status, "headers": headers},
-            {"type": "http.response.body", "body": payload}]  # fmt: skip
+    headers = [
+        (b"content-type", b"application/json"),
+        (b"content-length", str(len(payload)).encode()),
+        (REQUEST_ID_HEADER.lower().encode(), rid.encode()),
+    ]
+    return [
+        {"type": "http.response.start", "status": status, "headers": headers},
+        {"type": "http.response.body", "body": payload},
+    ]
 
 
 class RequestContextMiddleware:
@@ -169,16 +174,23 @@ class RequestContextMiddleware:
             if state["started"]:
                 raise
             state["status"] = 500
-            body = {"detail": "internal server error; this is a bug, please report it with the request id",
-                    "request_id": rid}  # fmt: skip
+            body = {
+                "detail": "internal server error; this is a bug, please report it with the request id",
+                "request_id": rid,
+            }
             for m in _json_response(500, body, rid):
                 await send(m)
         finally:
             log.info(
                 "request",
-                extra={"request_id": rid, "method": scope.get("method"), "path": scope.get("path"), "status": state["status"],
-                       "duration_ms": round((time.perf_counter() - t0) * 1000.0, 2)},
-            )  # fmt: skip
+                extra={
+                    "request_id": rid,
+                    "method": scope.get("method"),
+                    "path": scope.get("path"),
+                    "status": state["status"],
+                    "duration_ms": round((time.perf_counter() - t0) * 1000.0, 2),
+                },
+            )
             request_id_var.reset(token)
 
 

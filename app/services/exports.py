@@ -75,15 +75,22 @@ class Arc:
 def plan_arc(plan: Plan, stored: dict[str, Any]) -> Arc:
     """Return the exported arc of a recomputed plan, after checking it is the stored one."""
     if plan.phasing is None or plan.encounter is None or plan.encounter.arc is None:
-        raise InputError(["plan"], "the plan has no phasing burn (no candidate was planned), so there is no "
-                                   "manoeuvre or planned arc to export; the access report still is", where="path")  # fmt: skip
+        raise InputError(
+            ["plan"],
+            "the plan has no phasing burn (no candidate was planned), so there is no "
+            "manoeuvre or planned arc to export; the access report still is",
+            where="path",
+        )
     ph = plan.phasing
     stored_burn = (stored.get("phasing") or {}).get("t_burn")
     if stored_burn is not None:
         drift = abs((utc(plan.epoch, ph.t_burn_s) - datetime.fromisoformat(stored_burn)).total_seconds())
         if drift > 1e-3:
-            raise InputError(["plan"], f"recomputing the plan moved its burn by {drift:.3f} s (a newer planner?): plan "
-                                       "it again to export it", where="path")  # fmt: skip
+            raise InputError(
+                ["plan"],
+                f"recomputing the plan moved its burn by {drift:.3f} s (a newer planner?): plan it again to export it",
+                where="path",
+            )
     t0 = max(ph.t_burn_s - ARC_MARGIN_S, 0.0)
     t1 = min(ph.t_access_s + ARC_MARGIN_S, plan.duration_s)
     return Arc(plan, ph.t_burn_s, ph.t_access_s, t0, t1)
@@ -100,9 +107,13 @@ def _header(kind: str, version: str, now: datetime) -> list[str]:
 
 def _state_lines(r: Vec, v: Vec) -> list[str]:
     return [
-        f"X = {r[0]:.6f} [km]", f"Y = {r[1]:.6f} [km]", f"Z = {r[2]:.6f} [km]",
-        f"X_DOT = {v[0]:.9f} [km/s]", f"Y_DOT = {v[1]:.9f} [km/s]", f"Z_DOT = {v[2]:.9f} [km/s]",
-    ]  # fmt: skip
+        f"X = {r[0]:.6f} [km]",
+        f"Y = {r[1]:.6f} [km]",
+        f"Z = {r[2]:.6f} [km]",
+        f"X_DOT = {v[0]:.9f} [km/s]",
+        f"Y_DOT = {v[1]:.9f} [km/s]",
+        f"Z_DOT = {v[2]:.9f} [km/s]",
+    ]
 
 
 def opm(arc: Arc, plan_id: str, observer_name: str, now: datetime | None = None) -> str:
@@ -149,11 +160,23 @@ def oem(arc: Arc, plan_id: str, target_name: str, observer_name: str, now: datet
     assert arc.plan.encounter.arc is not None
     segments = [  # the burn's own instant ends the first observer segment (before it) and starts the second
         (target_name, f"GSA-{plan_id}-TARGET", arc.t0_s, arc.t1_s, arc.target, "the target"),
-        (observer_name, f"GSA-{plan_id}-OBSERVER", arc.t0_s, arc.t_burn_s, arc.plan.observer_trajectory.state,
-         "the observer before the burn"),
-        (observer_name, f"GSA-{plan_id}-OBSERVER", arc.t_burn_s, arc.t1_s, arc.plan.encounter.arc.state,
-         "the observer after the burn"),
-    ]  # fmt: skip
+        (
+            observer_name,
+            f"GSA-{plan_id}-OBSERVER",
+            arc.t0_s,
+            arc.t_burn_s,
+            arc.plan.observer_trajectory.state,
+            "the observer before the burn",
+        ),
+        (
+            observer_name,
+            f"GSA-{plan_id}-OBSERVER",
+            arc.t_burn_s,
+            arc.t1_s,
+            arc.plan.encounter.arc.state,
+            "the observer after the burn",
+        ),
+    ]
     lines = _header("OEM", "3.0", now)
     for name, object_id, t0, t1, states, what in segments:
         if t1 - t0 < 1e-6:
@@ -161,21 +184,34 @@ def oem(arc: Arc, plan_id: str, target_name: str, observer_name: str, now: datet
         t = _grid(t0, t1, OEM_STEP_S, (arc.t_access_s,))
         r, v = states(t)
         lines += [
-            "META_START", f"OBJECT_NAME = {name}", f"OBJECT_ID = {object_id}", "CENTER_NAME = EARTH",
-            "REF_FRAME = GCRF", "TIME_SYSTEM = UTC", f"START_TIME = {kvn_time(utc(epoch, t[0]))}",
-            f"USEABLE_START_TIME = {kvn_time(utc(epoch, t[0]))}", f"USEABLE_STOP_TIME = {kvn_time(utc(epoch, t[-1]))}",
-            f"STOP_TIME = {kvn_time(utc(epoch, t[-1]))}", "INTERPOLATION = LAGRANGE", "INTERPOLATION_DEGREE = 7",
-            "META_STOP", "", f"COMMENT {what}, plan {plan_id}: km and km/s",
-        ]  # fmt: skip
+            "META_START",
+            f"OBJECT_NAME = {name}",
+            f"OBJECT_ID = {object_id}",
+            "CENTER_NAME = EARTH",
+            "REF_FRAME = GCRF",
+            "TIME_SYSTEM = UTC",
+            f"START_TIME = {kvn_time(utc(epoch, t[0]))}",
+            f"USEABLE_START_TIME = {kvn_time(utc(epoch, t[0]))}",
+            f"USEABLE_STOP_TIME = {kvn_time(utc(epoch, t[-1]))}",
+            f"STOP_TIME = {kvn_time(utc(epoch, t[-1]))}",
+            "INTERPOLATION = LAGRANGE",
+            "INTERPOLATION_DEGREE = 7",
+            "META_STOP",
+            "",
+            f"COMMENT {what}, plan {plan_id}: km and km/s",
+        ]
         for k in range(t.size):
-            lines.append(f"{kvn_time(utc(epoch, t[k]))} " + " ".join(f"{x:.6f}" for x in r[:, k]) + " "
-                         + " ".join(f"{x:.9f}" for x in v[:, k]))  # fmt: skip
+            lines.append(
+                f"{kvn_time(utc(epoch, t[k]))} "
+                + " ".join(f"{x:.6f}" for x in r[:, k])
+                + " "
+                + " ".join(f"{x:.9f}" for x in v[:, k])
+            )
         lines.append("")
     return "\n".join(lines)
 
 
-def czml(arc: Arc, plan_id: str, names: dict[str, str], station: dict[str, Any],
-         windows: list[dict[str, Any]]) -> str:  # fmt: skip
+def czml(arc: Arc, plan_id: str, names: dict[str, str], station: dict[str, Any], windows: list[dict[str, Any]]) -> str:
     """CZML for Cesium: both satellites over the arc, the station, its access intervals, the imaging moment."""
     epoch = arc.plan.epoch
     t0, t1 = utc(epoch, arc.t0_s), utc(epoch, arc.t1_s)
@@ -193,33 +229,76 @@ def czml(arc: Arc, plan_id: str, names: dict[str, str], station: dict[str, Any],
 
     def satellite(key: str, states: Any, colour: list[int]) -> dict[str, Any]:
         return {
-            "id": key, "name": names[key], "availability": interval,
-            "position": {"epoch": z_time(t0), "referenceFrame": "INERTIAL", "interpolationAlgorithm": "LAGRANGE",
-                         "interpolationDegree": 5, "cartesian": samples(states)},
+            "id": key,
+            "name": names[key],
+            "availability": interval,
+            "position": {
+                "epoch": z_time(t0),
+                "referenceFrame": "INERTIAL",
+                "interpolationAlgorithm": "LAGRANGE",
+                "interpolationDegree": 5,
+                "cartesian": samples(states),
+            },
             "point": {"pixelSize": 8, "color": {"rgba": colour}},
             "label": {"text": names[key], "font": "12px sans-serif", "pixelOffset": {"cartesian2": [10, -10]}},
-            "path": {"width": 1.5, "leadTime": 0, "trailTime": arc.t1_s - arc.t0_s, "material": {"solidColor": {"color": {"rgba": colour}}}},
-        }  # fmt: skip
+            "path": {
+                "width": 1.5,
+                "leadTime": 0,
+                "trailTime": arc.t1_s - arc.t0_s,
+                "material": {"solidColor": {"color": {"rgba": colour}}},
+            },
+        }
 
-    access = [f"{z_time(datetime.fromisoformat(w['rise']))}/{z_time(datetime.fromisoformat(w['set']))}"
-              for w in windows if datetime.fromisoformat(w["set"]) >= t0 and datetime.fromisoformat(w["rise"]) <= t1]  # fmt: skip
+    access = [
+        f"{z_time(datetime.fromisoformat(w['rise']))}/{z_time(datetime.fromisoformat(w['set']))}"
+        for w in windows
+        if datetime.fromisoformat(w["set"]) >= t0 and datetime.fromisoformat(w["rise"]) <= t1
+    ]
     r_access, _ = arc.target(np.array([arc.t_access_s]))
     packets: list[dict[str, Any]] = [
-        {"id": "document", "name": f"GSA-ISAR plan {plan_id}", "version": "1.0",
-         "clock": {"interval": interval, "currentTime": z_time(t_access), "multiplier": 10, "range": "CLAMPED"}},
+        {
+            "id": "document",
+            "name": f"GSA-ISAR plan {plan_id}",
+            "version": "1.0",
+            "clock": {"interval": interval, "currentTime": z_time(t_access), "multiplier": 10, "range": "CLAMPED"},
+        },
         satellite("target", arc.target, [255, 127, 14, 255]),
         satellite("observer", arc.observer, [31, 119, 180, 255]),
-        {"id": "station", "name": names["station"],
-         "position": {"cartographicDegrees": [station["longitude_deg"], station["latitude_deg"], station.get("altitude_m", 0.0)]},
-         "point": {"pixelSize": 9, "color": {"rgba": [44, 160, 44, 255]}}, "label": {"text": names["station"]}},
-        {"id": "access", "name": "the station sees the target", "availability": access or interval,
-         "polyline": {"positions": {"references": ["station#position", "target#position"]}, "width": 1,
-                      "material": {"solidColor": {"color": {"rgba": [44, 160, 44, 200]}}}}},
-        {"id": "imaging", "name": "T_access: the imaging moment",
-         "availability": f"{z_time(t_access - timedelta(seconds=60))}/{z_time(t_access + timedelta(seconds=60))}",
-         "position": {"referenceFrame": "INERTIAL", "cartesian": [round(float(x) * 1000.0, 2) for x in r_access[:, 0]]},
-         "point": {"pixelSize": 14, "color": {"rgba": [214, 39, 40, 255]}}, "label": {"text": f"T_access {z_time(t_access)}"}},
-    ]  # fmt: skip
+        {
+            "id": "station",
+            "name": names["station"],
+            "position": {
+                "cartographicDegrees": [
+                    station["longitude_deg"],
+                    station["latitude_deg"],
+                    station.get("altitude_m", 0.0),
+                ]
+            },
+            "point": {"pixelSize": 9, "color": {"rgba": [44, 160, 44, 255]}},
+            "label": {"text": names["station"]},
+        },
+        {
+            "id": "access",
+            "name": "the station sees the target",
+            "availability": access or interval,
+            "polyline": {
+                "positions": {"references": ["station#position", "target#position"]},
+                "width": 1,
+                "material": {"solidColor": {"color": {"rgba": [44, 160, 44, 200]}}},
+            },
+        },
+        {
+            "id": "imaging",
+            "name": "T_access: the imaging moment",
+            "availability": f"{z_time(t_access - timedelta(seconds=60))}/{z_time(t_access + timedelta(seconds=60))}",
+            "position": {
+                "referenceFrame": "INERTIAL",
+                "cartesian": [round(float(x) * 1000.0, 2) for x in r_access[:, 0]],
+            },
+            "point": {"pixelSize": 14, "color": {"rgba": [214, 39, 40, 255]}},
+            "label": {"text": f"T_access {z_time(t_access)}"},
+        },
+    ]
     return json.dumps(packets, indent=1)
 
 
@@ -245,9 +324,13 @@ def pointing_csv(plan: Plan, windows: list[dict[str, Any]]) -> str:
         dt = 0.5
         rp, _ = plan.target_trajectory.state(t + dt)
         rm, _ = plan.target_trajectory.state(t - dt)
-        rate = (look_angles(rp, t + dt, plan.station, plan.frames).range_km
-                - look_angles(rm, t - dt, plan.station, plan.frames).range_km) / (2 * dt)  # fmt: skip
+        rate = (
+            look_angles(rp, t + dt, plan.station, plan.frames).range_km
+            - look_angles(rm, t - dt, plan.station, plan.frames).range_km
+        ) / (2 * dt)
         for j in range(t.size):
-            buf.write(f"{k},{z_time(utc(epoch, t[j]))},{look.azimuth_deg[j]:.4f},{look.elevation_deg[j]:.4f},"
-                      f"{look.range_km[j]:.3f},{rate[j]:.5f}\n")  # fmt: skip
+            buf.write(
+                f"{k},{z_time(utc(epoch, t[j]))},{look.azimuth_deg[j]:.4f},{look.elevation_deg[j]:.4f},"
+                f"{look.range_km[j]:.3f},{rate[j]:.5f}\n"
+            )
     return buf.getvalue()

@@ -89,8 +89,9 @@ def spin_rotation(axis: Vec, rate_deg_s: float, t: Vec) -> Vec:
     return np.eye(3) + np.sin(a) * k + (1.0 - np.cos(a)) * (k @ k)
 
 
-def pass_geometry_frames(plan_request: dict[str, Any], window: dict[str, Any], opts: PassOptions,
-                         rng: np.random.Generator) -> list[dict[str, Any]]:  # fmt: skip
+def pass_geometry_frames(
+    plan_request: dict[str, Any], window: dict[str, Any], opts: PassOptions, rng: np.random.Generator
+) -> list[dict[str, Any]]:
     """Return each frame of a simulated pass over ``window``: its time, geometry and true attitudes (no image yet)."""
     from planner.frames import observation_axes, pass_geometry, swept_deg
 
@@ -122,8 +123,11 @@ def pass_geometry_frames(plan_request: dict[str, Any], window: dict[str, Any], o
     theta = swept_deg(los_body(a0, geo))
     half = opts.aperture_deg / 2.0
     if theta[-1] < opts.aperture_deg:
-        raise InputError(["window"], f"the line of sight sweeps only {theta[-1]:.1f} deg of the target over this "
-                                     f"pass, less than one {opts.aperture_deg} deg sub-aperture")  # fmt: skip
+        raise InputError(
+            ["window"],
+            f"the line of sight sweeps only {theta[-1]:.1f} deg of the target over this "
+            f"pass, less than one {opts.aperture_deg} deg sub-aperture",
+        )
     step = opts.step_deg or opts.aperture_deg
     centres = np.arange(half, theta[-1] - half + 1e-9, step)
     centres += (theta[-1] - half - centres[-1]) / 2.0  # centre the frames on the pass
@@ -138,27 +142,38 @@ def pass_geometry_frames(plan_request: dict[str, Any], window: dict[str, Any], o
             continue
         a = body_attitude(a0, np.array([t_c]))[0]
         lvlh = g.lvlh[1]
-        out.append({
-            "observed_at": rise + timedelta(seconds=t_c),
-            "t_s": t_c,
-            "integration_s": t1 - t0,
-            "range_km": float(g.range_km[1]),
-            "attitude_deg": [float(v) for v in angles],
-            "body_to_lvlh": a,
-            "observation_in_lvlh": a @ obs_body,
-            "lvlh_in_gcrs": lvlh,
-        })  # fmt: skip
+        out.append(
+            {
+                "observed_at": rise + timedelta(seconds=t_c),
+                "t_s": t_c,
+                "integration_s": t1 - t0,
+                "range_km": float(g.range_km[1]),
+                "attitude_deg": [float(v) for v in angles],
+                "body_to_lvlh": a,
+                "observation_in_lvlh": a @ obs_body,
+                "lvlh_in_gcrs": lvlh,
+            }
+        )
     if len(out) > opts.max_frames:  # evenly thinned
         keep = np.unique(np.linspace(0, len(out) - 1, opts.max_frames).round().astype(int))
         out = [out[k] for k in keep]
     if len(out) < 2:
-        raise InputError(["within_deg"], f"only {len(out)} frame(s) of this pass fall within the angles asked for; "
-                                         "widen within_deg, choose another window, or give the attitude")  # fmt: skip
+        raise InputError(
+            ["within_deg"],
+            f"only {len(out)} frame(s) of this pass fall within the angles asked for; "
+            "widen within_deg, choose another window, or give the attitude",
+        )
     return out
 
 
-def render_pass(frames_meta: list[dict[str, Any]], opts: PassOptions, rng: np.random.Generator,
-                radar: Any = None, model: Any = None, scattering: Any = None) -> tuple[Vec, Vec]:  # fmt: skip
+def render_pass(
+    frames_meta: list[dict[str, Any]],
+    opts: PassOptions,
+    rng: np.random.Generator,
+    radar: Any = None,
+    model: Any = None,
+    scattering: Any = None,
+) -> tuple[Vec, Vec]:
     """Render each frame at its attitude; return the normalised frames [N, H, W] and their SNRs (dB, NaN: none)."""
     from inference.simulation.catalogue import at_attitudes
     from inference.simulation.isar import DEFAULT_SCATTERING
@@ -177,8 +192,15 @@ def render_pass(frames_meta: list[dict[str, Any]], opts: PassOptions, rng: np.ra
     return images.astype(np.float64), np.asarray(snrs, np.float64)
 
 
-def pass_record(frames_meta: list[dict[str, Any]], snrs: Vec, opts: PassOptions, window_index: int,
-                window: dict[str, Any], plan_request: dict[str, Any], cells_m: tuple[float, float]) -> dict[str, Any]:  # fmt: skip
+def pass_record(
+    frames_meta: list[dict[str, Any]],
+    snrs: Vec,
+    opts: PassOptions,
+    window_index: int,
+    window: dict[str, Any],
+    plan_request: dict[str, Any],
+    cells_m: tuple[float, float],
+) -> dict[str, Any]:
     """Return the JSON record (``pass.json``) of a simulated pass: each frame's time, geometry and truth."""
 
     def att(r: Vec) -> dict[str, Any]:
@@ -219,8 +241,10 @@ def _iso_z(t: datetime) -> str:
 
 
 REVERSED = np.diag([1.0, -1.0, -1.0])  # Rx(180): a frame read reversed in cross-range is the body turned half about X
-REVERSED_NOTE = ("read reversed in cross-range (the target turns against the line of sight faster than it sweeps): "
-                 "answered from the mirrored frame")  # fmt: skip
+REVERSED_NOTE = (
+    "read reversed in cross-range (the target turns against the line of sight faster than it sweeps): "
+    "answered from the mirrored frame"
+)
 
 
 def recheck_reversed(*, est: Any, checker: Any, frames: Vec, checks: list[Any]) -> list[Any]:
@@ -260,14 +284,22 @@ def recheck_reversed(*, est: Any, checker: Any, frames: Vec, checks: list[Any]) 
             alternatives=[
                 Alternative(back(a.angles_deg), a.silhouette_iou, a.fit_gap, a.distance_deg, a.start)
                 for a in c.alternatives
-            ],  # fmt: skip
+            ],
             features={**c.features, "reversed": 1.0},
         )
     return out
 
 
-def fuse_pass(*, est: Any, checker: Any, frames: Vec, checks: list[Any], plan_request: dict[str, Any],
-              observed_at: list[datetime], names: list[str]) -> tuple[dict[str, Any], list[Any]]:  # fmt: skip
+def fuse_pass(
+    *,
+    est: Any,
+    checker: Any,
+    frames: Vec,
+    checks: list[Any],
+    plan_request: dict[str, Any],
+    observed_at: list[datetime],
+    names: list[str],
+) -> tuple[dict[str, Any], list[Any]]:
     """Fuse a checked pass; where it is not a trusted still one, re-read its untrusted frames mirrored and fuse again.
 
     Returns the answer with the more trusted frames used, and the checks it rests on.
@@ -279,8 +311,7 @@ def fuse_pass(*, est: Any, checker: Any, frames: Vec, checks: list[Any], plan_re
     again = recheck_reversed(est=est, checker=checker, frames=frames, checks=checks)
     if again is checks:
         return first, checks
-    second = fuse_frames(plan_request=plan_request, checks=again, observed_at=observed_at, names=names,
-                         placed=placed)  # fmt: skip
+    second = fuse_frames(plan_request=plan_request, checks=again, observed_at=observed_at, names=names, placed=placed)
 
     def trusted_used(result: dict[str, Any], cs: list[Any]) -> int:
         return sum(1 for f in result["frames"] if f["used"] and usable(cs[f["index"]]))
@@ -339,9 +370,19 @@ def fuse_frames(
         finite = [b for b in c.quality.uncertainty_deg if math.isfinite(b)]
         bound = max(finite) if len(finite) == 3 else NO_BOUND_DEG
         q = c.quality
-        pass_frames.append(PassFrame(np.array([obs_in_lvlh @ r for r in cands]), bound, (t - t0).total_seconds(),
-                                     names[k], axes["los_lvlh"], axes["los_rate_lvlh"], usable(c),
-                                     "; ".join(q.reasons), tuple(q.uncertainty_deg) if len(finite) == 3 else None))  # fmt: skip
+        pass_frames.append(
+            PassFrame(
+                np.array([obs_in_lvlh @ r for r in cands]),
+                bound,
+                (t - t0).total_seconds(),
+                names[k],
+                axes["los_lvlh"],
+                axes["los_rate_lvlh"],
+                usable(c),
+                "; ".join(q.reasons),
+                tuple(q.uncertainty_deg) if len(finite) == 3 else None,
+            )
+        )
     fused = fuse(pass_frames)
     if fused.reference_s is None:  # a still attitude holds all pass: given in J2000 at the frame nearest mid-pass
         span = [(t - t0).total_seconds() for t in observed_at]
@@ -354,17 +395,19 @@ def fuse_frames(
     frames_out = []
     for k, (pf, c) in enumerate(zip(pass_frames, checks, strict=True)):
         chosen = int(np.argmin([angle_deg(fused.rotation, r) for r in pf.candidates]))
-        frames_out.append({
-            "index": k,
-            "name": names[k],
-            "observed_at": observed_at[k],
-            **checked_json(c),
-            "attitude_lvlh": matrix_attitude_json(pf.candidates[chosen]),
-            "branch": ["answer", "near-mirror", *[f"alternative {j}" for j in range(len(c.alternatives))]][chosen],
-            "used": k in fused.used,
-            "rejected_because": fused.rejected.get(k),
-            "residual_deg": round(fused.residual_deg[k], 4),
-        })  # fmt: skip
+        frames_out.append(
+            {
+                "index": k,
+                "name": names[k],
+                "observed_at": observed_at[k],
+                **checked_json(c),
+                "attitude_lvlh": matrix_attitude_json(pf.candidates[chosen]),
+                "branch": ["answer", "near-mirror", *[f"alternative {j}" for j in range(len(c.alternatives))]][chosen],
+                "used": k in fused.used,
+                "rejected_because": fused.rejected.get(k),
+                "residual_deg": round(fused.residual_deg[k], 4),
+            }
+        )
     speed = float(np.linalg.norm(fused.rate_deg_s))
     trusted_used = sum(1 for k in fused.used if usable(checks[k]))
     enough = trusted_used >= MIN_TRUSTED_FRAMES

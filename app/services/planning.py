@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import replace
 from datetime import UTC, datetime, timedelta
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -57,8 +58,50 @@ def source_of(orbit: OrbitIn) -> str:
     return next(k for k in ORBIT_SOURCES if getattr(orbit, k) is not None)
 
 
-def to_station(st: StationIn) -> Station:
-    return Station(st.latitude_deg, st.longitude_deg, st.altitude_m, st.min_elevation_deg, st.max_range_km)
+def to_station(st: StationIn | str) -> Station:
+    """The planner's station from a request's; a name must have been resolved (``with_stored_station``) first."""
+    if isinstance(st, str):
+        raise InputError(
+            ["ground_station"],
+            f"station {st!r} is a name, which only the service looks up (POST the plan to it), or give its coordinates",
+        )
+    return Station(
+        latitude_deg=st.latitude_deg,
+        longitude_deg=st.longitude_deg,
+        altitude_m=st.altitude_m,
+        min_elevation_deg=st.min_elevation_deg,
+        max_range_km=st.max_range_km,
+        mask=tuple((float(a), float(e)) for a, e in st.mask or ()),
+        refraction=st.refraction,
+    )
+
+
+R = TypeVar("R", PlanCreate, AccessCreate)
+
+
+def stored_station_lookup(session: Any, operator_id: str) -> Callable[[str], dict[str, Any] | None]:
+    """The lookup a request's station name is resolved with: the operator's stored station, or None."""
+    from app import crud
+
+    def lookup(name: str) -> dict[str, Any] | None:
+        row = crud.get_station(session=session, operator_id=operator_id, name=name)
+        return None if row is None else dict(row.station)
+
+    return lookup
+
+
+def with_stored_station(req: R, lookup: Callable[[str], dict[str, Any] | None]) -> R:
+    """The request with a station given by name replaced by the stored one (``lookup(name)``, None if absent)."""
+    if not isinstance(req.ground_station, str):
+        return req
+    stored = lookup(req.ground_station)
+    if stored is None:
+        raise InputError(
+            ["ground_station"],
+            f"no station named {req.ground_station!r} is stored: POST it to /v1/stations first "
+            "(GET /v1/stations lists yours), or give its coordinates here",
+        )
+    return req.model_copy(update={"ground_station": StationIn.model_validate(stored)})
 
 
 def plan_options(req: PlanCreate) -> PlanOptions:
@@ -256,9 +299,19 @@ def run_access(req: AccessCreate, max_epoch_gap_days: float | None = None) -> di
 
 
 ACCESS_CSV_COLUMNS = (
-    "access", "rise_utc", "culmination_utc", "set_utc", "duration_s", "rise_azimuth_deg", "culmination_azimuth_deg",
-    "set_azimuth_deg", "max_elevation_deg", "min_range_km", "rise_clipped", "set_clipped",
-)  # fmt: skip
+    "access",
+    "rise_utc",
+    "culmination_utc",
+    "set_utc",
+    "duration_s",
+    "rise_azimuth_deg",
+    "culmination_azimuth_deg",
+    "set_azimuth_deg",
+    "max_elevation_deg",
+    "min_range_km",
+    "rise_clipped",
+    "set_clipped",
+)
 
 
 def _z(iso: str) -> str:
@@ -280,10 +333,20 @@ def access_csv(windows: list[dict[str, Any]]) -> str:
     w = csv.writer(out, lineterminator="\n")
     w.writerow(ACCESS_CSV_COLUMNS)
     for k, win in enumerate(windows, start=1):
-        w.writerow([
-            k, _z(win["rise"]), _z(win["culmination"]), _z(win["set"]), f"{win['duration_s']:.3f}",
-            f"{win['rise_azimuth_deg']:.4f}", f"{win['culmination_azimuth_deg']:.4f}", f"{win['set_azimuth_deg']:.4f}",
-            f"{win['max_elevation_deg']:.4f}", f"{win['min_range_km']:.3f}", str(win["rise_clipped"]).lower(),
-            str(win["set_clipped"]).lower(),
-        ])  # fmt: skip
+        w.writerow(
+            [
+                k,
+                _z(win["rise"]),
+                _z(win["culmination"]),
+                _z(win["set"]),
+                f"{win['duration_s']:.3f}",
+                f"{win['rise_azimuth_deg']:.4f}",
+                f"{win['culmination_azimuth_deg']:.4f}",
+                f"{win['set_azimuth_deg']:.4f}",
+                f"{win['max_elevation_deg']:.4f}",
+                f"{win['min_range_km']:.3f}",
+                str(win["rise_clipped"]).lower(),
+                str(win["set_clipped"]).lower(),
+            ]
+        )
     return out.getvalue()

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from inference.errors import InferenceError, module_main
+from inference.files import write_json
 from inference.frames import geodesic_deg
 from inference.runtime import Estimator
 from inference.simulation.dataset import DatasetSpec, load_manifest, load_range, render_frames, split_ranges
@@ -70,8 +71,11 @@ def score(
         errors[name] = pred - angles
         if progress:
             r = rows[name]
-            print(f"evaluate: {name}: MAE z/y/x {r['mae_deg']} deg, geodesic p95 {r['geodesic_p95_deg']} deg",
-                  file=sys.stderr, flush=True)  # fmt: skip
+            print(
+                f"evaluate: {name}: MAE z/y/x {r['mae_deg']} deg, geodesic p95 {r['geodesic_p95_deg']} deg",
+                file=sys.stderr,
+                flush=True,
+            )
     return rows, errors
 
 
@@ -87,10 +91,16 @@ def summarise(pred: NDArray[np.floating], true: NDArray[np.floating]) -> dict[st
 
 
 def evaluate(
-    model_dir: str | Path, data_dir: str | Path | None = None, n_snr: int = 1000, seed: int = SNR_SEED,
-    out_dir: str | Path = "results", radar: Radar | None = None, progress: bool = True, record: bool = False,
+    model_dir: str | Path,
+    data_dir: str | Path | None = None,
+    n_snr: int = 1000,
+    seed: int = SNR_SEED,
+    out_dir: str | Path = "results",
+    radar: Radar | None = None,
+    progress: bool = True,
+    record: bool = False,
     without: str | Path | None = None,
-) -> dict[str, Any]:  # fmt: skip
+) -> dict[str, Any]:
     """Evaluate the ONNX models in ``model_dir``; return and write the results (and, with ``record``, into the card).
 
     ``without`` names a second model folder, trained on raw frames (``gsa train --no-enhance``):
@@ -138,14 +148,14 @@ def evaluate(
         errors.update(errs)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "results.json").write_text(json.dumps(results, indent=2))
+    write_json(out / "results.json", results)
     (out / "results.md").write_text(table(results))
     plot_errors(errors, out / "errors.png")
     if record:  # the card records its own models' rows only
         card_path = Path(model_dir) / "model_card.json"
         card = json.loads(card_path.read_text())
         card["evaluation"] = {"rows": rows_of[0], "n_per_snr": n_snr, "data": str(data_dir) if data_dir else None}
-        card_path.write_text(json.dumps(card, indent=2))
+        write_json(card_path, card)
     return results
 
 
@@ -194,15 +204,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--n-snr", type=int, default=1000, help="frames per SNR for Table 7 (default 1000)")
     p.add_argument("--out", default="results")
     p.add_argument("--record", action="store_true", help="also write the results into the model card")
-    p.add_argument("--without", help="models trained on raw frames (--no-enhance), scored on the same frames: "
-                   "Table 4's 'without enhancement' row")  # fmt: skip
+    p.add_argument(
+        "--without",
+        help="models trained on raw frames (--no-enhance), scored on the same frames: "
+        "Table 4's 'without enhancement' row",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     from inference.runtime import DEFAULT_MODEL_DIR
 
-    res = evaluate(args.models or DEFAULT_MODEL_DIR, args.data, args.n_snr, out_dir=args.out, record=args.record,
-                   without=args.without)  # fmt: skip
+    res = evaluate(
+        args.models or DEFAULT_MODEL_DIR,
+        args.data,
+        args.n_snr,
+        out_dir=args.out,
+        record=args.record,
+        without=args.without,
+    )
     print(table(res))
     print(f"written to {args.out}/results.json, results.md and errors.png")
     return 0

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Any
 
 from inference.errors import InferenceError
@@ -12,7 +12,7 @@ from inference.networks.unetpp import UNetPlusPlus
 
 @dataclass(frozen=True)
 class ModelConfig:
-    """Both networks' hyperparameters and the training protocol's defaults."""
+    """Both networks' shape (the schedule is the training recipe's: ``inference.training.options``)."""
 
     name: str
     img_size: int = 256
@@ -22,11 +22,6 @@ class ModelConfig:
     swin_depths: tuple[int, ...] = (2, 2, 6, 2)
     swin_heads: tuple[int, ...] = (3, 6, 12, 24)
     swin_window: int = 8
-    epochs: int = 100
-    batch_size: int = 32
-    lr: float = 2e-4
-    lr_decay: float = 0.98
-    extra: dict[str, Any] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -36,9 +31,7 @@ CONFIGS = {
     # The paper: UNet++ 32..512, Swin-T (C = 96, depths 2-2-6-2, heads 3-6-12-24), window 8 at 256 px.
     "paper": ModelConfig("paper"),
     # For shipping from a CPU: a quarter of the UNet++ filters, Swin at C = 48.
-    "compact": ModelConfig(
-        "compact", unet_filters=(16, 32, 64, 128, 256), unet_norm=True, swin_embed_dim=48, batch_size=16
-    ),
+    "compact": ModelConfig("compact", unet_filters=(16, 32, 64, 128, 256), unet_norm=True, swin_embed_dim=48),
     # What a 2-core CPU can train in under an hour: UNet++ 8..128, Swin C = 24, depths 2-2-2-2.
     "cpu": ModelConfig(
         "cpu",
@@ -47,10 +40,7 @@ CONFIGS = {
         swin_embed_dim=24,
         swin_depths=(2, 2, 2, 2),
         swin_heads=(1, 2, 4, 8),
-        batch_size=8,
-        lr=5e-4,
-        lr_decay=0.9,
-    ),  # fmt: skip
+    ),
     # Tests: tiny, trains on 64 px frames on a CPU in seconds.
     "smoke": ModelConfig(
         "smoke",
@@ -60,14 +50,21 @@ CONFIGS = {
         swin_embed_dim=12,
         swin_depths=(1, 1, 1, 1),
         swin_heads=(1, 1, 2, 2),
-        epochs=2,
-        batch_size=4,
-        lr=1e-3,
-    ),  # fmt: skip
+    ),
 }
 
 
+# What configs written before the schedule moved to the recipes also hold (read back, then dropped).
+SCHEDULE_KEYS = ("epochs", "batch_size", "lr", "lr_decay", "extra")
+
+
+def config_from_dict(d: dict[str, Any]) -> ModelConfig:
+    """Rebuild the config a checkpoint or card records (older ones also hold their schedule)."""
+    return get_config(d["name"], **{k: v for k, v in d.items() if k != "name" and k not in SCHEDULE_KEYS})
+
+
 def get_config(name: str, **overrides: Any) -> ModelConfig:
+    """Return the named network shape with ``overrides`` (config field names) applied and checked."""
     if name not in CONFIGS:
         raise InferenceError(f"unknown config {name!r}; choose one of {', '.join(CONFIGS)}", field="config")
     base = CONFIGS[name].as_dict()
@@ -116,7 +113,12 @@ def build_models(cfg: ModelConfig) -> tuple[UNetPlusPlus, SwinTransformer]:
     """Build UNet++ and Swin from a config (the only place that reads one)."""
     unet = UNetPlusPlus(1, cfg.unet_filters, cfg.unet_norm)
     swin = SwinTransformer(
-        img_size=cfg.img_size, in_chans=1, embed_dim=cfg.swin_embed_dim, depths=cfg.swin_depths,
-        num_heads=cfg.swin_heads, window_size=cfg.swin_window, num_outputs=3,
-    )  # fmt: skip
+        img_size=cfg.img_size,
+        in_chans=1,
+        embed_dim=cfg.swin_embed_dim,
+        depths=cfg.swin_depths,
+        num_heads=cfg.swin_heads,
+        window_size=cfg.swin_window,
+        num_outputs=3,
+    )
     return unet, swin

@@ -32,17 +32,27 @@ from inference.simulation.isar import DEFAULT_SCATTERING, Imager, Radar, Scatter
 from inference.simulation.targets import TargetModel, comsat_like, tiangong_like
 
 KINDS = (
-    "other-satellite", "range-flipped", "cross-range-flipped", "transposed", "normalised-twice",
-    "pixels-halved", "pixels-zoomed", "pure-noise", "inverted",
-)  # fmt: skip
+    "other-satellite",
+    "range-flipped",
+    "cross-range-flipped",
+    "transposed",
+    "normalised-twice",
+    "pixels-halved",
+    "pixels-zoomed",
+    "pure-noise",
+    "inverted",
+)
 CATALOGUE_SEED = 50_000  # bad frames: a seed no training, validation or test set uses
 FRESH_SEED = 60_000  # fresh good frames for the trust tests and benchmarks
 CALIBRATION_SEED = 70_000  # fresh good frames the shipped trust calibration was fitted on
 
 
-def simulated(spec: DatasetSpec, radar: Radar | None = None, model: TargetModel | None = None,
-              scattering: Scattering = DEFAULT_SCATTERING) -> tuple[NDArray[np.float32], NDArray[np.float64],
-                                                                    NDArray[np.float64], NDArray[np.bool_]]:  # fmt: skip
+def simulated(
+    spec: DatasetSpec,
+    radar: Radar | None = None,
+    model: TargetModel | None = None,
+    scattering: Scattering = DEFAULT_SCATTERING,
+) -> tuple[NDArray[np.float32], NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
     """Return a spec's frames (normalised), angles, SNRs and labels, of ``model`` (default: the default target)."""
     truths = [frame_truth(spec, i) for i in range(spec.n)]
     angles = np.array([t[0] for t in truths], float).reshape(-1, 3)
@@ -51,9 +61,14 @@ def simulated(spec: DatasetSpec, radar: Radar | None = None, model: TargetModel 
     return frames, angles, snrs, labels
 
 
-def at_attitudes(angles_deg: NDArray[np.float64], snrs_db: NDArray[np.float64], seeds: list[int],
-                 radar: Radar | None = None, model: TargetModel | None = None,
-                 scattering: Scattering = DEFAULT_SCATTERING) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:  # fmt: skip
+def at_attitudes(
+    angles_deg: NDArray[np.float64],
+    snrs_db: NDArray[np.float64],
+    seeds: list[int],
+    radar: Radar | None = None,
+    model: TargetModel | None = None,
+    scattering: Scattering = DEFAULT_SCATTERING,
+) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
     """Return frames (normalised) and labels of ``model`` at given attitudes [N, 3] (z, y, x deg), SNRs (NaN: none)."""
     radar = radar or Radar()
     model = model or tiangong_like()
@@ -69,8 +84,9 @@ def at_attitudes(angles_deg: NDArray[np.float64], snrs_db: NDArray[np.float64], 
     return frames, labels
 
 
-def good_frames(n: int, seed: int = FRESH_SEED, radar: Radar | None = None,
-                model: TargetModel | None = None) -> tuple[NDArray[np.float32], NDArray[np.float64], NDArray[np.float64]]:  # fmt: skip
+def good_frames(
+    n: int, seed: int = FRESH_SEED, radar: Radar | None = None, model: TargetModel | None = None
+) -> tuple[NDArray[np.float32], NDArray[np.float64], NDArray[np.float64]]:
     """Return n fresh normalised frames of ``model`` (default: the default target), their angles and SNRs."""
     frames, angles, snrs, _ = simulated(DatasetSpec(n=n, seed=seed), radar, model)
     return frames, angles, snrs

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import json
 import math
 import os
 import shutil
@@ -31,8 +30,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from inference.errors import DatasetError, module_main
+from inference.files import read_json, sha256_file, write_json
 from inference.frames import normalise_frame
-from inference.runtime import sha256_file
 from inference.simulation.isar import Imager, Radar, check_fits, draw_scattering, simulate
 from inference.simulation.targets import TargetModel, load_model, tiangong_like
 
@@ -126,8 +125,14 @@ def render_frames(
         angles[k] = ang
         snrs[k] = np.nan if snr is None else snr
         seeds[k] = s
-    return {"image": images, "label": labels, "angles_deg": angles, "snr_db": snrs, "seed": seeds,
-            "index": np.arange(start, stop)}  # fmt: skip
+    return {
+        "image": images,
+        "label": labels,
+        "angles_deg": angles,
+        "snr_db": snrs,
+        "seed": seeds,
+        "index": np.arange(start, stop),
+    }
 
 
 def _write_shard(args: tuple[DatasetSpec, Radar, int, int, str]) -> tuple[str, str, int]:
@@ -137,8 +142,9 @@ def _write_shard(args: tuple[DatasetSpec, Radar, int, int, str]) -> tuple[str, s
     return Path(path).name, sha256_file(path), stop - start
 
 
-def generate(spec: DatasetSpec, out: str | Path, radar: Radar | None = None, workers: int | None = None,
-             progress: bool = True) -> dict[str, Any]:  # fmt: skip
+def generate(
+    spec: DatasetSpec, out: str | Path, radar: Radar | None = None, workers: int | None = None, progress: bool = True
+) -> dict[str, Any]:
     """Generate the data set into ``out`` (which must not exist) and return its manifest."""
     radar = radar or Radar()
     out = Path(out)
@@ -176,8 +182,13 @@ def generate(spec: DatasetSpec, out: str | Path, radar: Radar | None = None, wor
         "format_version": FORMAT_VERSION,
         "spec": asdict(spec),
         "radar": asdict(radar),
-        "model": {"name": model.name, "description": model.description, "radius_m": model.radius_m,
-                  "scatterers": int(len(model.scatterers)), "mirror_planes": model.mirror_planes},
+        "model": {
+            "name": model.name,
+            "description": model.description,
+            "radius_m": model.radius_m,
+            "scatterers": int(len(model.scatterers)),
+            "mirror_planes": model.mirror_planes,
+        },
         "frames": spec.n,
         "split": {"train": [0, spec.n_train], "test": [spec.n_train, spec.n]} if spec.n_train is not None else None,
         "normalisation": "inference.simulation.isar.normalise_frame (40 dB below the 99.5th percentile)",
@@ -186,8 +197,8 @@ def generate(spec: DatasetSpec, out: str | Path, radar: Radar | None = None, wor
         "generated_in_s": round(elapsed, 2),
         "frames_per_s": round(spec.n / elapsed, 1),
         "workers": workers,
-    }  # fmt: skip
-    (partial / "manifest.json").write_text(json.dumps(manifest, indent=2))
+    }
+    write_json(partial / "manifest.json", manifest)
     partial.rename(out)
     return manifest
 
@@ -209,10 +220,7 @@ def load_manifest(data_dir: str | Path, verify: bool = True) -> dict[str, Any]:
     path = d / "manifest.json"
     if not path.is_file():
         raise DatasetError(f"{d} has no manifest.json: not a data set (make one with `gsa simulate`)", field="data")
-    try:
-        manifest: dict[str, Any] = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise DatasetError(f"{path} is not valid JSON: {exc.msg}", field="data") from None
+    manifest: dict[str, Any] = read_json(path, DatasetError, "data")
     if manifest.get("format_version") != FORMAT_VERSION or not manifest.get("shards"):
         raise DatasetError(f"{path} is not a version-{FORMAT_VERSION} manifest with shards", field="data")
     if verify:
@@ -239,8 +247,9 @@ def load_arrays(data_dir: str | Path, verify: bool = True) -> dict[str, NDArray[
     return out
 
 
-def load_range(data_dir: str | Path, start: int, stop: int, keys: tuple[str, ...] = ("image", "angles_deg"),
-               verify: bool = True) -> dict[str, NDArray[Any]]:  # fmt: skip
+def load_range(
+    data_dir: str | Path, start: int, stop: int, keys: tuple[str, ...] = ("image", "angles_deg"), verify: bool = True
+) -> dict[str, NDArray[Any]]:
     """Load frames ``start``..``stop - 1`` of a data set, reading only the shards that hold them."""
     d = Path(data_dir)
     manifest = load_manifest(d, verify)
@@ -274,8 +283,9 @@ def preview(spec: DatasetSpec, path: str | Path, radar: Radar | None = None, cou
         z, y, x = arrays["angles_deg"][k]
         snr = arrays["snr_db"][k]
         axes[0, k].imshow(arrays["image"][k].astype(np.float32), cmap="gray", extent=extent, vmin=0, vmax=1)
-        axes[0, k].set_title(f"z {z:.0f} y {y:.0f} x {x:.0f}\n" + ("noise-free" if np.isnan(snr) else f"{snr:.1f} dB"),
-                             fontsize=8)  # fmt: skip
+        axes[0, k].set_title(
+            f"z {z:.0f} y {y:.0f} x {x:.0f}\n" + ("noise-free" if np.isnan(snr) else f"{snr:.1f} dB"), fontsize=8
+        )
         axes[1, k].imshow(np.unpackbits(arrays["label"][k], axis=1), cmap="gray", extent=extent)
         for ax in axes[:, k]:
             ax.set_xlabel("cross-range (m)", fontsize=7)
@@ -352,8 +362,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--variety",
         help="draw each frame's scattering from a preset (robust: inference.simulation.isar.VARIETY_PRESETS)",
     )
-    p.add_argument("--variety-set", action="append", default=[], metavar="NAME=VALUE",
-                   help="fix one scattering parameter under --variety, e.g. window=none or edge_gain=0 (repeatable)")  # fmt: skip
+    p.add_argument(
+        "--variety-set",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="fix one scattering parameter under --variety, e.g. window=none or edge_gain=0 (repeatable)",
+    )
     p.add_argument("--out", help="new directory for the data set")
     p.add_argument("--preview", metavar="PNG", help="draw a few frames beside their labels instead")
 
@@ -380,9 +395,18 @@ def run(args: argparse.Namespace) -> int:
     if args.variety_set and not args.variety:
         raise DatasetError("--variety-set needs --variety PRESET", field="variety")
     spec = DatasetSpec(
-        args.n, args.seed, lo, hi, args.max_angle_deg, args.shard_size, n_train, args.model, args.model_scale,
-        args.variety, tuple(parse_override(v) for v in args.variety_set),
-    )  # fmt: skip
+        args.n,
+        args.seed,
+        lo,
+        hi,
+        args.max_angle_deg,
+        args.shard_size,
+        n_train,
+        args.model,
+        args.model_scale,
+        args.variety,
+        tuple(parse_override(v) for v in args.variety_set),
+    )
     radar = Radar(args.carrier_hz, args.bandwidth_hz, args.n_range, args.n_azimuth, args.aperture_deg)
     if args.preview:
         build_model(spec, radar)

@@ -301,9 +301,13 @@ def visible(
 
 
 def expected_magnitude(
-    normals_obs: Vec, kinds: NDArray[np.int8], los: Vec, lobe_scale: float = 1.0, edge_gain: float = 1.0,
+    normals_obs: Vec,
+    kinds: NDArray[np.int8],
+    los: Vec,
+    lobe_scale: float = 1.0,
+    edge_gain: float = 1.0,
     dense: bool = False,
-) -> Vec:  # fmt: skip
+) -> Vec:
     """Return each scatterer's aspect-dependent magnitude before the per-frame jitter (``scatterer_amplitudes``).
 
     FLAT facets flash when their normal meets the line of sight (Gaussian lobe of
@@ -326,9 +330,14 @@ def expected_magnitude(
 
 
 def scatterer_amplitudes(
-    normals_obs: Vec, kinds: NDArray[np.int8], los: Vec, rng: np.random.Generator, lobe_scale: float = 1.0,
-    edge_gain: float = 1.0, dense: bool = False,
-) -> NDArray[np.complex128]:  # fmt: skip
+    normals_obs: Vec,
+    kinds: NDArray[np.int8],
+    los: Vec,
+    rng: np.random.Generator,
+    lobe_scale: float = 1.0,
+    edge_gain: float = 1.0,
+    dense: bool = False,
+) -> NDArray[np.complex128]:
     """Return complex amplitudes: ``expected_magnitude``, seeded log-normal jitter and a random sub-cell phase."""
     mag = expected_magnitude(normals_obs, kinds, los, lobe_scale, edge_gain, dense)
     mag = mag * rng.lognormal(0.0, 0.25, len(kinds))
@@ -546,8 +555,9 @@ def simulate(
     if sc == DEFAULT_SCATTERING:
         amps = scatterer_amplitudes(normals[seen], kinds[seen], los, rng)
     else:
-        amps = scatterer_amplitudes(normals[seen], kinds[seen], los, rng, sc.lobe_scale, sc.edge_gain,
-                                    dense=sc.scatterers == "dense")  # fmt: skip
+        amps = scatterer_amplitudes(
+            normals[seen], kinds[seen], los, rng, sc.lobe_scale, sc.edge_gain, dense=sc.scatterers == "dense"
+        )
     p = pts[seen]
     if sc.dominant:
         pick = rng.choice(len(p), size=min(sc.dominant, len(p)), replace=False)

@@ -208,8 +208,12 @@ def tiangong_like(scatterer_spacing_m: float = 0.3, surface_spacing_m: float = 0
     add_plate(origin + [-1.5, 0, -2.1 - 2.25], ez, ex, 4.5, 2.2, -35.0)
     add_plate(node + [0, 6.0, 2.1 + 2.0], ez, ey, 4.0, 1.8, 10.0)
 
-    return _assembled("tiangong-like", parts_sc, parts_surf,
-                      "compact asymmetric Tiangong-like station (inference/simulation/targets.py: tiangong_like)")  # fmt: skip
+    return _assembled(
+        "tiangong-like",
+        parts_sc,
+        parts_surf,
+        "compact asymmetric Tiangong-like station (inference/simulation/targets.py: tiangong_like)",
+    )
 
 
 def comsat_like(scatterer_spacing_m: float = 0.3, surface_spacing_m: float = 0.08) -> TargetModel:
@@ -244,8 +248,10 @@ def comsat_like(scatterer_spacing_m: float = 0.3, surface_spacing_m: float = 0.0
 
     lx, ly, lz = 3.2, 2.4, 2.6
     for axis, size, (u, v, su, sv) in (
-        (ex, lx, (ey, ez, ly, lz)), (ey, ly, (ex, ez, lx, lz)), (ez, lz, (ex, ey, lx, ly)),
-    ):  # fmt: skip
+        (ex, lx, (ey, ez, ly, lz)),
+        (ey, ly, (ex, ez, lx, lz)),
+        (ez, lz, (ex, ey, lx, ly)),
+    ):
         for sign in (1.0, -1.0):
             add_plate(sign * axis * size / 2, u, v, su, sv)
     add_plate(np.array([0.0, ly / 2 + 0.6 + 3.5, 0.0]), ey, ex, 7.0, 2.2, 25.0)
@@ -254,8 +260,12 @@ def comsat_like(scatterer_spacing_m: float = 0.3, surface_spacing_m: float = 0.0
         add_cylinder(np.array([0.0, sign * ly / 2, 0.0]), sign * ey, 0.1, 0.6)
     add_cylinder(np.array([0.4, 0.0, lz / 2]), ez, 1.3, 0.35)
     add_cylinder(np.array([-lx / 2 - 1.2, 0.0, 0.0]), ex, 0.5, 1.2)
-    return _assembled("comsat-like", parts_sc, parts_surf,
-                      "box-wing communications satellite (inference/simulation/targets.py: comsat_like)")  # fmt: skip
+    return _assembled(
+        "comsat-like",
+        parts_sc,
+        parts_surf,
+        "box-wing communications satellite (inference/simulation/targets.py: comsat_like)",
+    )
 
 
 BUILTIN_TARGETS = {"tiangong-like": tiangong_like, "comsat-like": comsat_like}
@@ -288,10 +298,23 @@ def _read_obj(path: Path) -> tuple[Vec, NDArray[np.int64]]:
 
 
 _PLY_TYPES = {
-    "char": "i1", "uchar": "u1", "short": "i2", "ushort": "u2", "int": "i4", "uint": "u4",
-    "float": "f4", "double": "f8", "int8": "i1", "uint8": "u1", "int16": "i2", "uint16": "u2",
-    "int32": "i4", "uint32": "u4", "float32": "f4", "float64": "f8",
-}  # fmt: skip
+    "char": "i1",
+    "uchar": "u1",
+    "short": "i2",
+    "ushort": "u2",
+    "int": "i4",
+    "uint": "u4",
+    "float": "f4",
+    "double": "f8",
+    "int8": "i1",
+    "uint8": "u1",
+    "int16": "i2",
+    "uint16": "u2",
+    "int32": "i4",
+    "uint32": "u4",
+    "float32": "f4",
+    "float64": "f8",
+}
 
 
 def _read_ply(path: Path) -> tuple[Vec, NDArray[np.int64]]:

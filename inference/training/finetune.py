@@ -35,14 +35,20 @@ from numpy.typing import NDArray
 
 from inference.errors import DatasetError, InferenceError, module_main
 from inference.export import load_trained
+from inference.files import sha256_file, write_json
 from inference.frames import ANGLE_SCALE_DEG
 from inference.networks.swin import SwinTransformer
-from inference.runtime import sha256_file
 from inference.simulation.dataset import DatasetSpec, frame_truth, load_manifest, load_range, render_frames
 from inference.simulation.isar import Radar
-from inference.training.train import _save, averaged_weights, check_schedule, split_indices
+from inference.training.options import (
+    VAL_SEED,
+    FinetuneOptions,
+    add_option_arguments,
+    check_schedule,
+    options_from_args,
+)
+from inference.training.train import _save, averaged_weights, split_indices
 
-VAL_SEED = 20_000  # the fresh validation set: no training set (seed 0..) or SNR test set (10,000 + dB) uses it
 CHUNK = 64  # frames per cached chunk (and per progress line)
 
 
@@ -116,10 +122,14 @@ class FeatureCache:
             self.array[self.done : stop] = compute(self.done, stop)
             self.array.flush()
             self.done = stop
-            self.meta_path.write_text(json.dumps({"identity": self.identity, "done": self.done}))
+            write_json(self.meta_path, {"identity": self.identity, "done": self.done})
             rate = (self.done - first) / max(time.perf_counter() - t0, 1e-9)
-            print(f"finetune: caching {label} {self.done}/{n} frames ({rate:.1f} frames/s, "
-                  f"{(n - self.done) / max(rate, 1e-9):.0f} s left)", file=sys.stderr, flush=True)  # fmt: skip
+            print(
+                f"finetune: caching {label} {self.done}/{n} frames ({rate:.1f} frames/s, "
+                f"{(n - self.done) / max(rate, 1e-9):.0f} s left)",
+                file=sys.stderr,
+                flush=True,
+            )
         return np.asarray(self.array)
 
 
@@ -128,38 +138,31 @@ def _mae(pred: NDArray[Any], true: NDArray[Any]) -> list[float]:
 
 
 @torch.no_grad()
-def predict_tail(modules: torch.nn.Module, swin: SwinTransformer, feats: NDArray[Any], train_stages: int,
-                 batch: int = 64) -> NDArray[np.float32]:  # fmt: skip
+def predict_tail(
+    modules: torch.nn.Module, swin: SwinTransformer, feats: NDArray[Any], train_stages: int, batch: int = 64
+) -> NDArray[np.float32]:
     """Angles in degrees [N, 3] from cached features, with ``swin``'s tail (``modules``, already loaded into it)."""
     modules.eval()
-    out = [tail(swin, torch.from_numpy(feats[k : k + batch].astype(np.float32)), train_stages).numpy()
-           for k in range(0, len(feats), batch)]  # fmt: skip
+    out = [
+        tail(swin, torch.from_numpy(feats[k : k + batch].astype(np.float32)), train_stages).numpy()
+        for k in range(0, len(feats), batch)
+    ]
     return np.asarray(np.concatenate(out) * ANGLE_SCALE_DEG, np.float32)
 
 
 def finetune(
-    run_dir: str | Path,
-    data_dir: str | Path,
-    out_dir: str | Path,
-    enhancer: str | Path | None = None,
-    epochs: int = 4,
-    lr: float = 4e-5,
-    lr_decay: float = 0.9,
-    batch_size: int = 32,
-    ema: float | None = 0.999,
-    train_stages: int = 1,
-    n_val: int = 1000,
-    val_seed: int = VAL_SEED,
-    max_train_frames: int | None = None,
-    seed: int = 0,
-    threads: int | None = None,
-    cache_dir: str | Path | None = None,
+    run_dir: str | Path, data_dir: str | Path, out_dir: str | Path, options: FinetuneOptions | None = None
 ) -> dict[str, Any]:
     """Fine-tune ``run_dir``'s Swin tail into ``out_dir`` (a run directory); return the fine-tuning record.
 
     The feature cache lives in ``cache_dir`` (default ``out_dir``); point a second round of
     fine-tuning (``run_dir`` an earlier round's output) at the first round's cache to skip caching.
     """
+    opts = options if options is not None else FinetuneOptions()
+    enhancer, epochs, lr, lr_decay = opts.enhancer, opts.epochs, opts.lr, opts.lr_decay
+    batch_size, ema, train_stages, n_val = opts.batch_size, opts.ema, opts.train_stages, opts.n_val
+    val_seed, max_train_frames, seed, threads = opts.val_seed, opts.max_train_frames, opts.seed, opts.threads
+    cache_dir = opts.cache_dir
     if epochs < 1:
         raise InferenceError(f"epochs {epochs} must be at least 1", field="epochs")
     check_schedule(lr_decay, ema)
@@ -228,13 +231,17 @@ def finetune(
     shape = probe.shape[1:]
     data_id = {**identity, "data": manifest["content_sha256"]}
     feats = {
-        "train": FeatureCache(cache, "train", len(train_idx), shape, {**data_id, "rows": list(_span(train_idx))})
-        .fill(data_rows(train_idx), "training frames"),
-        "val": FeatureCache(cache, "val", n_val, shape, {**identity, "val": asdict(val_spec)})
-        .fill(lambda a, b: features(render_frames(val_spec, radar, a, b)["image"]), f"fresh validation frames (seed {val_seed})"),
-        "test": FeatureCache(cache, "test", len(test_idx), shape, {**data_id, "rows": list(_span(test_idx))})
-        .fill(data_rows(test_idx), "test frames"),
-    }  # fmt: skip
+        "train": FeatureCache(cache, "train", len(train_idx), shape, {**data_id, "rows": list(_span(train_idx))}).fill(
+            data_rows(train_idx), "training frames"
+        ),
+        "val": FeatureCache(cache, "val", n_val, shape, {**identity, "val": asdict(val_spec)}).fill(
+            lambda a, b: features(render_frames(val_spec, radar, a, b)["image"]),
+            f"fresh validation frames (seed {val_seed})",
+        ),
+        "test": FeatureCache(cache, "test", len(test_idx), shape, {**data_id, "rows": list(_span(test_idx))}).fill(
+            data_rows(test_idx), "test frames"
+        ),
+    }
     angles = {
         "train": load_range(data_dir, *_span(train_idx), keys=("angles_deg",), verify=False)["angles_deg"],
         "val": np.array([frame_truth(val_spec, k)[0] for k in range(n_val)], np.float32),
@@ -281,8 +288,12 @@ def finetune(
                 averaged.update_parameters(modules)
             total += float(loss.detach())
             if (step + 1) % 100 == 0:
-                print(f"finetune: epoch {epoch}/{epochs} step {step + 1}/{len(batches)} loss {total / (step + 1):.5f} "
-                      f"({(time.perf_counter() - t_epoch) / (step + 1):.2f} s/step)", file=sys.stderr, flush=True)  # fmt: skip
+                print(
+                    f"finetune: epoch {epoch}/{epochs} step {step + 1}/{len(batches)} loss {total / (step + 1):.5f} "
+                    f"({(time.perf_counter() - t_epoch) / (step + 1):.2f} s/step)",
+                    file=sys.stderr,
+                    flush=True,
+                )
         sched.step()
         rec: dict[str, Any] = {"epoch": epoch, "swin_loss": total / len(batches), "val_mae_deg": score()}
         candidates = [("trained", rec["val_mae_deg"], modules.state_dict())]
@@ -295,9 +306,14 @@ def finetune(
         for which, mae, state in candidates:
             if float(np.mean(mae)) < float(np.mean(best["val_mae_deg"])):
                 best = {"epoch": epoch, "weights": which, "val_mae_deg": mae, "state": copy.deepcopy(state)}
-        print(f"finetune: epoch {epoch}/{epochs} done: loss {rec['swin_loss']:.5f}, validation MAE z/y/x "
-              f"{_fmt(rec['val_mae_deg'])} deg" + (f" (averaged weights {_fmt(rec['ema_val_mae_deg'])})" if averaged else "")
-              + f" ({rec['seconds']:.0f} s)", file=sys.stderr, flush=True)  # fmt: skip
+        print(
+            f"finetune: epoch {epoch}/{epochs} done: loss {rec['swin_loss']:.5f}, validation MAE z/y/x "
+            f"{_fmt(rec['val_mae_deg'])} deg"
+            + (f" (averaged weights {_fmt(rec['ema_val_mae_deg'])})" if averaged else "")
+            + f" ({rec['seconds']:.0f} s)",
+            file=sys.stderr,
+            flush=True,
+        )
 
     # Keep the weights with the lowest validation error; score the test split once, before and after.
     test_before = score_on(modules, swin, start_state, feats["test"], angles["test"], train_stages)
@@ -308,7 +324,12 @@ def finetune(
         "enhancer": None if est is None else {"dir": str(enhancer), "unetpp_sha256": identity["enhancer"]},
         "train_stages": train_stages,
         "trained_parameters": sum(p.numel() for p in modules.parameters()),
-        "epochs": epochs, "lr": lr, "lr_decay": lr_decay, "batch_size": batch_size, "ema": ema, "seed": seed,
+        "epochs": epochs,
+        "lr": lr,
+        "lr_decay": lr_decay,
+        "batch_size": batch_size,
+        "ema": ema,
+        "seed": seed,
         "train_frames": int(len(train_idx)),
         "validation": {"spec": asdict(val_spec), "n": n_val},
         "chosen": {k: best[k] for k in ("epoch", "weights", "val_mae_deg")},
@@ -316,11 +337,15 @@ def finetune(
         "test_mae_deg_before": test_before,
         "test_mae_deg_after": test_after,
         "history": history,
-        "hardware": {"device": "cpu", "name": platform.processor() or platform.machine(), "torch": torch.__version__,
-                     "threads": torch.get_num_threads()},
+        "hardware": {
+            "device": "cpu",
+            "name": platform.processor() or platform.machine(),
+            "torch": torch.__version__,
+            "threads": torch.get_num_threads(),
+        },
         "cache_seconds": round(cache_seconds, 1),
         "train_seconds": round(sum(h["seconds"] for h in history), 1),
-    }  # fmt: skip
+    }
     _save({"state_dict": swin.state_dict(), "config": cfg, "enhance": enhance, "finetune": True}, out / "swin.pt")
     shutil.copy(Path(run_dir) / "unetpp.pt", out / "unetpp.pt")
     base_path = Path(run_dir) / "training.json"
@@ -328,7 +353,7 @@ def finetune(
     if "finetune" in training:  # a second round keeps the first round's record inside its own
         record["previous_round"] = training["finetune"]
     training["finetune"] = record
-    (out / "training.json").write_text(json.dumps(training, indent=2))
+    write_json(out / "training.json", training)
     plot_finetune(record, out / "finetune.png")
     return record
 
@@ -341,8 +366,14 @@ def _fmt(mae: list[float]) -> str:
     return "/".join(f"{v:.3f}" for v in mae)
 
 
-def score_on(modules: torch.nn.ModuleList, swin: SwinTransformer, state: dict[str, Any], feats: NDArray[Any],
-             angles: NDArray[Any], train_stages: int) -> list[float]:  # fmt: skip
+def score_on(
+    modules: torch.nn.ModuleList,
+    swin: SwinTransformer,
+    state: dict[str, Any],
+    feats: NDArray[Any],
+    angles: NDArray[Any],
+    train_stages: int,
+) -> list[float]:
     """MAE per axis (deg) of ``swin`` with its tail set to ``state``; the tail's own weights are put back."""
     saved = copy.deepcopy(modules.state_dict())
     modules.load_state_dict(state)
@@ -367,11 +398,19 @@ def plot_finetune(record: dict[str, Any], path: Path) -> None:
     for k, name in enumerate("zyx"):
         line = ax.plot(ep, [record["start_val_mae_deg"][k]] + [h["val_mae_deg"][k] for h in hist], "o-", label=name)[0]
         if all("ema_val_mae_deg" in h for h in hist):
-            ax.plot(ep, [record["start_val_mae_deg"][k]] + [h["ema_val_mae_deg"][k] for h in hist], "--",
-                    color=line.get_color(), label=f"{name}, averaged weights")  # fmt: skip
+            ax.plot(
+                ep,
+                [record["start_val_mae_deg"][k]] + [h["ema_val_mae_deg"][k] for h in hist],
+                "--",
+                color=line.get_color(),
+                label=f"{name}, averaged weights",
+            )
     c = record["chosen"]
-    ax.set(xlabel="epoch (0: the starting weights)", ylabel="validation MAE (deg)",
-           title=f"kept: epoch {c['epoch']}, {c['weights']} weights")  # fmt: skip
+    ax.set(
+        xlabel="epoch (0: the starting weights)",
+        ylabel="validation MAE (deg)",
+        title=f"kept: epoch {c['epoch']}, {c['weights']} weights",
+    )
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
@@ -382,28 +421,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--run", required=True, help="training run directory (unetpp.pt, swin.pt)")
     p.add_argument("--data", required=True, help="the data set it was trained on (from `gsa simulate`)")
     p.add_argument("--out", required=True, help="new run directory: swin.pt, unetpp.pt, training.json, finetune.png")
-    p.add_argument("--enhancer", help="exported model directory whose UNet++ enhances the frames (default: the run's)")
-    p.add_argument("--epochs", type=int, default=4)
-    p.add_argument("--lr", type=float, default=4e-5)
-    p.add_argument("--lr-decay", type=float, default=0.9, help="learning-rate factor per epoch")
-    p.add_argument("--batch-size", type=int, default=32)
-    p.add_argument("--ema", type=float, default=0.999, help="weight-averaging decay per step; 0 turns it off")
-    p.add_argument("--train-stages", type=int, default=1, help="how many of Swin's last stages to train")
-    p.add_argument("--n-val", type=int, default=1000, help="frames of the fresh validation set")
-    p.add_argument("--val-seed", type=int, default=VAL_SEED)
-    p.add_argument("--max-train-frames", type=int)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--threads", type=int, help="torch CPU threads (default: all cores)")
-    p.add_argument("--cache", help="where the feature cache lives (default: --out); an earlier round's --out reuses it")
+    add_option_arguments(p, FinetuneOptions)
 
 
 def run(args: argparse.Namespace) -> int:
-    rec = finetune(args.run, args.data, args.out, args.enhancer, args.epochs, args.lr, args.lr_decay, args.batch_size,
-                   args.ema or None, args.train_stages, args.n_val, args.val_seed, args.max_train_frames, args.seed,
-                   args.threads, args.cache)  # fmt: skip
+    rec = finetune(args.run, args.data, args.out, options_from_args(FinetuneOptions, args))
     c = rec["chosen"]
-    print(f"fine-tuned into {args.out}: kept epoch {c['epoch']} ({c['weights']} weights), validation MAE z/y/x "
-          f"{_fmt(c['val_mae_deg'])} deg; test MAE {_fmt(rec['test_mae_deg_before'])} -> {_fmt(rec['test_mae_deg_after'])} deg")  # fmt: skip
+    print(
+        f"fine-tuned into {args.out}: kept epoch {c['epoch']} ({c['weights']} weights), validation MAE z/y/x "
+        f"{_fmt(c['val_mae_deg'])} deg; test MAE {_fmt(rec['test_mae_deg_before'])} -> {_fmt(rec['test_mae_deg_after'])} deg"
+    )
     return 0
 
 

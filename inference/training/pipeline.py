@@ -3,7 +3,7 @@
 On the GPU machine (numpy, scipy, torch and onnxruntime only)::
 
     python -m inference.training.pipeline prepare --work W --n 13000 --n-train 12000 --n-snr 300
-    python -m inference.training.pipeline run --work W --name compact --config compact --max-minutes 20 --out OUT
+    python -m inference.training.pipeline run --work W --name compact --recipe shipped --max-minutes 20 --out OUT
 
 ``prepare`` simulates the data set into ``W/data`` and Table 7's fresh SNR sets into
 ``W/snr-0``, ``W/snr-5``, ``W/snr-10`` (each once, on every core). ``run`` trains
@@ -30,6 +30,7 @@ import json
 import os
 import shutil
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -38,7 +39,9 @@ import torch
 from inference.errors import InferenceError, ModelFileError
 from inference.evaluation.evaluate import PAPER, SNR_DB, held_out, plot_errors, row_name, score, snr_spec, table
 from inference.export import load_trained
+from inference.files import write_json
 from inference.simulation.dataset import DatasetSpec, default_train_frames, generate, load_arrays, load_manifest
+from inference.training.options import RECIPES, TrainOptions, add_option_arguments, options_from_args, recipe
 from inference.training.train import averaged_weights, predict, train
 
 PIECE_BYTES = 15 * 1024 * 1024
@@ -60,8 +63,15 @@ def _split(name: str, state: dict[str, Any], config: dict[str, Any], out: Path, 
     return pieces
 
 
-def prepare(work: Path, n: int, n_train: int | None = None, n_snr: int = 0, seed: int = 0, radar: Any = None,
-            workers: int | None = None) -> None:  # fmt: skip
+def prepare(
+    work: Path,
+    n: int,
+    n_train: int | None = None,
+    n_snr: int = 0,
+    seed: int = 0,
+    radar: Any = None,
+    workers: int | None = None,
+) -> None:
     """Simulate the data set into ``WORK/data`` and Table 7's fresh SNR sets into ``WORK/snr-DB`` (each once)."""
     data = work / "data"
     if not (data / "manifest.json").exists():
@@ -98,7 +108,7 @@ def evaluate_run(work: Path, name: str, device: str | None = None) -> dict[str, 
 
     rows, errors = score(lambda f: predict(unet if enhance else None, swin, f, dev)[0], sets())
     results = {"run": name, "paper_mae_deg": PAPER, "rows": rows}
-    (run_dir / "evaluation.json").write_text(json.dumps(results, indent=2))
+    write_json(run_dir / "evaluation.json", results)
     (run_dir / "evaluation.md").write_text(table(results))
     plot_errors(errors, run_dir / "errors.png")
     return results
@@ -135,17 +145,25 @@ def pack(run_dir: Path, out: Path, reuse: Path | None = None) -> dict[str, Any]:
     if ckpt.is_file():
         ck = torch.load(ckpt, map_location="cpu", weights_only=False)
         ema = ck.get("ema") or {}  # a run with --ema hands back its averaged weights, as its unetpp.pt/swin.pt hold
-        states = {"unetpp": averaged_weights(ema["unet"]) if "unet" in ema else ck["unet"],
-                  "swin": averaged_weights(ema["swin"]) if "swin" in ema else ck["swin"]}  # fmt: skip
-        manifest: dict[str, Any] = {"epochs": ck["epoch"], "complete": ck["epoch"] >= ck["config"]["epochs"],
-                                    "averaged_weights": bool(ema)}  # fmt: skip
+        states = {
+            "unetpp": averaged_weights(ema["unet"]) if "unet" in ema else ck["unet"],
+            "swin": averaged_weights(ema["swin"]) if "swin" in ema else ck["swin"],
+        }
+        manifest: dict[str, Any] = {
+            "epochs": ck["epoch"],
+            "complete": ck["epoch"] >= ck.get("epochs", ck["config"].get("epochs", 0)),
+            "averaged_weights": bool(ema),
+        }
         config, enhance = ck["config"], ck.get("enhance", True)
     elif (run_dir / "swin.pt").is_file() and (run_dir / "unetpp.pt").is_file():
         cks = {n: torch.load(run_dir / f"{n}.pt", map_location="cpu", weights_only=False) for n in ("unetpp", "swin")}
         states = {n: ck["state_dict"] for n, ck in cks.items()}
         training = json.loads((run_dir / "training.json").read_text()) if (run_dir / "training.json").is_file() else {}
-        manifest = {"epochs": len(training.get("history", [])), "complete": bool(training.get("complete")),
-                    "finetuned": "finetune" in training}  # fmt: skip
+        manifest = {
+            "epochs": len(training.get("history", [])),
+            "complete": bool(training.get("complete")),
+            "finetuned": "finetune" in training,
+        }
         config, enhance = cks["swin"]["config"], cks["swin"].get("enhance", True)
     else:
         raise ModelFileError(f"{ckpt} is missing: the run has not finished an epoch", field="run")
@@ -156,25 +174,33 @@ def pack(run_dir: Path, out: Path, reuse: Path | None = None) -> dict[str, Any]:
             manifest[name] = [{**p, "file": os.path.relpath(reuse / p["file"], out)} for p in prior[name]]
         else:
             manifest[name] = _split(name, state, config, out, **({"enhance": enhance} if name == "swin" else {}))
-    (out / "pieces.json").write_text(json.dumps(manifest, indent=2))
+    write_json(out / "pieces.json", manifest)
     for extra in RECORDS:
         if (run_dir / extra).exists():
             shutil.copy(run_dir / extra, out / extra)
     return manifest
 
 
-def run(config: str, n: int, work: Path, out: Path | None, max_minutes: float, seed: int = 0,
-        compile_models: bool = False, epochs: int | None = None, radar: Any = None, name: str = "run",
-        n_train: int | None = None, n_snr: int = 0, batch_size: int | None = None, lr_decay: float | None = None,
-        max_train_frames: int | None = None, evaluate: bool = True, lr: float | None = None,
-        unet_from: Path | None = None, swin_from: Path | None = None, enhance: bool = True,
-        ema: float | None = None, mode: str = "joint", unet_epochs: int | None = None) -> dict[str, Any]:  # fmt: skip
-    """Simulate (once), train ``WORK/NAME`` (resuming), evaluate when done, and pack the weights into ``out``."""
-    prepare(work, n, n_train, n_snr, seed, radar)
-    record = train(work / "data", work / name, config, epochs=epochs, seed=seed, resume=True, max_minutes=max_minutes,
-                   compile_models=compile_models, batch_size=batch_size, lr=lr, lr_decay=lr_decay,
-                   max_train_frames=max_train_frames, unet_from=unet_from, swin_from=swin_from,
-                   enhance=enhance, ema=ema, mode=mode, unet_epochs=unet_epochs)  # fmt: skip
+def run(
+    work: Path,
+    options: TrainOptions,
+    *,
+    n: int,
+    name: str = "run",
+    n_train: int | None = None,
+    n_snr: int = 0,
+    radar: Any = None,
+    out: Path | None = None,
+    evaluate: bool = True,
+) -> dict[str, Any]:
+    """Simulate (once), train ``WORK/NAME`` (resuming), evaluate when done, and pack the weights into ``out``.
+
+    ``options`` says what to train (a recipe from ``inference.training.options``); this adds the
+    data set (``n`` frames, ``n_train`` of them for training, ``n_snr`` per SNR test set) and
+    always resumes, so calling it again continues a run the time limit cut off.
+    """
+    prepare(work, n, n_train, n_snr, options.seed, radar)
+    record = train(work / "data", work / name, replace(options, resume=True))
     if evaluate:
         evaluate_run(work, name)
     manifest = pack(work / name, out) if out is not None else {}
@@ -206,21 +232,12 @@ def main(argv: list[str] | None = None) -> int:
         q.add_argument("--n-snr", type=int, default=0, help="frames per SNR in Table 7's fresh test sets")
         q.add_argument("--seed", type=int, default=0)
     r.add_argument("--name", default="run", help="run folder inside WORK")
-    r.add_argument("--config", default="paper")
     r.add_argument("--out", help="where the float16 pieces go (default: none)")
-    r.add_argument("--max-minutes", type=float, default=8.0)
-    r.add_argument("--epochs", type=int)
-    r.add_argument("--batch-size", type=int)
-    r.add_argument("--lr", type=float)
-    r.add_argument("--lr-decay", type=float)
+    r.add_argument(
+        "--recipe", default="paper", choices=sorted(RECIPES), help="named training options; the flags below override it"
+    )
     r.add_argument("--from", dest="start_from", help="start both networks from a run folder's unetpp.pt and swin.pt")
-    r.add_argument("--max-train-frames", type=int, help="train on the first N training frames only")
-    r.add_argument("--compile", action="store_true")
-    r.add_argument("--mode", default="joint", choices=["joint", "two-stage"])
-    r.add_argument("--unet-epochs", type=int, help="two-stage: epochs of UNet++ before Swin (default half)")
-    r.add_argument("--ema", type=float, help="average the weights (decay per step, e.g. 0.999); the result")
-    r.add_argument("--no-enhance", action="store_true",
-                   help="train Swin on raw frames, no UNet++ (Table 4's 'without enhancement' row)")  # fmt: skip
+    add_option_arguments(r, TrainOptions, skip=("seed", "resume", "unet_from", "swin_from", "log_every"))
     k = sub.add_parser("pack", help="write a run's latest weights in float16 pieces into OUT")
     k.add_argument("--run", required=True)
     k.add_argument("--out", required=True)
@@ -234,13 +251,19 @@ def main(argv: list[str] | None = None) -> int:
             prepare(Path(args.work), args.n, args.n_train, args.n_snr, args.seed)
             print(f"data sets ready in {args.work}")
         elif args.cmd == "run":
-            m = run(args.config, args.n, Path(args.work), Path(args.out) if args.out else None, args.max_minutes,
-                    args.seed, args.compile, args.epochs, name=args.name, n_train=args.n_train, n_snr=args.n_snr,
-                    batch_size=args.batch_size, lr_decay=args.lr_decay, lr=args.lr,
-                    max_train_frames=args.max_train_frames, enhance=not args.no_enhance, ema=args.ema,
-                    mode=args.mode, unet_epochs=args.unet_epochs,
-                    unet_from=Path(args.start_from) / "unetpp.pt" if args.start_from else None,
-                    swin_from=Path(args.start_from) / "swin.pt" if args.start_from else None)  # fmt: skip
+            opts = options_from_args(TrainOptions, args, base=recipe(args.recipe, max_minutes=8.0))
+            if args.start_from:
+                start = Path(args.start_from)
+                opts = replace(opts, unet_from=str(start / "unetpp.pt"), swin_from=str(start / "swin.pt"))
+            m = run(
+                Path(args.work),
+                replace(opts, seed=args.seed),
+                n=args.n,
+                name=args.name,
+                n_train=args.n_train,
+                n_snr=args.n_snr,
+                out=Path(args.out) if args.out else None,
+            )
             print(json.dumps({k: v for k, v in m.items() if k in ("complete", "epochs")}))
         elif args.cmd == "pack":
             m = pack(Path(args.run), Path(args.out), Path(args.reuse) if args.reuse else None)

@@ -1,6 +1,6 @@
 """Train UNet++ and Swin on a simulated data set (Hou et al. 2023 section 4.3.3).
 
-The paper's protocol: Adam, lr 2e-4 decayed x0.98 each epoch, batch 32, 100
+The paper's protocol (recipe ``paper``): Adam, lr 2e-4 decayed x0.98 each epoch, batch 32, 100
 epochs; per batch the UNet++ forward and its loss, Swin on the enhanced frames and
 its loss, update Swin, update UNet++ (``mode="joint"``). ``mode="two-stage"`` trains
 UNet++ first and then Swin on its frozen output; ``enhance=False`` trains Swin on
@@ -22,12 +22,12 @@ bf16 autocast on a GPU, and it stops cleanly after the epoch in which
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import platform
 import sys
 import time
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -35,11 +35,19 @@ import numpy as np
 import torch
 
 from inference.errors import DatasetError, InferenceError, module_main
+from inference.files import write_atomic, write_json
 from inference.frames import ANGLE_SCALE_DEG
 from inference.networks.build import ModelConfig, build_models, get_config
 from inference.networks.swin import angle_loss
 from inference.networks.unetpp import relative_frobenius_loss
 from inference.simulation.dataset import load_arrays, load_manifest, split_ranges
+from inference.training.options import (
+    RECIPES,
+    TrainOptions,
+    add_option_arguments,
+    options_from_args,
+    recipe,
+)
 
 
 def split_indices(manifest: dict[str, Any], n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -93,19 +101,9 @@ def averaged_weights(state: dict[str, Any]) -> dict[str, Any]:
     return {k[len("module.") :]: v for k, v in state.items() if k.startswith("module.")}
 
 
-def check_schedule(lr_decay: float, ema: float | None) -> None:
-    """Refuse a learning-rate decay outside (0, 1] or a weight-averaging decay outside (0, 1)."""
-    if not 0.0 < lr_decay <= 1.0:
-        raise InferenceError(f"lr_decay {lr_decay} must be in (0, 1]", field="lr_decay")
-    if ema is not None and not 0.0 < ema < 1.0:
-        raise InferenceError(f"ema {ema} must be in (0, 1), e.g. 0.999", field="ema")
-
-
 def _save(obj: Any, path: Path) -> None:
     """Save atomically, so a reader (or a cut-off run) never sees half a file."""
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(obj, tmp)
-    tmp.replace(path)
+    write_atomic(path, lambda tmp: torch.save(obj, tmp))
 
 
 @torch.no_grad()
@@ -149,65 +147,94 @@ def enhance_all(
         out[sel] = unet(x)[:, 0].float().cpu().numpy()
         done = min(k + batch, len(todo))
         if done % (batch * 20) == 0 or done == len(todo):
-            print(f"train: enhancing frames with the frozen UNet++ {done}/{len(todo)} "
-                  f"({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)  # fmt: skip
+            print(
+                f"train: enhancing frames with the frozen UNet++ {done}/{len(todo)} ({time.perf_counter() - t0:.0f} s)",
+                file=sys.stderr,
+                flush=True,
+            )
     return out
 
 
-def train(
-    data_dir: str | Path,
-    out_dir: str | Path,
-    config: str | ModelConfig = "smoke",
-    epochs: int | None = None,
-    batch_size: int | None = None,
-    lr: float | None = None,
-    mode: str = "joint",
-    enhance: bool = True,
-    seed: int = 0,
-    device: str | None = None,
-    resume: bool = False,
-    max_minutes: float | None = None,
-    max_train_frames: int | None = None,
-    log_every: int = 20,
-    compile_models: bool = False,
-    unet_epochs: int | None = None,
-    unet_from: str | Path | None = None,
-    threads: int | None = None,
-    swin_from: str | Path | None = None,
-    lr_decay: float | None = None,
-    ema: float | None = None,
-    shape: dict[str, Any] | None = None,
-) -> dict[str, Any]:
+@dataclass
+class _Run:
+    """One training run's state, which each step reads and advances."""
+
+    opts: TrainOptions
+    cfg: ModelConfig
+    out: Path
+    data_dir: Path
+    manifest: dict[str, Any]
+    data: dict[str, np.ndarray]
+    dev_data: dict[str, np.ndarray | torch.Tensor]
+    train_idx: np.ndarray
+    test_idx: np.ndarray
+    dev: torch.device
+    unet: torch.nn.Module
+    swin: torch.nn.Module
+    opt_u: torch.optim.Optimizer
+    opt_s: torch.optim.Optimizer
+    sch_u: torch.optim.lr_scheduler.LRScheduler
+    sch_s: torch.optim.lr_scheduler.LRScheduler
+    averaged: dict[str, torch.optim.swa_utils.AveragedModel]
+    stage_split: int
+    history: list[dict[str, Any]] = field(default_factory=list)
+    start_epoch: int = 0
+    cache: np.ndarray | None = None  # UNet++ output for every frame once UNet++ is frozen
+
+
+def train(data_dir: str | Path, out_dir: str | Path, options: TrainOptions | None = None) -> dict[str, Any]:
     """Train both networks (or Swin alone with ``enhance=False``) and return the training record.
 
-    ``mode="two-stage"`` trains UNet++ for ``unet_epochs`` (default half the epochs),
-    then freezes it, runs it once over every frame and trains Swin on those cached
-    enhanced frames, which is what makes Swin epochs cheap on a CPU. ``unet_from`` and
-    ``swin_from`` start a network from the weights of an earlier run's ``unetpp.pt`` or
-    ``swin.pt``: with a fresh learning-rate schedule this continues training that the
-    earlier run's decayed schedule had slowed down. ``shape`` overrides the named config's
-    network shape (``unet_filters``, ``swin_embed_dim``, ``swin_depths``, ``swin_heads``),
-    e.g. to train a small Swin behind a larger, already trained UNet++.
+    ``options`` (default ``recipe("compact")``) is built by keyword or from a named recipe
+    (``inference.training.options.recipe``). ``mode="two-stage"`` trains UNet++ for
+    ``unet_epochs`` (default half the epochs), then freezes it, runs it once over every frame
+    and trains Swin on those cached enhanced frames, which is what makes Swin epochs cheap on a
+    CPU. ``unet_from`` and ``swin_from`` start a network from the weights of an earlier run's
+    ``unetpp.pt`` or ``swin.pt``: with a fresh learning-rate schedule this continues training
+    that the earlier run's decayed schedule had slowed down. The shape fields override the
+    config's network shape, e.g. to train a small Swin behind a larger, already trained UNet++.
     """
-    cfg = (
-        config
-        if isinstance(config, ModelConfig)
-        else get_config(config, epochs=epochs, batch_size=batch_size, lr=lr, lr_decay=lr_decay, **(shape or {}))
-    )
-    check_schedule(cfg.lr_decay, ema)
-    if mode not in ("joint", "two-stage"):
-        raise InferenceError(f"mode {mode!r} must be 'joint' or 'two-stage'", field="mode")
-    if ema is not None and mode == "two-stage":
-        raise InferenceError("ema averages jointly trained networks; use it with mode 'joint'", field="ema")
-    if unet_epochs is not None and not 0 <= unet_epochs <= cfg.epochs:
-        raise InferenceError(
-            f"unet_epochs {unet_epochs} must be between 0 and epochs ({cfg.epochs})", field="unet_epochs"
+    opts = options if options is not None else recipe("compact")
+    run = _set_up(Path(data_dir), Path(out_dir), opts)
+    ckpt_path = run.out / "checkpoint.pt"
+    if opts.resume and ckpt_path.exists():
+        _resume(run, ckpt_path)
+    run_u: Callable[[torch.Tensor], torch.Tensor] = run.unet
+    run_s: Callable[[torch.Tensor], torch.Tensor] = run.swin
+    if opts.compile_models and run.dev.type == "cuda":
+        run_u, run_s = torch.compile(run.unet), torch.compile(run.swin)
+    rng = np.random.default_rng(opts.seed + run.start_epoch)
+    t_start = time.perf_counter()
+    for epoch in range(run.start_epoch, opts.epochs):
+        t_epoch = time.perf_counter()
+        losses = _epoch(run, epoch, rng, run_u, run_s)
+        record = {"epoch": epoch + 1, **losses, **_score(run), "seconds": time.perf_counter() - t_epoch}
+        run.history.append(record)
+        mae, ema_mae = record["test_mae_deg"], record.get("ema_test_mae_deg")
+        print(
+            f"train: epoch {epoch + 1}/{opts.epochs} done: unet {record['unet_loss']:.4f} swin {record['swin_loss']:.4f} "
+            f"test MAE z/y/x {mae[0]:.2f}/{mae[1]:.2f}/{mae[2]:.2f} deg"
+            + (" (averaged weights {:.2f}/{:.2f}/{:.2f})".format(*ema_mae) if ema_mae else "")
+            + f" ({record['seconds']:.0f} s)",
+            file=sys.stderr,
+            flush=True,
         )
-    for field, given, name in (("unet_from", unet_from, "unetpp.pt"), ("swin_from", swin_from, "swin.pt")):
-        if given is not None and not Path(given).is_file():
-            raise InferenceError(f"{given} does not exist; give an earlier run's {name}", field=field)
-    if threads:
-        torch.set_num_threads(threads)
+        _checkpoint(run, epoch + 1, ckpt_path)
+        if opts.max_minutes is not None and (time.perf_counter() - t_start) / 60.0 > opts.max_minutes:
+            print(
+                f"train: stopping after epoch {epoch + 1}: {opts.max_minutes} min used; --resume continues",
+                file=sys.stderr,
+            )
+            break
+    return _finish(run)
+
+
+def _set_up(data_dir: Path, out: Path, opts: TrainOptions) -> _Run:
+    """Check the options and the data set, build the networks (from earlier weights where asked) and optimisers."""
+    opts.check()
+    cfg = get_config(opts.config, **opts.shape())
+    if opts.threads:
+        torch.set_num_threads(opts.threads)
     manifest = load_manifest(data_dir, verify=True)  # fails before any work on a bad data set
     data = load_arrays(data_dir, verify=False)
     n, h, w = data["image"].shape
@@ -216,23 +243,21 @@ def train(
             f"frames are {h}x{w} but config {cfg.name!r} takes {cfg.img_size}x{cfg.img_size}", field="data"
         )
     train_idx, test_idx = split_indices(manifest, n)
-    if max_train_frames:
-        train_idx = train_idx[:max_train_frames]
+    if opts.max_train_frames:
+        train_idx = train_idx[: opts.max_train_frames]
     if len(train_idx) == 0:
         raise DatasetError(f"{data_dir} has no training frames", field="data")
-
-    out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    torch.manual_seed(seed)
-    dev = _device(device)
+    torch.manual_seed(opts.seed)
+    dev = _device(opts.device)
     unet, swin = build_models(cfg)
-    for field, given, net in (("unet_from", unet_from, unet), ("swin_from", swin_from, swin)):
+    for name, given, net in (("unet_from", opts.unet_from, unet), ("swin_from", opts.swin_from, swin)):
         if given is not None:
             ck0 = torch.load(given, map_location="cpu", weights_only=False)
             try:
                 net.load_state_dict({k: v.float() for k, v in ck0["state_dict"].items()})
             except (RuntimeError, KeyError, TypeError) as exc:
-                raise InferenceError(f"{given} does not fit config {cfg.name!r}: {exc}", field=field) from None
+                raise InferenceError(f"{given} does not fit config {cfg.name!r}: {exc}", field=name) from None
     unet.to(dev)
     swin.to(dev)
     if dev.type == "cuda":  # NHWC convolutions are what the tensor cores run natively
@@ -240,178 +265,217 @@ def train(
         torch.backends.cuda.matmul.allow_tf32 = True
         torch.backends.cudnn.allow_tf32 = True
         unet.to(memory_format=torch.channels_last)  # type: ignore[call-overload]
-    dev_data = on_device(data, dev)
-    opt_u = torch.optim.Adam(unet.parameters(), lr=cfg.lr)
-    opt_s = torch.optim.Adam(swin.parameters(), lr=cfg.lr)
-    sch_u = torch.optim.lr_scheduler.ExponentialLR(opt_u, cfg.lr_decay)
-    sch_s = torch.optim.lr_scheduler.ExponentialLR(opt_s, cfg.lr_decay)
+    opt_u = torch.optim.Adam(unet.parameters(), lr=opts.lr)
+    opt_s = torch.optim.Adam(swin.parameters(), lr=opts.lr)
     averaged: dict[str, torch.optim.swa_utils.AveragedModel] = {}
-    if ema is not None:
+    if opts.ema is not None:
         from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 
-        averaged = {k: AveragedModel(net, multi_avg_fn=get_ema_multi_avg_fn(ema), use_buffers=True)  # type: ignore[no-untyped-call]
-                    for k, net in (("unet", unet), ("swin", swin))}  # fmt: skip
-    history: list[dict[str, Any]] = []
-    start_epoch = 0
-    ckpt_path = out / "checkpoint.pt"
-    if resume and ckpt_path.exists():
-        ck = torch.load(ckpt_path, map_location=dev, weights_only=False)
-        try:
-            unet.load_state_dict(ck["unet"])
-            swin.load_state_dict(ck["swin"])
-        except (RuntimeError, KeyError) as exc:
-            raise InferenceError(
-                f"{ckpt_path} was trained with another network shape than config {cfg.name!r} with these "
-                f"overrides; resume with the run's own settings (its training.json) ({str(exc).splitlines()[0]})",
-                field="resume",
-            ) from None
-        opt_u.load_state_dict(ck["opt_u"])
-        opt_s.load_state_dict(ck["opt_s"])
-        sch_u.load_state_dict(ck["sch_u"])
-        sch_s.load_state_dict(ck["sch_s"])
-        history, start_epoch = ck["history"], ck["epoch"]
-        for k, avg in averaged.items():
-            if k in ck.get("ema", {}):
-                avg.load_state_dict(ck["ema"][k])
-        print(f"train: resumed at epoch {start_epoch}", file=sys.stderr, flush=True)
-    run_u: Callable[[torch.Tensor], torch.Tensor] = unet
-    run_s: Callable[[torch.Tensor], torch.Tensor] = swin
-    if compile_models and dev.type == "cuda":
-        run_u, run_s = torch.compile(unet), torch.compile(swin)
+        averaged = {
+            k: AveragedModel(net, multi_avg_fn=get_ema_multi_avg_fn(opts.ema), use_buffers=True)  # type: ignore[no-untyped-call]
+            for k, net in (("unet", unet), ("swin", swin))
+        }
+    two_stage = opts.mode == "two-stage"
+    return _Run(
+        opts=opts,
+        cfg=cfg,
+        out=out,
+        data_dir=data_dir,
+        manifest=manifest,
+        data=data,
+        dev_data=on_device(data, dev),
+        train_idx=train_idx,
+        test_idx=test_idx,
+        dev=dev,
+        unet=unet,
+        swin=swin,
+        opt_u=opt_u,
+        opt_s=opt_s,
+        sch_u=torch.optim.lr_scheduler.ExponentialLR(opt_u, opts.lr_decay),
+        sch_s=torch.optim.lr_scheduler.ExponentialLR(opt_s, opts.lr_decay),
+        averaged=averaged,
+        stage_split=(opts.epochs // 2 if opts.unet_epochs is None else opts.unet_epochs) if two_stage else 0,
+    )
+
+
+def _resume(run: _Run, ckpt_path: Path) -> None:
+    """Load the networks, optimisers, schedules, averages and history of the run's last epoch."""
+    ck = torch.load(ckpt_path, map_location=run.dev, weights_only=False)
+    try:
+        run.unet.load_state_dict(ck["unet"])
+        run.swin.load_state_dict(ck["swin"])
+    except (RuntimeError, KeyError) as exc:
+        raise InferenceError(
+            f"{ckpt_path} was trained with another network shape than config {run.cfg.name!r} with these "
+            f"overrides; resume with the run's own settings (its training.json) ({str(exc).splitlines()[0]})",
+            field="resume",
+        ) from None
+    run.opt_u.load_state_dict(ck["opt_u"])
+    run.opt_s.load_state_dict(ck["opt_s"])
+    run.sch_u.load_state_dict(ck["sch_u"])
+    run.sch_s.load_state_dict(ck["sch_s"])
+    run.history, run.start_epoch = ck["history"], ck["epoch"]
+    for k, avg in run.averaged.items():
+        if k in ck.get("ema", {}):
+            avg.load_state_dict(ck["ema"][k])
+    print(f"train: resumed at epoch {run.start_epoch}", file=sys.stderr, flush=True)
+
+
+def _epoch(
+    run: _Run,
+    epoch: int,
+    rng: np.random.Generator,
+    run_u: Callable[[torch.Tensor], torch.Tensor],
+    run_s: Callable[[torch.Tensor], torch.Tensor],
+) -> dict[str, float]:
+    """Train one epoch (per batch: UNet++ and its loss, Swin on its output and its loss, update both); return the mean losses."""
+    opts, dev = run.opts, run.dev
+    run.unet.train()
+    run.swin.train()
+    train_unet = opts.enhance and (opts.mode == "joint" or epoch < run.stage_split)
+    train_swin = opts.mode == "joint" or epoch >= run.stage_split or not opts.enhance
+    if opts.enhance and opts.mode == "two-stage" and not train_unet and run.cache is None:
+        rows = np.concatenate([run.train_idx, run.test_idx])
+        run.cache = enhance_all(run.unet, run.data["image"], dev, rows=rows)
     amp = (
         torch.autocast(device_type="cuda", dtype=torch.bfloat16)
         if dev.type == "cuda"
         else torch.autocast("cpu", enabled=False)
     )
-    rng = np.random.default_rng(seed + start_epoch)
-    t_start = time.perf_counter()
-    stage_split = (cfg.epochs // 2 if unet_epochs is None else unet_epochs) if mode == "two-stage" else 0
-    cache: np.ndarray | None = None  # UNet++ output for every frame once UNet++ is frozen
-
-    def training_record() -> dict[str, Any]:
-        """The training record (``training.json``), written after every epoch and at the end."""
-        done = bool(history) and history[-1]["epoch"] >= cfg.epochs
-        return {
-            "config": cfg.as_dict(),
-            "mode": mode,
-            "unet_epochs": stage_split if mode == "two-stage" else None,
-            "unet_from": str(unet_from) if unet_from is not None else None,
-            "swin_from": str(swin_from) if swin_from is not None else None,
-            "enhance": enhance,
-            "ema": ema,
-            "seed": seed,
-            "complete": done,
-            "data": {"dir": str(data_dir), "content_sha256": manifest["content_sha256"], "frames": int(n),
-                     "train": int(len(train_idx)), "test": int(len(test_idx)), "radar": manifest.get("radar"),
-                     "target": (manifest.get("model") or {}).get("name")},
-            "hardware": {"device": str(dev), "name": torch.cuda.get_device_name(0) if dev.type == "cuda" else platform.processor()
-                         or platform.machine(), "torch": torch.__version__, "threads": torch.get_num_threads()},
-            "train_seconds": sum(h["seconds"] for h in history),
-            "history": history,
-        }  # fmt: skip
-
-    for epoch in range(start_epoch, cfg.epochs):
-        unet.train()
-        swin.train()
-        train_unet = enhance and (mode == "joint" or epoch < stage_split)
-        train_swin = mode == "joint" or epoch >= stage_split or not enhance
-        if enhance and mode == "two-stage" and not train_unet and cache is None:
-            cache = enhance_all(unet, data["image"], dev, rows=np.concatenate([train_idx, test_idx]))
-        sums = {"unet_loss": torch.zeros((), device=dev), "swin_loss": torch.zeros((), device=dev)}
-        batches = _batches(train_idx, cfg.batch_size, rng)
-        t_epoch = time.perf_counter()
-        for step, sel in enumerate(batches):
-            x, y, a = _tensors(dev_data["image"] if cache is None else cache, dev_data, np.sort(sel), dev)
-            if dev.type == "cuda":
-                x = x.contiguous(memory_format=torch.channels_last)
-            with amp:
-                if enhance and cache is None:
-                    enhanced = run_u(x) if train_unet else run_u(x).detach()
-                    loss_u = relative_frobenius_loss(enhanced.float(), y)
-                    swin_in = enhanced.detach()
-                else:  # raw frames (no enhancement), or frames the frozen UNet++ already enhanced
-                    loss_u = torch.zeros((), device=dev)
-                    swin_in = x
-                loss_s = angle_loss(run_s(swin_in).float(), a)
-            if train_swin:
-                opt_s.zero_grad(set_to_none=True)
-                loss_s.backward()  # type: ignore[no-untyped-call]
-                opt_s.step()
-                if averaged:
-                    averaged["swin"].update_parameters(swin)
-            if train_unet:
-                opt_u.zero_grad(set_to_none=True)
-                loss_u.backward()  # type: ignore[no-untyped-call]
-                opt_u.step()
-                if averaged:
-                    averaged["unet"].update_parameters(unet)
-            sums["unet_loss"] += loss_u.detach().float()  # summed on the device: no sync per step
-            sums["swin_loss"] += loss_s.detach().float()
-            if log_every and (step + 1) % log_every == 0:
-                print(
-                    f"train: epoch {epoch + 1}/{cfg.epochs} step {step + 1}/{len(batches)} "
-                    f"unet {float(sums['unet_loss']) / (step + 1):.4f} swin {float(sums['swin_loss']) / (step + 1):.4f} "
-                    f"({(time.perf_counter() - t_epoch) / (step + 1):.2f} s/step)",
-                    file=sys.stderr,
-                    flush=True,
-                )
-        if train_unet:  # a frozen network's schedule stands still, so Swin starts stage two at its full rate
-            sch_u.step()
+    sums = {"unet_loss": torch.zeros((), device=dev), "swin_loss": torch.zeros((), device=dev)}
+    batches = _batches(run.train_idx, opts.batch_size, rng)
+    t_epoch = time.perf_counter()
+    for step, sel in enumerate(batches):
+        images = run.dev_data["image"] if run.cache is None else run.cache
+        x, y, a = _tensors(images, run.dev_data, np.sort(sel), dev)
+        if dev.type == "cuda":
+            x = x.contiguous(memory_format=torch.channels_last)
+        with amp:
+            if opts.enhance and run.cache is None:
+                enhanced = run_u(x) if train_unet else run_u(x).detach()
+                loss_u = relative_frobenius_loss(enhanced.float(), y)
+                swin_in = enhanced.detach()
+            else:  # raw frames (no enhancement), or frames the frozen UNet++ already enhanced
+                loss_u = torch.zeros((), device=dev)
+                swin_in = x
+            loss_s = angle_loss(run_s(swin_in).float(), a)
         if train_swin:
-            sch_s.step()
-        # Swin reads the frames UNet++ already enhanced (two-stage), or raw frames through UNet++ (or not).
-        src, through_unet = (cache, False) if cache is not None else (data["image"], enhance)
-
-        def test_mae(
-            u: torch.nn.Module, s: torch.nn.Module, src: np.ndarray = src, through: bool = through_unet
-        ) -> list[float]:
-            if not len(test_idx):
-                return [math.nan] * 3
-            pred, _ = predict(u if through else None, s, src[test_idx], dev)
-            return [float(v) for v in np.abs(pred - data["angles_deg"][test_idx]).mean(axis=0)]
-
-        mae = test_mae(unet, swin)
-        record = {
-            "epoch": epoch + 1,
-            "unet_loss": float(sums["unet_loss"]) / len(batches),
-            "swin_loss": float(sums["swin_loss"]) / len(batches),
-            "test_mae_deg": mae,
-            "seconds": time.perf_counter() - t_epoch,
-        }
-        ema_mae = test_mae(averaged["unet"].module, averaged["swin"].module) if averaged else []
-        if averaged:
-            record["ema_test_mae_deg"] = ema_mae
-        history.append(record)
-        print(
-            f"train: epoch {epoch + 1}/{cfg.epochs} done: unet {record['unet_loss']:.4f} swin {record['swin_loss']:.4f} "
-            f"test MAE z/y/x {mae[0]:.2f}/{mae[1]:.2f}/{mae[2]:.2f} deg"
-            + (" (averaged weights {:.2f}/{:.2f}/{:.2f})".format(*ema_mae) if averaged else "")
-            + f" ({record['seconds']:.0f} s)",
-            file=sys.stderr,
-            flush=True,
-        )
-        _save(
-            {"unet": unet.state_dict(), "swin": swin.state_dict(), "opt_u": opt_u.state_dict(),
-             "opt_s": opt_s.state_dict(), "sch_u": sch_u.state_dict(), "sch_s": sch_s.state_dict(),
-             "history": history, "epoch": epoch + 1, "config": cfg.as_dict(), "enhance": enhance,
-             "ema": {k: avg.state_dict() for k, avg in averaged.items()}},
-            ckpt_path,
-        )  # fmt: skip
-        (out / "training.json").write_text(json.dumps(training_record(), indent=2))
-        if max_minutes is not None and (time.perf_counter() - t_start) / 60.0 > max_minutes:
+            run.opt_s.zero_grad(set_to_none=True)
+            loss_s.backward()  # type: ignore[no-untyped-call]
+            run.opt_s.step()
+            if run.averaged:
+                run.averaged["swin"].update_parameters(run.swin)
+        if train_unet:
+            run.opt_u.zero_grad(set_to_none=True)
+            loss_u.backward()  # type: ignore[no-untyped-call]
+            run.opt_u.step()
+            if run.averaged:
+                run.averaged["unet"].update_parameters(run.unet)
+        sums["unet_loss"] += loss_u.detach().float()  # summed on the device: no sync per step
+        sums["swin_loss"] += loss_s.detach().float()
+        if opts.log_every and (step + 1) % opts.log_every == 0:
             print(
-                f"train: stopping after epoch {epoch + 1}: {max_minutes} min used; --resume continues", file=sys.stderr
+                f"train: epoch {epoch + 1}/{opts.epochs} step {step + 1}/{len(batches)} "
+                f"unet {float(sums['unet_loss']) / (step + 1):.4f} swin {float(sums['swin_loss']) / (step + 1):.4f} "
+                f"({(time.perf_counter() - t_epoch) / (step + 1):.2f} s/step)",
+                file=sys.stderr,
+                flush=True,
             )
-            break
-    final_u, final_s = (averaged["unet"].module, averaged["swin"].module) if averaged else (unet, swin)
-    _save({"state_dict": final_u.state_dict(), "config": cfg.as_dict(), "ema": ema}, out / "unetpp.pt")
+    if train_unet:  # a frozen network's schedule stands still, so Swin starts stage two at its full rate
+        run.sch_u.step()
+    if train_swin:
+        run.sch_s.step()
+    return {k: float(v) / len(batches) for k, v in sums.items()}
+
+
+def _score(run: _Run) -> dict[str, list[float]]:
+    """Score the test split: the raw weights' per-axis MAE (and the averaged weights', with ``ema``)."""
+    # Swin reads the frames UNet++ already enhanced (two-stage), or raw frames through UNet++ (or not).
+    src, through = (run.cache, False) if run.cache is not None else (run.data["image"], run.opts.enhance)
+
+    def test_mae(u: torch.nn.Module, s: torch.nn.Module) -> list[float]:
+        if not len(run.test_idx):
+            return [math.nan] * 3
+        pred, _ = predict(u if through else None, s, src[run.test_idx], run.dev)
+        return [float(v) for v in np.abs(pred - run.data["angles_deg"][run.test_idx]).mean(axis=0)]
+
+    scores = {"test_mae_deg": test_mae(run.unet, run.swin)}
+    if run.averaged:
+        scores["ema_test_mae_deg"] = test_mae(run.averaged["unet"].module, run.averaged["swin"].module)
+    return scores
+
+
+def _checkpoint(run: _Run, epochs_done: int, path: Path) -> None:
+    """Write everything a resumed run needs (atomically), and the training record so far."""
     _save(
-        {"state_dict": final_s.state_dict(), "config": cfg.as_dict(), "enhance": enhance, "ema": ema}, out / "swin.pt"
+        {
+            "unet": run.unet.state_dict(),
+            "swin": run.swin.state_dict(),
+            "opt_u": run.opt_u.state_dict(),
+            "opt_s": run.opt_s.state_dict(),
+            "sch_u": run.sch_u.state_dict(),
+            "sch_s": run.sch_s.state_dict(),
+            "history": run.history,
+            "epoch": epochs_done,
+            "epochs": run.opts.epochs,
+            "config": run.cfg.as_dict(),
+            "enhance": run.opts.enhance,
+            "ema": {k: avg.state_dict() for k, avg in run.averaged.items()},
+        },
+        path,
     )
-    record_all = training_record()
-    (out / "training.json").write_text(json.dumps(record_all, indent=2))
-    plot_history(history, out / "loss.png")
-    return record_all
+    write_json(run.out / "training.json", _record(run))
+
+
+def _finish(run: _Run) -> dict[str, Any]:
+    """Write the result's weights (the averaged ones, with ``ema``), the record and the loss plot."""
+    opts = run.opts
+    final_u, final_s = (
+        (run.averaged["unet"].module, run.averaged["swin"].module) if run.averaged else (run.unet, run.swin)
+    )
+    _save({"state_dict": final_u.state_dict(), "config": run.cfg.as_dict(), "ema": opts.ema}, run.out / "unetpp.pt")
+    _save(
+        {"state_dict": final_s.state_dict(), "config": run.cfg.as_dict(), "enhance": opts.enhance, "ema": opts.ema},
+        run.out / "swin.pt",
+    )
+    record = _record(run)
+    write_json(run.out / "training.json", record)
+    plot_history(run.history, run.out / "loss.png")
+    return record
+
+
+def _record(run: _Run) -> dict[str, Any]:
+    """The training record (``training.json``), written after every epoch and at the end."""
+    opts, dev = run.opts, run.dev
+    return {
+        "config": run.cfg.as_dict(),
+        "schedule": opts.schedule(),
+        "mode": opts.mode,
+        "unet_epochs": run.stage_split if opts.mode == "two-stage" else None,
+        "unet_from": str(opts.unet_from) if opts.unet_from is not None else None,
+        "swin_from": str(opts.swin_from) if opts.swin_from is not None else None,
+        "enhance": opts.enhance,
+        "ema": opts.ema,
+        "seed": opts.seed,
+        "complete": bool(run.history) and run.history[-1]["epoch"] >= opts.epochs,
+        "data": {
+            "dir": str(run.data_dir),
+            "content_sha256": run.manifest["content_sha256"],
+            "frames": int(len(run.data["image"])),
+            "train": int(len(run.train_idx)),
+            "test": int(len(run.test_idx)),
+            "radar": run.manifest.get("radar"),
+            "target": (run.manifest.get("model") or {}).get("name"),
+        },
+        "hardware": {
+            "device": str(dev),
+            "name": torch.cuda.get_device_name(0) if dev.type == "cuda" else platform.processor() or platform.machine(),
+            "torch": torch.__version__,
+            "threads": torch.get_num_threads(),
+        },
+        "train_seconds": sum(h["seconds"] for h in run.history),
+        "history": run.history,
+    }
 
 
 def plot_history(history: list[dict[str, Any]], path: Path) -> None:
@@ -444,52 +508,20 @@ def plot_history(history: list[dict[str, Any]], path: Path) -> None:
     plt.close(fig)
 
 
-def _ints(text: str) -> tuple[int, ...]:
-    """argparse type for a comma-separated list of integers ("2,2,6,2")."""
-    try:
-        return tuple(int(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of integers") from None
-
-
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", required=True, help="data set directory (from `gsa simulate`)")
-    p.add_argument("--config", default="compact", help="paper, compact, cpu or smoke")
     p.add_argument("--out", default="runs/train", help="output directory (checkpoints, weights, loss plot)")
-    p.add_argument("--epochs", type=int)
-    p.add_argument("--batch-size", type=int)
-    p.add_argument("--lr", type=float)
-    p.add_argument("--lr-decay", type=float, help="learning-rate factor per epoch (default: the config's)")
-    p.add_argument("--mode", default="joint", choices=["joint", "two-stage"])
-    p.add_argument("--unet-epochs", type=int, help="two-stage: epochs of UNet++ before Swin (default half)")
-    p.add_argument("--unet-from", help="start UNet++ from an earlier run's unetpp.pt")
-    p.add_argument("--swin-from", help="start Swin from an earlier run's swin.pt (fine-tuning with a fresh schedule)")
-    p.add_argument("--threads", type=int, help="torch CPU threads (default: all cores)")
-    p.add_argument("--no-enhance", action="store_true", help="train Swin on raw frames (no UNet++)")
     p.add_argument(
-        "--ema", type=float, help="also average the weights (decay per step, e.g. 0.999); saved as the result"
+        "--recipe",
+        default="compact",
+        choices=sorted(RECIPES),
+        help="named options to start from (shipped: how the shipped models were trained); the flags below override it",
     )
-    p.add_argument("--unet-filters", type=_ints, help="override the config's UNet++ filters, e.g. 16,32,64,128,256")
-    p.add_argument("--swin-dim", type=int, help="override the config's Swin embedding dimension C")
-    p.add_argument("--swin-depths", type=_ints, help="override the config's Swin depths, e.g. 2,2,2,2")
-    p.add_argument("--swin-heads", type=_ints, help="override the config's Swin heads per stage, e.g. 1,2,4,8")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--device")
-    p.add_argument("--resume", action="store_true")
-    p.add_argument("--max-minutes", type=float, help="stop after the epoch in which this much time has passed")
-    p.add_argument("--max-train-frames", type=int)
-    p.add_argument("--compile", action="store_true", help="torch.compile on a GPU")
+    add_option_arguments(p, TrainOptions)
 
 
 def run(args: argparse.Namespace) -> int:
-    rec = train(
-        args.data, args.out, args.config, args.epochs, args.batch_size, args.lr, args.mode, not args.no_enhance,
-        args.seed, args.device, args.resume, args.max_minutes, args.max_train_frames, compile_models=args.compile,
-        unet_epochs=args.unet_epochs, unet_from=args.unet_from, threads=args.threads, swin_from=args.swin_from,
-        lr_decay=args.lr_decay, ema=args.ema,
-        shape={"unet_filters": args.unet_filters, "swin_embed_dim": args.swin_dim, "swin_depths": args.swin_depths,
-               "swin_heads": args.swin_heads},
-    )  # fmt: skip
+    rec = train(args.data, args.out, options_from_args(TrainOptions, args, base=recipe(args.recipe)))
     last = rec["history"][-1] if rec["history"] else None
     if last:
         z, y, x = last["test_mae_deg"]

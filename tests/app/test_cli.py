@@ -114,8 +114,9 @@ def test_simulate_a_pass_then_fuse_it(tmp_path, smoke_models):
     assert f0["observed_at"].endswith("Z") and f0["cross_range_cell_m"] > 0
     for key in ("attitude_observation", "attitude_lvlh", "attitude_j2000", "observation_axes_in_lvlh"):
         assert key in f0
-    fused = _gsa("pass", str(tmp_path / "pass"), "--models", str(smoke_models), "--plot", str(tmp_path / "p.png"),
-                 cwd=tmp_path)  # fmt: skip
+    fused = _gsa(
+        "pass", str(tmp_path / "pass"), "--models", str(smoke_models), "--plot", str(tmp_path / "p.png"), cwd=tmp_path
+    )
     assert fused.returncode == 0, fused.stderr
     assert "fused, body to LVLH" in fused.stdout and (tmp_path / "p.png").stat().st_size > 10_000
     as_json = _gsa("pass", str(tmp_path / "pass"), "--models", str(smoke_models), "--json", cwd=tmp_path)

@@ -35,11 +35,11 @@ def _tables(url: str) -> set[str]:
 def test_upgrade_downgrade_upgrade(url):
     cfg = _cfg(url)
     command.upgrade(cfg, "head")
-    assert _tables(url) == {"operators", "api_keys", "plans", "estimates", "passes"}
+    assert _tables(url) == {"operators", "api_keys", "plans", "estimates", "passes", "stations"}
     command.downgrade(cfg, "base")
     assert _tables(url) == set()
     command.upgrade(cfg, "head")
-    assert _tables(url) == {"operators", "api_keys", "plans", "estimates", "passes"}
+    assert _tables(url) == {"operators", "api_keys", "plans", "estimates", "passes", "stations"}
     engine = create_engine(url)
     with engine.connect() as conn:
         assert conn.execute(text("SELECT version_num FROM alembic_version")).scalar() == head_revision()
@@ -55,16 +55,25 @@ def test_keys_from_before_0003_keep_working_and_hmac_keys_are_revoked_on_downgra
     legacy = hashlib.sha256(b"gsa_old-key").hexdigest()
     with engine.begin() as conn:
         conn.execute(text("INSERT INTO operators (id, name, created_at) VALUES ('op1', 'old', CURRENT_TIMESTAMP)"))
-        conn.execute(text("INSERT INTO api_keys (id, operator_id, name, prefix, key_hash, created_at) "
-                          "VALUES ('k1', 'op1', 'old', 'gsa_old-', :h, CURRENT_TIMESTAMP)"), {"h": legacy})  # fmt: skip
+        conn.execute(
+            text(
+                "INSERT INTO api_keys (id, operator_id, name, prefix, key_hash, created_at) "
+                "VALUES ('k1', 'op1', 'old', 'gsa_old-', :h, CURRENT_TIMESTAMP)"
+            ),
+            {"h": legacy},
+        )
     command.upgrade(cfg, "head")
     with engine.begin() as conn:
         assert conn.execute(text("SELECT hash_scheme, key_hash FROM api_keys WHERE id = 'k1'")).one() == (
             "sha256",
             legacy,
         )
-        conn.execute(text("INSERT INTO api_keys (id, operator_id, name, prefix, key_hash, hash_scheme, created_at) "
-                          "VALUES ('k2', 'op1', 'new', 'gsa_new-', 'ab', 'hmac-sha256', CURRENT_TIMESTAMP)"))  # fmt: skip
+        conn.execute(
+            text(
+                "INSERT INTO api_keys (id, operator_id, name, prefix, key_hash, hash_scheme, created_at) "
+                "VALUES ('k2', 'op1', 'new', 'gsa_new-', 'ab', 'hmac-sha256', CURRENT_TIMESTAMP)"
+            )
+        )
     command.downgrade(cfg, "0002")
     with engine.connect() as conn:
         rows = dict(conn.execute(text("SELECT id, revoked_at IS NOT NULL FROM api_keys")).all())

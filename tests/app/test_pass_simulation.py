@@ -111,8 +111,12 @@ def _noisy_pass(windows, rng, spin_deg_s, noise_deg=0.25, flips=0.0):
 
 
 def _fuse(meta, checks):
-    return pass_svc.fuse_frames(plan_request=PAPER_EXAMPLE, checks=checks, observed_at=[f["observed_at"] for f in meta],
-                                names=[str(k) for k in range(len(meta))])  # fmt: skip
+    return pass_svc.fuse_frames(
+        plan_request=PAPER_EXAMPLE,
+        checks=checks,
+        observed_at=[f["observed_at"] for f in meta],
+        names=[str(k) for k in range(len(meta))],
+    )
 
 
 def test_a_still_pass_is_stable_and_beats_its_frames(paper_windows):
@@ -148,8 +152,10 @@ def test_a_spinning_target_is_found_turning_with_its_rate(paper_windows, sense):
         assert isinstance(at, datetime)
         times = np.array([(f["observed_at"] - at).total_seconds() for f in meta])
         k = int(np.argmin(np.abs(times)))
-        truth = meta[k]["body_to_lvlh"] @ pass_svc.spin_rotation(np.array([0.0, 0.0, 1.0]), sense * 0.5,
-                                                                   np.array([-times[k]]))[0]  # fmt: skip
+        truth = (
+            meta[k]["body_to_lvlh"]
+            @ pass_svc.spin_rotation(np.array([0.0, 0.0, 1.0]), sense * 0.5, np.array([-times[k]]))[0]
+        )
         assert angle_deg(rotation_matrix(*out["attitude_lvlh"]["euler_zyx_deg"]), truth) < 1.0
     assert found >= 3
 

@@ -220,8 +220,13 @@ def test_a_client_that_leaves_stops_its_plan(tmp_path, smoke_models):
     from app.schemas import PAPER_EXAMPLE
 
     data = tmp_path / "data"
-    env = {"GSA_DATA_DIR": str(data), "GSA_MODEL_DIR": str(smoke_models), "GSA_API_KEYS": KEY_A,
-           "GSA_ORT_THREADS": "1", "GSA_LOG_LEVEL": "warning"}  # fmt: skip
+    env = {
+        "GSA_DATA_DIR": str(data),
+        "GSA_MODEL_DIR": str(smoke_models),
+        "GSA_API_KEYS": KEY_A,
+        "GSA_ORT_THREADS": "1",
+        "GSA_LOG_LEVEL": "warning",
+    }
     srv = Server(env, workers=1, log_path=tmp_path / "server.log").start()
     try:
         body = json.dumps({**PAPER_EXAMPLE, "search": {"duration_days": 30}}).encode()
@@ -237,8 +242,12 @@ def test_a_client_that_leaves_stops_its_plan(tmp_path, smoke_models):
         r = httpx.get(srv.url + "/v1/plans", headers={"X-API-Key": KEY_A}, timeout=5.0)
         assert r.status_code == 200 and r.json()["count"] == 0
         # The same plan from a client that waits is stored: the test above is not vacuous.
-        r = httpx.post(srv.url + "/v1/plans", content=body, timeout=60.0,
-                       headers={"X-API-Key": KEY_A, "Content-Type": "application/json"})  # fmt: skip
+        r = httpx.post(
+            srv.url + "/v1/plans",
+            content=body,
+            timeout=60.0,
+            headers={"X-API-Key": KEY_A, "Content-Type": "application/json"},
+        )
         assert r.status_code == 201, r.text
     finally:
         srv.stop()

@@ -50,9 +50,14 @@ def test_manifest_catches_tampering(tmp_path):
 
 @pytest.mark.parametrize(
     ("kwargs", "field"),
-    [({"n": 0}, "n"), ({"n": -5}, "n"), ({"n": 3, "snr_min_db": 10.0, "snr_max_db": 0.0}, "snr_db"),
-     ({"n": 3, "n_train": 4}, "n_train"), ({"n": 3, "max_angle_deg": 95.0}, "max_angle_deg")],
-)  # fmt: skip
+    [
+        ({"n": 0}, "n"),
+        ({"n": -5}, "n"),
+        ({"n": 3, "snr_min_db": 10.0, "snr_max_db": 0.0}, "snr_db"),
+        ({"n": 3, "n_train": 4}, "n_train"),
+        ({"n": 3, "max_angle_deg": 95.0}, "max_angle_deg"),
+    ],
+)
 def test_bad_specs(kwargs, field):
     with pytest.raises(DatasetError) as err:
         DatasetSpec(**kwargs)
@@ -72,22 +77,74 @@ def _simulate(*args, cwd):
 
 
 def test_simulate_command(tmp_path):
-    out = _simulate("--n", "4", "--seed", "1", "--snr-db", "0:10", "--shard-size", "2", "--n-range", "64",
-                    "--n-azimuth", "64", "--bandwidth-hz", "0.4e9", "--aperture-deg", "1.275", "--split",
-                    "--workers", "1", "--out", str(tmp_path / "set"), cwd=tmp_path)  # fmt: skip
+    out = _simulate(
+        "--n",
+        "4",
+        "--seed",
+        "1",
+        "--snr-db",
+        "0:10",
+        "--shard-size",
+        "2",
+        "--n-range",
+        "64",
+        "--n-azimuth",
+        "64",
+        "--bandwidth-hz",
+        "0.4e9",
+        "--aperture-deg",
+        "1.275",
+        "--split",
+        "--workers",
+        "1",
+        "--out",
+        str(tmp_path / "set"),
+        cwd=tmp_path,
+    )
     assert out.returncode == 0, out.stderr
     assert "4/4 frames" in out.stderr
     manifest = json.loads((tmp_path / "set" / "manifest.json").read_text())
     assert manifest["frames"] == 4 and manifest["split"]["train"] == [0, 3]
     # --n-train N: the first N frames train, the rest test (the shipped models' 24,000 of 25,000).
-    other = _simulate("--n", "3", "--seed", "1", "--n-train", "1", "--n-range", "64", "--n-azimuth", "64",
-                      "--bandwidth-hz", "0.4e9", "--aperture-deg", "1.275", "--workers", "1",
-                      "--out", str(tmp_path / "set2"), cwd=tmp_path)  # fmt: skip
+    other = _simulate(
+        "--n",
+        "3",
+        "--seed",
+        "1",
+        "--n-train",
+        "1",
+        "--n-range",
+        "64",
+        "--n-azimuth",
+        "64",
+        "--bandwidth-hz",
+        "0.4e9",
+        "--aperture-deg",
+        "1.275",
+        "--workers",
+        "1",
+        "--out",
+        str(tmp_path / "set2"),
+        cwd=tmp_path,
+    )
     assert other.returncode == 0, other.stderr
     split = json.loads((tmp_path / "set2" / "manifest.json").read_text())["split"]
     assert split == {"train": [0, 1], "test": [1, 3]}
-    prev = _simulate("--preview", str(tmp_path / "p.png"), "--n", "3", "--n-range", "64", "--n-azimuth", "64",
-                     "--bandwidth-hz", "0.4e9", "--aperture-deg", "1.275", cwd=tmp_path)  # fmt: skip
+    prev = _simulate(
+        "--preview",
+        str(tmp_path / "p.png"),
+        "--n",
+        "3",
+        "--n-range",
+        "64",
+        "--n-azimuth",
+        "64",
+        "--bandwidth-hz",
+        "0.4e9",
+        "--aperture-deg",
+        "1.275",
+        cwd=tmp_path,
+    )
     assert prev.returncode == 0 and (tmp_path / "p.png").stat().st_size > 5000
 
 

@@ -13,6 +13,7 @@ from inference.networks.build import build_models, get_config
 from inference.simulation.dataset import DatasetSpec, generate, load_manifest, render_frames
 from inference.simulation.isar import Radar
 from inference.training.finetune import finetune, front, tail, validation_spec
+from inference.training.options import FinetuneOptions, recipe
 from inference.training.train import train
 
 SMALL = Radar(n_range=64, n_azimuth=64, bandwidth_hz=0.4e9, aperture_deg=5.1 / 4)
@@ -22,7 +23,7 @@ SMALL = Radar(n_range=64, n_azimuth=64, bandwidth_hz=0.4e9, aperture_deg=5.1 / 4
 def run(tmp_path_factory):
     root = tmp_path_factory.mktemp("ft")
     generate(DatasetSpec(n=40, seed=4, shard_size=12, n_train=32), root / "data", SMALL, workers=1, progress=False)
-    train(root / "data", root / "run", "smoke", epochs=1, log_every=0)
+    train(root / "data", root / "run", recipe("smoke", epochs=1, log_every=0))
     return root
 
 
@@ -50,7 +51,7 @@ def _val_mae(run_dir, data, n_val):
 
 def test_finetune_trains_the_tail_only_and_keeps_the_best_validation_weights(run, capsys):
     out = run / "ft"
-    rec = finetune(run / "run", run / "data", out, epochs=3, lr=3e-3, batch_size=8, n_val=16)
+    rec = finetune(run / "run", run / "data", out, FinetuneOptions(epochs=3, lr=3e-3, batch_size=8, n_val=16))
     before = torch.load(run / "run" / "swin.pt", weights_only=False)["state_dict"]
     after = torch.load(out / "swin.pt", weights_only=False)["state_dict"]
     trained = [k for k in before if k.startswith(("stages.3.", "norm.", "head."))]
@@ -79,44 +80,49 @@ def test_finetune_trains_the_tail_only_and_keeps_the_best_validation_weights(run
 
 def test_the_feature_cache_is_reused_only_for_the_same_inputs(run, capsys):
     out = run / "again"
-    finetune(run / "run", run / "data", out, epochs=1, batch_size=8, n_val=16)
+    finetune(run / "run", run / "data", out, FinetuneOptions(epochs=1, batch_size=8, n_val=16))
     capsys.readouterr()
-    finetune(run / "run", run / "data", out, epochs=1, batch_size=8, n_val=16)
+    finetune(run / "run", run / "data", out, FinetuneOptions(epochs=1, batch_size=8, n_val=16))
     assert "caching" not in capsys.readouterr().err
     # A cut-off cache goes on from where it stopped.
     meta = out / "features-train.json"
     m = json.loads(meta.read_text())
     meta.write_text(json.dumps({**m, "done": 20}))
-    finetune(run / "run", run / "data", out, epochs=1, batch_size=8, n_val=16)
+    finetune(run / "run", run / "data", out, FinetuneOptions(epochs=1, batch_size=8, n_val=16))
     err = capsys.readouterr().err
     assert "caching training frames 32/32" in err and "caching training frames 20/" not in err
     assert "caching test" not in err
     # A second round, from the first round's output, reads the first round's cache: the front is the same.
-    rec2 = finetune(out, run / "data", run / "round2", epochs=1, batch_size=8, n_val=16, cache_dir=out)
+    rec2 = finetune(out, run / "data", run / "round2", FinetuneOptions(epochs=1, batch_size=8, n_val=16, cache_dir=out))
     assert "caching" not in capsys.readouterr().err
     first = json.loads((out / "training.json").read_text())["finetune"]
     assert rec2["previous_round"] == first and rec2["start_val_mae_deg"] == first["chosen"]["val_mae_deg"]
     assert not (run / "round2" / "features-train.npy").exists()
     # Training two stages needs other features: everything is cached again.
-    finetune(run / "run", run / "data", out, epochs=1, batch_size=8, n_val=16, train_stages=2)
+    finetune(run / "run", run / "data", out, FinetuneOptions(epochs=1, batch_size=8, n_val=16, train_stages=2))
     err = capsys.readouterr().err
     assert "caching training frames 32/32" in err and "caching test frames 8/8" in err
 
 
 def test_an_exported_enhancer_is_recorded(run, capsys):
     export(run / "run", run / "enh")
-    rec = finetune(run / "run", run / "data", run / "with-enh", enhancer=run / "enh", epochs=1, batch_size=8, n_val=16)
+    rec = finetune(
+        run / "run",
+        run / "data",
+        run / "with-enh",
+        FinetuneOptions(enhancer=run / "enh", epochs=1, batch_size=8, n_val=16),
+    )
     card = json.loads((run / "enh" / "model_card.json").read_text())
     assert rec["enhancer"]["unetpp_sha256"] == card["files"]["unetpp"]["sha256"]
 
 
 def test_finetune_refuses_bad_input(run, tmp_path, capsys):
     with pytest.raises(InferenceError, match="train_stages 5 must be between 1 and 4"):
-        finetune(run / "run", run / "data", tmp_path / "o", train_stages=5)
+        finetune(run / "run", run / "data", tmp_path / "o", FinetuneOptions(train_stages=5))
     with pytest.raises(InferenceError, match="new directory"):
         finetune(run / "run", run / "data", run / "run")
     with pytest.raises(InferenceError, match="n_val"):
-        finetune(run / "run", run / "data", tmp_path / "o", n_val=3)
+        finetune(run / "run", run / "data", tmp_path / "o", FinetuneOptions(n_val=3))
     with pytest.raises(ModelFileError, match="checkpoint .* is missing"):
         finetune(tmp_path, run / "data", tmp_path / "o")
     assert not (tmp_path / "o").exists()  # nothing started
@@ -130,7 +136,7 @@ def test_a_finetuned_run_packs_into_pieces_that_reuse_the_unchanged_unet(run, tm
     from inference.training.pipeline import join, pack
 
     ft = run / "ft2"
-    finetune(run / "run", run / "data", ft, epochs=1, lr=3e-3, batch_size=8, n_val=16)
+    finetune(run / "run", run / "data", ft, FinetuneOptions(epochs=1, lr=3e-3, batch_size=8, n_val=16))
     base = pack(run / "run", tmp_path / "base")  # a training run: from its checkpoint
     m = pack(ft, tmp_path / "ft", reuse=tmp_path / "base")  # a fine-tuned run has no checkpoint: its .pt files
     assert m["finetuned"] and m["epochs"] == 1

@@ -16,6 +16,7 @@ from inference.networks.unetpp import UNetPlusPlus, relative_frobenius_loss
 from inference.runtime import Estimator
 from inference.simulation.dataset import DatasetSpec, generate
 from inference.simulation.isar import Radar
+from inference.training.options import recipe
 from inference.training.train import train
 
 SMALL = Radar(n_range=64, n_azimuth=64, bandwidth_hz=0.4e9, aperture_deg=5.1 / 4)
@@ -31,7 +32,7 @@ def smoke_data(tmp_path_factory):
 @pytest.fixture(scope="module")
 def smoke_run(smoke_data, tmp_path_factory):
     out = tmp_path_factory.mktemp("run")
-    record = train(smoke_data, out, "smoke", epochs=2, log_every=0)
+    record = train(smoke_data, out, recipe("smoke", epochs=2, log_every=0))
     return out, record
 
 
@@ -78,7 +79,7 @@ def test_training_lowers_the_losses_and_writes_everything(smoke_run):
 def test_resume_continues_from_the_checkpoint(smoke_data, smoke_run, tmp_path):
     out, _ = smoke_run
     shutil.copytree(out, tmp_path / "run")
-    record = train(smoke_data, tmp_path / "run", "smoke", epochs=3, resume=True, log_every=0)
+    record = train(smoke_data, tmp_path / "run", recipe("smoke", epochs=3, resume=True, log_every=0))
     assert [h["epoch"] for h in record["history"]] == [1, 2, 3]
 
 
@@ -87,7 +88,7 @@ def test_averaged_weights_are_scored_saved_resumed_and_packed(smoke_data, tmp_pa
     from inference.training.train import averaged_weights
 
     out = tmp_path / "ema"
-    rec = train(smoke_data, out, "smoke", epochs=2, ema=0.5, log_every=0)
+    rec = train(smoke_data, out, recipe("smoke", epochs=2, ema=0.5, log_every=0))
     assert rec["ema"] == 0.5 and all(len(h["ema_test_mae_deg"]) == 3 for h in rec["history"])
     ck = torch.load(out / "checkpoint.pt", weights_only=False)
     saved = torch.load(out / "swin.pt", weights_only=False)["state_dict"]
@@ -96,16 +97,16 @@ def test_averaged_weights_are_scored_saved_resumed_and_packed(smoke_data, tmp_pa
     torch.testing.assert_close(saved["head.weight"], avg["head.weight"])
     assert not torch.equal(saved["head.weight"], ck["swin"]["head.weight"])  # the average, not the last step
     # The average carries over a resume, and pack hands back the averaged weights.
-    again = train(smoke_data, out, "smoke", epochs=3, ema=0.5, resume=True, log_every=0)
+    again = train(smoke_data, out, recipe("smoke", epochs=3, ema=0.5, resume=True, log_every=0))
     assert len(again["history"]) == 3 and "ema_test_mae_deg" in again["history"][-1]
     ck3 = torch.load(out / "checkpoint.pt", weights_only=False)
     assert int(ck3["ema"]["swin"]["n_averaged"]) == 3 * int(ck["ema"]["swin"]["n_averaged"]) // 2
     manifest = pack(out, tmp_path / "pieces")
     assert manifest["averaged_weights"] is True
     with pytest.raises(InferenceError, match="ema 1.5 must be in"):
-        train(smoke_data, tmp_path / "bad", "smoke", ema=1.5)
+        train(smoke_data, tmp_path / "bad", recipe("smoke", ema=1.5))
     with pytest.raises(InferenceError, match="use it with mode 'joint'"):
-        train(smoke_data, tmp_path / "bad", "smoke", ema=0.9, mode="two-stage")
+        train(smoke_data, tmp_path / "bad", recipe("smoke", ema=0.9, mode="two-stage"))
 
 
 def test_enhance_all_enhances_only_the_rows_asked_for():
@@ -123,43 +124,59 @@ def test_two_stage_from_a_trained_unet_freezes_it_and_trains_swin(smoke_data, sm
     out, _ = smoke_run
     unet_before = torch.load(out / "unetpp.pt", weights_only=False)["state_dict"]
     swin_before = torch.load(out / "swin.pt", weights_only=False)["state_dict"]
-    record = train(smoke_data, tmp_path / "two", "smoke", epochs=2, mode="two-stage", unet_epochs=0,
-                   unet_from=out / "unetpp.pt", log_every=0)  # fmt: skip
+    record = train(
+        smoke_data,
+        tmp_path / "two",
+        recipe("smoke", epochs=2, mode="two-stage", unet_epochs=0, unet_from=out / "unetpp.pt", log_every=0),
+    )
     unet_after = torch.load(tmp_path / "two" / "unetpp.pt", weights_only=False)["state_dict"]
     swin_after = torch.load(tmp_path / "two" / "swin.pt", weights_only=False)["state_dict"]
     assert all(torch.equal(unet_before[k], unet_after[k]) for k in unet_before)  # frozen, loaded as given
     assert any(not torch.equal(swin_before[k], swin_after[k]) for k in swin_before)
     assert record["unet_epochs"] == 0 and all(h["unet_loss"] == 0.0 for h in record["history"])
     with pytest.raises(InferenceError, match="unet_epochs"):
-        train(smoke_data, tmp_path / "bad", "smoke", epochs=2, mode="two-stage", unet_epochs=5)
+        train(smoke_data, tmp_path / "bad", recipe("smoke", epochs=2, mode="two-stage", unet_epochs=5))
     with pytest.raises(InferenceError, match="unetpp.pt"):
-        train(smoke_data, tmp_path / "bad", "smoke", unet_from=tmp_path / "missing.pt")
+        train(smoke_data, tmp_path / "bad", recipe("smoke", unet_from=tmp_path / "missing.pt"))
 
 
 def test_swin_from_starts_swin_from_earlier_weights_with_a_fresh_schedule(smoke_data, smoke_run, tmp_path):
     out, _ = smoke_run
     swin_before = torch.load(out / "swin.pt", weights_only=False)["state_dict"]
-    record = train(smoke_data, tmp_path / "ft", "smoke", epochs=1, lr=1e-12, lr_decay=0.5, mode="two-stage",
-                   unet_epochs=0, unet_from=out / "unetpp.pt", swin_from=out / "swin.pt", log_every=0)  # fmt: skip
+    record = train(
+        smoke_data,
+        tmp_path / "ft",
+        recipe(
+            "smoke",
+            epochs=1,
+            lr=1e-12,
+            lr_decay=0.5,
+            mode="two-stage",
+            unet_epochs=0,
+            unet_from=out / "unetpp.pt",
+            swin_from=out / "swin.pt",
+            log_every=0,
+        ),
+    )
     swin_after = torch.load(tmp_path / "ft" / "swin.pt", weights_only=False)["state_dict"]
     # a vanishing learning rate leaves the loaded weights where the earlier run left them
     assert all(torch.allclose(swin_before[k], swin_after[k], atol=1e-6) for k in swin_before)
-    assert record["swin_from"] == str(out / "swin.pt") and record["config"]["lr_decay"] == 0.5
+    assert record["swin_from"] == str(out / "swin.pt") and record["schedule"]["lr_decay"] == 0.5
     fresh = torch.load(_train_fresh(smoke_data, tmp_path / "fresh"), weights_only=False)["state_dict"]
     assert any(not torch.allclose(swin_before[k], fresh[k], atol=1e-6) for k in swin_before)
     with pytest.raises(InferenceError, match="swin.pt"):
-        train(smoke_data, tmp_path / "bad", "smoke", swin_from=tmp_path / "missing.pt")
+        train(smoke_data, tmp_path / "bad", recipe("smoke", swin_from=tmp_path / "missing.pt"))
     with pytest.raises(InferenceError, match="swin_from|does not fit"):
-        train(smoke_data, tmp_path / "bad", "smoke", swin_from=out / "unetpp.pt", log_every=0)
+        train(smoke_data, tmp_path / "bad", recipe("smoke", swin_from=out / "unetpp.pt", log_every=0))
     with pytest.raises(InferenceError, match="lr_decay"):
-        train(smoke_data, tmp_path / "bad", "smoke", lr_decay=1.5)
+        train(smoke_data, tmp_path / "bad", recipe("smoke", lr_decay=1.5))
 
 
 def test_a_smaller_swin_behind_a_trained_unet_trains_exports_and_runs(smoke_data, smoke_run, tmp_path):
     out, _ = smoke_run
-    shape = {"swin_embed_dim": 8, "swin_depths": (1, 1, 1, 1), "swin_heads": (1, 1, 2, 2)}
-    record = train(smoke_data, tmp_path / "small", "smoke", epochs=1, mode="two-stage", unet_epochs=0,
-                   unet_from=out / "unetpp.pt", shape=shape, log_every=0)  # fmt: skip
+    shape = {"swin_dim": 8, "swin_depths": (1, 1, 1, 1), "swin_heads": (1, 1, 2, 2)}
+    options = recipe("smoke", epochs=1, mode="two-stage", unet_epochs=0, unet_from=out / "unetpp.pt", **shape)
+    record = train(smoke_data, tmp_path / "small", options)
     assert record["config"]["swin_embed_dim"] == 8 and tuple(record["config"]["swin_heads"]) == (1, 1, 2, 2)
     swin = torch.load(tmp_path / "small" / "swin.pt", weights_only=False)
     assert swin["state_dict"]["patch_embed.weight"].shape[0] == 8
@@ -169,21 +186,40 @@ def test_a_smaller_swin_behind_a_trained_unet_trains_exports_and_runs(smoke_data
     angles = Estimator.load(tmp_path / "models").estimate(np.zeros((2, 64, 64), np.float32)).angles_deg
     assert angles.shape == (2, 3) and np.isfinite(angles).all()
     with pytest.raises(InferenceError, match="which 5 heads do not divide"):
-        train(smoke_data, tmp_path / "bad", "smoke", shape={"swin_heads": (5, 1, 2, 2)})
+        train(smoke_data, tmp_path / "bad", recipe("smoke", swin_heads=(5, 1, 2, 2)))
     with pytest.raises(InferenceError, match="one head count per stage"):
-        train(smoke_data, tmp_path / "bad", "smoke", shape={"swin_depths": (1, 1, 1)})
+        train(smoke_data, tmp_path / "bad", recipe("smoke", swin_depths=(1, 1, 1)))
     with pytest.raises(InferenceError, match="unknown config field"):
         get_config("smoke", swin_width=3)
     with pytest.raises(InferenceError, match="another network shape"):  # resuming with a different shape
-        train(smoke_data, tmp_path / "small", "smoke", epochs=2, resume=True, log_every=0)
+        train(smoke_data, tmp_path / "small", recipe("smoke", epochs=2, resume=True, log_every=0))
     assert not (tmp_path / "bad").exists()
 
 
 def test_train_command_shape_flags(smoke_data, tmp_path):
     from inference.training.train import main
 
-    assert main(["--data", str(smoke_data), "--config", "smoke", "--out", str(tmp_path / "r"), "--epochs", "1",
-                 "--swin-dim", "8", "--swin-heads", "1,1,2,2", "--unet-filters", "2,4,8,16,32"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "--data",
+                str(smoke_data),
+                "--config",
+                "smoke",
+                "--out",
+                str(tmp_path / "r"),
+                "--epochs",
+                "1",
+                "--swin-dim",
+                "8",
+                "--swin-heads",
+                "1,1,2,2",
+                "--unet-filters",
+                "2,4,8,16,32",
+            ]
+        )
+        == 0
+    )
     cfg = json.loads((tmp_path / "r" / "training.json").read_text())["config"]
     assert (cfg["swin_embed_dim"], cfg["unet_filters"]) == (8, [2, 4, 8, 16, 32])
     with pytest.raises(SystemExit):
@@ -197,8 +233,8 @@ def test_compare_counts_swin_epochs_and_writes_table_and_plot(smoke_data, smoke_
     from inference.evaluation.compare import compare, main
 
     out, joint = smoke_run
-    two = train(smoke_data, tmp_path / "two", "smoke", epochs=3, mode="two-stage", unet_epochs=2, log_every=0)
-    raw = train(smoke_data, tmp_path / "raw", "smoke", epochs=1, enhance=False, log_every=0)
+    two = train(smoke_data, tmp_path / "two", recipe("smoke", epochs=3, mode="two-stage", unet_epochs=2, log_every=0))
+    raw = train(smoke_data, tmp_path / "raw", recipe("smoke", epochs=1, enhance=False, log_every=0))
     text = compare([out, tmp_path / "two", tmp_path / "raw"], tmp_path / "cmp")
     rows = {line.split(" | ")[0].strip("| "): line for line in text.splitlines() if line.startswith("| ")}
     # two-stage: UNet++ alone for 2 epochs, so its Swin has trained 1 epoch, scored as in its record
@@ -216,7 +252,7 @@ def test_compare_counts_swin_epochs_and_writes_table_and_plot(smoke_data, smoke_
 
 
 def _train_fresh(data, out):
-    train(data, out, "smoke", epochs=1, lr=1e-12, mode="two-stage", unet_epochs=0, log_every=0)
+    train(data, out, recipe("smoke", epochs=1, lr=1e-12, mode="two-stage", unet_epochs=0, log_every=0))
     return out / "swin.pt"
 
 
@@ -273,8 +309,23 @@ def test_int8_export_quantises_unet_and_keeps_the_angles(smoke_run, smoke_data, 
 
     out, _ = smoke_run
     # The command line: UNet++ calibrated on the data set's 16 training frames (8 calibrate, 8 check).
-    assert main(["--run", str(out), "--out", str(tmp_path / "i8"), "--int8", "--half", "--frames", str(smoke_data),
-                 "--n-frames", "100"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "--run",
+                str(out),
+                "--out",
+                str(tmp_path / "i8"),
+                "--int8",
+                "--half",
+                "--frames",
+                str(smoke_data),
+                "--n-frames",
+                "100",
+            ]
+        )
+        == 0
+    )
     assert "int8: angles change by" in capsys.readouterr().out
     card = json.loads((tmp_path / "i8" / "model_card.json").read_text())
     u, s = card["files"]["unetpp"], card["files"]["swin"]
@@ -300,7 +351,7 @@ def test_int8_export_quantises_unet_and_keeps_the_angles(smoke_run, smoke_data, 
 
 def test_a_failed_export_leaves_the_models_in_place(smoke_run, smoke_data, tmp_path, monkeypatch):
     import inference.export as ex
-    from inference.runtime import sha256_file
+    from inference.files import sha256_file
     from inference.simulation.dataset import load_arrays
 
     out, _ = smoke_run
@@ -323,8 +374,12 @@ def test_int8_export_refuses_without_enough_real_frames(smoke_run, smoke_data, t
         export(out, tmp_path / "m", int8=True)
     assert main(["--run", str(out), "--out", str(tmp_path / "m"), "--int8"]) == 2
     assert "--int8 needs --frames DATA" in capsys.readouterr().err
-    assert main(["--run", str(out), "--out", str(tmp_path / "m"), "--int8", "--frames", str(smoke_data),
-                 "--n-frames", "4"]) == 2  # fmt: skip
+    assert (
+        main(
+            ["--run", str(out), "--out", str(tmp_path / "m"), "--int8", "--frames", str(smoke_data), "--n-frames", "4"]
+        )
+        == 2
+    )
     assert "--n-frames 4 is too few" in capsys.readouterr().err
     assert not (tmp_path / "m").exists()  # refused before anything was written
 
@@ -342,7 +397,7 @@ def test_evaluate_writes_the_tables_and_skips_unet_for_a_raw_frame_model(smoke_r
     assert (tmp_path / "res" / "errors.png").stat().st_size > 5000
     assert json.loads((tmp_path / "m" / "model_card.json").read_text())["evaluation"]["rows"] == res["rows"]
     # A Swin trained on raw frames (Table 4's other row): the runtime skips UNet++ and the rows say so.
-    train(smoke_data, tmp_path / "raw", "smoke", epochs=1, enhance=False, log_every=0)
+    train(smoke_data, tmp_path / "raw", recipe("smoke", epochs=1, enhance=False, log_every=0))
     assert export(tmp_path / "raw", tmp_path / "mraw")["enhance"] is False
     est = Estimator.load(tmp_path / "mraw")
     frames = load_arrays(smoke_data)["image"][:3].astype(np.float32)
@@ -360,8 +415,15 @@ def test_evaluate_writes_the_tables_and_skips_unet_for_a_raw_frame_model(smoke_r
         export(tmp_path / "raw", tmp_path / "x", frames=frames.repeat(4, axis=0), int8=True)
     # Both rows of Table 4 in one table: each model scored on the same frames as when scored alone.
     card_before = (tmp_path / "m" / "model_card.json").read_text()
-    both = evaluate(tmp_path / "m", smoke_data, n_snr=3, out_dir=tmp_path / "res3", progress=False,
-                    without=tmp_path / "mraw", record=True)  # fmt: skip
+    both = evaluate(
+        tmp_path / "m",
+        smoke_data,
+        n_snr=3,
+        out_dir=tmp_path / "res3",
+        progress=False,
+        without=tmp_path / "mraw",
+        record=True,
+    )
     assert both["rows"] == res["rows"] | raw["rows"]
     assert both["without_model"]["swin_sha256"] == est.identity["swin_sha256"]
     md = (tmp_path / "res3" / "results.md").read_text()
@@ -390,16 +452,16 @@ def test_runtime_refuses_bad_model_files(smoke_run, tmp_path):
 
 def test_training_refuses_bad_data(smoke_data, tmp_path):
     with pytest.raises(DatasetError, match="no manifest"):
-        train(tmp_path, tmp_path / "out", "smoke")
+        train(tmp_path, tmp_path / "out", recipe("smoke"))
     with pytest.raises(DatasetError, match="takes 256x256"):
-        train(smoke_data, tmp_path / "out", "compact")
+        train(smoke_data, tmp_path / "out", recipe("compact"))
     bad = tmp_path / "bad"
     shutil.copytree(smoke_data, bad)
     manifest = json.loads((bad / "manifest.json").read_text())
     manifest["shards"][0]["sha256"] = "0" * 64
     (bad / "manifest.json").write_text(json.dumps(manifest))
     with pytest.raises(DatasetError, match="does not match its sha256"):
-        train(bad, tmp_path / "out", "smoke")
+        train(bad, tmp_path / "out", recipe("smoke"))
     with pytest.raises(InferenceError, match="unknown config"):
         get_config("huge")
 
@@ -409,11 +471,13 @@ def test_quaternion_matches_rotation_matrix():
 
     z, y, x = 30.0, -20.0, 10.0
     w, qx, qy, qz = euler_to_quaternion(z, y, x)
-    r = np.array([
-        [1 - 2 * (qy**2 + qz**2), 2 * (qx * qy - w * qz), 2 * (qx * qz + w * qy)],
-        [2 * (qx * qy + w * qz), 1 - 2 * (qx**2 + qz**2), 2 * (qy * qz - w * qx)],
-        [2 * (qx * qz - w * qy), 2 * (qy * qz + w * qx), 1 - 2 * (qx**2 + qy**2)],
-    ])  # fmt: skip
+    r = np.array(
+        [
+            [1 - 2 * (qy**2 + qz**2), 2 * (qx * qy - w * qz), 2 * (qx * qz + w * qy)],
+            [2 * (qx * qy + w * qz), 1 - 2 * (qx**2 + qz**2), 2 * (qy * qz - w * qx)],
+            [2 * (qx * qz - w * qy), 2 * (qy * qz + w * qx), 1 - 2 * (qx**2 + qy**2)],
+        ]
+    )
     np.testing.assert_allclose(r, rotation_matrix(z, y, x), atol=1e-12)
 
 
@@ -422,12 +486,18 @@ def test_training_batches_are_the_same_from_numpy_and_from_device_tensors():
     from inference.training.train import _tensors
 
     rng = np.random.default_rng(0)
-    data = {"image": rng.random((10, 8, 8)).astype(np.float16), "label": rng.random((10, 8, 8)) > 0.5,
-            "angles_deg": rng.uniform(-45, 45, (10, 3)).astype(np.float32)}  # fmt: skip
+    data = {
+        "image": rng.random((10, 8, 8)).astype(np.float16),
+        "label": rng.random((10, 8, 8)) > 0.5,
+        "angles_deg": rng.uniform(-45, 45, (10, 3)).astype(np.float32),
+    }
     tensors = {k: torch.from_numpy(v) for k, v in data.items()}
     sel = np.array([1, 4, 7])
-    for a, b in zip(_tensors(data["image"], data, sel, torch.device("cpu")),
-                    _tensors(tensors["image"], tensors, sel, torch.device("cpu")), strict=True):  # fmt: skip
+    for a, b in zip(
+        _tensors(data["image"], data, sel, torch.device("cpu")),
+        _tensors(tensors["image"], tensors, sel, torch.device("cpu")),
+        strict=True,
+    ):
         assert a.dtype == b.dtype == torch.float32
         torch.testing.assert_close(a, b)
     x, y, a = _tensors(tensors["image"], tensors, sel, torch.device("cpu"))
@@ -441,8 +511,16 @@ def test_gpu_pipeline_at_toy_size(tmp_path):
     from inference.training.pipeline import run as pipeline_run
 
     work = tmp_path / "work"
-    manifest = pipeline_run("smoke", 12, work, tmp_path / "out", max_minutes=5, epochs=1, radar=SMALL, name="a",
-                            n_train=8, n_snr=4)  # fmt: skip
+    manifest = pipeline_run(
+        work,
+        recipe("smoke", max_minutes=5, epochs=1),
+        n=12,
+        out=tmp_path / "out",
+        radar=SMALL,
+        name="a",
+        n_train=8,
+        n_snr=4,
+    )
     assert manifest["complete"] and manifest["swin"]
     assert json.loads((work / "data" / "manifest.json").read_text())["split"] == {"train": [0, 8], "test": [8, 12]}
     for f in (tmp_path / "out").iterdir():
@@ -462,32 +540,54 @@ def test_gpu_pipeline_at_toy_size(tmp_path):
         if v.is_floating_point():
             torch.testing.assert_close(back["state_dict"][k], v.half().float())
     # A second call resumes instead of starting again; a second run shares the data.
-    again = pipeline_run("smoke", 12, work, None, max_minutes=5, epochs=2, radar=SMALL, name="a", evaluate=False)
+    again = pipeline_run(work, recipe("smoke", max_minutes=5, epochs=2), n=12, radar=SMALL, name="a", evaluate=False)
     assert again["epochs"] == 2
-    other = pipeline_run("smoke", 12, work, None, max_minutes=5, epochs=1, radar=SMALL, name="b", evaluate=False,
-                         max_train_frames=4)  # fmt: skip
+    other = pipeline_run(
+        work, recipe("smoke", max_minutes=5, epochs=1, max_train_frames=4), n=12, radar=SMALL, name="b", evaluate=False
+    )
     assert other["epochs"] == 1
     assert json.loads((work / "b" / "training.json").read_text())["data"]["train"] == 4
     # A Swin on raw frames (gsa_train.sh's noenhance run) is scored without UNet++: Table 4's other row.
-    raw = pipeline_run("smoke", 12, work, None, max_minutes=5, epochs=1, radar=SMALL, name="raw", enhance=False)
+    raw = pipeline_run(work, recipe("smoke", max_minutes=5, epochs=1, enhance=False), n=12, radar=SMALL, name="raw")
     assert raw["epochs"] == 1
     raw_rows = json.loads((work / "raw" / "evaluation.json").read_text())["rows"]
     assert set(raw_rows) == {"without enhancement"} | {f"{d} dB, without enhancement" for d in (0, 5, 10)}
     assert json.loads((work / "raw" / "training.json").read_text())["enhance"] is False
     # Two stages (gpu_train.sh's twostage run): UNet++ for one epoch, then Swin on its frozen output.
-    two = pipeline_run("smoke", 12, work, None, max_minutes=5, epochs=2, radar=SMALL, name="two", evaluate=False,
-                       mode="two-stage", unet_epochs=1)  # fmt: skip
+    two = pipeline_run(
+        work,
+        recipe("smoke", max_minutes=5, epochs=2, mode="two-stage", unet_epochs=1),
+        n=12,
+        radar=SMALL,
+        name="two",
+        evaluate=False,
+    )
     assert two["epochs"] == 2
     staged = json.loads((work / "two" / "training.json").read_text())
     assert staged["mode"] == "two-stage" and staged["unet_epochs"] == 1 and staged["history"][1]["unet_loss"] == 0.0
     # A run can start from joined pieces (how a later GPU session continues the shipped weights).
-    cont = pipeline_run("smoke", 12, work, None, max_minutes=5, epochs=1, radar=SMALL, name="c", evaluate=False,
-                        lr=1e-12, unet_from=tmp_path / "run" / "unetpp.pt", swin_from=tmp_path / "run" / "swin.pt")  # fmt: skip
+    cont = pipeline_run(
+        work,
+        recipe(
+            "smoke",
+            max_minutes=5,
+            epochs=1,
+            lr=1e-12,
+            unet_from=tmp_path / "run" / "unetpp.pt",
+            swin_from=tmp_path / "run" / "swin.pt",
+        ),
+        n=12,
+        radar=SMALL,
+        name="c",
+        evaluate=False,
+    )
     assert cont["epochs"] == 1
     rec = json.loads((work / "c" / "training.json").read_text())
-    assert rec["swin_from"].endswith("swin.pt") and rec["config"]["lr"] == 1e-12
-    torch.testing.assert_close(torch.load(work / "c" / "swin.pt", weights_only=False)["state_dict"]["head.weight"],
-                               back["state_dict"]["head.weight"])  # fmt: skip
+    assert rec["swin_from"].endswith("swin.pt") and rec["schedule"]["lr"] == 1e-12
+    torch.testing.assert_close(
+        torch.load(work / "c" / "swin.pt", weights_only=False)["state_dict"]["head.weight"],
+        back["state_dict"]["head.weight"],
+    )
     # pack takes the newest epoch from the checkpoint, even while no final weights exist.
     (work / "b" / "swin.pt").unlink()
     assert pack(work / "b", tmp_path / "out3")["epochs"] == 1

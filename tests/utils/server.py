@@ -50,8 +50,11 @@ class Server:
         cmd = [str(gsa)] if gsa.exists() else [sys.executable, "-m", "app.cli"]
         self.proc = subprocess.Popen(
             [*cmd, "serve", "--port", str(self.port), "--workers", str(self.workers)],
-            env=env, stdout=log, stderr=log, start_new_session=True,
-        )  # fmt: skip
+            env=env,
+            stdout=log,
+            stderr=log,
+            start_new_session=True,
+        )
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:
@@ -109,18 +112,37 @@ class LoadResult:
         out = {}
         for op, lat in sorted(self.latencies.items()):
             a = np.array(lat) * 1000.0
-            out[op] = {"n": len(a), "p50_ms": float(np.percentile(a, 50)), "p95_ms": float(np.percentile(a, 95)),
-                       "p99_ms": float(np.percentile(a, 99)), "max_ms": float(a.max())}  # fmt: skip
+            out[op] = {
+                "n": len(a),
+                "p50_ms": float(np.percentile(a, 50)),
+                "p95_ms": float(np.percentile(a, 95)),
+                "p99_ms": float(np.percentile(a, 99)),
+                "max_ms": float(a.max()),
+            }
         return out
 
 
 # The mix of one client's requests: writes (plans, estimates, a batch) and reads (listings, own records).
-MIX = [("post_plan", 0.15), ("post_estimate", 0.30), ("post_batch", 0.05), ("list_plans", 0.15),
-       ("list_estimates", 0.15), ("get_own", 0.15), ("scenes", 0.05)]  # fmt: skip
+MIX = [
+    ("post_plan", 0.15),
+    ("post_estimate", 0.30),
+    ("post_batch", 0.05),
+    ("list_plans", 0.15),
+    ("list_estimates", 0.15),
+    ("get_own", 0.15),
+    ("scenes", 0.05),
+]
 
 
-def run_load(url: str, keys: list[str], clients: int = 16, requests_each: int = 50, frame_size: int = 64,
-             seed: int = 0, stop: threading.Event | None = None) -> LoadResult:  # fmt: skip
+def run_load(
+    url: str,
+    keys: list[str],
+    clients: int = 16,
+    requests_each: int = 50,
+    frame_size: int = 64,
+    seed: int = 0,
+    stop: threading.Event | None = None,
+) -> LoadResult:
     """Send ``clients`` x ``requests_each`` mixed requests concurrently; record latencies and acknowledged ids."""
     lat: dict[str, list[float]] = defaultdict(list)
     statuses: dict[str, dict[int, int]] = defaultdict(lambda: defaultdict(int))
@@ -146,8 +168,10 @@ def run_load(url: str, keys: list[str], clients: int = 16, requests_each: int = 
                     elif op == "post_estimate":
                         r = http.post("/v1/estimates", files={"file": (f"c{c}-{k}.npy", npy_bytes(frame))})
                     elif op == "post_batch":
-                        r = http.post("/v1/estimates/batch",
-                                      files=[("files", (f"c{c}-{k}-{j}.npy", npy_bytes(frame * (j + 1)))) for j in range(4)])  # fmt: skip
+                        r = http.post(
+                            "/v1/estimates/batch",
+                            files=[("files", (f"c{c}-{k}-{j}.npy", npy_bytes(frame * (j + 1)))) for j in range(4)],
+                        )
                     elif op == "list_plans":
                         r = http.get("/v1/plans", params={"limit": 20})
                     elif op == "list_estimates":

@@ -29,6 +29,8 @@ from app.db.models import Estimate, utcnow
 from app.errors import InputError
 from app.schemas import CONTROL_CHARACTERS, EstimatePublic, EstimatesPublic, IsoDateTime, Text
 from app.services import estimation as svc
+from app.services import images
+from app.services import uploads as upload_svc
 
 router = APIRouter(prefix="/estimates", tags=["estimates"])
 
@@ -61,10 +63,21 @@ FILE = (
 
 
 def _estimate(
-    *, session: Any, operator_id: str, settings: Any, est: Any, uploads: list[svc.Upload], resample: bool,
-    plan_id: str | None, observed_at: datetime | None, snr_db: float | None, normalised: bool = False,
-    checker: Any, refine: bool = True, cells_m: tuple[float, float] | None = None,
-) -> list[Estimate]:  # fmt: skip
+    *,
+    session: Any,
+    operator_id: str,
+    settings: Any,
+    est: Any,
+    uploads: list[upload_svc.Upload],
+    resample: bool,
+    plan_id: str | None,
+    observed_at: datetime | None,
+    snr_db: float | None,
+    normalised: bool = False,
+    checker: Any,
+    refine: bool = True,
+    cells_m: tuple[float, float] | None = None,
+) -> list[Estimate]:
     """Validate everything, run the models on one batch, store the images, then the rows in one transaction."""
     if not uploads:
         raise InputError(["file"], "no frames in the upload")
@@ -79,8 +92,15 @@ def _estimate(
         plan = crud.get_plan(session=session, operator_id=operator_id, plan_id=plan_id)
         if plan is None:
             raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
-    frames, res, checks, per_frame = svc.check_frames(est=est, checker=checker, uploads=uploads, resample=resample,
-                                                      normalised=normalised, cells_m=cells_m, refine=refine)  # fmt: skip
+    frames, res, checks, per_frame = svc.check_frames(
+        est=est,
+        checker=checker,
+        uploads=uploads,
+        resample=resample,
+        normalised=normalised,
+        cells_m=cells_m,
+        refine=refine,
+    )
     enhanced = res.enhanced
     angles = [c.angles_deg for c in checks]
     in_frames: list[dict[str, Any] | None] = [None] * len(uploads)
@@ -89,12 +109,17 @@ def _estimate(
     rows = []
     blobs: list[bytes] = []
     for k, u in enumerate(uploads):
-        blobs += [svc.png_bytes(frames[k]), svc.png_bytes(enhanced[k])]
-        original = svc.store_blob(settings.data_dir, blobs[-2])
-        enh = svc.store_blob(settings.data_dir, blobs[-1])
-        result: dict[str, Any] = {**svc.checked_json(checks[k]), "target": checker.model.name, "model": est.identity,
-                                  "timings_s": {**per_frame, "batch_size": len(uploads)},
-                                  "input_normalised": normalised, "cells_m": list(cells_m) if cells_m else None}  # fmt: skip
+        blobs += [images.png_bytes(frames[k]), images.png_bytes(enhanced[k])]
+        original = images.store_blob(settings.data_dir, blobs[-2])
+        enh = images.store_blob(settings.data_dir, blobs[-1])
+        result: dict[str, Any] = {
+            **svc.checked_json(checks[k]),
+            "target": checker.model.name,
+            "model": est.identity,
+            "timings_s": {**per_frame, "batch_size": len(uploads)},
+            "input_normalised": normalised,
+            "cells_m": list(cells_m) if cells_m else None,
+        }
         placed = in_frames[k]
         if placed is not None:
             result["attitude_lvlh"] = placed["lvlh"]
@@ -113,11 +138,11 @@ def _estimate(
                 result=result,
                 original_sha256=original,
                 enhanced_sha256=enh,
-            )  # fmt: skip
+            )
         )
     stored = crud.create_estimates(session=session, rows=rows)
     for blob in blobs:  # a concurrent delete of an estimate with the same image may have removed it meanwhile
-        svc.store_blob(settings.data_dir, blob)
+        images.store_blob(settings.data_dir, blob)
     return stored
 
 
@@ -145,14 +170,26 @@ async def create_estimate(
     data = await read_upload(file, settings.max_upload_bytes)
     # Decoding, the models and the database run in a worker thread, so the event loop keeps serving meanwhile.
     uploads = await run_in_threadpool(
-        svc.decode, data, file.filename or "upload", allow_stack=False, max_side=settings.max_image_side
+        upload_svc.decode, data, file.filename or "upload", allow_stack=False, max_side=settings.max_image_side
     )
     if len(uploads) != 1:
         raise InputError(["file"], f"the file holds {len(uploads)} frames; send stacks to /v1/estimates/batch")
-    rows = await run_in_threadpool(_estimate, session=session, operator_id=operator.id, settings=settings, est=est,
-                                   uploads=uploads, resample=resample, plan_id=plan_id,
-                                   observed_at=as_utc(observed_at), snr_db=snr_db, normalised=normalised,
-                                   checker=checker, refine=refine, cells_m=cells_m)  # fmt: skip
+    rows = await run_in_threadpool(
+        _estimate,
+        session=session,
+        operator_id=operator.id,
+        settings=settings,
+        est=est,
+        uploads=uploads,
+        resample=resample,
+        plan_id=plan_id,
+        observed_at=as_utc(observed_at),
+        snr_db=snr_db,
+        normalised=normalised,
+        checker=checker,
+        refine=refine,
+        cells_m=cells_m,
+    )
     return EstimatePublic.row_json(rows[0])
 
 
@@ -179,10 +216,22 @@ async def create_estimates_batch(
     cells_m = cells_from_form(range_cell_m, cross_range_cell_m)
     checker = checker_for(checkers, target)
     uploads = await read_uploads(files, settings)
-    rows = await run_in_threadpool(_estimate, session=session, operator_id=operator.id, settings=settings, est=est,
-                                   uploads=uploads, resample=resample, plan_id=plan_id,
-                                   observed_at=as_utc(observed_at), snr_db=None, normalised=normalised,
-                                   checker=checker, refine=refine, cells_m=cells_m)  # fmt: skip
+    rows = await run_in_threadpool(
+        _estimate,
+        session=session,
+        operator_id=operator.id,
+        settings=settings,
+        est=est,
+        uploads=uploads,
+        resample=resample,
+        plan_id=plan_id,
+        observed_at=as_utc(observed_at),
+        snr_db=None,
+        normalised=normalised,
+        checker=checker,
+        refine=refine,
+        cells_m=cells_m,
+    )
     return {"data": [EstimatePublic.row_json(r) for r in rows], "count": len(rows)}
 
 
@@ -199,8 +248,15 @@ def list_estimates(
 ) -> dict[str, Any]:
     """List the caller's estimates, newest first, filtered by plan and creation time."""
     limit = check_page_size(limit, settings)
-    rows, total = crud.list_estimates(session=session, operator_id=operator.id, limit=limit, offset=offset,
-                                      plan_id=plan_id, created_after=created_after, created_before=created_before)  # fmt: skip
+    rows, total = crud.list_estimates(
+        session=session,
+        operator_id=operator.id,
+        limit=limit,
+        offset=offset,
+        plan_id=plan_id,
+        created_after=created_after,
+        created_before=created_before,
+    )
     return {"data": [EstimatePublic.row_json(r) for r in rows], "count": total}
 
 
@@ -220,7 +276,7 @@ def read_estimate(
 
 
 def _png(settings: Any, digest: str) -> Response:
-    path = svc.blob_path(Path(settings.data_dir), digest)
+    path = images.blob_path(Path(settings.data_dir), digest)
     if not path.is_file():
         raise HTTPException(status_code=404, detail="Image not found")
     return FileResponse(path, media_type="image/png")
@@ -252,5 +308,5 @@ def delete_estimate(
     crud.delete_estimate(session=session, estimate=e)
     for d in digests:
         if not crud.blob_in_use(session=session, digest=d):
-            svc.blob_path(Path(settings.data_dir), d).unlink(missing_ok=True)
+            images.blob_path(Path(settings.data_dir), d).unlink(missing_ok=True)
     return Response(status_code=204)

@@ -24,14 +24,26 @@ from app.errors import InputError
 from app.schemas import IsoDateTime, PassPublic, Text
 from app.services import estimation as svc
 from app.services import passes as pass_svc
+from app.services import uploads as upload_svc
 
 router = APIRouter(prefix="/passes", tags=["passes"])
 
 OBSERVED_AT = "each frame's time (ISO 8601 UTC), one per frame in upload order (repeat the field); inside the plan's access windows"
 
 
-def _fuse(*, session: Any, operator_id: str, settings: Any, est: Any, checker: Any, uploads: list[svc.Upload],
-          plan_id: str, observed_at: list[Any], cells_m: tuple[float, float] | None, normalised: bool) -> Pass:  # fmt: skip
+def _fuse(
+    *,
+    session: Any,
+    operator_id: str,
+    settings: Any,
+    est: Any,
+    checker: Any,
+    uploads: list[upload_svc.Upload],
+    plan_id: str,
+    observed_at: list[Any],
+    cells_m: tuple[float, float] | None,
+    normalised: bool,
+) -> Pass:
     if len(uploads) < 2:
         raise InputError(["files"], f"a pass needs at least two frames; this upload holds {len(uploads)}")
     if len(uploads) > settings.max_batch_frames:
@@ -44,10 +56,18 @@ def _fuse(*, session: Any, operator_id: str, settings: Any, est: Any, checker: A
     if plan is None:
         raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
     pass_svc.check_times(plan.result, observed_at)
-    frames, _, checks, per_frame = svc.check_frames(est=est, checker=checker, uploads=uploads, resample=False,
-                                                    normalised=normalised, cells_m=cells_m, search=False)  # fmt: skip
-    result, _ = pass_svc.fuse_pass(est=est, checker=checker, frames=frames, checks=checks, plan_request=plan.request,
-                                   observed_at=observed_at, names=[u.name for u in uploads])  # fmt: skip
+    frames, _, checks, per_frame = svc.check_frames(
+        est=est, checker=checker, uploads=uploads, resample=False, normalised=normalised, cells_m=cells_m, search=False
+    )
+    result, _ = pass_svc.fuse_pass(
+        est=est,
+        checker=checker,
+        frames=frames,
+        checks=checks,
+        plan_request=plan.request,
+        observed_at=observed_at,
+        names=[u.name for u in uploads],
+    )
     result = {**result, "target": checker.model.name, "timings_s": per_frame}
     row = Pass(operator_id=operator_id, created_at=utcnow(), plan_id=plan_id, result=_jsonable(result))
     session.add(row)
@@ -92,9 +112,19 @@ async def create_pass(
     cells_m = cells_from_form(range_cell_m, cross_range_cell_m)
     checker = checker_for(checkers, target)
     uploads = await read_uploads(files, settings)
-    row = await run_in_threadpool(_fuse, session=session, operator_id=operator.id, settings=settings, est=est,
-                                  checker=checker, uploads=uploads, plan_id=plan_id, observed_at=observed_at,
-                                  cells_m=cells_m, normalised=normalised)  # fmt: skip
+    row = await run_in_threadpool(
+        _fuse,
+        session=session,
+        operator_id=operator.id,
+        settings=settings,
+        est=est,
+        checker=checker,
+        uploads=uploads,
+        plan_id=plan_id,
+        observed_at=observed_at,
+        cells_m=cells_m,
+        normalised=normalised,
+    )
     return PassPublic.row_json(row)
 
 

@@ -14,7 +14,7 @@ from app import crud
 from app.api.deps import CurrentOperator, SessionDep, SettingsDep, as_utc, check_page_size, check_span
 from app.core.observability import resident_mb
 from app.schemas import PAPER_EXAMPLE, IsoDateTime, PlanCreate, PlanPublic, PlansPublic, PlanSummary, Text
-from app.services.planning import access_csv, run_plan
+from app.services.planning import access_csv, run_plan, stored_station_lookup, with_stored_station
 from planner.plan import StopCheck
 
 router = APIRouter(prefix="/plans", tags=["plans"])
@@ -47,8 +47,10 @@ def _budget(settings: Any, gone: threading.Event | None = None) -> StopCheck:
         if time.monotonic() > deadline:
             return f"over the {settings.plan_timeout_s:g}-s budget (GSA_PLAN_TIMEOUT_S); plan a shorter span or a coarser box"
         if resident_mb() > memory_limit:
-            return (f"over the {settings.plan_memory_mb:g}-MB memory budget (GSA_PLAN_MEMORY_MB); plan a shorter span "
-                    "or a coarser box")  # fmt: skip
+            return (
+                f"over the {settings.plan_memory_mb:g}-MB memory budget (GSA_PLAN_MEMORY_MB); plan a shorter span "
+                "or a coarser box"
+            )
         return None
 
     return stop
@@ -74,6 +76,7 @@ async def create_plan(
     plans) and stops when the caller disconnects; in each case nothing is stored.
     """
     check_span(plan_in.search.duration_days, settings, ["search", "duration_days"])
+    plan_in = with_stored_station(plan_in, stored_station_lookup(session, operator.id))
     gone = threading.Event()
     stop = _budget(settings, gone)
 
@@ -167,9 +170,12 @@ EXPORT_TYPES = {
     "opm": ("text/plain", "CCSDS OPM 3.0 (KVN): the observer before its burn, and the burn (GCRF, UTC)", "opm.txt"),
     "oem": ("text/plain", "CCSDS OEM 3.0 (KVN): target and observer over the planned arc (GCRF, UTC, 60 s)", "oem.txt"),
     "czml": ("application/json", "CZML for Cesium: both satellites, the station, access intervals, T_access", "czml"),
-    "pointing.csv": ("text/csv", "the radar's azimuth, elevation, range and range rate over each pass, 1 s steps",
-                     "pointing.csv"),
-}  # fmt: skip
+    "pointing.csv": (
+        "text/csv",
+        "the radar's azimuth, elevation, range and range rate over each pass, 1 s steps",
+        "pointing.csv",
+    ),
+}
 
 
 def _export(kind: str, plan_id: str, session: Any, operator: Any, settings: Any) -> Response:
@@ -178,8 +184,9 @@ def _export(kind: str, plan_id: str, session: Any, operator: Any, settings: Any)
     row = crud.get_plan(session=session, operator_id=operator.id, plan_id=plan_id)
     if row is None:
         raise HTTPException(status_code=404, detail="Plan not found")
-    plan, _ = run_plan(PlanCreate.model_validate(row.request), max_grid_points=settings.max_grid_points,
-                       stop=_budget(settings))  # fmt: skip
+    plan, _ = run_plan(
+        PlanCreate.model_validate(row.request), max_grid_points=settings.max_grid_points, stop=_budget(settings)
+    )
     names = {"target": row.target_name, "observer": row.observer_name, "station": row.station_name}
     windows = row.result.get("access_windows", [])
     if kind == "pointing.csv":
@@ -200,14 +207,20 @@ def _export(kind: str, plan_id: str, session: Any, operator: Any, settings: Any)
 def _export_route(kind: str) -> None:
     media, what, _ = EXPORT_TYPES[kind]
 
-    def export(session: SessionDep, operator: CurrentOperator, settings: SettingsDep,
-               plan_id: Annotated[Text, Path()]) -> Response:  # fmt: skip
+    def export(
+        session: SessionDep, operator: CurrentOperator, settings: SettingsDep, plan_id: Annotated[Text, Path()]
+    ) -> Response:
         return _export(kind, plan_id, session, operator, settings)
 
     export.__doc__ = f"The plan as {what}. Recomputed from the stored request; 422 if the plan has no burn."
     export.__name__ = f"export_{kind.replace('.', '_')}"
-    router.add_api_route(f"/{{plan_id}}/export/{kind}", export, methods=["GET"], response_class=Response,
-                         responses={**NOT_FOUND, 200: {"content": {media: {}}, "description": what}})  # fmt: skip
+    router.add_api_route(
+        f"/{{plan_id}}/export/{kind}",
+        export,
+        methods=["GET"],
+        response_class=Response,
+        responses={**NOT_FOUND, 200: {"content": {media: {}}, "description": what}},
+    )
 
 
 for _kind in EXPORT_TYPES:

@@ -37,6 +37,14 @@ def list_scenes(
             .order_by(Estimate.created_at, Estimate.id)
         ):
             by_plan[str(e.plan_id)].append(e)
-    data = [{"plan_id": p.id, "target_name": p.target_name, "t_access": as_utc(p.t_access), "miss_km": p.miss_km,
-             "estimates": [EstimatePublic.row_json(e) for e in by_plan[p.id]]} for p in plans]  # fmt: skip
+    data = [
+        {
+            "plan_id": p.id,
+            "target_name": p.target_name,
+            "t_access": as_utc(p.t_access),
+            "miss_km": p.miss_km,
+            "estimates": [EstimatePublic.row_json(e) for e in by_plan[p.id]],
+        }
+        for p in plans
+    ]
     return {"data": data, "count": total}

@@ -22,7 +22,7 @@ from app import crud
 from app.core.db import head_revision, make_engine, make_session_factory
 from app.core.observability import JsonFormatter
 from app.core.security import LEGACY_SCHEME, key_digest, load_key_secret
-from app.db.models import ApiKey, Estimate, Pass, Plan
+from app.db.models import ApiKey, Estimate, GroundStation, Pass, Plan
 from app.schemas import PAPER_EXAMPLE
 from tests.conftest import KEY_A, KEY_B
 from tests.utils.server import npy_bytes
@@ -30,8 +30,8 @@ from tests.utils.server import npy_bytes
 A = {"X-API-Key": KEY_A}
 B = {"X-API-Key": KEY_B}
 # The stored record each path parameter names; a route with any other parameter fails the test.
-ID_PARAMS = {"plan_id": "plan", "estimate_id": "estimate", "pass_id": "pass"}
-COLLECTIONS = {"plan": "plans", "estimate": "estimates", "pass": "passes"}
+ID_PARAMS = {"plan_id": "plan", "estimate_id": "estimate", "pass_id": "pass", "name": "station"}
+COLLECTIONS = {"plan": "plans", "estimate": "estimates", "pass": "passes", "station": "stations"}
 
 
 def _v1_routes(app):
@@ -44,7 +44,8 @@ def _counts(settings):
     engine = create_engine(settings.database_url)
     with engine.connect() as conn:
         out = {
-            t.__tablename__: conn.scalar(select(func.count()).select_from(t)) for t in (Plan, Estimate, Pass, ApiKey)
+            t.__tablename__: conn.scalar(select(func.count()).select_from(t))
+            for t in (Plan, Estimate, Pass, ApiKey, GroundStation)
         }
     engine.dispose()
     return out
@@ -56,18 +57,26 @@ def records(client):
     plan = client.post("/v1/plans", json=copy.deepcopy(PAPER_EXAMPLE), headers=A)
     assert plan.status_code == 201, plan.text
     frame = np.random.default_rng(0).random((64, 64))
-    est = client.post("/v1/estimates", files={"file": ("f.npy", npy_bytes(frame))}, data={"plan_id": plan.json()["id"]},
-                      headers=A)  # fmt: skip
+    est = client.post(
+        "/v1/estimates", files={"file": ("f.npy", npy_bytes(frame))}, data={"plan_id": plan.json()["id"]}, headers=A
+    )
     assert est.status_code == 201, est.text
     w = plan.json()["access_windows"][0]
     rise, end = datetime.fromisoformat(w["rise"]), datetime.fromisoformat(w["set"])
     times = [(rise + (end - rise) * f).isoformat() for f in (0.3, 0.6)]
     buf = io.BytesIO()
     np.savez(buf, frames=np.random.default_rng(1).random((2, 64, 64)))
-    ps = client.post("/v1/passes", files=[("files", ("p.npz", buf.getvalue()))],
-                     data={"plan_id": plan.json()["id"], "observed_at": times}, headers=A)  # fmt: skip
+    ps = client.post(
+        "/v1/passes",
+        files=[("files", ("p.npz", buf.getvalue()))],
+        data={"plan_id": plan.json()["id"], "observed_at": times},
+        headers=A,
+    )
     assert ps.status_code == 201, ps.text
-    return {"plan": plan.json()["id"], "estimate": est.json()["id"], "pass": ps.json()["id"]}
+    site = {**PAPER_EXAMPLE["ground_station"], "name": "site-of-operator-a"}
+    st = client.post("/v1/stations", json=site, headers=A)
+    assert st.status_code == 201, st.text
+    return {"plan": plan.json()["id"], "estimate": est.json()["id"], "pass": ps.json()["id"], "station": site["name"]}
 
 
 @pytest.fixture(scope="module")
@@ -119,8 +128,11 @@ def test_listings_never_show_another_operators_records(client, records):
             continue
         r = client.get(path, headers=B)
         assert r.status_code == 200, (path, r.text)
-        assert records["plan"] not in r.text and records["estimate"] not in r.text, path
-        assert records["plan"] in client.get(path, headers=A).text or path == "/v1/estimates"
+        assert all(records[k] not in r.text for k in ("plan", "estimate", "station")), path
+        mine = client.get(path, headers=A).text
+        assert (
+            records["station"] in mine if path == "/v1/stations" else records["plan"] in mine or path == "/v1/estimates"
+        )
     listed = client.get("/v1/estimates", headers=A).json()["data"]
     assert records["estimate"] in [e["id"] for e in listed]
 
@@ -142,8 +154,15 @@ def test_legacy_sha256_keys_still_work_and_are_rewritten_as_hmac(client):
     key = "gsa_legacy-key-from-before-migration-0003-xxxxxxx"
     with app.state.session_factory() as session:
         op = crud.get_or_create_operator(session=session, name="legacy")
-        session.add(ApiKey(operator_id=op.id, name="old", prefix=key[:8], key_hash=key_digest(key, b"", LEGACY_SCHEME),
-                           hash_scheme=LEGACY_SCHEME))  # fmt: skip
+        session.add(
+            ApiKey(
+                operator_id=op.id,
+                name="old",
+                prefix=key[:8],
+                key_hash=key_digest(key, b"", LEGACY_SCHEME),
+                hash_scheme=LEGACY_SCHEME,
+            )
+        )
         session.commit()
     assert client.get("/v1/plans", headers={"X-API-Key": key}).status_code == 200
     with app.state.session_factory() as session:

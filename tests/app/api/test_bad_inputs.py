@@ -29,8 +29,16 @@ from tests.conftest import KEY_A
 A = {"X-API-Key": KEY_A}
 ISS_L1 = "1 25544U 98067A   08264.51782528 -.00002182  00000-0 -11606-4 0  2927"
 ISS_L2 = "2 25544  51.6416 247.4627 0006703 130.5360 325.0288 15.72125391563537"
-LIMITS = {"max_upload_bytes": 200_000, "max_batch_bytes": 400_000, "max_request_bytes": 65_536, "max_image_side": 128,
-          "max_page_size": 5, "max_span_days": 2.0, "max_grid_points": 1000, "max_batch_frames": 2}  # fmt: skip
+LIMITS = {
+    "max_upload_bytes": 200_000,
+    "max_batch_bytes": 400_000,
+    "max_request_bytes": 65_536,
+    "max_image_side": 128,
+    "max_page_size": 5,
+    "max_span_days": 2.0,
+    "max_grid_points": 1000,
+    "max_batch_frames": 2,
+}
 
 
 @pytest.fixture(scope="module")
@@ -122,8 +130,10 @@ def _upload(data: bytes | Callable[[], bytes], name: str = "f.npy", **form: str)
 def _raw_multipart(filename: bytes, data: bytes) -> dict[str, Any]:
     """A multipart upload written byte for byte (httpx would percent-encode a NUL in the file name)."""
     b = b"gsa-test-boundary"
-    body = (b"--" + b + b'\r\nContent-Disposition: form-data; name="file"; filename="' + filename + b'"\r\n'
-            b"Content-Type: application/octet-stream\r\n\r\n" + data + b"\r\n--" + b + b"--\r\n")  # fmt: skip
+    body = (
+        b"--" + b + b'\r\nContent-Disposition: form-data; name="file"; filename="' + filename + b'"\r\n'
+        b"Content-Type: application/octet-stream\r\n\r\n" + data + b"\r\n--" + b + b"--\r\n"
+    )
     return {"content": body, "headers": {"Content-Type": "multipart/form-data; boundary=" + b.decode()}}
 
 
@@ -140,17 +150,59 @@ class Case:
 PLANS, EST = "/v1/plans", "/v1/estimates"
 CASES = [
     # TLEs
-    Case("tle_line_too_short", "POST", PLANS, _plan(**{"target.elements": None, "target.tle": [ISS_L1[:60], ISS_L2]}), 422, "tle"),
-    Case("tle_bad_checksum", "POST", PLANS, _plan(**{"target.elements": None, "target.tle": [ISS_L1, ISS_L2[:-1] + "0"]}), 422, "checksum"),
-    Case("tle_non_ascii", "POST", PLANS, _plan(**{"target.elements": None, "target.tle": [ISS_L1[:-2] + "é7", ISS_L2]}), 422, "tle"),
+    Case(
+        "tle_line_too_short",
+        "POST",
+        PLANS,
+        _plan(**{"target.elements": None, "target.tle": [ISS_L1[:60], ISS_L2]}),
+        422,
+        "tle",
+    ),
+    Case(
+        "tle_bad_checksum",
+        "POST",
+        PLANS,
+        _plan(**{"target.elements": None, "target.tle": [ISS_L1, ISS_L2[:-1] + "0"]}),
+        422,
+        "checksum",
+    ),
+    Case(
+        "tle_non_ascii",
+        "POST",
+        PLANS,
+        _plan(**{"target.elements": None, "target.tle": [ISS_L1[:-2] + "é7", ISS_L2]}),
+        422,
+        "tle",
+    ),
     Case("tle_one_line", "POST", PLANS, _plan(**{"target.elements": None, "target.tle": [ISS_L1]}), 422, "tle"),
     Case("tle_and_elements_both", "POST", PLANS, _plan(**{"target.tle": [ISS_L1, ISS_L2]}), 422, "exactly one"),
     # numbers that make no sense
-    Case("elements_nan", "POST", PLANS, _raw(json.dumps(PAPER_EXAMPLE).replace('"ha_km": 700', '"ha_km": NaN', 1)), 422, "ha_km"),
-    Case("elements_infinity", "POST", PLANS, _raw(json.dumps(PAPER_EXAMPLE).replace('"hp_km": 600', '"hp_km": Infinity', 1)), 422, "hp_km"),
+    Case(
+        "elements_nan",
+        "POST",
+        PLANS,
+        _raw(json.dumps(PAPER_EXAMPLE).replace('"ha_km": 700', '"ha_km": NaN', 1)),
+        422,
+        "ha_km",
+    ),
+    Case(
+        "elements_infinity",
+        "POST",
+        PLANS,
+        _raw(json.dumps(PAPER_EXAMPLE).replace('"hp_km": 600', '"hp_km": Infinity', 1)),
+        422,
+        "hp_km",
+    ),
     Case("elements_1e308", "POST", PLANS, _plan(**{"target.elements.ha_km": 1e308}), 422, "ha_km"),
     Case("perigee_negative", "POST", PLANS, _plan(**{"target.elements.hp_km": -50}), 422, "hp_km"),
-    Case("inclination_over_180", "POST", PLANS, _plan(**{"observer.elements.inclination_deg": 200}), 422, "inclination_deg"),
+    Case(
+        "inclination_over_180",
+        "POST",
+        PLANS,
+        _plan(**{"observer.elements.inclination_deg": 200}),
+        422,
+        "inclination_deg",
+    ),
     Case("apogee_below_perigee", "POST", PLANS, _plan(**{"target.elements.ha_km": 500}), 422, "ha_km"),
     Case("latitude_91", "POST", PLANS, _plan(**{"ground_station.latitude_deg": 91}), 422, "latitude_deg"),
     # types, shapes and unknown fields
@@ -163,17 +215,60 @@ CASES = [
     # names
     Case("name_with_path_separator", "POST", PLANS, _plan(**{"target.name": "../../etc/passwd"}), 422, "name"),
     Case("name_with_nul", "POST", PLANS, _plan(**{"observer.name": "obs\x00; DROP TABLE plans;--"}), 422, "name"),
-    Case("name_10000_characters", "POST", PLANS, _plan(**{"target.name": "x'; DELETE FROM plans;--" * 400}), 422, "name"),
+    Case(
+        "name_10000_characters", "POST", PLANS, _plan(**{"target.name": "x'; DELETE FROM plans;--" * 400}), 422, "name"
+    ),
     # a box whose corner takes the observer under 100 km: refused before planning, naming the box field
-    Case("box_below_perigee_limit", "POST", PLANS, _plan(**{"search.dhp_min_km": -300, "search.step_km": 50}), 422, "dhp_min_km"),
-    Case("box_apogee_below_perigee_limit", "POST", PLANS, _plan(**{"observer.elements.ha_km": 400, "search.dha_min_km": -320, "search.dhp_min_km": 0, "search.step_km": 10}), 422, "dha_min_km"),
+    Case(
+        "box_below_perigee_limit",
+        "POST",
+        PLANS,
+        _plan(**{"search.dhp_min_km": -300, "search.step_km": 50}),
+        422,
+        "dhp_min_km",
+    ),
+    Case(
+        "box_apogee_below_perigee_limit",
+        "POST",
+        PLANS,
+        _plan(
+            **{"observer.elements.ha_km": 400, "search.dha_min_km": -320, "search.dhp_min_km": 0, "search.step_km": 10}
+        ),
+        422,
+        "dha_min_km",
+    ),
     # the encounter's options
     Case("standoff_zero", "POST", PLANS, _plan(**{"search.standoff_km": 0}), 422, "standoff_km"),
     Case("standoff_over_500", "POST", PLANS, _plan(**{"search.standoff_km": 5000}), 422, "standoff_km"),
     Case("min_separation_negative", "POST", PLANS, _plan(**{"search.min_separation_km": -1}), 422, "min_separation_km"),
-    Case("min_separation_above_standoff", "POST", PLANS, _plan(**{"search.standoff_km": 2, "search.min_separation_km": 3}), 422, "min_separation_km"),
-    Case("tracking_rate_zero", "POST", PLANS, _plan(**{"search.max_tracking_rate_deg_s": 0}), 422, "max_tracking_rate_deg_s"),
-    Case("tracking_rate_nan", "POST", PLANS, _raw(json.dumps({**PAPER_EXAMPLE, "search": {"duration_days": 1, "max_tracking_rate_deg_s": 1}}).replace('"max_tracking_rate_deg_s": 1', '"max_tracking_rate_deg_s": NaN')), 422, "max_tracking_rate_deg_s"),
+    Case(
+        "min_separation_above_standoff",
+        "POST",
+        PLANS,
+        _plan(**{"search.standoff_km": 2, "search.min_separation_km": 3}),
+        422,
+        "min_separation_km",
+    ),
+    Case(
+        "tracking_rate_zero",
+        "POST",
+        PLANS,
+        _plan(**{"search.max_tracking_rate_deg_s": 0}),
+        422,
+        "max_tracking_rate_deg_s",
+    ),
+    Case(
+        "tracking_rate_nan",
+        "POST",
+        PLANS,
+        _raw(
+            json.dumps({**PAPER_EXAMPLE, "search": {"duration_days": 1, "max_tracking_rate_deg_s": 1}}).replace(
+                '"max_tracking_rate_deg_s": 1', '"max_tracking_rate_deg_s": NaN'
+            )
+        ),
+        422,
+        "max_tracking_rate_deg_s",
+    ),
     # NUL and other control characters, refused at the edge on both databases (PostgreSQL cannot store NUL)
     Case("nul_in_plan_id", "GET", "/v1/plans/abc%00", lambda: {}, 422, "plan_id"),
     Case("nul_in_target_filter", "GET", "/v1/plans?target_name=a%00b", lambda: {}, 422, "target_name"),
@@ -183,15 +278,39 @@ CASES = [
     Case("nul_in_estimate_png", "GET", "/v1/estimates/abc%00/enhanced.png", lambda: {}, 422, "estimate_id"),
     Case("nul_in_estimates_filter", "GET", "/v1/estimates?plan_id=a%00", lambda: {}, 422, "plan_id"),
     Case("nul_in_form_plan_id", "POST", EST, _upload(lambda: _npy(_frame()), plan_id="abc\x00"), 422, "plan_id"),
-    Case("nul_in_batch_plan_id", "POST", EST + "/batch",
-         lambda: {"files": [("files", ("f.npy", _npy(_frame())))], "data": {"plan_id": "a\x00b"}}, 422, "plan_id"),
-    Case("nul_in_upload_filename", "POST", EST, lambda: _raw_multipart(b"f\x00.npy", _npy(_frame())), 422, "control characters"),
+    Case(
+        "nul_in_batch_plan_id",
+        "POST",
+        EST + "/batch",
+        lambda: {"files": [("files", ("f.npy", _npy(_frame())))], "data": {"plan_id": "a\x00b"}},
+        422,
+        "plan_id",
+    ),
+    Case(
+        "nul_in_upload_filename",
+        "POST",
+        EST,
+        lambda: _raw_multipart(b"f\x00.npy", _npy(_frame())),
+        422,
+        "control characters",
+    ),
     # operator limits
     Case("span_over_limit", "POST", PLANS, _plan(**{"search.duration_days": 5}), 422, "GSA_MAX_SPAN_DAYS"),
     Case("grid_over_limit", "POST", PLANS, _plan(**{"search.step_km": 0.01}), 422, "step_km"),
-    Case("access_span_over_limit", "POST", "/v1/access-windows",
-         lambda: {"json": {"target": PAPER_EXAMPLE["target"], "ground_station": PAPER_EXAMPLE["ground_station"], "duration_days": 3}},
-         422, "duration_days"),
+    Case(
+        "access_span_over_limit",
+        "POST",
+        "/v1/access-windows",
+        lambda: {
+            "json": {
+                "target": PAPER_EXAMPLE["target"],
+                "ground_station": PAPER_EXAMPLE["ground_station"],
+                "duration_days": 3,
+            }
+        },
+        422,
+        "duration_days",
+    ),
     Case("request_body_over_limit", "POST", PLANS, _plan(**{"target.name": "x" * 70_000}), 413, "limit"),
     # uploads
     Case("upload_empty", "POST", EST, _upload(b""), 422, "empty"),
@@ -214,23 +333,84 @@ CASES = [
     Case("frame_all_nan", "POST", EST, _upload(lambda: _npy(np.full((64, 64), np.nan))), 422, "NaN"),
     Case("frame_with_inf", "POST", EST, _upload(lambda: _npy(np.where(_frame() > 0.5, np.inf, 1.0))), 422, "infinite"),
     Case("frame_all_zero", "POST", EST, _upload(lambda: _npy(np.zeros((64, 64)))), 422, "all zero"),
-    Case("image_side_over_limit", "POST", EST, _upload(lambda: _npy(_frame((64, 200))), resample="true"), 422, "GSA_MAX_IMAGE_SIDE"),
+    Case(
+        "image_side_over_limit",
+        "POST",
+        EST,
+        _upload(lambda: _npy(_frame((64, 200))), resample="true"),
+        422,
+        "GSA_MAX_IMAGE_SIDE",
+    ),
     Case("upload_over_size_limit", "POST", EST, _upload(lambda: _npy(_frame((100, 300)))), 413, "upload limit"),
     Case("unknown_plan_id", "POST", EST, _upload(lambda: _npy(_frame()), plan_id="0" * 36), 422, "plan_id"),
-    Case("observed_at_without_plan", "POST", EST, _upload(lambda: _npy(_frame()), observed_at="2022-11-28T11:28:29Z"), 422, "plan_id"),
+    Case(
+        "observed_at_without_plan",
+        "POST",
+        EST,
+        _upload(lambda: _npy(_frame()), observed_at="2022-11-28T11:28:29Z"),
+        422,
+        "plan_id",
+    ),
     Case("snr_not_a_number", "POST", EST, _upload(lambda: _npy(_frame()), snr_db="nan"), 422, "snr_db"),
     # the fit's fields
     Case("refine_not_a_bool", "POST", EST, _upload(lambda: _npy(_frame()), refine="perhaps"), 422, "refine"),
     Case("unknown_target", "POST", EST, _upload(lambda: _npy(_frame()), target="hubble"), 422, "target"),
-    Case("unknown_target_in_batch", "POST", EST + "/batch",
-         lambda: {"files": [("files", ("f.npy", _npy(_frame())))], "data": {"target": "../etc"}}, 422, "target"),
-    Case("range_cell_without_cross_range", "POST", EST, _upload(lambda: _npy(_frame()), range_cell_m="0.1"), 422, "cross_range_cell_m"),
-    Case("cross_range_cell_without_range", "POST", EST, _upload(lambda: _npy(_frame()), cross_range_cell_m="0.1"), 422, "range_cell_m"),
-    Case("range_cell_zero", "POST", EST, _upload(lambda: _npy(_frame()), range_cell_m="0", cross_range_cell_m="0.1"), 422, "range_cell_m"),
-    Case("cross_range_cell_nan", "POST", EST, _upload(lambda: _npy(_frame()), range_cell_m="0.1", cross_range_cell_m="nan"), 422, "cross_range_cell_m"),
-    Case("cells_too_coarse_for_the_frame", "POST", EST, _upload(lambda: _npy(_frame()), range_cell_m="0.001", cross_range_cell_m="0.001"), 422, "cell"),
-    Case("batch_over_frame_limit", "POST", EST + "/batch",
-         lambda: {"files": [("files", (f"f{k}.npy", _npy(_frame()))) for k in range(3)]}, 422, "batch limit"),
+    Case(
+        "unknown_target_in_batch",
+        "POST",
+        EST + "/batch",
+        lambda: {"files": [("files", ("f.npy", _npy(_frame())))], "data": {"target": "../etc"}},
+        422,
+        "target",
+    ),
+    Case(
+        "range_cell_without_cross_range",
+        "POST",
+        EST,
+        _upload(lambda: _npy(_frame()), range_cell_m="0.1"),
+        422,
+        "cross_range_cell_m",
+    ),
+    Case(
+        "cross_range_cell_without_range",
+        "POST",
+        EST,
+        _upload(lambda: _npy(_frame()), cross_range_cell_m="0.1"),
+        422,
+        "range_cell_m",
+    ),
+    Case(
+        "range_cell_zero",
+        "POST",
+        EST,
+        _upload(lambda: _npy(_frame()), range_cell_m="0", cross_range_cell_m="0.1"),
+        422,
+        "range_cell_m",
+    ),
+    Case(
+        "cross_range_cell_nan",
+        "POST",
+        EST,
+        _upload(lambda: _npy(_frame()), range_cell_m="0.1", cross_range_cell_m="nan"),
+        422,
+        "cross_range_cell_m",
+    ),
+    Case(
+        "cells_too_coarse_for_the_frame",
+        "POST",
+        EST,
+        _upload(lambda: _npy(_frame()), range_cell_m="0.001", cross_range_cell_m="0.001"),
+        422,
+        "cell",
+    ),
+    Case(
+        "batch_over_frame_limit",
+        "POST",
+        EST + "/batch",
+        lambda: {"files": [("files", (f"f{k}.npy", _npy(_frame()))) for k in range(3)]},
+        422,
+        "batch limit",
+    ),
     # listings
     Case("page_size_over_limit", "GET", PLANS + "?limit=10", lambda: {}, 422, "limit"),
     Case("page_size_zero", "GET", EST + "?limit=0", lambda: {}, 422, "limit"),
@@ -239,7 +419,7 @@ CASES = [
     Case("offset_negative", "GET", PLANS + "?offset=-1", lambda: {}, 422, "offset"),
     Case("filter_not_a_date", "GET", EST + "?created_after=tuesday", lambda: {}, 422, "created_after"),
     Case("plan_id_10000_characters", "GET", PLANS + "/" + "9" * 10000, lambda: {}, 404, "not found"),
-]  # fmt: skip
+]
 
 
 def _state(settings) -> dict[str, int]:

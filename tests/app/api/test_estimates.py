@@ -11,7 +11,7 @@ from sqlalchemy import create_engine, func, select
 from app.db.models import Estimate
 from app.main import create_app
 from app.schemas import PAPER_EXAMPLE
-from app.services.estimation import decode, prepare
+from app.services.uploads import decode, prepare
 from inference.errors import ModelFileError
 from inference.simulation.isar import Imager, normalise_frame, simulate
 from inference.simulation.targets import tiangong_like
@@ -72,7 +72,7 @@ def test_estimate_complex_npy(client, frame):
 
 
 def test_png_bytes_round_trips_any_shape_and_clips():
-    from app.services.estimation import png_bytes
+    from app.services.images import png_bytes
 
     frame = np.linspace(-0.5, 1.5, 15).reshape(3, 5)
     img = Image.open(io.BytesIO(png_bytes(frame)))
@@ -132,8 +132,10 @@ def test_scenes_page_through_plans_each_with_its_own_estimates(client, frame):
     first = client.post("/v1/plans", json=PAPER_EXAMPLE, headers=A).json()
     second = client.post("/v1/plans", json=PAPER_EXAMPLE, headers=A).json()
     t = first["chosen"]["t_access"]
-    ids = {p["id"]: [_post(client, _npy(frame), plan_id=p["id"], observed_at=t).json()["id"] for _ in range(2)]
-           for p in (first, second)}  # fmt: skip
+    ids = {
+        p["id"]: [_post(client, _npy(frame), plan_id=p["id"], observed_at=t).json()["id"] for _ in range(2)]
+        for p in (first, second)
+    }
     _post(client, _npy(frame))  # an estimate tied to no plan belongs to no scene
     pages = [client.get("/v1/scenes", params={"limit": 1, "offset": k}, headers=A).json() for k in (0, 1)]
     assert [p["count"] for p in pages] == [before + 2] * 2
@@ -254,8 +256,12 @@ def test_already_normalised_frames_are_taken_as_sent(client, settings, frame):
     r = _post(client, _npy(mag / mag.max()), normalised="true")  # in [0, 1], but raw: one pixel at 1.0
     assert r.status_code == 422 and "this is a raw frame" in r.json()["detail"][0]["msg"]
     assert _count(settings) == before
-    batch = client.post("/v1/estimates/batch", files=[("files", ("s.npy", _npy(np.stack([norm, norm]))))],
-                        data={"normalised": "true"}, headers=A)  # fmt: skip
+    batch = client.post(
+        "/v1/estimates/batch",
+        files=[("files", ("s.npy", _npy(np.stack([norm, norm]))))],
+        data={"normalised": "true"},
+        headers=A,
+    )
     assert batch.status_code == 201, batch.text
     assert all(e["input_normalised"] for e in batch.json()["data"])
 
@@ -319,10 +325,11 @@ def test_another_target_is_fitted_from_the_library(client, frame):
 
 def test_cells_in_metres_resample_about_the_centre(client):
     """A frame of twice the models' cells, resampled in metres, shows the target at the models' scale."""
-    from app.services.estimation import resample_metres
+    from app.services.uploads import resample_metres
 
-    coarse = type(SMOKE_RADAR)(n_range=32, n_azimuth=32, bandwidth_hz=SMOKE_RADAR.bandwidth_hz / 2,
-                               aperture_deg=SMOKE_RADAR.aperture_deg / 2)  # fmt: skip
+    coarse = type(SMOKE_RADAR)(
+        n_range=32, n_azimuth=32, bandwidth_hz=SMOKE_RADAR.bandwidth_hz / 2, aperture_deg=SMOKE_RADAR.aperture_deg / 2
+    )
     model = tiangong_like()
     a = simulate(model, Imager(coarse), (20.0, 10.0, -15.0), None, 0).label.astype(float)
     b = simulate(model, Imager(SMOKE_RADAR), (20.0, 10.0, -15.0), None, 0).label
@@ -330,8 +337,12 @@ def test_cells_in_metres_resample_about_the_centre(client):
     model_cells = (SMOKE_RADAR.range_cell_m, SMOKE_RADAR.cross_range_cell_m)
     out = resample_metres(a, cells, model_cells, 64) > 0.5
     assert np.count_nonzero(out & b) / np.count_nonzero(out | b) > 0.75
-    r = _post(client, _npy(simulate(model, Imager(coarse), (20.0, 10.0, -15.0), 10.0, 0).image),
-              range_cell_m=str(cells[0]), cross_range_cell_m=str(cells[1]))  # fmt: skip
+    r = _post(
+        client,
+        _npy(simulate(model, Imager(coarse), (20.0, 10.0, -15.0), 10.0, 0).image),
+        range_cell_m=str(cells[0]),
+        cross_range_cell_m=str(cells[1]),
+    )
     assert r.status_code == 201, r.text
 
 

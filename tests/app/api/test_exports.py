@@ -43,9 +43,24 @@ def test_opm_is_read_back_and_its_burn_meets_the_target(client, plan, tmp_path):
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/plain")
     text = r.text
     assert text.startswith("CCSDS_OPM_VERS = 3.0\n")
-    for key in ("CREATION_DATE", "ORIGINATOR", "OBJECT_NAME", "OBJECT_ID", "CENTER_NAME = EARTH", "REF_FRAME = GCRF",
-                "TIME_SYSTEM = UTC", "EPOCH", "X_DOT", "MAN_EPOCH_IGNITION", "MAN_DURATION", "MAN_DELTA_MASS",
-                "MAN_REF_FRAME = GCRF", "MAN_DV_1", "MAN_DV_2", "MAN_DV_3"):  # fmt: skip
+    for key in (
+        "CREATION_DATE",
+        "ORIGINATOR",
+        "OBJECT_NAME",
+        "OBJECT_ID",
+        "CENTER_NAME = EARTH",
+        "REF_FRAME = GCRF",
+        "TIME_SYSTEM = UTC",
+        "EPOCH",
+        "X_DOT",
+        "MAN_EPOCH_IGNITION",
+        "MAN_DURATION",
+        "MAN_DELTA_MASS",
+        "MAN_REF_FRAME = GCRF",
+        "MAN_DV_1",
+        "MAN_DV_2",
+        "MAN_DV_3",
+    ):
         assert key in text, key
     opm = _read(tmp_path, text, "plan_opm")
     seg = opm.body.segment
@@ -87,8 +102,16 @@ def test_oem_is_read_back_with_the_burn_between_segments(client, plan, tmp_path)
     # Before the burn the observer's position is continuous, its velocity jumps by the burn.
     last, first = segs[1].data.state_vector[-1], segs[2].data.state_vector[0]
     dr = np.array([first.x.value - last.x.value, first.y.value - last.y.value, first.z.value - last.z.value])
-    dv = np.array([first.x_dot.value - last.x_dot.value, first.y_dot.value - last.y_dot.value,
-                   first.z_dot.value - last.z_dot.value]) * 1000.0  # fmt: skip
+    dv = (
+        np.array(
+            [
+                first.x_dot.value - last.x_dot.value,
+                first.y_dot.value - last.y_dot.value,
+                first.z_dot.value - last.z_dot.value,
+            ]
+        )
+        * 1000.0
+    )
     assert np.linalg.norm(dr) < 1e-5
     np.testing.assert_allclose(dv, plan["phasing"]["dv_m_s"], atol=1e-4)
     # The target's ephemeris against the independent integrator, from the target's elements.
@@ -101,8 +124,14 @@ def test_oem_is_read_back_with_the_burn_between_segments(client, plan, tmp_path)
     assert np.max(np.linalg.norm(ours - ref, axis=0)) < 0.05
     # At T_access the two ephemerides are the planned separation apart.
     t_access = plan["phasing"]["t_access"]
-    at = {s.metadata.object_id: next(v for v in s.data.state_vector if abs((_t(v.epoch) - datetime.fromisoformat(t_access)).total_seconds()) < 1e-3)
-          for s in (segs[0], segs[2])}  # fmt: skip
+    at = {
+        s.metadata.object_id: next(
+            v
+            for v in s.data.state_vector
+            if abs((_t(v.epoch) - datetime.fromisoformat(t_access)).total_seconds()) < 1e-3
+        )
+        for s in (segs[0], segs[2])
+    }
     a, b = at.values()
     gap = np.linalg.norm([a.x.value - b.x.value, a.y.value - b.y.value, a.z.value - b.z.value])
     assert abs(gap - plan["phasing"]["verification"]["separation_km"]) < 1e-3
@@ -115,8 +144,9 @@ def test_czml_holds_both_satellites_the_station_and_the_moment(client, plan):
     assert set(packets) == {"document", "target", "observer", "station", "access", "imaging"}
     assert packets["document"]["version"] == "1.0"
     t_access = datetime.fromisoformat(plan["phasing"]["t_access"])
-    assert datetime.fromisoformat(packets["document"]["clock"]["currentTime"].replace("Z", "+00:00")) - t_access < \
-        __import__("datetime").timedelta(milliseconds=1)  # fmt: skip
+    assert datetime.fromisoformat(
+        packets["document"]["clock"]["currentTime"].replace("Z", "+00:00")
+    ) - t_access < __import__("datetime").timedelta(milliseconds=1)
     for key in ("target", "observer"):
         pos = packets[key]["position"]
         assert pos["referenceFrame"] == "INERTIAL" and pos["epoch"].endswith("Z")

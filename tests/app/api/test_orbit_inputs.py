@@ -15,12 +15,24 @@ A = {"X-API-Key": KEY_A}
 STATION = {"name": "GS", "latitude_deg": 40.0, "longitude_deg": -75.0, "altitude_m": 100.0}
 # The ISS TLE of the sgp4 and skyfield documentation, as CelesTrak would serve it as an OMM.
 OMM = {
-    "OBJECT_NAME": "ISS (ZARYA)", "OBJECT_ID": "1998-067A", "EPOCH": "2008-09-20T12:25:40.104192",
-    "MEAN_MOTION": 15.72125391, "ECCENTRICITY": 0.0006703, "INCLINATION": 51.6416, "RA_OF_ASC_NODE": 247.4627,
-    "ARG_OF_PERICENTER": 130.536, "MEAN_ANOMALY": 325.0288, "EPHEMERIS_TYPE": 0, "CLASSIFICATION_TYPE": "U",
-    "NORAD_CAT_ID": 25544, "ELEMENT_SET_NO": 292, "REV_AT_EPOCH": 56353, "BSTAR": -1.1606e-05,
-    "MEAN_MOTION_DOT": -2.182e-05, "MEAN_MOTION_DDOT": 0,
-}  # fmt: skip
+    "OBJECT_NAME": "ISS (ZARYA)",
+    "OBJECT_ID": "1998-067A",
+    "EPOCH": "2008-09-20T12:25:40.104192",
+    "MEAN_MOTION": 15.72125391,
+    "ECCENTRICITY": 0.0006703,
+    "INCLINATION": 51.6416,
+    "RA_OF_ASC_NODE": 247.4627,
+    "ARG_OF_PERICENTER": 130.536,
+    "MEAN_ANOMALY": 325.0288,
+    "EPHEMERIS_TYPE": 0,
+    "CLASSIFICATION_TYPE": "U",
+    "NORAD_CAT_ID": 25544,
+    "ELEMENT_SET_NO": 292,
+    "REV_AT_EPOCH": 56353,
+    "BSTAR": -1.1606e-05,
+    "MEAN_MOTION_DOT": -2.182e-05,
+    "MEAN_MOTION_DDOT": 0,
+}
 META = ("OBJECT_NAME", "OBJECT_ID")
 XML = (
     '<?xml version="1.0" encoding="UTF-8"?>\n<ndm><omm id="CCSDS_OMM_VERS" version="2.0"><header><CREATION_DATE/>'
@@ -39,7 +51,7 @@ XML = (
             "ARG_OF_PERICENTER",
             "MEAN_ANOMALY",
         )
-    )  # fmt: skip
+    )
     + "</meanElements><tleParameters>"
     + "".join(
         f"<{k}>{OMM[k]}</{k}>"
@@ -53,15 +65,19 @@ XML = (
             "MEAN_MOTION_DOT",
             "MEAN_MOTION_DDOT",
         )
-    )  # fmt: skip
+    )
     + "</tleParameters></data></segment></body></omm></ndm>"
 )
 CSV = ",".join(OMM) + "\n" + ",".join(str(v) for v in OMM.values()) + "\n"
 
 
 def _windows(client, target):
-    body = {"target": {"name": "ISS", **target}, "ground_station": STATION, "start": ISS_EPOCH.isoformat(),
-            "duration_days": 1.0}  # fmt: skip
+    body = {
+        "target": {"name": "ISS", **target},
+        "ground_station": STATION,
+        "start": ISS_EPOCH.isoformat(),
+        "duration_days": 1.0,
+    }
     r = client.post("/v1/access-windows", json=body, headers=A)
     assert r.status_code == 200, r.text
     return r.json()["access_windows"]
@@ -112,8 +128,12 @@ BAD = [
 
 @pytest.mark.parametrize(("target", "loc"), BAD, ids=[str(i) for i in range(len(BAD))])
 def test_bad_orbit_inputs_name_the_field(client, target, loc):
-    body = {"target": {"name": "ISS", **copy.deepcopy(target)}, "ground_station": STATION,
-            "start": ISS_EPOCH.isoformat(), "duration_days": 1.0}  # fmt: skip
+    body = {
+        "target": {"name": "ISS", **copy.deepcopy(target)},
+        "ground_station": STATION,
+        "start": ISS_EPOCH.isoformat(),
+        "duration_days": 1.0,
+    }
     r = client.post("/v1/access-windows", json=body, headers=A)
     assert r.status_code == 422, r.text
     got = r.json()["detail"][0]["loc"]

@@ -38,8 +38,12 @@ def _times(plan, n=4):
 
 
 def _post(client, plan_id, times, data=None, headers=A):
-    return client.post("/v1/passes", files=[("files", ("pass.npz", data or _stack(len(times))))],
-                       data={"plan_id": plan_id, "observed_at": times}, headers=headers)  # fmt: skip
+    return client.post(
+        "/v1/passes",
+        files=[("files", ("pass.npz", data or _stack(len(times))))],
+        data={"plan_id": plan_id, "observed_at": times},
+        headers=headers,
+    )
 
 
 def _count(settings):
@@ -74,9 +78,14 @@ def test_a_pass_is_fused_and_stored(client, plan):
 
 @pytest.mark.parametrize(
     ("case", "field"),
-    [("one_frame", "files"), ("times_missing", "observed_at"), ("time_outside_windows", "observed_at"),
-     ("unknown_plan", "plan_id"), ("time_not_a_date", "observed_at")],
-)  # fmt: skip
+    [
+        ("one_frame", "files"),
+        ("times_missing", "observed_at"),
+        ("time_outside_windows", "observed_at"),
+        ("unknown_plan", "plan_id"),
+        ("time_not_a_date", "observed_at"),
+    ],
+)
 def test_bad_passes_are_422_and_store_nothing(client, settings, plan, case, field):
     before = _count(settings)
     times = _times(plan)
@@ -108,8 +117,12 @@ def test_a_simulated_pass_goes_in_as_it_is(client, plan):
     buf = io.BytesIO()
     np.savez(buf, image=images)
     times = [f["observed_at"].isoformat() for f in meta]
-    r = client.post("/v1/passes", files=[("files", ("frames.npz", buf.getvalue()))],
-                    data={"plan_id": plan["id"], "observed_at": times, "normalised": "true"}, headers=A)  # fmt: skip
+    r = client.post(
+        "/v1/passes",
+        files=[("files", ("frames.npz", buf.getvalue()))],
+        data={"plan_id": plan["id"], "observed_at": times, "normalised": "true"},
+        headers=A,
+    )
     assert r.status_code == 201, r.text
     body = r.json()
     assert len(body["frames"]) == len(meta) and body["turning_chi2"] is not None
@@ -120,8 +133,12 @@ def test_a_simulated_pass_goes_in_as_it_is(client, plan):
 def test_an_unknown_form_field_is_refused_by_name(client, plan, settings):
     """A misspelt field (planid for plan_id) must not be ignored: 422 naming it, nothing stored."""
     before = _count(settings)
-    r = client.post("/v1/passes", files=[("files", ("pass.npz", _stack(2)))],
-                    data={"plan_id": plan["id"], "observed_at": _times(plan, 2), "planid": "x"}, headers=A)  # fmt: skip
+    r = client.post(
+        "/v1/passes",
+        files=[("files", ("pass.npz", _stack(2)))],
+        data={"plan_id": plan["id"], "observed_at": _times(plan, 2), "planid": "x"},
+        headers=A,
+    )
     assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "planid"], r.text
     assert "plan_id" in r.json()["detail"][0]["msg"]
     assert _count(settings) == before

@@ -1,0 +1,75 @@
+"""Stations: radar sites an operator stores once and names in plans and access requests."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, HTTPException, Path, Query, Response
+
+from app import crud
+from app.api.deps import CurrentOperator, SessionDep, SettingsDep, as_utc, check_page_size
+from app.schemas import StationCreate, StationPublic, StationsPublic, Text
+
+router = APIRouter(prefix="/stations", tags=["stations"])
+
+NOT_FOUND: dict[int | str, dict[str, Any]] = {404: {"description": "the caller has no station of this name"}}
+StationPath = Annotated[Text, Path(min_length=1, max_length=200, description="the station's name, as stored")]
+
+
+def _public(row: Any) -> dict[str, Any]:
+    return {**row.station, "created_at": as_utc(row.created_at)}
+
+
+@router.post(
+    "",
+    status_code=201,
+    response_model=StationPublic,
+    responses={409: {"description": "the caller already has a station of this name; nothing changed"}},
+)
+def create_station(session: SessionDep, operator: CurrentOperator, station_in: StationCreate) -> dict[str, Any]:
+    """Store a station under its name; plans then give ``"ground_station": "NAME"`` instead of its coordinates.
+
+    A plan keeps a copy of the station it was planned for, so deleting or replacing a station
+    later changes no stored plan.
+    """
+    row = crud.create_station(session=session, operator_id=operator.id, station=station_in.model_dump(mode="json"))
+    if row is None:
+        raise HTTPException(
+            status_code=409,
+            detail=f"a station named {station_in.name!r} is already stored: DELETE /v1/stations/{station_in.name} "
+            "first, or choose another name",
+        )
+    return _public(row)
+
+
+@router.get("", response_model=StationsPublic)
+def list_stations(
+    session: SessionDep,
+    operator: CurrentOperator,
+    settings: SettingsDep,
+    limit: Annotated[int | None, Query(ge=1, le=10_000, description="page size (default 20)")] = None,
+    offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
+) -> dict[str, Any]:
+    """List the caller's stations by name."""
+    limit = check_page_size(limit, settings)
+    rows, total = crud.list_stations(session=session, operator_id=operator.id, limit=limit, offset=offset)
+    return {"data": [_public(r) for r in rows], "count": total}
+
+
+@router.get("/{name}", response_model=StationPublic, responses=NOT_FOUND)
+def get_station(session: SessionDep, operator: CurrentOperator, name: StationPath) -> dict[str, Any]:
+    """One of the caller's stations."""
+    row = crud.get_station(session=session, operator_id=operator.id, name=name)
+    if row is None:
+        raise HTTPException(status_code=404, detail="Station not found")
+    return _public(row)
+
+
+@router.delete("/{name}", status_code=204, responses=NOT_FOUND)
+def delete_station(session: SessionDep, operator: CurrentOperator, name: StationPath) -> Response:
+    """Delete one of the caller's stations (plans made with it keep their copy)."""
+    row = crud.get_station(session=session, operator_id=operator.id, name=name)
+    if row is None:
+        raise HTTPException(status_code=404, detail="Station not found")
+    crud.delete_station(session=session, station=row)
+    return Response(status_code=204)

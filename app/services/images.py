@@ -1,0 +1,82 @@
+"""Frame images: an 8-bit PNG writer, and the content-addressed store the estimates' images live in."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import struct
+import threading
+import zlib
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from app.core.security import private_dir, write_private
+
+
+def png_bytes(frame: NDArray[np.floating]) -> bytes:
+    """Encode a frame in [0, 1] (clipped) as an 8-bit grayscale PNG, written directly and left uncompressed.
+
+    Radar speckle barely compresses (Pillow at level 1 saved 6 % of the bytes) and Pillow took
+    2.2 ms a frame here, a third of a request's overhead with two images per estimate; this
+    writer takes 0.06 ms. Any PNG reader reads it (deflate's stored blocks; a test reads it back).
+    """
+    pixels = (np.clip(frame, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+    h, w = pixels.shape
+    rows = np.zeros((h, w + 1), np.uint8)  # each row starts with its filter type, 0: none
+    rows[:, 1:] = pixels
+
+    def chunk(tag: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data))
+
+    header = struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0)  # 8-bit grayscale, no interlace
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", header)
+        + chunk(b"IDAT", zlib.compress(rows.tobytes(), 0))
+        + chunk(b"IEND", b"")
+    )
+
+
+def store_blob(data_dir: Path, data: bytes) -> str:
+    """Store bytes content-addressed under ``data_dir/images``; return their sha256."""
+    digest = hashlib.sha256(data).hexdigest()
+    path = blob_path(data_dir, digest)
+    if not path.exists():
+        private_dir(path.parent)
+        tmp = path.with_name(f"{digest}.{os.getpid()}.{threading.get_ident()}.tmp")
+        write_private(tmp, data)
+        tmp.replace(path)
+    return digest
+
+
+def sweep_blobs(*, session: Any, data_dir: Path, grace_s: float = 0.0) -> int:
+    """Remove image files (and half-written ``.tmp`` files) that no estimate refers to; return how many.
+
+    Only files older than ``grace_s`` go, so a host sharing the folder can finish a write in flight.
+    """
+    import time
+
+    from app import crud
+
+    root = Path(data_dir) / "images"
+    if not root.is_dir():
+        return 0
+    used = crud.blob_digests(session=session)
+    cutoff = time.time() - grace_s
+    removed = 0
+    for path in root.glob("*/*"):
+        stale = path.suffix == ".tmp" or (path.suffix == ".png" and path.stem not in used)
+        try:
+            if stale and path.stat().st_mtime <= cutoff:
+                path.unlink()
+                removed += 1
+        except FileNotFoundError:
+            continue
+    return removed
+
+
+def blob_path(data_dir: Path, digest: str) -> Path:
+    return Path(data_dir) / "images" / digest[:2] / f"{digest}.png"
