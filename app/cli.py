@@ -156,6 +156,148 @@ def _validation_line(exc: ValidationError) -> str:
     return f"{loc}: {err['msg']}"
 
 
+EXAMPLES_DIR = Path(__file__).resolve().parents[1] / "examples"
+EXAMPLE_PLANS = {"paper": "paper-plan.json", "iss": "iss-plan.json"}
+
+
+def add_client_options(p: argparse.ArgumentParser, what: str = "send it to a running service instead") -> None:
+    """``--server`` and ``--api-key``, defaulting to GSA_SERVER and GSA_API_KEY (every client command has them)."""
+    p.add_argument(
+        "--server",
+        default=os.environ.get("GSA_SERVER") or None,
+        help=f"{what}, e.g. http://127.0.0.1:8000 (default: GSA_SERVER)",
+    )
+    p.add_argument(
+        "--api-key", default=os.environ.get("GSA_API_KEY") or None, help="your API key (default: GSA_API_KEY)"
+    )
+
+
+def _server_detail(r: Any) -> str:
+    """The service's own words for a refusal: the field and message of a 422, the detail of others."""
+    try:
+        detail = r.json().get("detail")
+    except ValueError:
+        return r.text[:300]
+    if isinstance(detail, list) and detail and isinstance(detail[0], dict):
+        loc = ".".join(str(x) for x in detail[0].get("loc", ()) if x not in ("body", "query", "path"))
+        return f"{loc}: {detail[0].get('msg')}" if loc else str(detail[0].get("msg"))
+    return str(detail)[:300]
+
+
+def call_server(args: argparse.Namespace, method: str, path: str, timeout: float = 60, **kw: Any) -> Any:
+    """One request to ``args.server`` with ``args.api_key``; an unreachable server or a refusal is one CliError line."""
+    import httpx
+
+    if not args.server:
+        raise CliError(
+            "give --server URL or set GSA_SERVER (e.g. http://127.0.0.1:8000): this command asks the service"
+        )
+    try:
+        r = httpx.request(
+            method, args.server.rstrip("/") + path, headers={"X-API-Key": args.api_key or ""}, timeout=timeout, **kw
+        )
+    except httpx.HTTPError as exc:
+        raise CliError(f"cannot reach {args.server}: {exc}") from None
+    if r.status_code >= 400:
+        raise CliError(f"server answered {r.status_code}: {_server_detail(r)}")
+    return r
+
+
+def cmd_plans(args: argparse.Namespace) -> int:
+    from urllib.parse import quote
+
+    if args.plans_cmd == "show":
+        body = call_server(args, "GET", f"/v1/plans/{quote(args.id, safe='')}").json()
+        if args.json:
+            print(json.dumps(body, indent=2))
+        else:
+            print(
+                f"plan {body['id']}: {body['target_name']} / {body['observer_name']} / {body['station_name']}, "
+                f"created {utc_text(body['created_at'])}"
+            )
+            print(format_plan(body))
+        return 0
+    params: dict[str, Any] = {"limit": args.limit}
+    if args.target_name:
+        params["target_name"] = args.target_name
+    body = call_server(args, "GET", "/v1/plans", params=params).json()
+    if args.json:
+        print(json.dumps(body, indent=2))
+        return 0
+    print(f"{body['count']} plans; newest {len(body['data'])}:")
+    print(
+        f"{'id':<36}  {'created (UTC)':<24}  {'target':<16} {'observer':<16} {'station':<14} {'T_access (UTC)':<24} {'miss (km)':>9}"
+    )
+    for p in body["data"]:
+        miss = "-" if p["miss_km"] is None else f"{p['miss_km']:9.3f}"
+        print(
+            f"{p['id']:<36}  {utc_text(p['created_at']):<24}  {p['target_name'][:16]:<16} {p['observer_name'][:16]:<16} "
+            f"{p['station_name'][:14]:<14} {utc_text(p['t_access']):<24} {miss:>9}"
+        )
+    return 0
+
+
+def cmd_estimates(args: argparse.Namespace) -> int:
+    from urllib.parse import quote
+
+    if args.estimates_cmd == "show":
+        body = call_server(args, "GET", f"/v1/estimates/{quote(args.id, safe='')}").json()
+        if args.json:
+            print(json.dumps(body, indent=2))
+        else:
+            _print_checked(
+                body, prefix=f"estimate {body['id']} ({body['input_name']}, {utc_text(body['created_at'])}): "
+            )
+        return 0
+    params: dict[str, Any] = {"limit": args.limit}
+    if args.plan_id:
+        params["plan_id"] = args.plan_id
+    body = call_server(args, "GET", "/v1/estimates", params=params).json()
+    if args.json:
+        print(json.dumps(body, indent=2))
+        return 0
+    print(f"{body['count']} estimates; newest {len(body['data'])}:")
+    print(f"{'id':<36}  {'created (UTC)':<24}  {'input':<20} {'z, y, x (deg)':<22} {'trusted':<7}  plan")
+    for e in body["data"]:
+        z, y, x = e["attitude"]["euler_zyx_deg"]
+        trusted = "yes" if e.get("quality", {}).get("trusted") else "no"
+        print(
+            f"{e['id']:<36}  {utc_text(e['created_at']):<24}  {e['input_name'][:20]:<20} "
+            f"{f'{z:.2f}, {y:.2f}, {x:.2f}':<22} {trusted:<7}  {e.get('plan_id') or '-'}"
+        )
+    return 0
+
+
+def cmd_stations(args: argparse.Namespace) -> int:
+    from urllib.parse import quote
+
+    if args.stations_cmd == "add":
+        body = call_server(args, "POST", "/v1/stations", json=_read_json(args.file)).json()
+        print(f"station {body['name']!r} stored")
+        return 0
+    if args.stations_cmd == "delete":
+        call_server(args, "DELETE", f"/v1/stations/{quote(args.name, safe='')}")
+        print(f"station {args.name!r} deleted")
+        return 0
+    if args.stations_cmd == "show":
+        print(json.dumps(call_server(args, "GET", f"/v1/stations/{quote(args.name, safe='')}").json(), indent=2))
+        return 0
+    body = call_server(args, "GET", "/v1/stations", params={"limit": args.limit}).json()
+    if args.json:
+        print(json.dumps(body, indent=2))
+        return 0
+    print(f"{body['count']} stations:")
+    print(
+        f"{'name':<24} {'lat (deg)':>10} {'lon (deg)':>10} {'alt (m)':>8} {'min el (deg)':>12} {'mask points':>11}  refraction"
+    )
+    for st in body["data"]:
+        print(
+            f"{st['name'][:24]:<24} {st['latitude_deg']:10.4f} {st['longitude_deg']:10.4f} {st['altitude_m']:8.0f} "
+            f"{st['min_elevation_deg']:12.1f} {len(st.get('mask') or []):11d}  {'on' if st['refraction'] else 'off'}"
+        )
+    return 0
+
+
 def cmd_plan(args: argparse.Namespace) -> int:
     from app.errors import InputError
     from app.schemas import PlanCreate
@@ -163,8 +305,19 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
     if args.export and Path(args.export).exists() and any(Path(args.export).iterdir()):
         raise CliError(f"{args.export} is not empty: give a new or empty directory for --export")
+    if bool(args.file) == bool(args.example):
+        raise CliError("give a request file (the body of POST /v1/plans) or --example paper|iss, not both")
+    source = args.file or str(EXAMPLES_DIR / EXAMPLE_PLANS[args.example])
+    if args.example and not Path(source).is_file():
+        raise CliError(f"{source} is missing: the examples live in the repository's examples/ folder")
+    if args.server:
+        if args.export or args.plot:
+            raise CliError("--export and --plot plan locally; with --server, GET /v1/plans/ID/export/... instead")
+        body = call_server(args, "POST", "/v1/plans", json=_read_json(source), timeout=600).json()
+        print(json.dumps(body, indent=2) if args.json else f"plan {body['id']} stored\n" + format_plan(body))
+        return 0
     try:
-        req = PlanCreate.model_validate(_read_json(args.file))
+        req = PlanCreate.model_validate(_read_json(source))
         plan, result = run_plan(req)
     except ValidationError as exc:
         raise CliError(_validation_line(exc)) from None
@@ -226,34 +379,55 @@ def cmd_access(args: argparse.Namespace) -> int:
     return 0
 
 
+def utc_text(iso: str | None) -> str:
+    """An ISO 8601 instant as the CLI writes every time: UTC to the millisecond with a ``Z``."""
+    if not iso:
+        return "-"
+    from datetime import UTC
+
+    t = datetime.fromisoformat(iso.replace("Z", "+00:00"))
+    t = t.replace(tzinfo=UTC) if t.tzinfo is None else t.astimezone(UTC)
+    return t.strftime("%Y-%m-%dT%H:%M:%S.") + f"{t.microsecond // 1000:03d}Z"
+
+
 def format_windows(windows: list[dict[str, Any]]) -> str:
-    lines = [f"{'rise (UTC)':<27} {'culmination':<27} {'set':<27} {'max el':>7} {'min range':>10}"]
+    lines = [
+        f"{'rise (UTC)':<25} {'culmination (UTC)':<25} {'set (UTC)':<25} {'max el (deg)':>12} "
+        f"{'min range (km)':>14} {'duration (s)':>12}"
+    ]
     for w in windows:
         lines.append(
-            f"{w['rise'][:26]:<27} {w['culmination'][:26]:<27} {w['set'][:26]:<27} "
-            f"{w['max_elevation_deg']:7.2f} {w['min_range_km']:9.1f}k"
+            f"{utc_text(w['rise']):<25} {utc_text(w['culmination']):<25} {utc_text(w['set']):<25} "
+            f"{w['max_elevation_deg']:12.2f} {w['min_range_km']:14.1f} {w['duration_s']:12.1f}"
         )
     return "\n".join(lines)
 
 
 def format_plan(r: dict[str, Any]) -> str:
-    """Return a plan as a readable report."""
-    out = [f"epoch {r['epoch']}, {r['duration_days']:g} days, elements read as {r['reading']}"]
+    """Return a plan as a readable report: every time in UTC with Z, every number with its unit."""
+    out = [f"epoch {utc_text(r['epoch'])}, {r['duration_days']:g} days, elements read as {r['reading']}"]
     out.append(f"\n{len(r['access_windows'])} access windows")
     out.append(format_windows(r["access_windows"][:10]))
     if len(r["access_windows"]) > 10:
         out.append(f"... and {len(r['access_windows']) - 10} more")
-    out.append(f"\n{len(r['candidates'])} candidates (best of each pass, ranked by miss)")
-    out.append(f"{'#':>3} {'T_access (UTC)':<27} {'dHa km':>8} {'dHp km':>8} {'miss km':>9} {'node':>5} {'sunlit':>7}")
-    for k, c in enumerate(r["candidates"][:15]):
+    out.append(f"\n{len(r['candidates'])} candidates (best of each pass, ranked by miss); * marks the chosen one")
+    out.append(
+        f"{'#':>4} {'T_access (UTC)':<25} {'dHa (km)':>9} {'dHp (km)':>9} {'miss (km)':>10} {'node':>5} {'sunlit':>7}"
+    )
+    chosen_at = (r.get("chosen") or {}).get("t_access")
+    shown = [(k, c) for k, c in enumerate(r["candidates"]) if k < 15 or c["t_access"] == chosen_at]
+    for n, (k, c) in enumerate(shown):
+        if n and k != shown[n - 1][0] + 1:
+            out.append("   ...")
+        mark = "*" if c["t_access"] == chosen_at else " "
         out.append(
-            f"{k:3d} {c['t_access'][:26]:<27} {c['delta_ha_km']:8.1f} {c['delta_hp_km']:8.1f} "
-            f"{c['miss_km']:9.3f} {c['node']:>5} {('yes' if c['feasibility']['sunlit'] else 'no'):>7}"
+            f"{mark}{k:3d} {utc_text(c['t_access']):<25} {c['delta_ha_km']:9.1f} {c['delta_hp_km']:9.1f} "
+            f"{c['miss_km']:10.3f} {c['node']:>5} {('yes' if c['feasibility']['sunlit'] else 'no'):>7}"
         )
     ch = r.get("chosen")
     if ch:
         out.append(
-            f"\nchosen: T_access {ch['t_access']}, dHa {ch['delta_ha_km']:.1f} km, dHp {ch['delta_hp_km']:.1f} km"
+            f"\nchosen: T_access {utc_text(ch['t_access'])}, dHa {ch['delta_ha_km']:.1f} km, dHp {ch['delta_hp_km']:.1f} km"
         )
         out.append(f"  node-line miss with the changed observer's own propagation: {ch['miss_km']:.3f} km")
         out.append(f"  height change costs {r['alignment_dv_m_s']:.1f} m/s")
@@ -261,7 +435,7 @@ def format_plan(r: dict[str, Any]) -> str:
     if ph:
         v = ph["verification"]
         out.append(
-            f"phasing: burn {ph['t_burn']} ({ph['revolutions_before']} rev before), "
+            f"phasing: burn {utc_text(ph['t_burn'])} ({ph['revolutions_before']} rev before), "
             f"dv {ph['dv_total_m_s']:.1f} m/s, RTN [{', '.join(f'{x:.1f}' for x in ph['dv_rtn_m_s'])}] m/s"
         )
         out.append(
@@ -270,7 +444,7 @@ def format_plan(r: dict[str, Any]) -> str:
         )
         out.append(
             f"encounter: stand-off {v['standoff_km']:.2f} km, separation {v['separation_km']:.3f} km at T_access, "
-            f"closest approach {v['closest_approach_km']:.3f} km at {v['closest_approach_time']}, "
+            f"closest approach {v['closest_approach_km']:.3f} km at {utc_text(v['closest_approach_time'])}, "
             f"target angular rate {v['target_angular_rate_deg_s']:.2f} deg/s"
         )
     if ch:
@@ -367,8 +541,6 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise CliError(f"cannot read {args.file}: {exc.strerror}") from None
     if args.server:
-        import httpx
-
         form = {
             "resample": str(args.resample).lower(),
             "normalised": str(args.normalised).lower(),
@@ -382,18 +554,9 @@ def cmd_estimate(args: argparse.Namespace) -> int:
             form["observed_at"] = args.observed_at
         if cells:
             form.update({"range_cell_m": str(cells[0]), "cross_range_cell_m": str(cells[1])})
-        try:
-            r = httpx.post(
-                args.server.rstrip("/") + "/v1/estimates",
-                files={"file": (Path(args.file).name, data)},
-                data=form,
-                headers={"X-API-Key": args.api_key or ""},
-                timeout=60,
-            )
-        except httpx.HTTPError as exc:
-            raise CliError(f"cannot reach {args.server}: {exc}") from None
-        if r.status_code >= 400:
-            raise CliError(f"server answered {r.status_code}: {r.text[:300]}")
+        r = call_server(
+            args, "POST", "/v1/estimates", files={"file": (Path(args.file).name, data)}, data=form, timeout=60
+        )
         body = r.json()
         _print_checked(body, prefix=f"estimate {body['id']}: ")
         return 0
@@ -698,7 +861,6 @@ def cmd_pass(args: argparse.Namespace) -> int:
 
 
 def _pass_on_server(args: argparse.Namespace, data: bytes, rec: dict[str, Any]) -> int:
-    import httpx
 
     if not args.plan_id:
         raise CliError("--server needs --plan-id: the stored plan the pass belongs to")
@@ -709,18 +871,7 @@ def _pass_on_server(args: argparse.Namespace, data: bytes, rec: dict[str, Any]) 
     }
     if args.target:
         form["target"] = args.target
-    try:
-        r = httpx.post(
-            args.server.rstrip("/") + "/v1/passes",
-            files={"files": ("frames.npz", data)},
-            data=form,
-            headers={"X-API-Key": args.api_key or ""},
-            timeout=300,
-        )
-    except httpx.HTTPError as exc:
-        raise CliError(f"cannot reach {args.server}: {exc}") from None
-    if r.status_code >= 400:
-        raise CliError(f"server answered {r.status_code}: {r.text[:300]}")
+    r = call_server(args, "POST", "/v1/passes", files={"files": ("frames.npz", data)}, data=form, timeout=300)
     body = r.json()
     if args.json:
         print(json.dumps(body, indent=1))
@@ -863,7 +1014,9 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
     kr.add_argument("id")
     k.set_defaults(func=cmd_keys)
     pl = sub.add_parser("plan", help="plan a GSA scene from a JSON request (the body of POST /v1/plans)")
-    pl.add_argument("file")
+    pl.add_argument("file", nargs="?", help="the request (JSON); or --example")
+    pl.add_argument("--example", choices=sorted(EXAMPLE_PLANS), help="plan a shipped example (examples/*.json)")
+    add_client_options(pl, "plan on a running service (stored there; a station may be named)")
     pl.add_argument("--json", action="store_true", help="print JSON instead of a table")
     pl.add_argument("--plot", metavar="PNG", help="draw ground track, elevation and alignment error")
     pl.add_argument(
@@ -872,6 +1025,34 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
         help="also write the plan as opm.txt, oem.txt (CCSDS KVN), plan.czml, access.csv and pointing.csv",
     )
     pl.set_defaults(func=cmd_plan)
+    for noun, func in (("plans", cmd_plans), ("estimates", cmd_estimates)):
+        c = sub.add_parser(noun, help=f"your {noun} stored on the service (list, show)")
+        cs = c.add_subparsers(dest=f"{noun}_cmd", required=True)
+        cl = cs.add_parser("list", help=f"your {noun}, newest first")
+        cl.add_argument("--limit", type=int, default=20)
+        cl.add_argument("--json", action="store_true")
+        if noun == "plans":
+            cl.add_argument("--target-name", help="only this target's plans")
+        else:
+            cl.add_argument("--plan-id", help="only the estimates tied to this plan")
+        cw = cs.add_parser("show", help=f"one of your {noun}")
+        cw.add_argument("id")
+        cw.add_argument("--json", action="store_true")
+        for q in (cl, cw):
+            add_client_options(q, "the service")
+        c.set_defaults(func=func)
+    st = sub.add_parser("stations", help="your named stations on the service (list, show, add, delete)")
+    sts = st.add_subparsers(dest="stations_cmd", required=True)
+    stl = sts.add_parser("list", help="your stations by name")
+    stl.add_argument("--limit", type=int, default=100)
+    stl.add_argument("--json", action="store_true")
+    sta = sts.add_parser("add", help="store a station from a JSON file (name, latitude_deg, longitude_deg, mask, ...)")
+    sta.add_argument("file")
+    for verb in ("show", "delete"):
+        sts.add_parser(verb, help=f"{verb} one station").add_argument("name")
+    for q in sts.choices.values():
+        add_client_options(q, "the service")
+    st.set_defaults(func=cmd_stations)
     ac = sub.add_parser("access", help="access windows from a JSON request (the body of POST /v1/access-windows)")
     ac.add_argument("file")
     ac.add_argument("--json", action="store_true")
@@ -894,8 +1075,7 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
         action="store_true",
         help="the frame is already normalised (a frame of a gsa simulate data set): take it as sent",
     )
-    es.add_argument("--server", help="send it to a running service instead, e.g. http://127.0.0.1:8000")
-    es.add_argument("--api-key")
+    add_client_options(es)
     es.add_argument("--plot", metavar="PNG", help="draw the input and the enhanced frame with the fitted outline")
     es.add_argument("--no-refine", action="store_true", help="answer Swin's estimate, without the fit")
     es.add_argument("--target", help="the target the frame shows (default GSA_DEFAULT_TARGET: tiangong-like)")
@@ -911,8 +1091,7 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
     ps.add_argument("--target", help="the target the frames show (default GSA_DEFAULT_TARGET: tiangong-like)")
     ps.add_argument("--json", action="store_true", help="print the fused pass as JSON")
     ps.add_argument("--plot", metavar="PNG", help="draw each frame's LVLH attitude with its bound beside the fused one")
-    ps.add_argument("--server", help="send it to a running service (POST /v1/passes) instead")
-    ps.add_argument("--api-key")
+    add_client_options(ps, "send it to a running service (POST /v1/passes) instead")
     ps.add_argument("--plan-id", help="with --server: the stored plan the pass belongs to")
     ps.set_defaults(func=cmd_pass)
     return p

@@ -165,10 +165,11 @@ def test_gsa_pass_sends_a_simulated_pass_to_the_service(client, plan, tmp_path, 
     record = pass_svc.pass_record(meta, snrs, opts, 0, window, PAPER_EXAMPLE, cells)
     (tmp_path / "pass.json").write_text(json.dumps(record))
 
-    def post(url, **kwargs):  # the service in-process, reached the way httpx.post reaches a real one
-        return client.post(url.replace("http://gsa.test", ""), **{k: v for k, v in kwargs.items() if k != "timeout"})
+    def request(method, url, **kwargs):  # the service in-process, reached the way httpx reaches a real one
+        kwargs.pop("timeout", None)
+        return client.request(method, url.replace("http://gsa.test", ""), **kwargs)
 
-    monkeypatch.setattr(httpx, "post", post)
+    monkeypatch.setattr(httpx, "request", request)
     rc = main(["pass", str(tmp_path), "--server", "http://gsa.test", "--api-key", KEY_A, "--plan-id", plan["id"]])
     out = capsys.readouterr().out
     assert rc == 0, out

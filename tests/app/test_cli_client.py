@@ -1,0 +1,82 @@
+"""gsa's client commands (plans, estimates, stations, plan/estimate --server) against the service in-process,
+reached through httpx as a real one is; GSA_SERVER and GSA_API_KEY stand in for the flags."""
+
+import json
+
+import httpx
+import numpy as np
+import pytest
+
+from app.cli import main
+from app.schemas import PAPER_EXAMPLE
+from tests.conftest import KEY_A
+
+SERVER = "http://gsa.test"
+
+
+@pytest.fixture
+def served(client, monkeypatch):
+    def request(method, url, **kwargs):
+        kwargs.pop("timeout", None)
+        assert url.startswith(SERVER), url
+        return client.request(method, url[len(SERVER) :], **kwargs)
+
+    monkeypatch.setattr(httpx, "request", request)
+    monkeypatch.setenv("GSA_SERVER", SERVER)
+    monkeypatch.setenv("GSA_API_KEY", KEY_A)
+    return client
+
+
+def _run(capsys, *argv):
+    rc = main(list(argv))
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def test_stations_plans_and_estimates_through_the_command_line(served, capsys, tmp_path):
+    site = {**PAPER_EXAMPLE["ground_station"], "name": "cli site", "mask": [[0, 2], [180, 6]]}
+    (tmp_path / "site.json").write_text(json.dumps(site))
+    assert _run(capsys, "stations", "add", str(tmp_path / "site.json"))[0] == 0
+    rc, out, _ = _run(capsys, "stations", "list")
+    assert rc == 0 and "cli site" in out and "mask points" in out
+    # A plan that names the stored station, planned and stored by the service.
+    (tmp_path / "req.json").write_text(json.dumps({**PAPER_EXAMPLE, "ground_station": "cli site"}))
+    rc, out, _ = _run(capsys, "plan", str(tmp_path / "req.json"))
+    assert rc == 0 and out.startswith("plan ") and "* " in out  # the chosen candidate is marked
+    plan_id = out.split()[1]
+    rc, out, _ = _run(capsys, "plans", "list")
+    assert rc == 0 and plan_id in out and "cli site" in out
+    rc, out, _ = _run(capsys, "plans", "show", plan_id, "--json")
+    assert rc == 0 and json.loads(out)["station_name"] == "cli site"
+    # An estimate sent with --server (from GSA_SERVER), then listed and shown.
+    np.save(tmp_path / "f.npy", np.random.default_rng(3).random((64, 64)).astype(np.float32))
+    rc, out, _ = _run(capsys, "estimate", str(tmp_path / "f.npy"))
+    assert rc == 0 and out.startswith("estimate "), out
+    est_id = out.split()[1].rstrip(":")
+    rc, out, _ = _run(capsys, "estimates", "list")
+    assert rc == 0 and est_id in out
+    rc, out, _ = _run(capsys, "estimates", "show", est_id)
+    assert rc == 0 and est_id in out and "deg" in out
+    assert _run(capsys, "stations", "delete", "cli site")[0] == 0
+
+
+def test_refusals_are_one_line_with_the_services_words(served, capsys, monkeypatch, tmp_path):
+    rc, _, err = _run(capsys, "plans", "show", "no-such-plan")
+    assert rc == 2 and err.strip() == "gsa: error: server answered 404: Plan not found"
+    (tmp_path / "req.json").write_text(json.dumps({**PAPER_EXAMPLE, "ground_station": "nowhere"}))
+    rc, _, err = _run(capsys, "plan", str(tmp_path / "req.json"))
+    assert rc == 2 and "server answered 422: ground_station: no station named 'nowhere'" in err
+    assert len(err.strip().splitlines()) == 1
+    monkeypatch.delenv("GSA_SERVER")
+    rc, _, err = _run(capsys, "plans", "list")
+    assert rc == 2 and "give --server URL or set GSA_SERVER" in err
+    monkeypatch.setenv("GSA_API_KEY", "wrong")
+    rc, _, err = _run(capsys, "plans", "list", "--server", SERVER)
+    assert rc == 2 and "server answered 401" in err
+
+
+def test_plan_examples_run_as_shipped(capsys):
+    rc, out, _ = _run(capsys, "plan", "--example", "paper")
+    assert rc == 0 and "72 access windows" in out and "chosen: T_access" in out
+    rc, _, err = _run(capsys, "plan")
+    assert rc == 2 and "--example" in err
