@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup run test bench fuzz load lint clean
+.PHONY: setup run test browser bench fuzz load lint clean
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -17,8 +17,14 @@ setup: $(STAMP)
 run: $(STAMP)
 	$(BIN)/gsa serve
 
-test: $(STAMP)
+test: $(STAMP) browser
 	$(BIN)/python -m pytest -q
+
+# The console's tests run in Debian's Chromium; installed once if the machine lacks it (apt, as root or with sudo).
+browser:
+	@command -v chromium >/dev/null 2>&1 || { echo "installing Debian's chromium for the console tests (about a minute)"; \
+	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+	  $$SUDO apt-get install -y -qq chromium >/dev/null 2>&1 || { $$SUDO apt-get update -qq && $$SUDO apt-get install -y -qq chromium >/dev/null; }; }
 
 bench: $(STAMP)
 	$(BIN)/python -m bench.run

@@ -350,12 +350,13 @@ def _export_plan(plan: Any, result: dict[str, Any], req: Any, folder: Path) -> N
         "access.csv": access_csv(result["access_windows"]),
         "pointing.csv": exports.pointing_csv(plan, result["access_windows"]),
     }
+    names = {"target": req.target.name, "observer": req.observer.name, "station": req.ground_station.name}
+    files["plan.geojson"] = exports.geojson(plan, names, result["access_windows"])
     try:
         arc = exports.plan_arc(plan, result)
     except InputError as exc:
         print(f"note: no OPM, OEM or CZML: {exc.message}", file=sys.stderr)
     else:
-        names = {"target": req.target.name, "observer": req.observer.name, "station": req.ground_station.name}
         files["opm.txt"] = exports.opm(arc, name, req.observer.name)
         files["oem.txt"] = exports.oem(arc, name, req.target.name, req.observer.name)
         files["plan.czml"] = exports.czml(arc, name, names, req.ground_station.model_dump(), result["access_windows"])
@@ -1022,7 +1023,7 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
     pl.add_argument(
         "--export",
         metavar="DIR",
-        help="also write the plan as opm.txt, oem.txt (CCSDS KVN), plan.czml, access.csv and pointing.csv",
+        help="also write the plan as opm.txt, oem.txt (CCSDS KVN), plan.czml, plan.geojson, access.csv and pointing.csv",
     )
     pl.set_defaults(func=cmd_plan)
     for noun, func in (("plans", cmd_plans), ("estimates", cmd_estimates)):

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 from fastapi import FastAPI
 from fastapi.responses import HTMLResponse, JSONResponse
+from fastapi.staticfiles import StaticFiles
 
 from app.api.main import api_router
 from app.core.config import Settings, get_settings
@@ -22,6 +24,8 @@ LANDING_HTML = """<!doctype html>
 <p>Ground-and-space-access scene planning (Hou et al. 2023, Algorithm 1) and ISAR attitude estimation.
 Every <code>/v1</code> call needs an <code>X-API-Key</code> header.</p>
 <ul>
+<li><a href="/console/">The console</a>: your plans (the pass on a map, the access table, the chosen scene) and
+estimates (the frames and the attitude in each frame), in this browser, with your API key</li>
 <li><a href="/docs">API docs (Swagger UI)</a> and <a href="/redoc">the same as ReDoc</a>, served offline</li>
 <li><a href="/openapi.json">OpenAPI document</a></li>
 <li><a href="/healthz">/healthz</a> (the process is up) and <a href="/readyz">/readyz</a> (database and models)</li>
@@ -112,6 +116,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     def landing() -> HTMLResponse:
         """A landing page: what this is and where the docs and health checks are."""
         return HTMLResponse(LANDING_HTML)
+
+    # The console: static pages over the /v1 API (app/console; no build step, nothing from a CDN).
+    app.mount(
+        "/console/", StaticFiles(directory=Path(__file__).resolve().parent / "console", html=True), name="console"
+    )
 
     @app.get("/healthz", tags=["health"])
     def healthz() -> dict[str, str]:

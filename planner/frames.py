@@ -19,6 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from planner.access import mask_deg
+from planner.constants import F_EARTH, R_EARTH_KM
 from planner.propagation import EarthFrames, Station, Trajectory
 
 Vec = NDArray[np.float64]
@@ -77,3 +79,46 @@ def swept_deg(los: Vec) -> Vec:
     """Return the cumulative angle (deg) the unit lines of sight (3, N) sweep, 0 at the first."""
     cos = np.clip(np.sum(los[:, 1:] * los[:, :-1], axis=0), -1.0, 1.0)
     return np.concatenate([[0.0], np.cumsum(np.degrees(np.arccos(cos)))])
+
+
+def geodetic(r_itrs_km: Vec) -> tuple[Vec, Vec, Vec]:
+    """Return WGS-84 geodetic latitude, longitude (deg) and height (km) of ITRS positions (3, N).
+
+    Bowring's iteration from the geocentric latitude; three steps reach 1e-9 deg for any
+    height from the ground to GEO.
+    """
+    x, y, z = np.asarray(r_itrs_km, float)
+    e2 = F_EARTH * (2.0 - F_EARTH)
+    p = np.hypot(x, y)
+    lat = np.arctan2(z, p * (1.0 - e2))
+    for _ in range(4):
+        n = R_EARTH_KM / np.sqrt(1.0 - e2 * np.sin(lat) ** 2)
+        h = p / np.cos(lat) - n
+        lat = np.arctan2(z, p * (1.0 - e2 * n / (n + h)))
+    n = R_EARTH_KM / np.sqrt(1.0 - e2 * np.sin(lat) ** 2)
+    h = p / np.cos(lat) - n
+    return np.degrees(lat), np.degrees(np.arctan2(y, x)), h
+
+
+def ground_track(traj: Trajectory, frames: EarthFrames, t_s: Vec) -> tuple[Vec, Vec, Vec]:
+    """The sub-satellite points of ``traj`` at ``t_s``: geodetic latitude, longitude (deg) and height (km)."""
+    t = np.asarray(t_s, float)
+    r, _ = traj.state(t)
+    return geodetic(frames.to_itrs(t, r))
+
+
+def visibility_circle(station: Station, height_km: float, n: int = 361) -> tuple[Vec, Vec]:
+    """Where a satellite at ``height_km`` is in view of ``station``: the ground points (lat, lon deg), one an azimuth.
+
+    At each azimuth the limit is the station's mask there (``planner.access.mask_deg``, never below
+    its minimum elevation); the Earth-central angle to the edge is arccos(R cos e / (R + h)) - e on
+    a sphere of the site's geocentric radius. Geometric elevations: refraction would widen it a little.
+    """
+    az = np.linspace(0.0, 360.0, n)
+    e = np.radians(mask_deg(station, az))
+    radius = float(np.linalg.norm(station.itrs_km()))
+    lam = np.arccos(radius * np.cos(e) / (radius + height_km)) - e
+    lat1, lon1, a = np.radians(station.latitude_deg), np.radians(station.longitude_deg), np.radians(az)
+    lat2 = np.arcsin(np.sin(lat1) * np.cos(lam) + np.cos(lat1) * np.sin(lam) * np.cos(a))
+    lon2 = lon1 + np.arctan2(np.sin(a) * np.sin(lam) * np.cos(lat1), np.cos(lam) - np.sin(lat1) * np.sin(lat2))
+    return np.degrees(lat2), (np.degrees(lon2) + 180.0) % 360.0 - 180.0

@@ -334,3 +334,98 @@ def pointing_csv(plan: Plan, windows: list[dict[str, Any]]) -> str:
                 f"{look.range_km[j]:.3f},{rate[j]:.5f}\n"
             )
     return buf.getvalue()
+
+
+TRACK_STEP_S = 20.0
+TRACK_HALF_SPAN_S = 3000.0  # about half a low orbit either side of the chosen moment
+
+
+def _lines(lat: Vec, lon: Vec) -> list[list[list[float]]]:
+    """A track as GeoJSON line parts, cut where it crosses the antimeridian (RFC 7946 section 3.1.9)."""
+    parts: list[list[list[float]]] = [[]]
+    for k in range(lat.size):
+        if k and abs(lon[k] - lon[k - 1]) > 180.0:
+            parts.append([])
+        parts[-1].append([round(float(lon[k]), 5), round(float(lat[k]), 5)])
+    return [p for p in parts if len(p) > 1]
+
+
+def _feature(kind: str, geometry: dict[str, Any], **properties: Any) -> dict[str, Any]:
+    return {"type": "Feature", "geometry": geometry, "properties": {"kind": kind, **properties}}
+
+
+def geojson(plan: Plan, names: dict[str, str], windows: list[dict[str, Any]]) -> str:
+    """GeoJSON (RFC 7946, WGS-84 longitude/latitude): the station, where it sees the target, both ground tracks
+    around the chosen moment (the target's in-view part apart), and the target under T_access."""
+    from planner.access import look_angles, mask_deg
+    from planner.frames import ground_track, visibility_circle
+
+    assert plan.target_trajectory is not None and plan.frames is not None and plan.station is not None
+    st, epoch = plan.station, plan.epoch
+    chosen = plan.chosen
+    if chosen is not None:
+        t_c = chosen.t_access_s
+    elif windows:
+        t_c = (datetime.fromisoformat(windows[0]["culmination"]) - epoch).total_seconds()
+    else:
+        t_c = 0.0
+    t = np.arange(max(0.0, t_c - TRACK_HALF_SPAN_S), min(plan.duration_s, t_c + TRACK_HALF_SPAN_S) + 1e-9, TRACK_STEP_S)
+    lat, lon, h = ground_track(plan.target_trajectory, plan.frames, t)
+    r, _ = plan.target_trajectory.state(t)
+    look = look_angles(r, t, st, plan.frames)
+    seen = look.elevation_deg >= mask_deg(st, look.azimuth_deg)
+    span = {"start": z_time(utc(epoch, float(t[0]))), "end": z_time(utc(epoch, float(t[-1])))}
+    features = [
+        _feature(
+            "station",
+            {"type": "Point", "coordinates": [st.longitude_deg, st.latitude_deg]},
+            name=names["station"],
+            altitude_m=st.altitude_m,
+        ),
+        _feature(
+            "target_track", {"type": "MultiLineString", "coordinates": _lines(lat, lon)}, name=names["target"], **span
+        ),
+        _feature(
+            "target_in_view",
+            {
+                "type": "MultiLineString",
+                "coordinates": _lines(np.where(seen, lat, np.nan), np.where(seen, lon, np.nan)),
+            },
+            name=names["target"],
+        ),
+    ]
+    # NaN breaks the in-view line into its passes; drop the NaN points themselves.
+    features[-1]["geometry"]["coordinates"] = [
+        [p for p in part if not math.isnan(p[0])] for part in features[-1]["geometry"]["coordinates"]
+    ]
+    features[-1]["geometry"]["coordinates"] = [p for p in features[-1]["geometry"]["coordinates"] if len(p) > 1]
+    height = float(np.interp(t_c, t, h))
+    c_lat, c_lon = visibility_circle(st, height)
+    features.append(
+        _feature(
+            "visibility_circle",
+            {"type": "MultiLineString", "coordinates": _lines(c_lat, c_lon)},
+            height_km=round(height, 3),
+            elevation_limit="the station's mask by azimuth, never below min_elevation_deg (geometric)",
+        )
+    )
+    if plan.observer_trajectory is not None:
+        o_lat, o_lon, _ = ground_track(plan.observer_trajectory, plan.frames, t)
+        features.append(
+            _feature(
+                "observer_track",
+                {"type": "MultiLineString", "coordinates": _lines(o_lat, o_lon)},
+                name=names["observer"],
+                **span,
+            )
+        )
+    if chosen is not None:
+        a_lat, a_lon, _ = ground_track(plan.target_trajectory, plan.frames, np.array([t_c]))
+        features.append(
+            _feature(
+                "t_access",
+                {"type": "Point", "coordinates": [round(float(a_lon[0]), 5), round(float(a_lat[0]), 5)]},
+                time=z_time(utc(epoch, t_c)),
+            )
+        )
+    return json.dumps({"type": "FeatureCollection", "features": features}, indent=1)

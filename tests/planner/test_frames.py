@@ -5,7 +5,7 @@ import math
 import numpy as np
 from skyfield.api import EarthSatellite, wgs84
 
-from planner.frames import lvlh_axes, observation_axes, pass_geometry, swept_deg
+from planner.frames import ground_track, lvlh_axes, observation_axes, pass_geometry, swept_deg, visibility_circle
 from planner.propagation import EarthFrames, SGP4Trajectory, Station, skyfield_times, timescale
 from planner.tle import parse_tle
 from tests.utils.orbits import ISS_EPOCH, ISS_L1, ISS_L2
@@ -54,3 +54,32 @@ def test_observation_axes_of_a_line_of_sight_turning_in_a_plane():
         np.testing.assert_allclose(obs[k][:, 1], [-math.sin(a[k]), math.cos(a[k]), 0.0], atol=1e-3)
         np.testing.assert_allclose(obs[k][:, 2], [0.0, 0.0, 1.0], atol=1e-9)
     np.testing.assert_allclose(swept_deg(los), 3.0 * t, atol=1e-9)
+
+
+def test_ground_track_against_skyfields_wgs84_subpoints():
+    frames = EarthFrames(ISS_EPOCH, 0.0, 7200.0)
+    traj = SGP4Trajectory(parse_tle(ISS_L1, ISS_L2), ISS_EPOCH, frames)
+    t = np.linspace(0.0, 6000.0, 50)
+    lat, lon, h = ground_track(traj, frames, t)
+    sat = EarthSatellite(ISS_L1, ISS_L2, ts=timescale())
+    geo = sat.at(skyfield_times(ISS_EPOCH, t))
+    ref_lat, ref_lon = wgs84.latlon_of(geo)
+    np.testing.assert_allclose(lat, ref_lat.degrees, atol=2e-4)
+    np.testing.assert_allclose((lon - ref_lon.degrees + 180.0) % 360.0 - 180.0, 0.0, atol=2e-4)
+    np.testing.assert_allclose(h, wgs84.height_of(geo).km, atol=0.01)
+
+
+def test_visibility_circle_is_where_skyfield_sees_the_height_at_the_mask():
+    """A point at the given height above each circle point is seen from the station at the mask's elevation."""
+    station = Station(50.6166, 7.1296, 307.0, min_elevation_deg=3.0, mask=((0.0, 5.0), (90.0, 2.0), (200.0, 12.0)))
+    lat, lon = visibility_circle(station, 400.0, n=73)
+    site = wgs84.latlon(station.latitude_deg, station.longitude_deg, station.altitude_m)
+    t = timescale().utc(2024, 1, 1)
+    seen = []
+    for la, lo in zip(lat, lon, strict=True):
+        alt, az, _ = (wgs84.latlon(la, lo, 400_000.0) - site).at(t).altaz()
+        seen.append((alt.degrees, az.degrees))
+    alt, az = np.array(seen).T
+    pts = np.array(station.mask + ((360.0, 5.0),))
+    limit = np.maximum(3.0, np.interp(az, pts[:, 0], pts[:, 1]))
+    np.testing.assert_allclose(alt, limit, atol=0.4)  # a sphere of the site's radius against the ellipsoid

@@ -170,6 +170,11 @@ EXPORT_TYPES = {
     "opm": ("text/plain", "CCSDS OPM 3.0 (KVN): the observer before its burn, and the burn (GCRF, UTC)", "opm.txt"),
     "oem": ("text/plain", "CCSDS OEM 3.0 (KVN): target and observer over the planned arc (GCRF, UTC, 60 s)", "oem.txt"),
     "czml": ("application/json", "CZML for Cesium: both satellites, the station, access intervals, T_access", "czml"),
+    "geojson": (
+        "application/geo+json",
+        "GeoJSON for GIS tools: the station, where it sees the target, both ground tracks, T_access",
+        "geojson",
+    ),
     "pointing.csv": (
         "text/csv",
         "the radar's azimuth, elevation, range and range rate over each pass, 1 s steps",
@@ -191,6 +196,8 @@ def _export(kind: str, plan_id: str, session: Any, operator: Any, settings: Any)
     windows = row.result.get("access_windows", [])
     if kind == "pointing.csv":
         body = exports.pointing_csv(plan, windows)
+    elif kind == "geojson":
+        body = exports.geojson(plan, names, windows)
     else:
         arc = exports.plan_arc(plan, row.result)
         if kind == "opm":

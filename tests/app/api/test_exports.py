@@ -197,3 +197,43 @@ def test_exports_are_the_operators_own(client, plan):
     for kind in ("opm", "oem", "czml", "pointing.csv"):
         assert client.get(f"/v1/plans/{plan['id']}/export/{kind}", headers={"X-API-Key": KEY_B}).status_code == 404
         assert client.get(f"/v1/plans/no-such-plan/export/{kind}", headers=A).status_code == 404
+
+
+def _central_deg(lat1, lon1, lat2, lon2):
+    p1, p2, dl = np.radians(lat1), np.radians(lat2), np.radians(lon2 - lon1)
+    return np.degrees(np.arccos(np.clip(np.sin(p1) * np.sin(p2) + np.cos(p1) * np.cos(p2) * np.cos(dl), -1, 1)))
+
+
+def test_geojson_tracks_station_and_where_it_sees_the_target(client, plan):
+    r = client.get(f"/v1/plans/{plan['id']}/export/geojson", headers=A)
+    assert r.status_code == 200 and r.headers["content-type"].startswith("application/geo+json")
+    doc = r.json()
+    assert doc["type"] == "FeatureCollection"
+    kinds = {f["properties"]["kind"]: f for f in doc["features"]}
+    assert set(kinds) == {
+        "station",
+        "target_track",
+        "target_in_view",
+        "visibility_circle",
+        "observer_track",
+        "t_access",
+    }
+    for f in doc["features"]:
+        parts = f["geometry"]["coordinates"]
+        for part in parts if f["geometry"]["type"] == "MultiLineString" else [[parts]]:
+            lon, lat = np.array(part).T
+            assert np.all(np.abs(lon) <= 180) and np.all(np.abs(lat) <= 90)
+            assert np.all(np.abs(np.diff(lon)) < 180)  # cut at the antimeridian (RFC 7946 3.1.9)
+    s_lon, s_lat = kinds["station"]["geometry"]["coordinates"]
+    assert (s_lat, s_lon) == (31.1, 121.3)
+    # Every in-view sub-point lies within the visibility circle (two computations: look angles, and the
+    # circle's spherical geometry); every sub-point outside the circle's largest radius is out of view.
+    circle = np.concatenate([np.array(p) for p in kinds["visibility_circle"]["geometry"]["coordinates"]])
+    radius = _central_deg(s_lat, s_lon, circle[:, 1], circle[:, 0])
+    seen = np.concatenate([np.array(p) for p in kinds["target_in_view"]["geometry"]["coordinates"]])
+    assert seen.size and np.all(_central_deg(s_lat, s_lon, seen[:, 1], seen[:, 0]) <= radius.max() + 0.2)
+    # T_access lies on the target's track.
+    a_lon, a_lat = kinds["t_access"]["geometry"]["coordinates"]
+    track = np.concatenate([np.array(p) for p in kinds["target_track"]["geometry"]["coordinates"]])
+    assert _central_deg(a_lat, a_lon, track[:, 1], track[:, 0]).min() < 1.5  # 20-s steps at 7 km/s
+    assert kinds["t_access"]["properties"]["time"] == plan["chosen"]["t_access"].replace("+00:00", "Z")[:23] + "Z"

@@ -1,0 +1,257 @@
+// GSA-ISAR console: plain JavaScript over the service's own /v1 API, no build step, nothing from a CDN.
+// The API key is asked once per browser session (sessionStorage); "#key=..." in the address hands it over
+// once and is then taken out of the address.
+"use strict";
+
+const view = document.getElementById("view");
+const status = document.getElementById("status");
+let failed = 0;
+let pending = 0;
+
+function esc(v) {
+  return String(v ?? "").replace(/[&<>"']/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;" })[c]);
+}
+function utc(iso) {
+  if (!iso) return "-";
+  const d = new Date(iso);
+  return isNaN(d) ? esc(iso) : d.toISOString().replace(".000Z", "Z");
+}
+function num(v, digits) {
+  return v === null || v === undefined ? "-" : Number(v).toFixed(digits);
+}
+function fail(message) {
+  failed += 1;
+  status.dataset.failed = String(failed);
+  view.insertAdjacentHTML("afterbegin", `<p class="error">${esc(message)}</p>`);
+}
+function settle() {
+  if (pending === 0) status.dataset.ready = "1";
+}
+
+function takeKeyFromAddress() {
+  const m = location.hash.match(/key=([^&]+)/);
+  if (m) {
+    sessionStorage.setItem("gsaKey", decodeURIComponent(m[1]));
+    const rest = location.hash.replace(/[#&]?key=[^&]+/, "").replace(/^&/, "");
+    history.replaceState(null, "", location.pathname + (rest.startsWith("#") ? rest : "#" + (rest || "/plans")));
+  }
+}
+function key() {
+  return sessionStorage.getItem("gsaKey");
+}
+
+async function api(path, as = "json") {
+  pending += 1;
+  status.dataset.ready = "0";
+  try {
+    const r = await fetch(path, { headers: { "X-API-Key": key() } });
+    if (r.status === 401) {
+      sessionStorage.removeItem("gsaKey");
+      throw new Error("the API key was refused: enter a valid one");
+    }
+    if (!r.ok) {
+      let detail = r.statusText;
+      try {
+        const body = await r.json();
+        detail = Array.isArray(body.detail) ? body.detail.map((d) => `${d.loc.join(".")}: ${d.msg}`).join("; ") : body.detail;
+      } catch (e) { /* not JSON */ }
+      throw new Error(`${path}: ${r.status} ${detail}`);
+    }
+    return as === "blob" ? await r.blob() : as === "text" ? await r.text() : await r.json();
+  } finally {
+    pending -= 1;
+    settle();
+  }
+}
+
+function askForKey() {
+  document.getElementById("who").textContent = "";
+  view.innerHTML = `<h1>API key</h1>
+    <div class="card"><p>Every request carries your API key (<code>X-API-Key</code>). It is kept in this browser tab
+    only (sessionStorage) and goes to no other site. <code>gsa keys create NAME</code> makes one; <code>make run</code>
+    prints a development key.</p>
+    <form id="keyform"><input type="password" id="keyinput" placeholder="gsa_..." autocomplete="off">
+    <button>Use this key</button></form></div>`;
+  document.getElementById("keyform").addEventListener("submit", (ev) => {
+    ev.preventDefault();
+    sessionStorage.setItem("gsaKey", document.getElementById("keyinput").value.trim());
+    route();
+  });
+  status.dataset.ready = "1";
+}
+
+// ---- plans
+async function plansPage(params) {
+  const target = params.get("target") || "";
+  const q = new URLSearchParams({ limit: "50" });
+  if (target) q.set("target_name", target);
+  const body = await api(`/v1/plans?${q}`);
+  const rows = body.data.map((p) => `<tr>
+      <td><a href="#/plans/${esc(p.id)}">${esc(p.id.slice(0, 8))}</a></td><td>${utc(p.created_at)}</td>
+      <td>${esc(p.target_name)}</td><td>${esc(p.observer_name)}</td><td>${esc(p.station_name)}</td>
+      <td>${utc(p.t_access)}</td><td class="num">${num(p.miss_km, 3)}</td></tr>`).join("");
+  view.innerHTML = `<h1>Plans <span class="muted">(${body.count})</span></h1>
+    <form class="filter" id="filter"><input type="text" id="target" placeholder="target name" value="${esc(target)}">
+    <button>Filter</button></form>
+    <table id="plans"><thead><tr><th>plan</th><th>created (UTC)</th><th>target</th><th>observer</th><th>station</th>
+    <th>T_access (UTC)</th><th class="num">miss (km)</th></tr></thead><tbody>${rows ||
+      '<tr><td colspan="7" class="muted">No plans yet: POST /v1/plans, or gsa plan --server.</td></tr>'}</tbody></table>`;
+  document.getElementById("filter").addEventListener("submit", (ev) => {
+    ev.preventDefault();
+    const t = document.getElementById("target").value.trim();
+    location.hash = "#/plans" + (t ? "?target=" + encodeURIComponent(t) : "");
+  });
+}
+
+const W = 1080, H = 540;
+function xy(lon, lat) {
+  return [((lon + 180) / 360) * W, ((90 - lat) / 180) * H];
+}
+function path(parts) {
+  return parts.map((part) => "M" + part.map(([lon, lat]) => xy(lon, lat).map((v) => v.toFixed(1)).join(",")).join("L")).join("");
+}
+function mapSvg(geo) {
+  const by = Object.fromEntries(geo.features.map((f) => [f.properties.kind, f]));
+  let grid = "";
+  for (let lon = -180; lon <= 180; lon += 30) grid += `<path d="M${xy(lon, 90)}L${xy(lon, -90)}"/>`;
+  for (let lat = -90; lat <= 90; lat += 30) grid += `<path d="M${xy(-180, lat)}L${xy(180, lat)}"/>`;
+  let labels = "";
+  for (let lon = -150; lon <= 150; lon += 60) labels += `<text x="${xy(lon, 0)[0] + 3}" y="${H - 6}">${lon}°</text>`;
+  for (let lat = -60; lat <= 60; lat += 30) labels += `<text x="4" y="${xy(0, lat)[1] - 3}">${lat}°</text>`;
+  const line = (kind, color, width, dash) => by[kind] ?
+    `<path class="${kind}" d="${path(by[kind].geometry.coordinates)}" fill="none" stroke="${color}" stroke-width="${width}"${dash ? ` stroke-dasharray="${dash}"` : ""}/>` : "";
+  const st = by.station.geometry.coordinates;
+  const [sx, sy] = xy(st[0], st[1]);
+  let access = "";
+  if (by.t_access) {
+    const [ax, ay] = xy(...by.t_access.geometry.coordinates);
+    access = `<path d="M${ax},${ay - 9}L${ax + 3},${ay - 3}L${ax + 9},${ay - 3}L${ax + 4},${ay + 2}L${ax + 6},${ay + 9}L${ax},${ay + 5}L${ax - 6},${ay + 9}L${ax - 4},${ay + 2}L${ax - 9},${ay - 3}L${ax - 3},${ay - 3}Z" fill="#111"/>`;
+  }
+  return `<svg class="map" id="map" viewBox="0 0 ${W} ${H}" role="img" aria-label="ground tracks">
+    <g stroke="#b7c8da" stroke-width="0.8">${grid}</g><g fill="#6a7c90" font-size="11">${labels}</g>
+    ${line("visibility_circle", "#c0392b", 1.6, "5 3")}
+    ${line("observer_track", "#8e44ad", 1.2, "2 3")}
+    ${line("target_track", "#7f8c8d", 1.4)}
+    ${line("target_in_view", "#0b5cad", 3.5)}
+    <path d="M${sx},${sy - 8}L${sx + 7},${sy + 5}L${sx - 7},${sy + 5}Z" fill="#c0392b" stroke="#fff"/>
+    ${access}</svg>
+    <div class="legend"><span><i style="background:#7f8c8d"></i>target ground track</span>
+    <span><i style="background:#0b5cad"></i>target in view of the station</span>
+    <span><i style="background:#8e44ad"></i>observer ground track</span>
+    <span><i style="background:#c0392b"></i>station and where it sees the target (its mask, at ${num(by.visibility_circle.properties.height_km, 0)} km)</span>
+    <span>★ target at T_access</span></div>`;
+}
+
+async function planPage(id) {
+  const p = await api(`/v1/plans/${encodeURIComponent(id)}`);
+  view.innerHTML = `<h1>Plan ${esc(p.target_name)} / ${esc(p.observer_name)} / ${esc(p.station_name)}</h1><p class="muted">Loading the pass...</p>`;
+  const geo = await api(`/v1/plans/${encodeURIComponent(id)}/export/geojson`);
+  const ch = p.chosen;
+  const f = ch ? ch.feasibility : null;
+  const verdict = !ch ? `<p class="verdict bad">No candidate was planned: ${esc((p.notes || []).join("; "))}</p>`
+    : f.feasible ? `<p class="verdict good">Feasible: the target is sunlit at T_access and every check of the encounter passes.</p>`
+      : `<p class="verdict bad">Not feasible: ${esc(f.reasons.join("; "))}.</p>`;
+  const inChosen = (w) => ch && new Date(w.rise) <= new Date(ch.t_access) && new Date(ch.t_access) <= new Date(w.set);
+  const shownWindows = p.access_windows.map((w, k) => [k, w]).filter(([k, w]) => k < 30 || inChosen(w));
+  const windows = shownWindows.map(([k, w]) => `<tr${inChosen(w) ? ' class="chosen"' : ""}>
+      <td class="num">${k}</td><td>${utc(w.rise)}</td><td>${utc(w.culmination)}</td><td>${utc(w.set)}</td>
+      <td class="num">${num(w.max_elevation_deg, 2)}</td><td class="num">${num(w.min_range_km, 1)}</td>
+      <td class="num">${num(w.duration_s, 1)}</td></tr>`).join("");
+  const ph = p.phasing;
+  const scene = ch ? `<div class="grid">
+      <div class="card"><b>Chosen scene</b><br>T_access ${utc(ch.t_access)}<br>height change dHa ${num(ch.delta_ha_km, 1)} km,
+        dHp ${num(ch.delta_hp_km, 1)} km<br>node-line miss ${num(ch.miss_km, 3)} km (${esc(ch.node)})<br>
+        target ${f.sunlit ? "sunlit" : "in Earth's shadow"}</div>
+      ${ph ? `<div class="card"><b>Phasing burn</b><br>${utc(ph.t_burn)} (${ph.revolutions_before} rev before)<br>
+        dv ${num(ph.dv_total_m_s, 1)} m/s, RTN [${ph.dv_rtn_m_s.map((v) => num(v, 1)).join(", ")}] m/s<br>
+        verified (numerical J2): ${num(ph.verification.miss_km * 1000, 1)} m from the aim point<br>
+        closest approach ${num(ph.verification.closest_approach_km, 3)} km; the target crosses the observer's sky at
+        ${num(ph.verification.target_angular_rate_deg_s, 2)} deg/s</div>` : ""}
+    </div>` : "";
+  const exportsList = ["opm", "oem", "czml", "geojson", "access.csv", "pointing.csv"]
+    .map((k) => `<a href="#" data-export="${k}">${k}</a>`).join(" · ");
+  view.innerHTML = `<h1>Plan ${esc(p.target_name)} / ${esc(p.observer_name)} / ${esc(p.station_name)}</h1>
+    <p class="muted">${esc(p.id)} · created ${utc(p.created_at)} · ${p.duration_days} days from ${utc(p.epoch)} · elements ${esc(p.reading)}</p>
+    ${verdict}${(p.notes || []).map((n) => `<p class="muted">note: ${esc(n)}</p>`).join("")}${mapSvg(geo)}${scene}
+    <h2>Access windows (${p.access_windows.length}${p.access_windows.length > 30 ? ", the first 30 and the chosen one" : ""}; the chosen pass highlighted)</h2>
+    <table id="windows"><thead><tr><th class="num">#</th><th>rise (UTC)</th><th>culmination (UTC)</th><th>set (UTC)</th>
+    <th class="num">max el (deg)</th><th class="num">min range (km)</th><th class="num">duration (s)</th></tr></thead>
+    <tbody>${windows}</tbody></table>
+    <h2>Exports</h2><p>${exportsList}</p>`;
+  view.querySelectorAll("[data-export]").forEach((a) => a.addEventListener("click", async (ev) => {
+    ev.preventDefault();
+    const kind = a.dataset.export;
+    const blob = await api(`/v1/plans/${encodeURIComponent(id)}/export/${kind}`, "blob");
+    const link = document.createElement("a");
+    link.href = URL.createObjectURL(blob);
+    link.download = `plan-${id}.${kind}`;
+    link.click();
+  }));
+}
+
+// ---- estimates
+function euler(att) {
+  return att ? att.euler_zyx_deg.map((v) => num(v, 2)).join(", ") : "-";
+}
+async function estimatesPage() {
+  const body = await api("/v1/estimates?limit=50");
+  const rows = body.data.map((e) => `<tr><td><a href="#/estimates/${esc(e.id)}">${esc(e.id.slice(0, 8))}</a></td>
+      <td>${utc(e.created_at)}</td><td>${esc(e.input_name)}</td><td>${euler(e.attitude)}</td>
+      <td>${e.quality ? (e.quality.trusted ? "yes" : "no") : "-"}</td>
+      <td>${e.plan_id ? `<a href="#/plans/${esc(e.plan_id)}">${esc(e.plan_id.slice(0, 8))}</a>` : "-"}</td></tr>`).join("");
+  view.innerHTML = `<h1>Estimates <span class="muted">(${body.count})</span></h1>
+    <table id="estimates"><thead><tr><th>estimate</th><th>created (UTC)</th><th>input</th><th>z, y, x (deg)</th>
+    <th>trusted</th><th>plan</th></tr></thead><tbody>${rows ||
+      '<tr><td colspan="6" class="muted">No estimates yet: POST /v1/estimates, or gsa estimate --server.</td></tr>'}</tbody></table>`;
+}
+
+async function estimatePage(id) {
+  const e = await api(`/v1/estimates/${encodeURIComponent(id)}`);
+  const q = e.quality;
+  const frames = [["attitude", "observation frame (fitted)"], ["attitude_network", "observation frame (Swin alone)"],
+    ["attitude_lvlh", "LVLH (the target's orbital frame)"], ["attitude_j2000", "J2000"]]
+    .filter(([k]) => e[k]).map(([k, name]) => `<tr><td>${name}</td><td>${euler(e[k])}</td>
+      <td>${e[k].quaternion_wxyz.map((v) => num(v, 5)).join(", ")}</td></tr>`).join("");
+  const verdict = !q ? "" : q.trusted
+    ? `<p class="verdict good">Trusted: silhouette IoU ${num(q.silhouette_iou, 3)}, 90 % bound z / y / x ${q.uncertainty_deg.map((v) => num(v, 2)).join(" / ")} deg.</p>`
+    : `<p class="verdict bad">Not trusted: ${esc(q.reasons.join("; "))}.</p>`;
+  const alts = (e.alternatives || []).map((a) => `<li>${euler(a)} deg (IoU ${num(a.silhouette_iou, 3)}, ${num(a.distance_deg, 1)} deg away)</li>`).join("");
+  view.innerHTML = `<h1>Estimate ${esc(e.input_name)}</h1>
+    <p class="muted">${esc(e.id)} · created ${utc(e.created_at)} · target ${esc(e.target || "-")} · frame ${e.shape.join(" x ")}
+    ${e.plan_id ? ` · plan <a href="#/plans/${esc(e.plan_id)}">${esc(e.plan_id.slice(0, 8))}</a> observed ${utc(e.observed_at)}` : ""}</p>
+    ${verdict}
+    <div class="grid frames"><div class="card"><b>Original frame</b><img id="original" alt="original frame"></div>
+    <div class="card"><b>Enhanced by UNet++</b><img id="enhanced" alt="enhanced frame"></div></div>
+    <h2>Attitude in each frame</h2>
+    <table id="attitudes"><thead><tr><th>frame</th><th>Euler z, y, x (deg)</th><th>quaternion w, x, y, z</th></tr></thead><tbody>${frames}</tbody></table>
+    ${alts ? `<h2>Attitudes that fit nearly as well</h2><ul>${alts}</ul>` : ""}`;
+  for (const which of ["original", "enhanced"]) {
+    const blob = await api(`/v1/estimates/${encodeURIComponent(id)}/${which}.png`, "blob");
+    document.getElementById(which).src = URL.createObjectURL(blob);
+  }
+}
+
+async function route() {
+  takeKeyFromAddress();
+  if (!key()) return askForKey();
+  document.getElementById("who").innerHTML = `key ${esc(key().slice(0, 8))}... <button id="forget">Forget</button>`;
+  document.getElementById("forget").addEventListener("click", () => { sessionStorage.removeItem("gsaKey"); route(); });
+  const [where, query] = (location.hash.slice(1) || "/plans").split("?");
+  const params = new URLSearchParams(query || "");
+  const parts = where.split("/").filter(Boolean);
+  view.innerHTML = "<p>Loading...</p>";
+  try {
+    if (parts[0] === "plans" && parts[1]) await planPage(decodeURIComponent(parts[1]));
+    else if (parts[0] === "estimates" && parts[1]) await estimatePage(decodeURIComponent(parts[1]));
+    else if (parts[0] === "estimates") await estimatesPage();
+    else await plansPage(params);
+  } catch (err) {
+    fail(err.message);
+    if (!key()) askForKey();
+  }
+  settle();
+}
+
+window.addEventListener("hashchange", route);
+window.addEventListener("error", (ev) => fail(`script error: ${ev.message}`));
+route();

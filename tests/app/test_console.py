@@ -1,0 +1,119 @@
+"""The web console in a real headless Chromium (Debian's package) against a real `gsa serve`.
+
+Every page loads with no failed request (the server's access log has no 4xx or 5xx, the page counts no
+failed call), a plan created through the API is in the list, and its page draws its pass; a screenshot
+of each page is written to tests/screenshots/ for people to look at."""
+
+from __future__ import annotations
+
+import io
+import json
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import httpx
+import numpy as np
+import pytest
+
+from app.schemas import PAPER_EXAMPLE
+from tests.conftest import KEY_A
+from tests.utils.server import Server
+
+ROOT = Path(__file__).resolve().parents[2]
+SHOTS = ROOT / "tests" / "screenshots"
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--hide-scrollbars",
+    "--virtual-time-budget=30000",
+]
+
+
+@pytest.fixture(scope="module")
+def served(tmp_path_factory, smoke_models):
+    data = tmp_path_factory.mktemp("console")
+    env = {
+        "GSA_DATA_DIR": str(data),
+        "GSA_DATABASE_URL": f"sqlite:///{data}/gsa.db",
+        "GSA_MODEL_DIR": str(smoke_models),
+        "GSA_API_KEYS": KEY_A,
+        "GSA_ORT_THREADS": "1",
+        "GSA_LOG_LEVEL": "info",
+    }
+    srv = Server(env, workers=1, log_path=data / "server.log").start()
+    headers = {"X-API-Key": KEY_A}
+    plan = httpx.post(srv.url + "/v1/plans", json=PAPER_EXAMPLE, headers=headers, timeout=300).json()
+    buf = io.BytesIO()
+    np.save(buf, np.random.default_rng(2).random((64, 64)).astype(np.float32))
+    est = httpx.post(
+        srv.url + "/v1/estimates", files={"file": ("frame.npy", buf.getvalue())}, headers=headers, timeout=120
+    ).json()
+    yield srv, plan, est, data / "server.log"
+    srv.stop()
+
+
+def _browse(url: str, name: str, profile: Path) -> str:
+    """The page's DOM after its scripts ran, and its screenshot in tests/screenshots/NAME.png."""
+    assert CHROMIUM, "Debian's chromium is needed for the console tests: apt-get install chromium (make test does)"
+    SHOTS.mkdir(exist_ok=True)
+    base = [CHROMIUM, *FLAGS, f"--user-data-dir={profile}"]
+    dom = subprocess.run([*base, "--dump-dom", url], capture_output=True, text=True, timeout=180).stdout
+    subprocess.run(
+        [*base, "--window-size=1280,1500", f"--screenshot={SHOTS / (name + '.png')}", url],
+        capture_output=True,
+        timeout=180,
+    )
+    return dom
+
+
+def _status(dom: str) -> tuple[int, int]:
+    m = re.search(r'id="status" data-failed="(\d+)" data-ready="(\d)"', dom)
+    assert m, dom[-500:]
+    return int(m.group(1)), int(m.group(2))
+
+
+def test_console_pages_in_chromium(served, tmp_path):
+    srv, plan, est, log = served
+    console = f"{srv.url}/console/#key={KEY_A}&"
+    pages = {
+        "plans": (f"{console}/plans", [plan["id"][:8], "Sat_Target"]),
+        "plan": (
+            f"{console}/plans/{plan['id']}",
+            ['class="target_in_view"', 'class="visibility_circle"', "Not feasible", "Phasing burn"],
+        ),
+        "estimates": (f"{console}/estimates", [est["id"][:8]]),
+        "estimate": (
+            f"{console}/estimates/{est['id']}",
+            ['id="original" alt="original frame" src="blob:', "observation frame (fitted)"],
+        ),
+        "no-key": (f"{srv.url}/console/", ["Use this key"]),
+    }
+    for name, (url, expected) in pages.items():
+        dom = _browse(url, name, tmp_path / name)
+        failed, ready = _status(dom)
+        assert failed == 0 and ready == 1, (name, dom[-1500:])
+        for text in expected:
+            assert text in dom, (name, text)
+        assert (SHOTS / f"{name}.png").stat().st_size > 10_000, name
+    # Every request the pages made (console files, API calls, images) answered below 400.
+    lines = [json.loads(x) for x in log.read_text().splitlines() if x.startswith("{")]
+    served_paths = [x for x in lines if "status" in x and "path" in x]
+    assert any(x["path"].startswith("/console/") for x in served_paths)
+    assert any(x["path"].endswith("/export/geojson") for x in served_paths)
+    bad = [(x["path"], x["status"]) for x in served_paths if x["status"] >= 400]
+    assert not bad, bad
+
+
+def test_the_landing_page_links_the_console(client):
+    assert 'href="/console/"' in client.get("/").text
+    r = client.get("/console", follow_redirects=False)
+    assert r.status_code in (307, 308) and r.headers["location"].endswith("/console/")
