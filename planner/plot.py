@@ -1,75 +1,131 @@
-"""Draw a plan: ground track with the station's passes, elevation over the chosen pass, node-line error."""
+"""Draw a plan: the map (coastlines, night side, both ground tracks, the station and where it sees the
+target), the chosen pass on the station's sky, its elevation in UTC, and the node-line error."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+from numpy.typing import NDArray
 
 from planner.access import look_angles, mask_deg
 from planner.alignment import node_miss_km
+from planner.coastlines import coastline_lines
+from planner.frames import geodetic, ground_track, visibility_circle
+from planner.illumination import sun_position_km, sunlit
+from planner.plan import utc
+
+Vec = NDArray[np.float64]
+
+
+def _broken(lon: Vec, lat: Vec) -> tuple[Vec, Vec]:
+    """A track with NaN where it jumps across the antimeridian, so no line crosses the map."""
+    jump = np.abs(np.diff(lon, prepend=lon[0])) > 180.0
+    return np.where(jump, np.nan, lon), np.where(jump, np.nan, lat)
+
+
+def feasibility_words(plan) -> str:  # type: ignore[no-untyped-def]
+    """The plan's verdict in words, as the figure states it."""
+    f = plan.chosen_feasibility
+    if plan.chosen is None or f is None:
+        return "no candidate was planned" + (f": {plan.notes[0]}" if plan.notes else "")
+    return "feasible" if f.feasible else "not feasible: " + "; ".join(f.reasons)
 
 
 def plot_plan(plan, path: str, title: str = "") -> None:  # type: ignore[no-untyped-def]
-    """Write a three-panel PNG of ``plan`` (a planner.plan.Plan) to ``path``."""
+    """Write a four-panel PNG of ``plan`` (a planner.plan.Plan) to ``path``."""
     import matplotlib
 
     matplotlib.use("Agg")
+    import matplotlib.dates as mdates
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 3, figsize=(17, 5), gridspec_kw={"width_ratios": [1.6, 1, 1]})
+    fig = plt.figure(figsize=(16, 10))
+    grid = fig.add_gridspec(2, 3, height_ratios=[1.25, 1])
     tgt, frames, station = plan.target_trajectory, plan.frames, plan.station
     chosen = plan.chosen
     t_c = (
         chosen.t_access_s if chosen is not None else float(plan.windows.culmination_s[0]) if len(plan.windows) else 0.0
     )
+    when = utc(plan.epoch, t_c)
 
-    # Ground track over two revolutions centred on T_access.
-    t = np.linspace(max(0.0, t_c - 6000.0), min(plan.duration_s, t_c + 6000.0), 2000)
+    # The map: coastlines, the night side at T_access, a revolution of each ground track either side.
+    ax = fig.add_subplot(grid[0, :])
+    lon_g, lat_g = np.meshgrid(np.linspace(-180, 180, 361), np.linspace(-90, 90, 181))
+    r_sun = sun_position_km(plan.epoch, np.array([t_c]))
+    s_lat, s_lon, _ = geodetic(frames.to_itrs(np.array([t_c]), r_sun))
+    p1, p2 = np.radians(lat_g), np.radians(s_lat[0])
+    night = np.sin(p1) * np.sin(p2) + np.cos(p1) * np.cos(p2) * np.cos(np.radians(lon_g - s_lon[0])) < 0.0
+    ax.imshow(
+        night, extent=(-180, 180, -90, 90), origin="lower", cmap="Greys", vmin=0, vmax=4, alpha=0.9, aspect="auto"
+    )
+    for line in coastline_lines():
+        ax.plot(line[:, 0], line[:, 1], color="0.35", lw=0.6)
+    t = np.linspace(max(0.0, t_c - 6000.0), min(plan.duration_s, t_c + 6000.0), 2400)
+    lat, lon, h = ground_track(tgt, frames, t)
     r, _ = tgt.state(t)
-    r_itrs = frames.to_itrs(t, r)
-    lat = np.degrees(np.arctan2(r_itrs[2], np.hypot(r_itrs[0], r_itrs[1])))
-    lon = np.degrees(np.arctan2(r_itrs[1], r_itrs[0]))
     look = look_angles(r, t, station, frames)
-    visible = look.elevation_deg >= mask_deg(station, look.azimuth_deg)
-    ax = axes[0]
-    lon_plot = np.where(np.abs(np.diff(lon, prepend=lon[0])) > 180, np.nan, lon)
-    ax.plot(lon_plot, lat, color="0.6", lw=1, label="target ground track")
-    ax.plot(np.where(visible, lon_plot, np.nan), lat, color="tab:blue", lw=2.5, label="visible from the station")
+    seen = look.elevation_deg >= mask_deg(station, look.azimuth_deg)
+    lit = sunlit(r, sun_position_km(plan.epoch, t))
+    x, y = _broken(lon, lat)
+    ax.plot(np.where(lit, x, np.nan), y, color="0.45", lw=1.2, label="target ground track (sunlit)")
+    ax.plot(np.where(~lit, x, np.nan), y, color="0.45", lw=1.2, ls=":", label="target in Earth's shadow")
+    ax.plot(np.where(seen, x, np.nan), y, color="tab:blue", lw=3, label="target in view of the station")
+    if plan.observer_trajectory is not None:
+        o_lat, o_lon, _ = ground_track(plan.observer_trajectory, frames, t)
+        ax.plot(*_broken(o_lon, o_lat), color="tab:purple", lw=1, ls="--", label="observer ground track")
+    c_lat, c_lon = visibility_circle(station, float(np.interp(t_c, t, h)))
+    ax.plot(*_broken(c_lon, c_lat), color="tab:red", lw=1.2, ls="--", label="where the station sees the target")
     ax.plot(station.longitude_deg, station.latitude_deg, "r^", ms=10, label="station")
     if chosen is not None:
-        rc, _ = tgt.state(t_c)
-        rci = frames.to_itrs(np.array([t_c]), rc)
-        ax.plot(
-            np.degrees(np.arctan2(rci[1], rci[0])),
-            np.degrees(np.arctan2(rci[2], np.hypot(rci[0], rci[1]))),
-            "k*",
-            ms=14,
-            label="T_access",
-        )
+        a_lat, a_lon, _ = ground_track(tgt, frames, np.array([t_c]))
+        ax.plot(a_lon, a_lat, "k*", ms=15, label="target at T_access")
     ax.set(
         xlim=(-180, 180),
         ylim=(-90, 90),
         xlabel="longitude (deg)",
-        ylabel="latitude (deg)",
-        title="ground track around the chosen access",
+        ylabel="latitude (deg, WGS-84)",
+        title=f"ground tracks {utc(plan.epoch, float(t[0])):%Y-%m-%d %H:%M}-{utc(plan.epoch, float(t[-1])):%H:%M} UTC; "
+        f"night side shaded at T_access {when:%Y-%m-%d %H:%M:%S} UTC",
     )
-    ax.grid(alpha=0.3)
-    ax.legend(loc="lower left", fontsize=8)
+    ax.set_xticks(range(-180, 181, 30))
+    ax.set_yticks(range(-90, 91, 30))
+    ax.grid(alpha=0.25)
+    ax.legend(loc="lower left", fontsize=8, ncol=2, framealpha=0.9)
 
-    # Elevation over the chosen pass.
-    ax = axes[1]
     if chosen is not None:
         k = chosen.pass_index
         tp = np.linspace(plan.windows.rise_s[k], plan.windows.set_s[k], 400)
         rp, _ = tgt.state(tp)
-        el = look_angles(rp, tp, station, frames).elevation_deg
-        ax.plot((tp - t_c) / 60.0, el, color="tab:blue")
-        ax.axvline(0.0, color="k", ls="--", label="T_access")
-        ax.set(xlabel="minutes from T_access", ylabel="elevation (deg)", title="the chosen pass")
+        lp = look_angles(rp, tp, station, frames)
+        # The pass on the station's sky: azimuth from north through east, zenith at the centre.
+        sky: Any = fig.add_subplot(grid[1, 0], projection="polar")
+        ax = sky
+        ax.set_theta_zero_location("N")
+        ax.set_theta_direction(-1)
+        az = np.linspace(0.0, 360.0, 361)
+        ax.fill_between(np.radians(az), 90.0 - mask_deg(station, az), 90.0, color="tab:red", alpha=0.15, label="mask")
+        ax.plot(np.radians(lp.azimuth_deg), 90.0 - lp.elevation_deg, color="tab:blue", lw=2)
+        ra, _ = tgt.state(np.array([t_c]))
+        la = look_angles(ra, np.array([t_c]), station, frames)
+        ax.plot(np.radians(la.azimuth_deg), 90.0 - la.elevation_deg, "k*", ms=12)
+        ax.set_rlim(0, 90)
+        ax.set_yticks([0, 30, 60, 90])
+        ax.set_yticklabels(["90", "60", "30", "0"])
+        ax.set_title("the chosen pass on the station's sky (elevation, deg)", fontsize=10)
+        ax.legend(loc="lower left", fontsize=8)
+
+        ax = fig.add_subplot(grid[1, 1])
+        times = mdates.date2num([utc(plan.epoch, float(s)) for s in tp])  # type: ignore[no-untyped-call]
+        ax.plot(times, lp.elevation_deg, color="tab:blue", label="elevation")
+        ax.plot(times, mask_deg(station, lp.azimuth_deg), color="tab:red", ls="--", label="mask at its azimuth")
+        ax.axvline(float(mdates.date2num(when)), color="k", ls="--", label="T_access")  # type: ignore[no-untyped-call]
+        ax.xaxis.set_major_formatter(mdates.DateFormatter("%H:%M:%S"))  # type: ignore[no-untyped-call]
+        ax.set(xlabel=f"UTC, {when:%Y-%m-%d}", ylabel="elevation (deg)", title="the chosen pass")
         ax.legend(fontsize=8)
         ax.grid(alpha=0.3)
 
-    # Node-line miss around T_access, with the changed observer's own propagation.
-    ax = axes[2]
+    ax = fig.add_subplot(grid[1, 2])
     if chosen is not None and plan.observer_trajectory is not None:
         tm = np.linspace(t_c - 60.0, t_c + 60.0, 241)
         rt, vt = tgt.state(tm)
@@ -84,7 +140,7 @@ def plot_plan(plan, path: str, title: str = "") -> None:  # type: ignore[no-unty
             title=f"alignment, dHa {chosen.delta_ha_km:.1f} km, dHp {chosen.delta_hp_km:.1f} km",
         )
         ax.grid(alpha=0.3)
-    fig.suptitle(title)
+    fig.suptitle(f"{title}\n{feasibility_words(plan)}" if title else feasibility_words(plan), fontsize=12)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=100)
     plt.close(fig)

@@ -110,7 +110,16 @@ function xy(lon, lat) {
 function path(parts) {
   return parts.map((part) => "M" + part.map(([lon, lat]) => xy(lon, lat).map((v) => v.toFixed(1)).join(",")).join("L")).join("");
 }
-function mapSvg(geo) {
+let coast = null;
+async function coastlines() {
+  if (coast === null) {
+    const r = await fetch("coastlines.json");
+    coast = r.ok ? await r.json() : [];
+    if (!r.ok) fail(`coastlines.json: ${r.status}`);
+  }
+  return coast;
+}
+function mapSvg(geo, coastLines) {
   const by = Object.fromEntries(geo.features.map((f) => [f.properties.kind, f]));
   let grid = "";
   for (let lon = -180; lon <= 180; lon += 30) grid += `<path d="M${xy(lon, 90)}L${xy(lon, -90)}"/>`;
@@ -128,7 +137,9 @@ function mapSvg(geo) {
     access = `<path d="M${ax},${ay - 9}L${ax + 3},${ay - 3}L${ax + 9},${ay - 3}L${ax + 4},${ay + 2}L${ax + 6},${ay + 9}L${ax},${ay + 5}L${ax - 6},${ay + 9}L${ax - 4},${ay + 2}L${ax - 9},${ay - 3}L${ax - 3},${ay - 3}Z" fill="#111"/>`;
   }
   return `<svg class="map" id="map" viewBox="0 0 ${W} ${H}" role="img" aria-label="ground tracks">
-    <g stroke="#b7c8da" stroke-width="0.8">${grid}</g><g fill="#6a7c90" font-size="11">${labels}</g>
+    <g stroke="#b7c8da" stroke-width="0.8">${grid}</g>
+    <path class="coast" d="${path(coastLines)}" fill="none" stroke="#5d6d7e" stroke-width="0.7"/>
+    <g fill="#6a7c90" font-size="11">${labels}</g>
     ${line("visibility_circle", "#c0392b", 1.6, "5 3")}
     ${line("observer_track", "#8e44ad", 1.2, "2 3")}
     ${line("target_track", "#7f8c8d", 1.4)}
@@ -146,6 +157,7 @@ async function planPage(id) {
   const p = await api(`/v1/plans/${encodeURIComponent(id)}`);
   view.innerHTML = `<h1>Plan ${esc(p.target_name)} / ${esc(p.observer_name)} / ${esc(p.station_name)}</h1><p class="muted">Loading the pass...</p>`;
   const geo = await api(`/v1/plans/${encodeURIComponent(id)}/export/geojson`);
+  const coastLines = await coastlines();
   const ch = p.chosen;
   const f = ch ? ch.feasibility : null;
   const verdict = !ch ? `<p class="verdict bad">No candidate was planned: ${esc((p.notes || []).join("; "))}</p>`
@@ -172,7 +184,7 @@ async function planPage(id) {
     .map((k) => `<a href="#" data-export="${k}">${k}</a>`).join(" · ");
   view.innerHTML = `<h1>Plan ${esc(p.target_name)} / ${esc(p.observer_name)} / ${esc(p.station_name)}</h1>
     <p class="muted">${esc(p.id)} · created ${utc(p.created_at)} · ${p.duration_days} days from ${utc(p.epoch)} · elements ${esc(p.reading)}</p>
-    ${verdict}${(p.notes || []).map((n) => `<p class="muted">note: ${esc(n)}</p>`).join("")}${mapSvg(geo)}${scene}
+    ${verdict}${(p.notes || []).map((n) => `<p class="muted">note: ${esc(n)}</p>`).join("")}${mapSvg(geo, coastLines)}${scene}
     <h2>Access windows (${p.access_windows.length}${p.access_windows.length > 30 ? ", the first 30 and the chosen one" : ""}; the chosen pass highlighted)</h2>
     <table id="windows"><thead><tr><th class="num">#</th><th>rise (UTC)</th><th>culmination (UTC)</th><th>set (UTC)</th>
     <th class="num">max el (deg)</th><th class="num">min range (km)</th><th class="num">duration (s)</th></tr></thead>

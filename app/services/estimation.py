@@ -12,7 +12,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from app import crud
+from app.db.models import Estimate, utcnow
 from app.errors import InputError
+from app.schemas import CONTROL_CHARACTERS
+from app.services import images
 from app.services.uploads import Upload, prepare
 from inference.frames import euler_from_matrix, euler_to_quaternion, rotation_matrix
 
@@ -164,3 +168,91 @@ def attitudes_in_frames(
     out: dict[str, Any] = {name: matrix_attitude_json(axes[name].T @ body_to_gcrs) for name in ("lvlh", "j2000")}
     out["observation_axes_in_j2000"] = axes["observation"].round(12).tolist()
     return out
+
+
+def estimate_and_store(
+    *,
+    session: Any,
+    operator_id: str,
+    settings: Any,
+    est: Any,
+    uploads: list[Upload],
+    resample: bool,
+    plan_id: str | None,
+    observed_at: datetime | None,
+    snr_db: float | None,
+    normalised: bool = False,
+    checker: Any,
+    refine: bool = True,
+    cells_m: tuple[float, float] | None = None,
+) -> list[Estimate]:
+    """Validate everything, run the models on one batch, store the images, then the rows in one transaction.
+
+    The single and batch upload routes both end here; the images are stored before their rows, and
+    again after them, because a concurrent delete of an estimate with the same image may remove it.
+    """
+    if not uploads:
+        raise InputError(["file"], "no frames in the upload")
+    if len(uploads) > settings.max_batch_frames:
+        raise InputError(["file"], f"{len(uploads)} frames is over the batch limit of {settings.max_batch_frames}")
+    if any(CONTROL_CHARACTERS.search(u.name) for u in uploads):
+        raise InputError(["file"], "a frame's name (a stack member) must not contain control characters")
+    if (observed_at is None) != (plan_id is None) and observed_at is not None:
+        raise InputError(["plan_id"], "observed_at needs a plan_id to place the attitude in LVLH and J2000")
+    plan = None
+    if plan_id is not None:
+        plan = crud.get_plan(session=session, operator_id=operator_id, plan_id=plan_id)
+        if plan is None:
+            raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
+    frames, res, checks, per_frame = check_frames(
+        est=est,
+        checker=checker,
+        uploads=uploads,
+        resample=resample,
+        normalised=normalised,
+        cells_m=cells_m,
+        refine=refine,
+    )
+    enhanced = res.enhanced
+    angles = [c.angles_deg for c in checks]
+    in_frames: list[dict[str, Any] | None] = [None] * len(uploads)
+    if plan is not None and observed_at is not None:
+        in_frames = [attitudes_in_frames(plan.request, observed_at, a) for a in angles]
+    rows = []
+    blobs: list[bytes] = []
+    for k, u in enumerate(uploads):
+        blobs += [images.png_bytes(frames[k]), images.png_bytes(enhanced[k])]
+        original = images.store_blob(settings.data_dir, blobs[-2])
+        enh = images.store_blob(settings.data_dir, blobs[-1])
+        result: dict[str, Any] = {
+            **checked_json(checks[k]),
+            "target": checker.model.name,
+            "model": est.identity,
+            "timings_s": {**per_frame, "batch_size": len(uploads)},
+            "input_normalised": normalised,
+            "cells_m": list(cells_m) if cells_m else None,
+        }
+        placed = in_frames[k]
+        if placed is not None:
+            result["attitude_lvlh"] = placed["lvlh"]
+            result["attitude_j2000"] = placed["j2000"]
+        rows.append(
+            Estimate(
+                operator_id=operator_id,
+                created_at=utcnow(),
+                plan_id=plan_id,
+                observed_at=observed_at,
+                input_name=u.name[:255],
+                input_sha256=u.sha256,
+                shape=list(u.shape),
+                dtype=u.dtype,
+                snr_db=snr_db,
+                result=result,
+                original_sha256=original,
+                enhanced_sha256=enh,
+            )
+        )
+    stored = crud.create_estimates(session=session, rows=rows)
+    for blob in blobs:  # a concurrent delete of an estimate with the same image may have removed it meanwhile
+        images.store_blob(settings.data_dir, blob)
+    return stored

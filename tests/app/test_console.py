@@ -88,7 +88,13 @@ def test_console_pages_in_chromium(served, tmp_path):
         "plans": (f"{console}/plans", [plan["id"][:8], "Sat_Target"]),
         "plan": (
             f"{console}/plans/{plan['id']}",
-            ['class="target_in_view"', 'class="visibility_circle"', "Not feasible", "Phasing burn"],
+            [
+                'class="target_in_view"',
+                'class="visibility_circle"',
+                'class="coast" d="M',
+                "Not feasible",
+                "Phasing burn",
+            ],
         ),
         "estimates": (f"{console}/estimates", [est["id"][:8]]),
         "estimate": (

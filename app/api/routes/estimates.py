@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from datetime import datetime
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -25,9 +24,9 @@ from app.api.deps import (
     read_upload,
     read_uploads,
 )
-from app.db.models import Estimate, utcnow
+from app.db.models import Estimate
 from app.errors import InputError
-from app.schemas import CONTROL_CHARACTERS, EstimatePublic, EstimatesPublic, IsoDateTime, Text
+from app.schemas import EstimatePublic, EstimatesPublic, IsoDateTime, Text
 from app.services import estimation as svc
 from app.services import images
 from app.services import uploads as upload_svc
@@ -62,90 +61,6 @@ FILE = (
 )
 
 
-def _estimate(
-    *,
-    session: Any,
-    operator_id: str,
-    settings: Any,
-    est: Any,
-    uploads: list[upload_svc.Upload],
-    resample: bool,
-    plan_id: str | None,
-    observed_at: datetime | None,
-    snr_db: float | None,
-    normalised: bool = False,
-    checker: Any,
-    refine: bool = True,
-    cells_m: tuple[float, float] | None = None,
-) -> list[Estimate]:
-    """Validate everything, run the models on one batch, store the images, then the rows in one transaction."""
-    if not uploads:
-        raise InputError(["file"], "no frames in the upload")
-    if len(uploads) > settings.max_batch_frames:
-        raise InputError(["file"], f"{len(uploads)} frames is over the batch limit of {settings.max_batch_frames}")
-    if any(CONTROL_CHARACTERS.search(u.name) for u in uploads):
-        raise InputError(["file"], "a frame's name (a stack member) must not contain control characters")
-    if (observed_at is None) != (plan_id is None) and observed_at is not None:
-        raise InputError(["plan_id"], "observed_at needs a plan_id to place the attitude in LVLH and J2000")
-    plan = None
-    if plan_id is not None:
-        plan = crud.get_plan(session=session, operator_id=operator_id, plan_id=plan_id)
-        if plan is None:
-            raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
-    frames, res, checks, per_frame = svc.check_frames(
-        est=est,
-        checker=checker,
-        uploads=uploads,
-        resample=resample,
-        normalised=normalised,
-        cells_m=cells_m,
-        refine=refine,
-    )
-    enhanced = res.enhanced
-    angles = [c.angles_deg for c in checks]
-    in_frames: list[dict[str, Any] | None] = [None] * len(uploads)
-    if plan is not None and observed_at is not None:
-        in_frames = [svc.attitudes_in_frames(plan.request, observed_at, a) for a in angles]
-    rows = []
-    blobs: list[bytes] = []
-    for k, u in enumerate(uploads):
-        blobs += [images.png_bytes(frames[k]), images.png_bytes(enhanced[k])]
-        original = images.store_blob(settings.data_dir, blobs[-2])
-        enh = images.store_blob(settings.data_dir, blobs[-1])
-        result: dict[str, Any] = {
-            **svc.checked_json(checks[k]),
-            "target": checker.model.name,
-            "model": est.identity,
-            "timings_s": {**per_frame, "batch_size": len(uploads)},
-            "input_normalised": normalised,
-            "cells_m": list(cells_m) if cells_m else None,
-        }
-        placed = in_frames[k]
-        if placed is not None:
-            result["attitude_lvlh"] = placed["lvlh"]
-            result["attitude_j2000"] = placed["j2000"]
-        rows.append(
-            Estimate(
-                operator_id=operator_id,
-                created_at=utcnow(),
-                plan_id=plan_id,
-                observed_at=observed_at,
-                input_name=u.name[:255],
-                input_sha256=u.sha256,
-                shape=list(u.shape),
-                dtype=u.dtype,
-                snr_db=snr_db,
-                result=result,
-                original_sha256=original,
-                enhanced_sha256=enh,
-            )
-        )
-    stored = crud.create_estimates(session=session, rows=rows)
-    for blob in blobs:  # a concurrent delete of an estimate with the same image may have removed it meanwhile
-        images.store_blob(settings.data_dir, blob)
-    return stored
-
-
 @router.post("", status_code=201, response_model=EstimatePublic, responses={413: {"description": "file too large"}})
 async def create_estimate(
     session: SessionDep,
@@ -175,7 +90,7 @@ async def create_estimate(
     if len(uploads) != 1:
         raise InputError(["file"], f"the file holds {len(uploads)} frames; send stacks to /v1/estimates/batch")
     rows = await run_in_threadpool(
-        _estimate,
+        svc.estimate_and_store,
         session=session,
         operator_id=operator.id,
         settings=settings,
@@ -217,7 +132,7 @@ async def create_estimates_batch(
     checker = checker_for(checkers, target)
     uploads = await read_uploads(files, settings)
     rows = await run_in_threadpool(
-        _estimate,
+        svc.estimate_and_store,
         session=session,
         operator_id=operator.id,
         settings=settings,
