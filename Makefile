@@ -7,10 +7,15 @@ STAMP := $(VENV)/.installed
 .PHONY: setup run test browser bench fuzz load lint clean
 
 $(STAMP): pyproject.toml
+	@echo "==> creating the virtual environment $(VENV)"
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[dev]'
+	@echo "==> installing GSA-ISAR and what it needs (a few minutes on a fresh machine; torch is the largest)"
+	@{ $(BIN)/pip install -e '.[dev]' 2>&1; echo $$? > $(VENV)/.pip-status; } | tee $(VENV)/install.log \
+	  | grep --line-buffered -E '^(Collecting|Installing collected|Successfully|ERROR)' | cut -c1-100
+	@[ "$$(cat $(VENV)/.pip-status)" = 0 ] || { echo "the install failed: see $(VENV)/install.log"; exit 1; }
 	touch $(STAMP)
+	@echo "==> installed; run $(BIN)/gsa, or source $(VENV)/bin/activate first"
 
 setup: $(STAMP)
 

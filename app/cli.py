@@ -73,11 +73,12 @@ def cmd_serve(args: argparse.Namespace) -> int:
     import uvicorn
 
     from app.core.db import upgrade_database
-    from app.core.observability import configure_logging, uvicorn_log_config
+    from app.core.observability import configure_logging, json_lines_wanted, uvicorn_log_config
     from app.services.images import sweep_blobs
 
     settings = _settings()
-    configure_logging(settings.log_level, settings.log_json)
+    json_lines = json_lines_wanted(settings.log_json)
+    configure_logging(settings.log_level, json_lines)
     upgrade_database(settings.database_url)
     _secret(settings)  # made once here, before the workers start
     key = ensure_dev_key(settings)
@@ -92,7 +93,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
         print(f"development API key (send as X-API-Key): {key}")
         print(f"  it is also in {Path(settings.data_dir) / 'dev-api-key.txt'}")
     sys.stdout.flush()
-    log_config = uvicorn_log_config(settings.log_level) if settings.log_json else None
+    log_config = uvicorn_log_config(settings.log_level, json_lines)
     from app.core.server import raise_descriptor_limit, uvicorn_limits
 
     raise_descriptor_limit(settings.max_connections)

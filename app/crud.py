@@ -132,6 +132,26 @@ def list_plans(
     return list(rows), total
 
 
+def list_scenes(
+    *, session: Session, operator_id: str, limit: int, offset: int
+) -> tuple[list[Plan], dict[str, list[Estimate]], int]:
+    """A page of the operator's plans, newest first, with each plan's estimates (one query for the page's)."""
+    where = Plan.operator_id == operator_id
+    total = int(session.scalar(select(func.count()).select_from(Plan).where(where)) or 0)
+    plans = list(
+        session.scalars(select(Plan).where(where).order_by(Plan.created_at.desc()).limit(limit).offset(offset)).all()
+    )
+    by_plan: dict[str, list[Estimate]] = {p.id: [] for p in plans}
+    if by_plan:
+        for e in session.scalars(
+            select(Estimate)
+            .where(Estimate.plan_id.in_(list(by_plan)), Estimate.operator_id == operator_id)
+            .order_by(Estimate.created_at, Estimate.id)
+        ):
+            by_plan[str(e.plan_id)].append(e)
+    return plans, by_plan, total
+
+
 def create_estimates(*, session: Session, rows: list[Estimate]) -> list[Estimate]:
     """Store several estimates in one transaction (all or none)."""
     session.add_all(rows)

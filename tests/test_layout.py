@@ -123,6 +123,15 @@ def test_no_route_module_imports_another():
     assert not bad, bad
 
 
+def test_no_route_module_holds_sql():
+    """Routes read, call a service or crud, and answer: the queries live in app/crud.py."""
+    routes = ROOT / "app" / "api" / "routes"
+    bad = [
+        (p.name, module) for p in routes.glob("*.py") for module, _ in _imports(p) if module.startswith("sqlalchemy")
+    ]
+    assert not bad, bad
+
+
 def test_light_entry_points_leave_torch_and_the_simulator_out():
     """`import app.main` and building gsa's parser (what `gsa --help` and `gsa serve` do) import no torch."""
     code = (

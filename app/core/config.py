@@ -56,7 +56,7 @@ class Settings(BaseSettings):
     key_secret: str = ""
     orphan_grace_s: float = Field(default=0.0, ge=0.0)
     log_level: str = Field(default="info", pattern="^(debug|info|warning|error)$")
-    log_json: bool = True
+    log_json: bool | None = None  # unset: JSON lines unless stderr is a terminal
 
     @model_validator(mode="after")
     def _default_database(self) -> Settings:

@@ -67,10 +67,35 @@ class JsonFormatter(logging.Formatter):
         return json.dumps(out, default=str)
 
 
+class TextFormatter(JsonFormatter):
+    """One readable line per record for a terminal: UTC time, level, message, then the ``extra`` fields.
+
+    ``2026-12-01T18:00:01.123Z info    POST /v1/plans 201 812.4 ms (request_id=9f2c...)``
+    """
+
+    def format(self, record: logging.LogRecord) -> str:
+        line = json.loads(super().format(record))
+        ts = line.pop("ts").replace("+00:00", "Z")
+        level, msg, exc = line.pop("level"), line.pop("msg"), line.pop("exc", None)
+        line.pop("logger", None)
+        if {"method", "path", "status"} <= line.keys():  # an access line reads as the request it was
+            msg = f"{line.pop('method')} {line.pop('path')} {line.pop('status')}"
+            if "duration_ms" in line:
+                msg += f" {float(line.pop('duration_ms')):.1f} ms"
+        extra = " ".join(f"{k}={v}" for k, v in line.items())
+        out = f"{ts} {level:<7} {msg}" + (f" ({extra})" if extra else "")
+        return out + ("\n" + exc if exc else "")
+
+
+def json_lines_wanted(setting: bool | None) -> bool:
+    """GSA_LOG_JSON: true or false as set; unset, JSON lines unless stderr is a terminal (people read text)."""
+    return (not sys.stderr.isatty()) if setting is None else setting
+
+
 def configure_logging(level: str = "info", json_lines: bool = True) -> None:
-    """Send every logger (ours and uvicorn's) to stderr, as JSON lines unless ``json_lines`` is false."""
+    """Send every logger (ours and uvicorn's) to stderr, as JSON lines, or readable text where ``json_lines`` is false."""
     handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(JsonFormatter() if json_lines else logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    handler.setFormatter(JsonFormatter() if json_lines else TextFormatter())
     root = logging.getLogger()
     root.handlers[:] = [handler]
     root.setLevel(level.upper())
@@ -82,13 +107,14 @@ def configure_logging(level: str = "info", json_lines: bool = True) -> None:
     logging.getLogger("uvicorn.access").disabled = True
 
 
-def uvicorn_log_config(level: str = "info") -> dict[str, Any]:
-    """A ``logging.config`` dictionary for uvicorn workers: JSON lines on stderr, no uvicorn access log."""
+def uvicorn_log_config(level: str = "info", json_lines: bool = True) -> dict[str, Any]:
+    """A ``logging.config`` dictionary for uvicorn workers: JSON lines (or text) on stderr, no uvicorn access log."""
+    formatter = "app.core.observability." + ("JsonFormatter" if json_lines else "TextFormatter")
     return {
         "version": 1,
         "disable_existing_loggers": False,
-        "formatters": {"json": {"()": "app.core.observability.JsonFormatter"}},
-        "handlers": {"stderr": {"class": "logging.StreamHandler", "formatter": "json", "stream": "ext://sys.stderr"}},
+        "formatters": {"line": {"()": formatter}},
+        "handlers": {"stderr": {"class": "logging.StreamHandler", "formatter": "line", "stream": "ext://sys.stderr"}},
         "root": {"handlers": ["stderr"], "level": level.upper()},
         "loggers": {
             "uvicorn": {"handlers": [], "propagate": True},

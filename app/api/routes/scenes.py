@@ -5,10 +5,9 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Query
-from sqlalchemy import func, select
 
+from app import crud
 from app.api.deps import CurrentOperator, SessionDep, SettingsDep, as_utc, check_page_size
-from app.db.models import Estimate, Plan
 from app.schemas import EstimatePublic, ScenesPublic
 
 router = APIRouter(prefix="/scenes", tags=["scenes"])
@@ -24,19 +23,7 @@ def list_scenes(
 ) -> dict[str, Any]:
     """List the caller's plans, newest first, each with its chosen access and its estimates."""
     limit = check_page_size(limit, settings)
-    where = Plan.operator_id == operator.id
-    total = int(session.scalar(select(func.count()).select_from(Plan).where(where)) or 0)
-    plans = session.scalars(
-        select(Plan).where(where).order_by(Plan.created_at.desc()).limit(limit).offset(offset)
-    ).all()
-    by_plan: dict[str, list[Estimate]] = {p.id: [] for p in plans}
-    if by_plan:  # one query for the whole page's estimates
-        for e in session.scalars(
-            select(Estimate)
-            .where(Estimate.plan_id.in_(list(by_plan)), Estimate.operator_id == operator.id)
-            .order_by(Estimate.created_at, Estimate.id)
-        ):
-            by_plan[str(e.plan_id)].append(e)
+    plans, by_plan, total = crud.list_scenes(session=session, operator_id=operator.id, limit=limit, offset=offset)
     data = [
         {
             "plan_id": p.id,

@@ -20,7 +20,7 @@ from sqlalchemy import create_engine, func, select, text
 
 from app import crud
 from app.core.db import head_revision, make_engine, make_session_factory
-from app.core.observability import JsonFormatter
+from app.core.observability import JsonFormatter, TextFormatter, json_lines_wanted
 from app.core.security import LEGACY_SCHEME, key_digest, load_key_secret
 from app.db.models import ApiKey, Estimate, GroundStation, Pass, Plan
 from app.schemas import PAPER_EXAMPLE
@@ -202,6 +202,20 @@ def test_logs_are_json_lines_with_the_request_id_and_never_the_key(client, caplo
     assert access and access[-1]["path"] == "/v1/plans" and access[-1]["status"] == 200
     assert access[-1]["method"] == "GET" and access[-1]["duration_ms"] >= 0
     assert all(KEY_A not in line for line in lines)
+
+
+def test_on_a_terminal_the_same_lines_are_readable_text(client, caplog, monkeypatch):
+    caplog.set_level(logging.INFO, logger="gsa.access")
+    client.get("/v1/plans", headers={**A, "X-Request-ID": "log-check-2"})
+    (line,) = [TextFormatter().format(r) for r in caplog.records if "log-check-2" in JsonFormatter().format(r)]
+    assert re.match(r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z info +\S", line), line
+    assert re.search(r" GET /v1/plans 200 [\d.]+ ms \(.*request_id=log-check-2", line), line
+    assert KEY_A not in line and "\n" not in line
+    # GSA_LOG_JSON unset: JSON unless stderr is a terminal; set, as set.
+    monkeypatch.setattr("sys.stderr.isatty", lambda: True)
+    assert json_lines_wanted(None) is False and json_lines_wanted(True) is True
+    monkeypatch.setattr("sys.stderr.isatty", lambda: False)
+    assert json_lines_wanted(None) is True and json_lines_wanted(False) is False
 
 
 def test_a_bug_is_a_json_500_with_the_request_id(settings, caplog):
