@@ -64,16 +64,46 @@ class Strict(BaseModel):
 class ElementsIn(Strict):
     """Orbital elements at an epoch, as in the paper's Table 1 (heights above 6378.137 km)."""
 
+    model_config = ConfigDict(
+        extra="forbid",
+        allow_inf_nan=False,
+        json_schema_extra={
+            "oneOf": [{"required": ["ha_km", "hp_km"]}, {"required": ["semi_major_axis_km", "eccentricity"]}]
+        },
+    )
+
     epoch: IsoDateTime
-    ha_km: Finite = Field(ge=100.0, le=1.0e6, description="apogee height, km")
-    hp_km: Finite = Field(ge=100.0, le=1.0e6, description="perigee height, km (at least 100)")
+    # The size and shape: apogee and perigee heights (Table 1), or the semi-major axis and eccentricity.
+    ha_km: Annotated[Finite, Field(ge=100.0, le=1.0e6)] | SkipJsonSchema[None] = Field(
+        default=None, description="apogee height above 6378.137 km, km"
+    )
+    hp_km: Annotated[Finite, Field(ge=100.0, le=1.0e6)] | SkipJsonSchema[None] = Field(
+        default=None, description="perigee height, km (at least 100)"
+    )
+    semi_major_axis_km: Annotated[Finite, Field(ge=6478.137, le=1.0e6)] | SkipJsonSchema[None] = Field(
+        default=None, description="instead of ha_km and hp_km: the semi-major axis, km"
+    )
+    eccentricity: Annotated[Finite, Field(ge=0.0, lt=1.0)] | SkipJsonSchema[None] = Field(
+        default=None, description="with semi_major_axis_km"
+    )
     inclination_deg: Finite = Field(ge=0.0, le=180.0)
     raan_deg: Finite = Field(ge=-360.0, le=360.0)
     arg_perigee_deg: Finite = Field(ge=-360.0, le=360.0)
     mean_anomaly_deg: Finite = Field(ge=-360.0, le=360.0)
 
     @model_validator(mode="after")
-    def _apogee_above_perigee(self) -> ElementsIn:
+    def _one_size_and_shape(self) -> ElementsIn:
+        heights = self.ha_km is not None, self.hp_km is not None
+        kepler = self.semi_major_axis_km is not None, self.eccentricity is not None
+        if not ((all(heights) and not any(kepler)) or (all(kepler) and not any(heights))):
+            raise ValueError("give ha_km and hp_km, or semi_major_axis_km and eccentricity (one pair, both of it)")
+        if self.semi_major_axis_km is not None and self.eccentricity is not None:
+            hp = self.semi_major_axis_km * (1.0 - self.eccentricity) - 6378.137
+            if hp < 100.0:
+                raise ValueError(f"the perigee is {hp:.1f} km high: below 100 km the orbit decays")
+            self.ha_km = self.semi_major_axis_km * (1.0 + self.eccentricity) - 6378.137
+            self.hp_km = hp
+        assert self.ha_km is not None and self.hp_km is not None
         if self.ha_km < self.hp_km:
             raise ValueError(f"ha_km ({self.ha_km}) is below hp_km ({self.hp_km}): give the apogee height first")
         return self
@@ -103,12 +133,13 @@ class OmmIn(BaseModel):
     MEAN_MOTION_DDOT: Finite | None = None
 
 
-ORBIT_SOURCES = ("elements", "tle", "omm", "omm_xml", "omm_csv")
+ORBIT_SOURCES = ("elements", "tle", "omm", "omm_xml", "omm_csv", "omm_kvn", "opm")
 
 
 class OrbitIn(Strict):
     """A satellite: a name and exactly one of ``elements``, ``tle`` (2 lines, a 3LE, or a text block), ``omm`` (a
-    CelesTrak OMM JSON object), ``omm_xml`` or ``omm_csv`` (CelesTrak's OMM XML or CSV text, one element set)."""
+    CelesTrak OMM JSON object), ``omm_xml``, ``omm_csv`` or ``omm_kvn`` (CelesTrak's OMM XML, CSV or KVN text, one
+    element set), or ``opm`` (a CCSDS OPM in KVN: its state vector, taken as osculating elements)."""
 
     model_config = ConfigDict(
         extra="forbid",
@@ -127,6 +158,14 @@ class OrbitIn(Strict):
     omm: OmmIn | SkipJsonSchema[None] = None
     omm_xml: Annotated[str, Field(max_length=20_000)] | SkipJsonSchema[None] = None
     omm_csv: Annotated[str, Field(max_length=5_000)] | SkipJsonSchema[None] = None
+    omm_kvn: Annotated[str, Field(max_length=20_000)] | SkipJsonSchema[None] = Field(
+        default=None, description="a CCSDS OMM in KVN (KEYWORD = value lines), as CelesTrak serves FORMAT=kvn"
+    )
+    opm: Annotated[str, Field(max_length=20_000)] | SkipJsonSchema[None] = Field(
+        default=None,
+        description="a CCSDS OPM 2.0/3.0 in KVN: EPOCH (UTC) and X..Z_DOT (km, km/s) in EME2000, GCRF or ICRF about "
+        "the Earth, read as osculating elements (plan with reading osculating)",
+    )
 
     @model_validator(mode="after")
     def _one_source(self) -> OrbitIn:

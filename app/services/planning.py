@@ -14,6 +14,7 @@ from app.errors import InputError
 from app.schemas import ORBIT_SOURCES, AccessCreate, OrbitIn, PlanCreate, StationIn
 from planner.access import AccessWindows, access_windows
 from planner.alignment import Candidate, HeightBox
+from planner.ccsds import elements_from_opm, omm_fields_from_kvn
 from planner.elements import Elements
 from planner.errors import PlannerError, PlanningStopped
 from planner.plan import Feasibility, Orbit, Plan, PlanOptions, StopCheck, make_plan, utc
@@ -29,20 +30,25 @@ def to_orbit(orbit: OrbitIn, where: str) -> Orbit:
             return Orbit(orbit.name, tle=parse_tle(line1, line2))
         if orbit.omm is not None:
             return Orbit(orbit.name, tle=tle_from_omm(orbit.omm.model_dump(exclude_none=True)))
+        if orbit.omm_kvn is not None:
+            return Orbit(orbit.name, tle=tle_from_omm(omm_fields_from_kvn(orbit.omm_kvn), field="omm_kvn"))
+        if orbit.opm is not None:
+            return Orbit(orbit.name, elements=elements_from_opm(orbit.opm))
         if orbit.omm_xml is not None or orbit.omm_csv is not None:
             kind, text = ("xml", orbit.omm_xml) if orbit.omm_xml is not None else ("csv", orbit.omm_csv)
             assert text is not None
             return Orbit(orbit.name, tle=tle_from_omm(omm_fields_from_text(text, kind), field=f"omm_{kind}"))
         assert orbit.elements is not None
         e = orbit.elements
+        assert e.ha_km is not None and e.hp_km is not None  # ElementsIn fills them from a and e too
         el = Elements(
-            as_utc(e.epoch),
-            e.ha_km,
-            e.hp_km,
-            e.inclination_deg,
-            e.raan_deg % 360.0,
-            e.arg_perigee_deg % 360.0,
-            e.mean_anomaly_deg % 360.0,
+            epoch=as_utc(e.epoch),
+            ha_km=e.ha_km,
+            hp_km=e.hp_km,
+            inclination_deg=e.inclination_deg,
+            raan_deg=e.raan_deg % 360.0,
+            arg_perigee_deg=e.arg_perigee_deg % 360.0,
+            mean_anomaly_deg=e.mean_anomaly_deg % 360.0,
         )
         return Orbit(orbit.name, elements=el)
     except PlannerError as exc:
@@ -51,6 +57,15 @@ def to_orbit(orbit: OrbitIn, where: str) -> Orbit:
         if exc.field and exc.field != sub:
             loc.append(exc.field)
         raise InputError(loc, str(exc)) from None
+
+
+def _osculating_states(orbits: tuple[tuple[OrbitIn, str], ...], reading: str, loc: list[str | int]) -> None:
+    """An OPM's state vector is an osculating orbit: refuse to read it as mean elements."""
+    for orbit, where in orbits:
+        if orbit.opm is not None and reading == "mean":
+            raise InputError(
+                loc, f"the {where} is an OPM state vector, an osculating orbit: plan with reading osculating"
+            )
 
 
 def source_of(orbit: OrbitIn) -> str:
@@ -254,6 +269,7 @@ def run_plan(
     stop: StopCheck | None = None,
 ) -> tuple[Plan, dict[str, Any]]:
     """Validate a plan request against the planner, run it, and return the plan and its JSON."""
+    _osculating_states(((req.target, "target"), (req.observer, "observer")), req.search.reading, ["search", "reading"])
     target = to_orbit(req.target, "target")
     observer = to_orbit(req.observer, "observer")
     station = to_station(req.ground_station)
@@ -281,6 +297,7 @@ def run_plan(
 
 def run_access(req: AccessCreate, max_epoch_gap_days: float | None = None) -> dict[str, Any]:
     """Compute access windows alone."""
+    _osculating_states(((req.target, "target"),), req.reading, ["reading"])
     target = to_orbit(req.target, "target")
     station = to_station(req.ground_station)
     from planner.plan import target_trajectory

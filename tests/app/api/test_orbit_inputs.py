@@ -69,6 +69,34 @@ XML = (
     + "</tleParameters></data></segment></body></omm></ndm>"
 )
 CSV = ",".join(OMM) + "\n" + ",".join(str(v) for v in OMM.values()) + "\n"
+UNITS = {"MEAN_MOTION": " [rev/day]", "INCLINATION": " [deg]", "BSTAR": " [1/ER]"}
+KVN = (
+    "CCSDS_OMM_VERS = 2.0\nCOMMENT GENERATED VIA SPACE-TRACK.ORG API\nCREATION_DATE = 2008-09-20T13:00:00\n"
+    "ORIGINATOR = 18 SPCS\n\n"
+    + "".join(f"{k} = {OMM[k]}\n" for k in META)
+    + "CENTER_NAME = EARTH\nREF_FRAME = TEME\nTIME_SYSTEM = UTC\nMEAN_ELEMENT_THEORY = SGP4\n"
+    + "".join(f"{k} = {v}{UNITS.get(k, '')}\n" for k, v in OMM.items() if k not in META)
+)
+
+
+def _opm(r_km, v_km_s, epoch="2008-09-20T12:25:40.104192", frame="GCRF", version="3.0"):
+    """An OPM in KVN as 502.0-B-3 lays it out, written here by hand (the reader is what is tested)."""
+    state = "".join(
+        f"{k} = {x:.9f} [{'km' if n < 3 else 'km/s'}]\n"
+        for n, (k, x) in enumerate(zip(("X", "Y", "Z", "X_DOT", "Y_DOT", "Z_DOT"), [*r_km, *v_km_s], strict=True))
+    )
+    return (
+        f"CCSDS_OPM_VERS = {version}\nCREATION_DATE = 2026-12-01T00:00:00\nORIGINATOR = TEST\n"
+        f"OBJECT_NAME = ISS (ZARYA)\nOBJECT_ID = 1998-067A\nCENTER_NAME = EARTH\nREF_FRAME = {frame}\n"
+        f"TIME_SYSTEM = UTC\nCOMMENT the state\nEPOCH = {epoch}\n" + state
+    )
+
+
+def _iss_state():
+    ts = timescale()
+    sat = EarthSatellite(ISS_L1, ISS_L2, ts=ts)
+    t = ts.utc(2008, 9, 20, 12, 25, 40.104192)
+    return sat.at(t)
 
 
 def _windows(client, target):
@@ -93,6 +121,7 @@ def test_every_form_of_the_same_orbit_gives_the_same_passes(client):
         {"omm": OMM},
         {"omm_xml": XML},
         {"omm_csv": CSV},
+        {"omm_kvn": KVN},
     ]
     for form in forms:
         got = _windows(client, form)
@@ -112,6 +141,77 @@ def test_the_omm_propagates_as_skyfields_own_omm_reader_has_it():
     np.testing.assert_allclose(ours.at(t).position.km, ref.at(t).position.km, atol=1e-6)
 
 
+def test_an_opm_state_vector_reads_as_skyfields_osculating_elements():
+    """The OPM's state (skyfield's GCRS state of the ISS) gives skyfield's own osculating elements of that state."""
+    from skyfield.elementslib import osculating_elements_of
+
+    from app.schemas import OrbitIn
+    from app.services.planning import to_orbit
+
+    geo = _iss_state()
+    el = to_orbit(OrbitIn.model_validate({"name": "ISS", "opm": _opm(geo.position.km, geo.velocity.km_per_s)}), "x")
+    ref = osculating_elements_of(geo, gm_km3_s2=398600.4418)  # the planner's GM (skyfield defaults to DE421's)
+    e = el.elements
+    assert abs(e.ha_km + 6378.137 - ref.apoapsis_distance.km) < 1e-6
+    assert abs(e.hp_km + 6378.137 - ref.periapsis_distance.km) < 1e-6
+    assert abs(e.inclination_deg - ref.inclination.degrees) < 1e-9
+    assert abs(e.raan_deg - ref.longitude_of_ascending_node.degrees) < 1e-9
+    # e = 0.0013: the perigee's direction is ill-conditioned (1e-5 deg is 1.6 mm of a e), their sum is not.
+    assert abs((e.arg_perigee_deg - ref.argument_of_periapsis.degrees + 180) % 360 - 180) < 1e-5
+    assert abs((e.mean_anomaly_deg - ref.mean_anomaly.degrees + 180) % 360 - 180) < 1e-5
+    u = e.arg_perigee_deg + e.mean_anomaly_deg - ref.argument_of_periapsis.degrees - ref.mean_anomaly.degrees
+    assert abs((u + 180) % 360 - 180) < 1e-7
+    assert e.epoch.isoformat().startswith("2008-09-20T12:25:40.104")
+
+
+def test_an_opm_and_keplerian_a_e_plan_as_their_elements(client):
+    geo = _iss_state()
+    body = {"ground_station": STATION, "start": ISS_EPOCH.isoformat(), "duration_days": 1.0}
+    r = client.post(
+        "/v1/access-windows",
+        json={**body, "target": {"name": "ISS", "opm": _opm(geo.position.km, geo.velocity.km_per_s)}},
+        headers=A,
+    )
+    assert r.status_code == 200, r.text
+    assert len(r.json()["access_windows"]) >= 3
+    mean = client.post(
+        "/v1/access-windows",
+        json={
+            **body,
+            "reading": "mean",
+            "target": {"name": "ISS", "opm": _opm(geo.position.km, geo.velocity.km_per_s)},
+        },
+        headers=A,
+    )
+    assert mean.status_code == 422 and mean.json()["detail"][0]["loc"] == ["body", "reading"]
+    # The paper's target as a / e and as Ha / Hp: the same windows.
+    heights = {
+        "epoch": "2022-11-27T16:00:00Z",
+        "ha_km": 700,
+        "hp_km": 600,
+        "inclination_deg": 43,
+        "raan_deg": 290,
+        "arg_perigee_deg": 100,
+        "mean_anomaly_deg": 200,
+    }
+    a = 6378.137 + 650.0
+    kepler = {
+        **{k: v for k, v in heights.items() if k not in ("ha_km", "hp_km")},
+        "semi_major_axis_km": a,
+        "eccentricity": 50.0 / a,
+    }
+    got = []
+    for el in (heights, kepler):
+        r = client.post(
+            "/v1/access-windows",
+            json={"target": {"name": "T", "elements": el}, "ground_station": STATION, "duration_days": 1.0},
+            headers=A,
+        )
+        assert r.status_code == 200, r.text
+        got.append([w["rise"][:22] for w in r.json()["access_windows"]])
+    assert got[0] == got[1] and got[0]
+
+
 BAD = [
     ({"omm": {**OMM, "ECCENTRICITY": 1.5}}, ["body", "target", "omm", "ECCENTRICITY"]),
     ({"omm": {k: v for k, v in OMM.items() if k != "MEAN_MOTION"}}, ["body", "target", "omm", "MEAN_MOTION"]),
@@ -123,6 +223,33 @@ BAD = [
     ({"tle": ["a", ISS_L1, ISS_L2, ISS_L2]}, ["body", "target", "tle"]),
     ({"tle": f"{ISS_L1}\n"}, ["body", "target", "tle"]),
     ({"tle": [ISS_L1, ISS_L2], "omm": OMM}, ["body", "target"]),
+    (
+        {"omm_kvn": KVN.replace("CCSDS_OMM_VERS = 2.0", "CCSDS_OMM_VERS = 1.0")},
+        ["body", "target", "omm_kvn", "CCSDS_OMM_VERS"],
+    ),
+    ({"omm_kvn": KVN + "MEAN_MOTION 15.7\n"}, ["body", "target", "omm_kvn"]),
+    ({"omm_kvn": KVN + KVN}, ["body", "target", "omm_kvn"]),
+    ({"opm": _opm((7000.0, 0, 0), (0, 7.5, 0), frame="ITRF")}, ["body", "target", "opm", "REF_FRAME"]),
+    ({"opm": _opm((7000.0, 0, 0), (0, 7.5, 0), version="1.0")}, ["body", "target", "opm", "CCSDS_OPM_VERS"]),
+    ({"opm": _opm((7000.0, 0, 0), (0, 12.0, 0))}, ["body", "target", "opm"]),
+    ({"opm": _opm((7000.0, 0, 0), (0, 7.5, 0), epoch="soon")}, ["body", "target", "opm", "EPOCH"]),
+    ({"opm": _opm((7000.0, 0, 0), (0, 7.5, 0)).replace("Z_DOT", "W_DOT")}, ["body", "target", "opm", "Z_DOT"]),
+    (
+        {
+            "elements": {
+                "epoch": "2022-11-27T16:00:00Z",
+                "ha_km": 700,
+                "hp_km": 600,
+                "semi_major_axis_km": 7000,
+                "eccentricity": 0.01,
+                "inclination_deg": 43,
+                "raan_deg": 0,
+                "arg_perigee_deg": 0,
+                "mean_anomaly_deg": 0,
+            }
+        },
+        ["body", "target", "elements"],
+    ),
 ]
 
 
