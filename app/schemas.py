@@ -237,24 +237,23 @@ GroundStationIn = Annotated[
 ]
 
 
+STATION_EXAMPLE: dict[str, Any] = {
+    "name": "Shanghai",
+    "latitude_deg": 31.1,
+    "longitude_deg": 121.3,
+    "altitude_m": 4.0,
+    "min_elevation_deg": 3.0,
+    "mask": [[0, 5], [90, 2], [180, 8], [270, 15]],
+}
+
+
 class StationCreate(StationIn):
     """A station to store under /v1/stations and name in plans (``"ground_station": "NAME"``)."""
 
     model_config = ConfigDict(
         extra="forbid",
         allow_inf_nan=False,
-        json_schema_extra={
-            "examples": [
-                {
-                    "name": "Shanghai",
-                    "latitude_deg": 31.1,
-                    "longitude_deg": 121.3,
-                    "altitude_m": 4.0,
-                    "min_elevation_deg": 3.0,
-                    "mask": [[0, 5], [90, 2], [180, 8], [270, 15]],
-                }
-            ]
-        },
+        json_schema_extra={"examples": [STATION_EXAMPLE]},
     )
 
     name: Name

@@ -6,6 +6,7 @@ from typing import Any
 
 from fastapi import APIRouter
 
+from app import openapi_examples as examples
 from app.api.deps import CurrentOperator, SessionDep, SettingsDep, check_span
 from app.schemas import AccessCreate, AccessPublic
 from app.services.planning import run_access, stored_station_lookup, with_stored_station
@@ -13,7 +14,11 @@ from app.services.planning import run_access, stored_station_lookup, with_stored
 router = APIRouter(prefix="/access-windows", tags=["access"])
 
 
-@router.post("", response_model=AccessPublic)
+@router.post(
+    "",
+    response_model=AccessPublic,
+    responses={200: {"content": {"application/json": {"example": examples.load("access")}}}},
+)
 def compute_access(
     session: SessionDep, operator: CurrentOperator, settings: SettingsDep, access_in: AccessCreate
 ) -> dict[str, Any]:

@@ -11,6 +11,7 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse, Response
 
 from app import crud
+from app import openapi_examples as examples
 from app.api.deps import (
     CheckersDep,
     CurrentOperator,
@@ -61,7 +62,15 @@ FILE = (
 )
 
 
-@router.post("", status_code=201, response_model=EstimatePublic, responses={413: {"description": "file too large"}})
+@router.post(
+    "",
+    status_code=201,
+    response_model=EstimatePublic,
+    responses={
+        201: {"content": {"application/json": {"example": examples.load("estimate")}}},
+        413: {"description": "file too large"},
+    },
+)
 async def create_estimate(
     session: SessionDep,
     operator: CurrentOperator,
@@ -182,7 +191,11 @@ def _owned(session: Any, operator_id: str, estimate_id: Annotated[Text, PathPara
     return e
 
 
-@router.get("/{estimate_id}", response_model=EstimatePublic, responses=NOT_FOUND)
+@router.get(
+    "/{estimate_id}",
+    response_model=EstimatePublic,
+    responses={**NOT_FOUND, 200: {"content": {"application/json": {"example": examples.load("estimate")}}}},
+)
 def read_estimate(
     session: SessionDep, operator: CurrentOperator, estimate_id: Annotated[Text, PathParam()]
 ) -> dict[str, Any]:

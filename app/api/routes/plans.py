@@ -11,6 +11,7 @@ from fastapi import APIRouter, Body, HTTPException, Path, Query, Request, Respon
 from fastapi.concurrency import run_in_threadpool
 
 from app import crud
+from app import openapi_examples as examples
 from app.api.deps import CurrentOperator, SessionDep, SettingsDep, as_utc, check_page_size, check_span
 from app.core.observability import resident_mb
 from app.schemas import PAPER_EXAMPLE, IsoDateTime, PlanCreate, PlanPublic, PlansPublic, PlanSummary, Text
@@ -60,7 +61,10 @@ def _budget(settings: Any, gone: threading.Event | None = None) -> StopCheck:
     "",
     status_code=201,
     response_model=PlanPublic,
-    responses={503: {"description": "planning ran over GSA_PLAN_TIMEOUT_S and was stopped; nothing was stored"}},
+    responses={
+        201: {"content": {"application/json": {"example": examples.load("plan")}}},
+        503: {"description": "planning ran over GSA_PLAN_TIMEOUT_S and was stopped; nothing was stored"},
+    },
 )
 async def create_plan(
     request: Request,
@@ -142,7 +146,11 @@ def list_plans(
     return {"data": data, "count": total}
 
 
-@router.get("/{plan_id}", response_model=PlanPublic, responses=NOT_FOUND)
+@router.get(
+    "/{plan_id}",
+    response_model=PlanPublic,
+    responses={**NOT_FOUND, 200: {"content": {"application/json": {"example": examples.load("plan")}}}},
+)
 def read_plan(session: SessionDep, operator: CurrentOperator, plan_id: Annotated[Text, Path()]) -> dict[str, Any]:
     """Return one of the caller's plans."""
     plan = crud.get_plan(session=session, operator_id=operator.id, plan_id=plan_id)

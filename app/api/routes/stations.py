@@ -7,6 +7,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, HTTPException, Path, Query, Response
 
 from app import crud
+from app import openapi_examples as examples
 from app.api.deps import CurrentOperator, SessionDep, SettingsDep, as_utc, check_page_size
 from app.schemas import StationCreate, StationPublic, StationsPublic, Text
 
@@ -24,7 +25,10 @@ def _public(row: Any) -> dict[str, Any]:
     "",
     status_code=201,
     response_model=StationPublic,
-    responses={409: {"description": "the caller already has a station of this name; nothing changed"}},
+    responses={
+        201: {"content": {"application/json": {"example": examples.load("station")}}},
+        409: {"description": "the caller already has a station of this name; nothing changed"},
+    },
 )
 def create_station(session: SessionDep, operator: CurrentOperator, station_in: StationCreate) -> dict[str, Any]:
     """Store a station under its name; plans then give ``"ground_station": "NAME"`` instead of its coordinates.
