@@ -538,8 +538,3 @@ def _phasing_cost_km_s(
     except PlannerError:
         return math.inf
     return ph.dv_total_km_s + float(height_change_dv_km_s(model.a_km, model.e, cand.delta_ha_km, cand.delta_hp_km))
-
-
-def utc(epoch: datetime, t_s: float) -> datetime:
-    """Return the UTC moment ``t_s`` elapsed seconds after ``epoch``."""
-    return epoch + timedelta(seconds=float(t_s))

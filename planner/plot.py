@@ -13,7 +13,7 @@ from planner.alignment import node_miss_km
 from planner.coastlines import coastline_lines
 from planner.frames import geodetic, ground_track, visibility_circle
 from planner.illumination import sun_position_km, sunlit
-from planner.plan import utc
+from planner.propagation import utc
 
 Vec = NDArray[np.float64]
 

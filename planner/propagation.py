@@ -124,6 +124,32 @@ def seconds_between(epoch: datetime, moment: datetime) -> float:
     return float((ts.from_datetime(as_utc(moment)) - ts.from_datetime(as_utc(epoch))) * DAY_S)
 
 
+_J2000_UTC = datetime(2000, 1, 1, 12, 0, tzinfo=UTC)
+
+
+def _tai_minus_utc_s(moment: datetime) -> float:
+    """TAI - UTC (s) at a UTC moment, from the leap-second table skyfield ships."""
+    ts = timescale()
+    jd = 2451545.0 + (as_utc(moment) - _J2000_UTC).total_seconds() / DAY_S
+    k = int(np.searchsorted(ts.leap_dates, jd, side="right")) - 1
+    return float(ts.leap_offsets[max(k, 0)])
+
+
+def utc(epoch: datetime, t_s: float) -> datetime:
+    """Return the UTC moment ``t_s`` elapsed SI seconds after ``epoch``: ``seconds_between``'s inverse.
+
+    Elapsed seconds run through leap seconds, UTC's clock repeats one: 120 s after
+    2016-12-31T23:59:00Z is 2017-01-01T00:00:59Z. A moment inside a leap second (23:59:60, which
+    datetime cannot write) comes out as the next day's 00:00:00.
+    """
+    start = as_utc(epoch)
+    guess = start + timedelta(seconds=float(t_s))
+    offset = _tai_minus_utc_s(start)
+    for _ in range(2):  # the offset at the answer decides the answer; twice settles it
+        guess = start + timedelta(seconds=float(t_s) + offset - _tai_minus_utc_s(guess))
+    return guess
+
+
 def _rot_z(angle: Vec) -> Vec:
     """Return rotation matrices of shape (3, 3, N) about z by ``angle`` (skyfield's rot_z)."""
     c, s = np.cos(angle), np.sin(angle)

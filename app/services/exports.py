@@ -23,7 +23,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.errors import InputError
-from planner.plan import Plan, utc
+from planner.plan import Plan
+from planner.propagation import utc
 
 Vec = NDArray[np.float64]
 ORIGINATOR = "GSA-ISAR"

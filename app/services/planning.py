@@ -17,8 +17,8 @@ from planner.alignment import Candidate, HeightBox
 from planner.ccsds import elements_from_opm, omm_fields_from_kvn
 from planner.elements import Elements
 from planner.errors import PlannerError, PlanningStopped
-from planner.plan import Feasibility, Orbit, Plan, PlanOptions, StopCheck, make_plan, utc
-from planner.propagation import EarthFrames, Station, as_utc
+from planner.plan import Feasibility, Orbit, Plan, PlanOptions, StopCheck, make_plan
+from planner.propagation import EarthFrames, Station, as_utc, utc
 from planner.tle import omm_fields_from_text, parse_tle, tle_from_omm, tle_lines
 
 

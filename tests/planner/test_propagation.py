@@ -186,3 +186,20 @@ def test_integrations_do_not_leak():
     grown = tracemalloc.get_traced_memory()[0] - before
     tracemalloc.stop()
     assert grown < 40_000, grown
+
+
+def test_utc_is_seconds_between_inverse_across_a_leap_second():
+    """Elapsed SI seconds against skyfield's own UTC: 2016-12-31 ended with 23:59:60."""
+    from datetime import UTC, datetime
+
+    from planner.propagation import seconds_between, utc
+
+    ts = timescale()
+    epoch = datetime(2016, 12, 31, 23, 59, 0, tzinfo=UTC)
+    t0 = ts.from_datetime(epoch)
+    for t_s in (0.0, 30.5, 59.0, 61.0, 120.0, 86400.0, -3600.0):
+        ref = ts.tt_jd(t0.whole, t0.tt_fraction + t_s / 86400.0).utc_datetime()
+        got = utc(epoch, t_s)
+        assert abs((got - ref).total_seconds()) < 1e-5, (t_s, got, ref)
+        assert abs(seconds_between(epoch, got) - t_s) < 1e-5, t_s
+    assert utc(epoch, 120.0) == datetime(2017, 1, 1, 0, 0, 59, tzinfo=UTC)  # not 00:01:00: the day had 86401 s
