@@ -2,10 +2,9 @@
 
 Options shrink or speed up the files once float32 parity is proven: ``--half`` stores the
 large weights in float16 (computed in float32), and ``--int8`` quantises UNet++ to int8
-(static, per-channel weights, calibrated on real frames), which runs it about 2x faster on
-a CPU with int8 dot-product instructions (BENCHMARKS.md). Swin stays in floating point:
-dynamic int8 on its MatMuls moved the shipped model's angles by 0.17 deg on average for
-about 15 % of its time, while int8 UNet++ moved them by 0.06-0.12 deg for 60 % of its.
+(static, per-channel weights, calibrated on real frames), which runs it faster on a CPU with
+int8 dot-product instructions. Swin stays in floating point: int8 there moved the angles more
+for less time saved (design/measurements.md, "int8 UNet++, floating-point Swin").
 """
 
 from __future__ import annotations
@@ -23,10 +22,10 @@ from typing import Any
 import numpy as np
 import torch
 
-from inference.errors import InferenceError, ModelFileError, module_main
+from inference.errors import InferenceError, module_main
 from inference.files import sha256_file, write_json
 from inference.frames import ANGLE_SCALE_DEG
-from inference.networks.build import build_models, config_from_dict
+from inference.training.checkpoints import load_trained
 
 OPSET = 17
 PARITY_RTOL = 1e-4  # relative difference, float32, ORT against torch
@@ -37,37 +36,6 @@ HALF_MIN_ELEMENTS = 1024  # smaller tensors (biases, norms) stay float32: they c
 INT8_ANGLE_TOL_DEG = 0.25
 INT8_MIN_FRAMES = 8  # real frames needed: half calibrate, half check
 PARITY_FRAMES = 16  # real frames for the float parity checks (each runs through torch and ORT)
-
-
-def load_trained(run_dir: str | Path) -> tuple[torch.nn.Module, torch.nn.Module, dict[str, Any], bool]:
-    """Load ``unetpp.pt`` and ``swin.pt`` from a training run; raise ModelFileError naming a bad file.
-
-    Returns the networks, the configuration, and whether Swin reads UNet++'s output (the
-    default) or raw frames (``gsa train --no-enhance``), as swin.pt records.
-    """
-    d = Path(run_dir)
-    models = []
-    cfg_dict: dict[str, Any] = {}
-    enhance = True
-    for name in ("unetpp.pt", "swin.pt"):
-        path = d / name
-        if not path.is_file():
-            raise ModelFileError(f"checkpoint {path} is missing", field="model")
-        try:
-            ck = torch.load(path, map_location="cpu", weights_only=False)
-        except Exception as exc:
-            raise ModelFileError(f"checkpoint {path} cannot be read: {exc}", field="model") from None
-        cfg_dict = ck["config"]
-        models.append(ck["state_dict"])
-        if name == "swin.pt":
-            enhance = bool(ck.get("enhance", True))
-    cfg = config_from_dict(cfg_dict)
-    unet, swin = build_models(cfg)
-    unet.load_state_dict(models[0])
-    swin.load_state_dict(models[1])
-    unet.eval()
-    swin.eval()
-    return unet, swin, cfg.as_dict(), enhance
 
 
 def export_onnx(model: torch.nn.Module, path: Path, img_size: int) -> None:

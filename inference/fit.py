@@ -453,7 +453,8 @@ LIBRARY_HALF_RANGE_DEG = 45.0
 class Library:
     """Coarse silhouettes of a grid of attitudes over the +-45 deg cube: starts for targets without networks.
 
-    Built once per target (2,197 attitudes at 7.5 deg, about 1 s and 18 MB here); ``starts``
+    Built once per target (2,197 attitudes at 7.5 deg; cost in design/measurements.md, "The coarse
+    silhouette library"); ``starts``
     scores every entry against a frame's 4x-pooled enhanced silhouette in one product
     and returns the best few, each at least ``separation_deg`` from the others.
     """

@@ -64,8 +64,8 @@ def session_options(threads: int | None = None) -> Any:
     Full graph optimisation, sequential execution, ``threads`` intra-op threads (default:
     all cores), and no spin-waiting. Each session has its own thread pool; with spinning
     on, the pool of the network that just ran keeps its threads busy-waiting while the
-    other network runs, and on 2 cores that doubled the two-model time (about 105 ms
-    against 59 ms measured here with the shipped models).
+    other network runs, which on 2 cores doubled the two-model time (design/measurements.md,
+    "ONNX Runtime threads without spinning").
     """
     import os
 

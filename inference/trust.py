@@ -178,7 +178,8 @@ class Checker:
         """Fit (unless ``refine`` is off), bound, and check one frame; ``network_deg`` None means no networks.
 
         ``search`` off skips the library search where Swin's answer does not fit (a pass, whose
-        other frames stand in for one that fails, saves its cost: 0.3 s a frame).
+        other frames stand in for one that fails, saves its cost: design/measurements.md, "A pass
+        skips the library search").
         """
         cal = self.calibration
         net = None if network_deg is None else np.asarray(network_deg, float)

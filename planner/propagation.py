@@ -402,9 +402,9 @@ class NumericalJ2Trajectory:
     """Two-body + J2 motion integrated once with DOP853, then interpolated anywhere in its span.
 
     The integrator is scipy's Fortran DOP853 (``scipy.integrate.ode``), which steps
-    in compiled code: 10 days at rtol 1e-10 take ~0.12 s (2.7 m from a 1e-13 run), against ~3.4 s for
-    ``solve_ivp(method="DOP853")``, whose Python stepping costs more than the force
-    model; the two agree (tests/planner/test_propagation.py). The integrator's own
+    in compiled code, many times faster than ``solve_ivp(method="DOP853")``, whose Python
+    stepping costs more than the force model (design/measurements.md, "DOP853 in compiled
+    code"); the two agree (tests/planner/test_propagation.py). The integrator's own
     steps are kept and read back by quintic Hermite interpolation of position,
     velocity and acceleration, accurate to well under a metre.
     """

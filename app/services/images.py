@@ -19,9 +19,9 @@ from app.core.security import private_dir, write_private
 def png_bytes(frame: NDArray[np.floating]) -> bytes:
     """Encode a frame in [0, 1] (clipped) as an 8-bit grayscale PNG, written directly and left uncompressed.
 
-    Radar speckle barely compresses (Pillow at level 1 saved 6 % of the bytes) and Pillow took
-    2.2 ms a frame here, a third of a request's overhead with two images per estimate; this
-    writer takes 0.06 ms. Any PNG reader reads it (deflate's stored blocks; a test reads it back).
+    Radar speckle barely compresses, and a general encoder costs a good share of a request;
+    deflate's stored blocks cost almost nothing and any PNG reader reads them (design/measurements.md,
+    "PNG writer"; a test reads it back).
     """
     pixels = (np.clip(frame, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
     h, w = pixels.shape

@@ -196,6 +196,28 @@ class SwinTransformer(nn.Module):
     def forward_head(self, x: torch.Tensor) -> torch.Tensor:
         return self.head(x)
 
+    def split_stages(self, train_stages: int) -> tuple[list[nn.Module], list[nn.Module]]:
+        """The stages as (frozen, trained) for fine-tuning: the trained ones are the last ``train_stages``."""
+        stages = list(self.stages.children())
+        return stages[: len(stages) - train_stages], stages[len(stages) - train_stages :]
+
+    def front(self, x: torch.Tensor, train_stages: int) -> torch.Tensor:
+        """The frozen part: frames [B, 1, H, W] -> the last frozen stage's tokens [B, h, w, C]."""
+        y = self.embed(x)
+        for stage in self.split_stages(train_stages)[0]:
+            y = stage(y)
+        return y
+
+    def tail(self, f: torch.Tensor, train_stages: int) -> torch.Tensor:
+        """The trained part: the front's tokens -> scaled angles [B, 3]; ``front`` then ``tail`` is ``forward``."""
+        for stage in self.split_stages(train_stages)[1]:
+            f = stage(f)
+        return self.forward_head(self.pool(f))
+
+    def tail_modules(self, train_stages: int) -> nn.ModuleList:
+        """What fine-tuning trains: the last ``train_stages`` stages, the final norm and the head."""
+        return nn.ModuleList([*self.split_stages(train_stages)[1], self.norm, self.head])
+
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.forward_head(self.forward_features(x))
 

@@ -5,8 +5,8 @@ stays frozen and runs once over every frame, through the enhancer the service ru
 (``--enhancer``: an exported model directory, whose int8 UNet++ is then what Swin
 learns to read) or the run's own UNet++. Its output is cached on disk (resumable, so
 a cut-off run goes on where it stopped), and the last stage(s), the norm and the head
-train on that cache: for the compact config a batch of 32 takes 0.4 s on 2 CPU cores,
-against 4.5 s for the whole Swin.
+train on that cache, an order of magnitude faster a batch than the whole Swin
+(design/measurements.md, "Fine-tuning Swin's tail on a feature cache").
 
 Epochs are scored on a fresh validation set, simulated like the training set with a
 seed no other set uses, and the weights with the lowest validation error (the starting
@@ -34,12 +34,12 @@ import torch
 from numpy.typing import NDArray
 
 from inference.errors import DatasetError, InferenceError, module_main
-from inference.export import load_trained
 from inference.files import sha256_file, write_json
 from inference.frames import ANGLE_SCALE_DEG
 from inference.networks.swin import SwinTransformer
 from inference.simulation.dataset import DatasetSpec, frame_truth, load_manifest, load_range, render_frames
 from inference.simulation.isar import Radar
+from inference.training.checkpoints import averaged_weights, load_trained, save_checkpoint
 from inference.training.options import (
     VAL_SEED,
     FinetuneOptions,
@@ -47,39 +47,14 @@ from inference.training.options import (
     check_schedule,
     options_from_args,
 )
-from inference.training.train import _save, averaged_weights, split_indices
+from inference.training.train import split_indices
 
 CHUNK = 64  # frames per cached chunk (and per progress line)
 
 
-def split_stages(swin: SwinTransformer, train_stages: int) -> tuple[list[torch.nn.Module], list[torch.nn.Module]]:
-    """Swin's stages as (frozen, trained): the trained ones are the last ``train_stages``."""
-    stages = list(swin.stages.children())
-    return stages[: len(stages) - train_stages], stages[len(stages) - train_stages :]
-
-
-def front(swin: SwinTransformer, x: torch.Tensor, train_stages: int) -> torch.Tensor:
-    """Swin's frozen part: frames [B, 1, H, W] -> the last frozen stage's tokens [B, h, w, C]."""
-    y = swin.embed(x)
-    for stage in split_stages(swin, train_stages)[0]:
-        y = stage(y)
-    return y
-
-
-def tail(swin: SwinTransformer, f: torch.Tensor, train_stages: int) -> torch.Tensor:
-    """Swin's trained part: cached tokens -> scaled angles [B, 3]; ``front`` then ``tail`` is ``swin``."""
-    for stage in split_stages(swin, train_stages)[1]:
-        f = stage(f)
-    return swin.forward_head(swin.pool(f))
-
-
-def tail_modules(swin: SwinTransformer, train_stages: int) -> torch.nn.ModuleList:
-    return torch.nn.ModuleList([*split_stages(swin, train_stages)[1], swin.norm, swin.head])
-
-
 def front_sha256(swin: SwinTransformer, train_stages: int) -> str:
     """Hash of the frozen front's weights: what the cached features depend on, besides the frames."""
-    frozen = [swin.patch_embed, swin.embed_norm, *split_stages(swin, train_stages)[0]]
+    frozen = [swin.patch_embed, swin.embed_norm, *swin.split_stages(train_stages)[0]]
     h = hashlib.sha256()
     for k, module in enumerate(frozen):
         for name, t in module.state_dict().items():
@@ -144,7 +119,7 @@ def predict_tail(
     """Angles in degrees [N, 3] from cached features, with ``swin``'s tail (``modules``, already loaded into it)."""
     modules.eval()
     out = [
-        tail(swin, torch.from_numpy(feats[k : k + batch].astype(np.float32)), train_stages).numpy()
+        swin.tail(torch.from_numpy(feats[k : k + batch].astype(np.float32)), train_stages).numpy()
         for k in range(0, len(feats), batch)
     ]
     return np.asarray(np.concatenate(out) * ANGLE_SCALE_DEG, np.float32)
@@ -202,7 +177,7 @@ def finetune(
         x = np.asarray(frames, np.float32)
         if enhance:
             x = est.enhance(x) if est is not None else unet(torch.from_numpy(x)[:, None])[:, 0].numpy()
-        return front(swin, torch.from_numpy(np.ascontiguousarray(x))[:, None], train_stages).numpy().astype(np.float16)
+        return swin.front(torch.from_numpy(np.ascontiguousarray(x))[:, None], train_stages).numpy().astype(np.float16)
 
     for rows in (train_idx, test_idx):
         if np.any(np.diff(rows) != 1):
@@ -252,7 +227,7 @@ def finetune(
     # Train the tail on the cached features; score each epoch (and the averaged weights) on the validation set.
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    modules = tail_modules(swin, train_stages)
+    modules = swin.tail_modules(train_stages)
     opt = torch.optim.Adam(modules.parameters(), lr=lr)
     sched = torch.optim.lr_scheduler.ExponentialLR(opt, lr_decay)
     averaged = None
@@ -280,7 +255,7 @@ def finetune(
         batches = [np.sort(order[k : k + batch_size]) for k in range(0, len(order), batch_size)]
         for step, sel in enumerate(batches):
             f = torch.from_numpy(x_train[sel].astype(np.float32))
-            loss = torch.nn.functional.mse_loss(tail(swin, f, train_stages), y_train[sel])
+            loss = torch.nn.functional.mse_loss(swin.tail(f, train_stages), y_train[sel])
             opt.zero_grad(set_to_none=True)
             loss.backward()  # type: ignore[no-untyped-call]
             opt.step()
@@ -346,7 +321,9 @@ def finetune(
         "cache_seconds": round(cache_seconds, 1),
         "train_seconds": round(sum(h["seconds"] for h in history), 1),
     }
-    _save({"state_dict": swin.state_dict(), "config": cfg, "enhance": enhance, "finetune": True}, out / "swin.pt")
+    save_checkpoint(
+        {"state_dict": swin.state_dict(), "config": cfg, "enhance": enhance, "finetune": True}, out / "swin.pt"
+    )
     shutil.copy(Path(run_dir) / "unetpp.pt", out / "unetpp.pt")
     base_path = Path(run_dir) / "training.json"
     training = json.loads(base_path.read_text()) if base_path.is_file() else {"config": cfg}

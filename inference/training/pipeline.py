@@ -24,8 +24,6 @@ rebuilds ``unetpp.pt`` and ``swin.pt`` (float32) and exports them.
 from __future__ import annotations
 
 import argparse
-import hashlib
-import io
 import json
 import os
 import shutil
@@ -38,29 +36,14 @@ import torch
 
 from inference.errors import InferenceError, ModelFileError
 from inference.evaluation.evaluate import PAPER, SNR_DB, held_out, plot_errors, row_name, score, snr_spec, table
-from inference.export import load_trained
 from inference.files import write_json
 from inference.simulation.dataset import DatasetSpec, default_train_frames, generate, load_arrays, load_manifest
+from inference.training.checkpoints import averaged_weights, load_trained, read_pieces, same_half, write_pieces
 from inference.training.options import RECIPES, TrainOptions, add_option_arguments, options_from_args, recipe
-from inference.training.train import averaged_weights, predict, train
+from inference.training.train import predict, train
 
-PIECE_BYTES = 15 * 1024 * 1024
 # A run's records, carried beside its pieces.
 RECORDS = ("training.json", "loss.png", "evaluation.json", "evaluation.md", "errors.png")
-
-
-def _split(name: str, state: dict[str, Any], config: dict[str, Any], out: Path, **extra: Any) -> list[dict[str, Any]]:
-    half = {k: (v.half() if v.is_floating_point() else v) for k, v in state.items()}
-    buf = io.BytesIO()
-    torch.save({"state_dict": half, "config": config, **extra}, buf)
-    blob = buf.getvalue()
-    pieces = []
-    for k in range(0, len(blob), PIECE_BYTES):
-        part = blob[k : k + PIECE_BYTES]
-        path = out / f"{name}.part{k // PIECE_BYTES:02d}"
-        path.write_bytes(part)
-        pieces.append({"file": path.name, "sha256": hashlib.sha256(part).hexdigest(), "bytes": len(part)})
-    return pieces
 
 
 def prepare(
@@ -114,25 +97,6 @@ def evaluate_run(work: Path, name: str, device: str | None = None) -> dict[str, 
     return results
 
 
-def _joined(pieces: Path, name: str, manifest: dict[str, Any]) -> dict[str, Any]:
-    """One network's checkpoint rebuilt from its pieces (each checked against its sha256)."""
-    blob = b""
-    for p in manifest[name]:
-        part = (pieces / p["file"]).read_bytes()
-        if hashlib.sha256(part).hexdigest() != p["sha256"]:
-            raise ModelFileError(f"piece {pieces / p['file']} does not match its sha256", field="model")
-        blob += part
-    ck: dict[str, Any] = torch.load(io.BytesIO(blob), map_location="cpu", weights_only=False)
-    return ck
-
-
-def _same_half(a: dict[str, Any], b: dict[str, Any]) -> bool:
-    return a.keys() == b.keys() and all(
-        torch.equal(v.half() if v.is_floating_point() else v, b[k].half() if b[k].is_floating_point() else b[k])
-        for k, v in a.items()
-    )
-
-
 def pack(run_dir: Path, out: Path, reuse: Path | None = None) -> dict[str, Any]:
     """Write a run's latest weights in float16 pieces, with its records, into ``out``.
 
@@ -170,10 +134,10 @@ def pack(run_dir: Path, out: Path, reuse: Path | None = None) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     prior = json.loads((reuse / "pieces.json").read_text()) if reuse is not None else {}
     for name, state in states.items():
-        if reuse is not None and _same_half(state, _joined(reuse, name, prior)["state_dict"]):
+        if reuse is not None and same_half(state, read_pieces(reuse, name, prior)["state_dict"]):
             manifest[name] = [{**p, "file": os.path.relpath(reuse / p["file"], out)} for p in prior[name]]
         else:
-            manifest[name] = _split(name, state, config, out, **({"enhance": enhance} if name == "swin" else {}))
+            manifest[name] = write_pieces(name, state, config, out, **({"enhance": enhance} if name == "swin" else {}))
     write_json(out / "pieces.json", manifest)
     for extra in RECORDS:
         if (run_dir / extra).exists():
@@ -212,7 +176,7 @@ def join(pieces: Path, run_dir: Path) -> None:
     manifest = json.loads((pieces / "pieces.json").read_text())
     run_dir.mkdir(parents=True, exist_ok=True)
     for name in ("unetpp", "swin"):
-        ck = _joined(pieces, name, manifest)
+        ck = read_pieces(pieces, name, manifest)
         ck["state_dict"] = {k: (v.float() if v.is_floating_point() else v) for k, v in ck["state_dict"].items()}
         torch.save(ck, run_dir / f"{name}.pt")
     for extra in RECORDS:

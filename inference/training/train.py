@@ -9,10 +9,10 @@ raw frames (the paper's "without enhancement" row). Angles are regressed scaled 
 
 ``ema`` also keeps an exponential moving average of both networks' weights (and batch-norm
 statistics), updated after every optimiser step; each epoch scores both, and the averaged
-weights are the ones written to ``unetpp.pt`` and ``swin.pt``. Per-epoch test errors of the
-raw weights jitter by 0.1-0.5 deg late in training (the H100 run of 2026-11-23), so which
-epoch a run stops at decides too much; the average smooths that, chosen beforehand rather
-than by peeking at the test set.
+weights are the ones written to ``unetpp.pt`` and ``swin.pt``. The raw weights' test error
+jitters from epoch to epoch late in training, so which epoch a run stops at would decide too
+much; the average smooths that, chosen beforehand rather than by peeking at the test set
+(design/measurements.md, "Averaged weights").
 
 Needs numpy, scipy and torch only. Resumable (``checkpoint.pt`` each epoch), seeded,
 bf16 autocast on a GPU, and it stops cleanly after the epoch in which
@@ -35,12 +35,13 @@ import numpy as np
 import torch
 
 from inference.errors import DatasetError, InferenceError, module_main
-from inference.files import write_atomic, write_json
+from inference.files import write_json
 from inference.frames import ANGLE_SCALE_DEG
 from inference.networks.build import ModelConfig, build_models, get_config
 from inference.networks.swin import angle_loss
 from inference.networks.unetpp import relative_frobenius_loss
 from inference.simulation.dataset import load_arrays, load_manifest, split_ranges
+from inference.training.checkpoints import save_checkpoint
 from inference.training.options import (
     RECIPES,
     TrainOptions,
@@ -94,16 +95,6 @@ def on_device(data: dict[str, np.ndarray], device: torch.device) -> dict[str, np
     return {
         k: (torch.from_numpy(v).to(device) if k in ("image", "label", "angles_deg") else v) for k, v in data.items()
     }
-
-
-def averaged_weights(state: dict[str, Any]) -> dict[str, Any]:
-    """Return the network weights inside an ``AveragedModel`` state dict (without its ``module.`` prefix)."""
-    return {k[len("module.") :]: v for k, v in state.items() if k.startswith("module.")}
-
-
-def _save(obj: Any, path: Path) -> None:
-    """Save atomically, so a reader (or a cut-off run) never sees half a file."""
-    write_atomic(path, lambda tmp: torch.save(obj, tmp))
 
 
 @torch.no_grad()
@@ -407,7 +398,7 @@ def _score(run: _Run) -> dict[str, list[float]]:
 
 def _checkpoint(run: _Run, epochs_done: int, path: Path) -> None:
     """Write everything a resumed run needs (atomically), and the training record so far."""
-    _save(
+    save_checkpoint(
         {
             "unet": run.unet.state_dict(),
             "swin": run.swin.state_dict(),
@@ -433,8 +424,10 @@ def _finish(run: _Run) -> dict[str, Any]:
     final_u, final_s = (
         (run.averaged["unet"].module, run.averaged["swin"].module) if run.averaged else (run.unet, run.swin)
     )
-    _save({"state_dict": final_u.state_dict(), "config": run.cfg.as_dict(), "ema": opts.ema}, run.out / "unetpp.pt")
-    _save(
+    save_checkpoint(
+        {"state_dict": final_u.state_dict(), "config": run.cfg.as_dict(), "ema": opts.ema}, run.out / "unetpp.pt"
+    )
+    save_checkpoint(
         {"state_dict": final_s.state_dict(), "config": run.cfg.as_dict(), "enhance": opts.enhance, "ema": opts.ema},
         run.out / "swin.pt",
     )

@@ -8,11 +8,12 @@ import torch
 
 from app.cli import main as gsa
 from inference.errors import InferenceError, ModelFileError
-from inference.export import export, load_trained
+from inference.export import export
 from inference.networks.build import build_models, get_config
 from inference.simulation.dataset import DatasetSpec, generate, load_manifest, render_frames
 from inference.simulation.isar import Radar
-from inference.training.finetune import finetune, front, tail, validation_spec
+from inference.training.checkpoints import load_trained
+from inference.training.finetune import finetune, validation_spec
 from inference.training.options import FinetuneOptions, recipe
 from inference.training.train import train
 
@@ -34,7 +35,7 @@ def test_front_then_tail_is_the_whole_swin(stages):
     swin.eval()
     x = torch.randn(3, 1, 64, 64)
     with torch.no_grad():
-        torch.testing.assert_close(tail(swin, front(swin, x, stages), stages), swin(x))
+        torch.testing.assert_close(swin.tail(swin.front(x, stages), stages), swin(x))
 
 
 def _val_mae(run_dir, data, n_val):

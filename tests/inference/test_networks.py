@@ -84,8 +84,8 @@ def test_resume_continues_from_the_checkpoint(smoke_data, smoke_run, tmp_path):
 
 
 def test_averaged_weights_are_scored_saved_resumed_and_packed(smoke_data, tmp_path):
+    from inference.training.checkpoints import averaged_weights
     from inference.training.pipeline import pack
-    from inference.training.train import averaged_weights
 
     out = tmp_path / "ema"
     rec = train(smoke_data, out, recipe("smoke", epochs=2, ema=0.5, log_every=0))
