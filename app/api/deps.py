@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Annotated, Any, cast
 
-from fastapi import Depends, HTTPException, Request, Security, UploadFile
+from fastapi import Depends, HTTPException, Query, Request, Security, UploadFile
 from fastapi.security import APIKeyHeader
 from sqlalchemy.orm import Session
 
@@ -96,6 +97,26 @@ as_utc = utc_or_none  # the routes' name for it
 
 
 DEFAULT_PAGE_SIZE = 20
+
+
+@dataclass(frozen=True)
+class Page:
+    """One page of a listing: how many (checked against GSA_MAX_PAGE_SIZE) and how many to skip."""
+
+    limit: int
+    offset: int
+
+
+def page_of(
+    settings: SettingsDep,
+    limit: Annotated[int | None, Query(ge=1, le=10_000, description="page size (default 20)")] = None,
+    offset: Annotated[int, Query(ge=0, le=10_000_000, description="how many to skip, newest first")] = 0,
+) -> Page:
+    """The page every listing route takes (``limit``, ``offset``)."""
+    return Page(check_page_size(limit, settings), offset)
+
+
+PageDep = Annotated[Page, Depends(page_of)]
 
 
 def check_page_size(limit: int | None, settings: Settings) -> int:

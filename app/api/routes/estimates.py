@@ -16,11 +16,11 @@ from app.api.deps import (
     CheckersDep,
     CurrentOperator,
     EstimatorDep,
+    PageDep,
     SessionDep,
     SettingsDep,
     as_utc,
     cells_from_form,
-    check_page_size,
     checker_for,
     read_upload,
     read_uploads,
@@ -163,20 +163,17 @@ async def create_estimates_batch(
 def list_estimates(
     session: SessionDep,
     operator: CurrentOperator,
-    settings: SettingsDep,
-    limit: Annotated[int | None, Query(ge=1, le=10_000, description="page size (default 20)")] = None,
-    offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
+    page: PageDep,
     plan_id: Annotated[Text | None, Query(max_length=36)] = None,
     created_after: IsoDateTime | None = None,
     created_before: IsoDateTime | None = None,
 ) -> dict[str, Any]:
     """List the caller's estimates, newest first, filtered by plan and creation time."""
-    limit = check_page_size(limit, settings)
     rows, total = crud.list_estimates(
         session=session,
         operator_id=operator.id,
-        limit=limit,
-        offset=offset,
+        limit=page.limit,
+        offset=page.offset,
         plan_id=plan_id,
         created_after=created_after,
         created_before=created_before,

@@ -12,7 +12,7 @@ from fastapi.concurrency import run_in_threadpool
 
 from app import crud
 from app import openapi_examples as examples
-from app.api.deps import CurrentOperator, SessionDep, SettingsDep, as_utc, check_page_size, check_span
+from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep, as_utc, check_span
 from app.core.observability import resident_mb
 from app.schemas import PAPER_EXAMPLE, IsoDateTime, PlanCreate, PlanPublic, PlansPublic, PlanSummary, Text
 from app.services.planning import access_csv, run_plan, stored_station_lookup, with_stored_station
@@ -113,20 +113,17 @@ async def create_plan(
 def list_plans(
     session: SessionDep,
     operator: CurrentOperator,
-    settings: SettingsDep,
-    limit: Annotated[int | None, Query(ge=1, le=10_000, description="page size (default 20)")] = None,
-    offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
+    page: PageDep,
     target_name: Annotated[Text | None, Query(max_length=200)] = None,
     created_after: IsoDateTime | None = None,
     created_before: IsoDateTime | None = None,
 ) -> dict[str, Any]:
     """List the caller's plans, newest first, filtered by target name and creation time."""
-    limit = check_page_size(limit, settings)
     rows, total = crud.list_plans(
         session=session,
         operator_id=operator.id,
-        limit=limit,
-        offset=offset,
+        limit=page.limit,
+        offset=page.offset,
         target_name=target_name,
         created_after=created_after,
         created_before=created_before,

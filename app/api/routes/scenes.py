@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Any
 
-from fastapi import APIRouter, Query
+from fastapi import APIRouter
 
 from app import crud
-from app.api.deps import CurrentOperator, SessionDep, SettingsDep, as_utc, check_page_size
+from app.api.deps import CurrentOperator, PageDep, SessionDep, as_utc
 from app.schemas import EstimatePublic, ScenesPublic
 
 router = APIRouter(prefix="/scenes", tags=["scenes"])
@@ -17,13 +17,12 @@ router = APIRouter(prefix="/scenes", tags=["scenes"])
 def list_scenes(
     session: SessionDep,
     operator: CurrentOperator,
-    settings: SettingsDep,
-    limit: Annotated[int | None, Query(ge=1, le=10_000, description="page size (default 20)")] = None,
-    offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
+    page: PageDep,
 ) -> dict[str, Any]:
     """List the caller's plans, newest first, each with its chosen access and its estimates."""
-    limit = check_page_size(limit, settings)
-    plans, by_plan, total = crud.list_scenes(session=session, operator_id=operator.id, limit=limit, offset=offset)
+    plans, by_plan, total = crud.list_scenes(
+        session=session, operator_id=operator.id, limit=page.limit, offset=page.offset
+    )
     data = [
         {
             "plan_id": p.id,

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, HTTPException, Path, Query, Response
+from fastapi import APIRouter, HTTPException, Path, Response
 
 from app import crud
 from app import openapi_examples as examples
-from app.api.deps import CurrentOperator, SessionDep, SettingsDep, as_utc, check_page_size
+from app.api.deps import CurrentOperator, PageDep, SessionDep, as_utc
 from app.schemas import StationCreate, StationPublic, StationsPublic, Text
 
 router = APIRouter(prefix="/stations", tags=["stations"])
@@ -50,13 +50,10 @@ def create_station(session: SessionDep, operator: CurrentOperator, station_in: S
 def list_stations(
     session: SessionDep,
     operator: CurrentOperator,
-    settings: SettingsDep,
-    limit: Annotated[int | None, Query(ge=1, le=10_000, description="page size (default 20)")] = None,
-    offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
+    page: PageDep,
 ) -> dict[str, Any]:
     """List the caller's stations by name."""
-    limit = check_page_size(limit, settings)
-    rows, total = crud.list_stations(session=session, operator_id=operator.id, limit=limit, offset=offset)
+    rows, total = crud.list_stations(session=session, operator_id=operator.id, limit=page.limit, offset=page.offset)
     return {"data": [_public(r) for r in rows], "count": total}
 
 
