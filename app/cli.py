@@ -521,6 +521,34 @@ def _local_models(args: argparse.Namespace, settings: Any) -> tuple[Any, Any]:
     return est, checkers.get(args.target or checkers.default)
 
 
+def _one_frame(args: argparse.Namespace, data: bytes) -> tuple[str, bytes, bool]:
+    """The one frame ``gsa estimate`` reads: the file itself, or frame ``--frame K`` of a stack (a ``gsa simulate``
+    shard, whose frames are normalised and say so), as .npy bytes; with whether the file says it is normalised."""
+    import io
+
+    import numpy as np
+
+    from app.errors import InputError
+    from app.services import uploads as upload_svc
+
+    name = Path(args.file).name
+    if args.frame is None and not data.startswith(b"PK"):
+        return name, data, False
+    try:
+        frames = upload_svc.decode(data, name, allow_stack=True)
+    except InputError as exc:
+        raise CliError(_input_line(exc)) from None
+    if args.frame is None:
+        if len(frames) == 1:
+            return name, data, frames[0].normalised
+        raise CliError(f"{args.file} holds {len(frames)} frames: pick one with --frame K (0..{len(frames) - 1})")
+    if not 0 <= args.frame < len(frames):
+        raise CliError(f"--frame {args.frame}: {args.file} holds frames 0..{len(frames) - 1}")
+    buf = io.BytesIO()
+    np.save(buf, frames[args.frame].magnitude.astype(np.float32))
+    return f"{name}[{args.frame}]", buf.getvalue(), frames[args.frame].normalised
+
+
 def cmd_estimate(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -542,10 +570,11 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         data = Path(args.file).read_bytes()
     except OSError as exc:
         raise CliError(f"cannot read {args.file}: {exc.strerror}") from None
+    name, data, file_normalised = _one_frame(args, data)
     if args.server:
         form = {
             "resample": str(args.resample).lower(),
-            "normalised": str(args.normalised).lower(),
+            "normalised": str(args.normalised or file_normalised).lower(),
             "refine": str(not args.no_refine).lower(),
         }
         if args.target:
@@ -556,9 +585,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
             form["observed_at"] = args.observed_at
         if cells:
             form.update({"range_cell_m": str(cells[0]), "cross_range_cell_m": str(cells[1])})
-        r = call_server(
-            args, "POST", "/v1/estimates", files={"file": (Path(args.file).name, data)}, data=form, timeout=60
-        )
+        r = call_server(args, "POST", "/v1/estimates", files={"file": (name, data)}, data=form, timeout=60)
         body = r.json()
         _print_checked(body, prefix=f"estimate {body['id']}: ")
         return 0
@@ -568,9 +595,11 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     settings = _settings()
     try:
         est, checker = _local_models(args, settings)
-        (up,) = upload_svc.decode(data, Path(args.file).name, allow_stack=False)
+        (up,) = upload_svc.decode(data, name, allow_stack=False)
         model_cells = (checker.radar.range_cell_m, checker.radar.cross_range_cell_m)
-        frame = upload_svc.prepare(up, est.img_size, args.resample, args.normalised, cells, model_cells)
+        frame = upload_svc.prepare(
+            up, est.img_size, args.resample, args.normalised or file_normalised, cells, model_cells
+        )
         res = est.estimate(frame[None])
         t0 = time.perf_counter()
         checked = checker.check(
@@ -1072,6 +1101,9 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
     es.add_argument("file")
     es.add_argument("--models", help="model directory (default: GSA_MODEL_DIR or the shipped models)")
     es.add_argument("--resample", action="store_true", help="resample a frame of another size")
+    es.add_argument(
+        "--frame", type=int, help="frame K of a stack (.npz [N, H, W], e.g. a gsa simulate shard, read as it is)"
+    )
     es.add_argument(
         "--normalised",
         action="store_true",

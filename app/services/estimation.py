@@ -229,7 +229,7 @@ def estimate_and_store(
             "target": checker.model.name,
             "model": est.identity,
             "timings_s": {**per_frame, "batch_size": len(uploads)},
-            "input_normalised": normalised,
+            "input_normalised": normalised or u.normalised,
             "cells_m": list(cells_m) if cells_m else None,
         }
         placed = in_frames[k]

@@ -28,6 +28,7 @@ class Upload:
     shape: tuple[int, ...]
     dtype: str
     magnitude: NDArray[np.float64]
+    normalised: bool = False  # the file says so: a ``gsa simulate`` shard holds the models' input already
 
 
 def _loc(name: str) -> list[str | int]:
@@ -35,6 +36,8 @@ def _loc(name: str) -> list[str | int]:
 
 
 DEFAULT_MAX_SIDE = 4096
+# What marks a `gsa simulate` shard (inference.simulation.dataset): normalised frames beside their truths.
+SHARD_MEMBERS = {"image.npy", "label.npy", "angles_deg.npy"}
 
 
 def _check_side(shape: tuple[int, ...], name: str, max_side: int) -> None:
@@ -112,6 +115,9 @@ def _npz_arrays(data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE) -> lis
                 raise InputError(
                     _loc(name), f"the .npz archive unpacks to {total} bytes, over {4 * MAX_NPZ_MEMBER_BYTES}"
                 )
+            names = {m.filename for m in members}
+            if SHARD_MEMBERS <= names:  # a gsa simulate shard: its frames, not its labels and truths
+                members = [m for m in members if m.filename == "image.npy"]
             return [(m.filename.removesuffix(".npy"), _npy(zf.read(m), name, max_side)) for m in members]
     except (
         zipfile.BadZipFile,
@@ -123,6 +129,11 @@ def _npz_arrays(data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE) -> lis
         zlib.error,
     ) as exc:
         raise InputError(_loc(name), f"not a readable .npz archive: {exc}") from None
+
+
+def _is_shard(data: bytes) -> bool:
+    with zipfile.ZipFile(io.BytesIO(data)) as zf:
+        return SHARD_MEMBERS <= set(zf.namelist())
 
 
 def _image(data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE) -> NDArray[Any]:
@@ -155,10 +166,12 @@ def decode(data: bytes, name: str, allow_stack: bool = True, max_side: int = DEF
         raise InputError(_loc(name), "the file is empty")
     digest = hashlib.sha256(data).hexdigest()
     head = data[:8]
+    shard = False
     if head.startswith(b"\x93NUMPY"):
         arrays = [(name, _npy(data, name, max_side))]
     elif head.startswith(b"PK"):
         arrays = _npz_arrays(data, name, max_side)
+        shard = [label for label, _ in arrays] == ["image"] and _is_shard(data)
     elif head.startswith(b"\x89PNG") or head[:4] in (b"II*\x00", b"MM\x00*"):
         arrays = [(name, _image(data, name, max_side))]
     else:
@@ -177,7 +190,7 @@ def decode(data: bytes, name: str, allow_stack: bool = True, max_side: int = DEF
             continue
         for k, frame in enumerate(stack):
             frame_name = name if len(stack) == 1 and len(arrays) == 1 else f"{name}:{label}[{k}]"
-            out.append(Upload(frame_name, digest, tuple(frame.shape), str(arr.dtype), _check_array(frame, name)))
+            out.append(Upload(frame_name, digest, tuple(frame.shape), str(arr.dtype), _check_array(frame, name), shard))
     return out
 
 
@@ -227,9 +240,11 @@ def prepare(
     would change it. ``cells_m`` (range, cross-range metres) resamples in metres to the
     models' cells ``model_cells_m`` (``resample_metres``), whatever the frame's size; without it, a frame of
     another size needs ``resample`` (in pixels, which is only right when it spans the same
-    metres as the models' frames).
+    metres as the models' frames). A frame whose file says it is normalised (``upload.normalised``:
+    a ``gsa simulate`` shard) is taken as sent too.
     """
     mag = upload.magnitude
+    normalised = normalised or upload.normalised
     if normalised:
         lo, hi = float(mag.min()), float(mag.max())
         if lo < 0.0 or hi > 1.0:

@@ -363,3 +363,21 @@ def test_an_operators_mesh_is_offered_and_a_bad_one_refused(settings, tmp_path):
     huge.write_text(mesh.read_text())
     with pytest.raises(ModelFileError, match="frame is only"):
         create_app(settings.model_copy(update={"target_model": huge, "target_scale": 50.0}))
+
+
+def test_a_gsa_simulate_shard_is_read_as_it_is(client, tmp_path):
+    """A shard's frames, not its labels and truths, each taken as the normalised frame the file says it is."""
+    from inference.simulation.dataset import DatasetSpec, generate
+
+    generate(DatasetSpec(n=3, seed=11, shard_size=3), tmp_path / "set", SMOKE_RADAR, workers=1, progress=False)
+    data = (tmp_path / "set" / "shard-00000.npz").read_bytes()
+    frames = decode(data, "shard-00000.npz")
+    assert len(frames) == 3 and all(f.normalised for f in frames)
+    assert [f.shape for f in frames] == [(SMOKE_RADAR.n_range, SMOKE_RADAR.n_azimuth)] * 3
+    # Taken as sent: a frame normalised twice would change (its top 0.5 % are clipped to 1 again).
+    np.testing.assert_array_equal(
+        prepare(frames[0], SMOKE_RADAR.n_range, False), frames[0].magnitude.astype(np.float32)
+    )
+    r = client.post("/v1/estimates/batch", files=[("files", ("shard-00000.npz", data))], headers=A)
+    assert r.status_code == 201, r.text
+    assert r.json()["count"] == 3 and all(e["input_normalised"] for e in r.json()["data"])
