@@ -232,7 +232,8 @@ async function estimatePage(id) {
     <p class="muted">${esc(e.id)} · created ${utc(e.created_at)} · target ${esc(e.target || "-")} · frame ${e.shape.join(" x ")}
     ${e.plan_id ? ` · plan <a href="#/plans/${esc(e.plan_id)}">${esc(e.plan_id.slice(0, 8))}</a> observed ${utc(e.observed_at)}` : ""}</p>
     ${verdict}
-    <div class="grid frames"><div class="card"><b>Original frame</b><img id="original" alt="original frame"></div>
+    <div class="grid frames"><div class="card"><b>Original frame</b> <span class="muted">with the fitted outline</span>
+    <canvas id="overlay" class="frame"></canvas><img id="original" alt="original frame" hidden></div>
     <div class="card"><b>Enhanced by UNet++</b><img id="enhanced" alt="enhanced frame"></div></div>
     <h2>Attitude in each frame</h2>
     <table id="attitudes"><thead><tr><th>frame</th><th>Euler z, y, x (deg)</th><th>quaternion w, x, y, z</th></tr></thead><tbody>${frames}</tbody></table>
@@ -241,6 +242,30 @@ async function estimatePage(id) {
     const blob = await api(`/v1/estimates/${encodeURIComponent(id)}/${which}.png`, "blob");
     document.getElementById(which).src = URL.createObjectURL(blob);
   }
+  // The fitted outline (the target's projection at the answer) in orange over the original frame.
+  const [frame, edge] = await Promise.all(["original", "outline"].map(async (which) => {
+    const img = new Image();
+    img.src = URL.createObjectURL(await api(`/v1/estimates/${encodeURIComponent(id)}/${which}.png`, "blob"));
+    await img.decode();
+    return img;
+  }));
+  const canvas = document.getElementById("overlay");
+  canvas.width = frame.width;
+  canvas.height = frame.height;
+  const ctx = canvas.getContext("2d");
+  ctx.drawImage(frame, 0, 0);
+  const scratch = document.createElement("canvas");
+  scratch.width = edge.width;
+  scratch.height = edge.height;
+  const sctx = scratch.getContext("2d");
+  sctx.drawImage(edge, 0, 0);
+  const picture = ctx.getImageData(0, 0, canvas.width, canvas.height);
+  const mask = sctx.getImageData(0, 0, edge.width, edge.height).data;
+  for (let i = 0; i < mask.length; i += 4) {
+    if (mask[i] > 127) picture.data.set([255, 127, 14, 255], i);
+  }
+  ctx.putImageData(picture, 0, 0);
+  canvas.dataset.drawn = "1";
 }
 
 async function route() {

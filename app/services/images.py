@@ -80,3 +80,11 @@ def sweep_blobs(*, session: Any, data_dir: Path, grace_s: float = 0.0) -> int:
 
 def blob_path(data_dir: Path, digest: str) -> Path:
     return Path(data_dir) / "images" / digest[:2] / f"{digest}.png"
+
+
+def outline_png(occupancy: NDArray[np.bool_]) -> bytes:
+    """The edge of a silhouette (its pixels with a neighbour outside it) as an 8-bit PNG: 255 on the edge, 0 elsewhere."""
+    from scipy.ndimage import binary_erosion
+
+    edge = occupancy & ~binary_erosion(occupancy)
+    return png_bytes(edge.astype(np.float64))

@@ -99,7 +99,7 @@ def test_console_pages_in_chromium(served, tmp_path):
         "estimates": (f"{console}/estimates", [est["id"][:8]]),
         "estimate": (
             f"{console}/estimates/{est['id']}",
-            ['id="original" alt="original frame" src="blob:', "observation frame (fitted)"],
+            ['id="original" alt="original frame" hidden="" src="blob:', 'data-drawn="1"', "observation frame (fitted)"],
         ),
         "no-key": (f"{srv.url}/console/", ["Use this key"]),
     }

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Any
 
+import numpy as np
 from fastapi import APIRouter, File, Form, HTTPException, Query, UploadFile
 from fastapi import Path as PathParam
 from fastapi.concurrency import run_in_threadpool
@@ -221,6 +222,31 @@ def original_png(
 ) -> Response:
     """The uploaded frame as the models saw it (normalised)."""
     return _png(settings, _owned(session, operator.id, estimate_id).original_sha256)
+
+
+@router.get(
+    "/{estimate_id}/outline.png",
+    response_class=Response,
+    responses={**NOT_FOUND, 200: {"content": {"image/png": {}}, "description": "the fitted outline, 255 on the edge"}},
+)
+def outline_png(
+    session: SessionDep, operator: CurrentOperator, checkers: CheckersDep, estimate_id: Annotated[Text, PathParam()]
+) -> Response:
+    """The target's projection at the answered attitude, as its edge on the frame's grid (to lay over original.png).
+
+    Drawn again from the stored attitude with the target the frame was fitted to; 404 where that
+    target is no longer served.
+    """
+    from inference.errors import ModelFileError
+
+    e = _owned(session, operator.id, estimate_id)
+    try:
+        checker = checkers.get(e.result.get("target") or checkers.default)
+    except ModelFileError:  # a target this service no longer has
+        raise HTTPException(status_code=404, detail="the estimate's target is not served here") from None
+    angles = np.asarray(e.result["attitude"]["euler_zyx_deg"], float)[None]
+    occupancy = checker.renderer.occupancy(angles)[0] > 0.5
+    return Response(images.outline_png(occupancy), media_type="image/png")
 
 
 @router.delete("/{estimate_id}", status_code=204, responses=NOT_FOUND)

@@ -381,3 +381,15 @@ def test_a_gsa_simulate_shard_is_read_as_it_is(client, tmp_path):
     r = client.post("/v1/estimates/batch", files=[("files", ("shard-00000.npz", data))], headers=A)
     assert r.status_code == 201, r.text
     assert r.json()["count"] == 3 and all(e["input_normalised"] for e in r.json()["data"])
+
+
+def test_the_fitted_outline_is_the_edge_of_the_projection(client, frame):
+    r = client.post("/v1/estimates", files={"file": ("f.npy", _npy(frame))}, headers=A)
+    assert r.status_code == 201, r.text
+    eid = r.json()["id"]
+    png = client.get(f"/v1/estimates/{eid}/outline.png", headers=A)
+    assert png.status_code == 200 and png.headers["content-type"] == "image/png"
+    edge = np.asarray(Image.open(io.BytesIO(png.content)))
+    assert edge.shape == (SMOKE_RADAR.n_range, SMOKE_RADAR.n_azimuth) and set(np.unique(edge)) <= {0, 255}
+    assert 0 < (edge == 255).sum() < edge.size // 4  # a boundary, not a filled shape
+    assert client.get(f"/v1/estimates/{eid}/outline.png", headers={"X-API-Key": KEY_B}).status_code == 404
