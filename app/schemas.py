@@ -56,7 +56,13 @@ Name = Annotated[str, Field(min_length=1, max_length=200, pattern=r"^[^/\\\x00-\
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 
 
-class Strict(BaseModel):
+class Described(BaseModel):
+    """Every field's description is the docstring under it (or its Field's): one place for each field's words."""
+
+    model_config = ConfigDict(use_attribute_docstrings=True)
+
+
+class Strict(Described):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
@@ -73,6 +79,7 @@ class ElementsIn(Strict):
     )
 
     epoch: IsoDateTime
+    """the elements' epoch (ISO 8601, UTC)"""
     # The size and shape: apogee and perigee heights (Table 1), or the semi-major axis and eccentricity.
     ha_km: Annotated[Finite, Field(ge=100.0, le=1.0e6)] | SkipJsonSchema[None] = Field(
         default=None, description="apogee height above 6378.137 km, km"
@@ -87,9 +94,13 @@ class ElementsIn(Strict):
         default=None, description="with semi_major_axis_km"
     )
     inclination_deg: Finite = Field(ge=0.0, le=180.0)
+    """inclination to the GCRS/J2000 equator, deg"""
     raan_deg: Finite = Field(ge=-360.0, le=360.0)
+    """right ascension of the ascending node, deg"""
     arg_perigee_deg: Finite = Field(ge=-360.0, le=360.0)
+    """argument of perigee, deg"""
     mean_anomaly_deg: Finite = Field(ge=-360.0, le=360.0)
+    """mean anomaly at the epoch, deg"""
 
     @model_validator(mode="after")
     def _one_size_and_shape(self) -> ElementsIn:
@@ -109,28 +120,39 @@ class ElementsIn(Strict):
         return self
 
 
-class OmmIn(BaseModel):
+class OmmIn(Described):
     """One CCSDS OMM (mean elements for SGP4) as CelesTrak serves it in JSON (``FORMAT=json``)."""
 
     model_config = ConfigDict(extra="allow", allow_inf_nan=False)
 
     OBJECT_NAME: Annotated[str, Field(max_length=80)] | None = None
+    """the object's name"""
     OBJECT_ID: Annotated[str, Field(max_length=40)] | None = None
+    """international designator (COSPAR), e.g. 1998-067A"""
     EPOCH: Annotated[str, Field(max_length=40, description="UTC, e.g. 2024-03-01T06:00:00.000000")]
     MEAN_MOTION: Finite = Field(description="revolutions a day")
     ECCENTRICITY: Finite
+    """mean eccentricity (SGP4)"""
     INCLINATION: Finite = Field(description="deg")
     RA_OF_ASC_NODE: Finite = Field(description="deg")
     ARG_OF_PERICENTER: Finite = Field(description="deg")
     MEAN_ANOMALY: Finite = Field(description="deg")
     EPHEMERIS_TYPE: int | None = None
+    """0: SGP4"""
     CLASSIFICATION_TYPE: Annotated[str, Field(max_length=1)] | None = None
+    """U: unclassified"""
     NORAD_CAT_ID: int | None = None
+    """NORAD catalogue number"""
     ELEMENT_SET_NO: int | None = None
+    """element set number"""
     REV_AT_EPOCH: int | None = None
+    """revolution number at the epoch"""
     BSTAR: Finite | None = None
+    """SGP4 drag term, 1/earth radii"""
     MEAN_MOTION_DOT: Finite | None = None
+    """first derivative of the mean motion / 2, rev/day^2"""
     MEAN_MOTION_DDOT: Finite | None = None
+    """second derivative of the mean motion / 6, rev/day^3"""
 
 
 ORBIT_SOURCES = ("elements", "tle", "omm", "omm_xml", "omm_csv", "omm_kvn", "opm")
@@ -148,16 +170,21 @@ class OrbitIn(Strict):
     )
 
     name: Name
+    """the satellite's name"""
     # Optional, but never null in the schema: oneOf above says which one is given.
     elements: ElementsIn | SkipJsonSchema[None] = None
+    """orbital elements (Table 1 form: heights, or a and e)"""
     tle: (
         Annotated[list[Annotated[str, Field(max_length=80)]], Field(min_length=2, max_length=3)]
         | Annotated[str, Field(max_length=300)]
         | SkipJsonSchema[None]
     ) = Field(default=None, description="two element lines, a 3LE (a name line first), or the same as one text block")
     omm: OmmIn | SkipJsonSchema[None] = None
+    """one CCSDS OMM as a CelesTrak JSON object"""
     omm_xml: Annotated[str, Field(max_length=20_000)] | SkipJsonSchema[None] = None
+    """one CCSDS OMM as CelesTrak's XML"""
     omm_csv: Annotated[str, Field(max_length=5_000)] | SkipJsonSchema[None] = None
+    """one CCSDS OMM as CelesTrak's CSV (a header line and one row)"""
     omm_kvn: Annotated[str, Field(max_length=20_000)] | SkipJsonSchema[None] = Field(
         default=None, description="a CCSDS OMM in KVN (KEYWORD = value lines), as CelesTrak serves FORMAT=kvn"
     )
@@ -193,9 +220,13 @@ class StationIn(Strict):
     """A ground radar site on the WGS-84 ellipsoid, its horizon and whether elevations are refracted."""
 
     name: Name = "GS"
+    """the station's name"""
     latitude_deg: Finite = Field(ge=-90.0, le=90.0)
+    """geodetic latitude (WGS-84), deg"""
     longitude_deg: Finite = Field(ge=-180.0, le=360.0)
+    """longitude, deg east"""
     altitude_m: Finite = Field(default=0.0, ge=-500.0, le=9000.0)
+    """height above the WGS-84 ellipsoid, m"""
     min_elevation_deg: Finite = Field(
         default=0.0, ge=-5.0, le=89.0, description="the lowest elevation the radar tracks at, in every direction (deg)"
     )
@@ -257,15 +288,19 @@ class StationCreate(StationIn):
     )
 
     name: Name
+    """the station's name, unique among yours"""
 
 
 class StationPublic(StationIn):
     created_at: datetime
+    """when it was stored (UTC)"""
 
 
-class StationsPublic(BaseModel):
+class StationsPublic(Described):
     data: list[StationPublic]
+    """the stations of this page, by name"""
     count: int
+    """how many stations you have"""
 
 
 class SearchIn(Strict):
@@ -273,17 +308,29 @@ class SearchIn(Strict):
 
     start: IsoDateTime | None = Field(default=None, description="default: the target's epoch")
     duration_days: Finite = Field(default=10.0, gt=0.0, le=30.0)
+    """the span to search from start, days (at most 30)"""
     reading: Literal["osculating", "mean"] = "osculating"
+    """osculating (the instantaneous orbit, numerical J2) or mean (J2 secular rates)"""
     dha_min_km: Finite = Field(default=-50.0, ge=-500.0, le=500.0)
+    """the lowest apogee height change to try, km"""
     dha_max_km: Finite = Field(default=50.0, ge=-500.0, le=500.0)
+    """the highest apogee height change, km"""
     dhp_min_km: Finite = Field(default=-50.0, ge=-500.0, le=500.0)
+    """the lowest perigee height change, km"""
     dhp_max_km: Finite = Field(default=50.0, ge=-500.0, le=500.0)
+    """the highest perigee height change, km"""
     step_km: Finite = Field(default=0.1, ge=0.001, le=100.0)
+    """the (dHa, dHp) grid step, km"""
     max_miss_km: Finite = Field(default=10.0, gt=0.0, le=1.0e5)
+    """a candidate's node-line miss may be at most this, km"""
     revolutions_before: list[Literal[1, 2]] = Field(default=[1, 2], min_length=1, max_length=2)
+    """how many target revolutions before t_access the phasing burn may be"""
     criterion: Literal["smallest_change", "least_dv"] = "least_dv"
+    """how the chosen candidate is picked: least_dv or smallest_change"""
     max_imaging_range_km: Finite = Field(default=50.0, gt=0.0)
+    """the observer may be at most this far from the target at t_access, km"""
     max_phase_angle_deg: Finite = Field(default=90.0, gt=0.0, le=180.0)
+    """the Sun-target-observer angle may be at most this, deg"""
     standoff_km: Finite = Field(
         default=5.0,
         ge=0.5,
@@ -348,11 +395,14 @@ class PlanCreate(Strict):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False, json_schema_extra={"examples": [PAPER_EXAMPLE]})
 
     target: OrbitIn
+    """the satellite to image"""
     observer: OrbitIn
+    """the optical observer satellite that manoeuvres"""
     ground_station: GroundStationIn = Field(
         description="the radar site, or the name of one stored under /v1/stations (the plan keeps a copy)"
     )
     search: SearchIn = Field(default_factory=SearchIn)
+    """the search: span, box, ranking and encounter limits (defaults: the paper's)"""
 
 
 class AccessCreate(Strict):
@@ -367,49 +417,78 @@ class AccessCreate(Strict):
     )
 
     target: OrbitIn
+    """the satellite"""
     ground_station: GroundStationIn = Field(description="the radar site, or the name of one stored under /v1/stations")
     start: IsoDateTime | None = None
+    """the start of the span (ISO 8601, UTC; default: the target's epoch)"""
     duration_days: Finite = Field(default=7.0, gt=0.0, le=30.0)
+    """the span, days (at most 30)"""
     reading: Literal["osculating", "mean"] = "osculating"
+    """osculating (numerical J2) or mean (J2 secular rates)"""
 
 
 # Responses
-class WindowPublic(BaseModel):
+class WindowPublic(Described):
     rise: datetime
+    """when the target rises above the mask (UTC)"""
     culmination: datetime
+    """its highest elevation (UTC)"""
     set: datetime
+    """when it sets below the mask (UTC)"""
     duration_s: float
+    """set - rise, s"""
     max_elevation_deg: float
+    """the highest elevation, deg (refracted when the station asks for it)"""
     rise_azimuth_deg: float
+    """azimuth at rise, deg from north through east"""
     culmination_azimuth_deg: float
+    """azimuth at culmination, deg"""
     set_azimuth_deg: float
+    """azimuth at set, deg"""
     min_range_km: float
+    """the least slant range inside the window, km"""
     rise_clipped: bool
+    """true when the pass was already in progress at the span's start (rise is the start)"""
     set_clipped: bool
+    """true when it was still in progress at the span's end"""
 
 
-class FeasibilityPublic(BaseModel):
+class FeasibilityPublic(Described):
     sunlit: bool
+    """whether the target is in sunlight at t_access (an optical observer needs it)"""
     feasible: bool
+    """whether every check passes"""
     reasons: list[str]
+    """each failed check in words; empty when feasible"""
     observer_range_km: float | None
+    """observer-target distance at t_access, km (the chosen candidate's, once planned)"""
     phase_angle_deg: float | None
+    """Sun-target-observer angle at t_access, deg (the chosen candidate's)"""
 
 
-class CandidatePublic(BaseModel):
+class CandidatePublic(Described):
     pass_index: int
+    """which access window (0-based) this candidate belongs to"""
     node: str
+    """the node line the alignment uses: +OC on the target's ascending side, -OC on its descending side"""
     t_access: datetime
+    """the moment the target crosses the observer's orbital plane inside the pass (UTC)"""
     delta_ha_km: float
+    """the observer's apogee height change this alignment needs, km"""
     delta_hp_km: float
+    """the observer's perigee height change, km"""
     miss_km: float
+    """distance of the target from the changed observer's orbital plane at t_access, km"""
     change_km: float
+    """|dHa| + |dHp|, km: what smallest_change ranks by"""
     t_access_range: list[datetime] | None
+    """the earliest and latest t_access the (dHa, dHp) box reaches in this pass, or null"""
     family: list[list[float]] = Field(description="(dHa, dHp) km pairs aligning the node line at the same moment")
     feasibility: FeasibilityPublic
+    """whether this candidate can be imaged: light, range, phase angle"""
 
 
-class VerificationPublic(BaseModel):
+class VerificationPublic(Described):
     miss_km: float = Field(
         description="numerically propagated (J2) distance of the observer from its aim point at T_access"
     )
@@ -417,6 +496,7 @@ class VerificationPublic(BaseModel):
         description="distance from the target if the plain two-body Lambert burn were flown"
     )
     corrections: int
+    """differential corrections the shooting took to meet the aim point"""
     relative_speed_km_s: float = Field(description="observer-target relative speed at T_access")
     standoff_km: float = Field(description="distance of the aim point from the target")
     separation_km: float = Field(description="propagated observer-target distance at T_access")
@@ -424,71 +504,107 @@ class VerificationPublic(BaseModel):
         description="least observer-target distance from the burn to one orbit after T_access"
     )
     closest_approach_time: datetime
+    """when the closest approach is (UTC)"""
     target_angular_rate_deg_s: float = Field(
         description="the target's angular rate seen from the observer at T_access (what an optical tracker must follow)"
     )
 
 
-class PhasingPublic(BaseModel):
+class PhasingPublic(Described):
     t_burn: datetime
+    """the phasing burn's moment (UTC)"""
     t_access: datetime
+    """the imaging moment the burn aims at (UTC)"""
     revolutions_before: int
+    """how many target revolutions before t_access the burn is"""
     lambert_revolutions: int
+    """complete revolutions of the Lambert arc"""
     dv_m_s: list[float] = Field(description="impulse in GCRS, m/s")
     dv_rtn_m_s: list[float] = Field(description="impulse in radial / along-track / cross-track, m/s")
     dv_total_m_s: float
+    """the burn's size, m/s"""
     verification: VerificationPublic
+    """the burn flown by the numerical J2 propagator, and the encounter it gives"""
 
 
-class PlanResult(BaseModel):
+class PlanResult(Described):
     epoch: datetime
+    """the start of the search span (UTC)"""
     duration_days: float
+    """the span searched, days"""
     reading: str
+    """how the elements were read: osculating or mean"""
     access_windows: list[WindowPublic]
+    """every pass of the target over the station"""
     candidates: list[CandidatePublic]
+    """the best alignment of each pass, ranked by miss"""
     chosen: CandidatePublic | None
+    """the candidate planned (the best sunlit one by the criterion), or null"""
     alignment_dv_m_s: float | None
+    """the height change's cost, m/s"""
     phasing: PhasingPublic | None
+    """the burn that brings the observer to the target at t_access, or null"""
     timings_s: dict[str, float]
+    """where the planning time went, seconds"""
     notes: list[str]
+    """what the planner wants the operator to know, in words"""
 
 
 class PlanPublic(PlanResult):
     id: str
+    """the plan's id"""
     created_at: datetime
+    """when it was stored (UTC)"""
     target_name: str
+    """the target's name"""
     observer_name: str
+    """the observer's name"""
     station_name: str
+    """the station's name"""
 
 
-class PlanSummary(BaseModel):
+class PlanSummary(Described):
     id: str
+    """the plan's id"""
     created_at: datetime
+    """when it was stored (UTC)"""
     target_name: str
+    """the target's name"""
     observer_name: str
+    """the observer's name"""
     station_name: str
+    """the station's name"""
     t_access: datetime | None
+    """the chosen candidate's t_access (UTC), or null"""
     miss_km: float | None
+    """the chosen candidate's miss, km, or null"""
 
 
-class PlansPublic(BaseModel):
+class PlansPublic(Described):
     data: list[PlanSummary]
+    """the plans of this page, newest first"""
     count: int
+    """how many plans match in all"""
 
 
-class AccessPublic(BaseModel):
+class AccessPublic(Described):
     epoch: datetime
+    """the start of the span (UTC)"""
     duration_days: float
+    """the span searched, days"""
     access_windows: list[WindowPublic]
+    """every pass of the target over the station in the span, in time order"""
 
 
-class AttitudePublic(BaseModel):
+class AttitudePublic(Described):
     euler_zyx_deg: list[float] = Field(description="Euler angles z, y, x (deg): R = Rz Ry Rx, body to frame")
     quaternion_wxyz: list[float]
+    """the same rotation as a unit quaternion, scalar first (body to frame)"""
     rotation_matrix: list[list[float]]
+    """the same rotation as a 3 x 3 matrix, rows the frame's axes in body coordinates (body to frame: v_frame = R v_body)"""
 
 
-class QualityPublic(BaseModel):
+class QualityPublic(Described):
     silhouette_iou: float = Field(
         description="IoU of the fitted projection (the label the simulator would draw) with UNet++'s silhouette; "
         "fresh frames of the default target: 0.98-0.99"
@@ -503,6 +619,7 @@ class QualityPublic(BaseModel):
 
 class AlternativePublic(AttitudePublic):
     silhouette_iou: float
+    """IoU of this attitude's projection with UNet++'s silhouette"""
     fit_gap: float = Field(
         description="how much lower its soft IoU is than the answer's; negative when it fits better but the answer "
         "stays nearer Swin's estimate (Swin saw the brightness the silhouette lacks)"
@@ -510,16 +627,25 @@ class AlternativePublic(AttitudePublic):
     distance_deg: float = Field(description="rotation angle between it and the answer")
 
 
-class EstimatePublic(BaseModel):
+class EstimatePublic(Described):
     id: str
+    """the estimate's id"""
     created_at: datetime
+    """when it was stored (UTC)"""
     plan_id: str | None
+    """the plan the frame belongs to, if one was given"""
     observed_at: datetime | None
+    """when the frame was observed (UTC), if given"""
     input_name: str
+    """the uploaded file's name (with the member and index for stacks)"""
     input_sha256: str
+    """sha256 of the uploaded file"""
     shape: list[int]
+    """the uploaded frame's shape [rows, columns]"""
     dtype: str
+    """the uploaded array's type"""
     snr_db: float | None
+    """the SNR the caller stated, dB, if any"""
     attitude: AttitudePublic = Field(
         description="in the ISAR observation frame: the fitted attitude (Swin's own when refine=false)"
     )
@@ -533,13 +659,18 @@ class EstimatePublic(BaseModel):
         default_factory=list, description="other attitudes that fit nearly as well, e.g. the near-mirror (z, -y, -x)"
     )
     attitude_lvlh: AttitudePublic | None = None
+    """the attitude in the target's LVLH frame (with plan_id and observed_at)"""
     attitude_j2000: AttitudePublic | None = None
+    """the attitude in J2000/GCRS (with plan_id and observed_at)"""
     model: dict[str, Any]
+    """the models that answered: their card's name and file hashes"""
     timings_s: dict[str, float]
+    """where the time went, seconds (decoding, the networks, the fit)"""
     input_normalised: bool = Field(
         False, description="true when the frame was sent already normalised (normalised=true) and taken as sent"
     )
     links: dict[str, str]
+    """the estimate's own URL and its images' URLs"""
 
     @staticmethod
     def row_json(e: Any) -> dict[str, Any]:
@@ -574,29 +705,40 @@ class EstimatePublic(BaseModel):
         }
 
 
-class EstimatesPublic(BaseModel):
+class EstimatesPublic(Described):
     data: list[EstimatePublic]
+    """the estimates of this page"""
     count: int
+    """how many estimates match in all"""
 
 
-class ScenePublic(BaseModel):
+class ScenePublic(Described):
     plan_id: str
+    """the plan"""
     target_name: str
+    """its target's name"""
     t_access: datetime | None
+    """its chosen t_access (UTC), or null"""
     miss_km: float | None
+    """its chosen miss, km, or null"""
     estimates: list[EstimatePublic]
+    """the estimates tied to the plan"""
 
 
-class ScenesPublic(BaseModel):
+class ScenesPublic(Described):
     data: list[ScenePublic]
+    """the scenes of this page, newest first"""
     count: int
+    """how many plans the caller has"""
 
 
-class ErrorMessage(BaseModel):
+class ErrorMessage(Described):
     """An error that is not about one field: its reason and the request id to quote."""
 
     detail: str
+    """what was wrong and what to do"""
     request_id: str | None = None
+    """the X-Request-ID of the request, to find it in the server's log"""
 
 
 ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
@@ -606,19 +748,28 @@ ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
 }
 
 
-class PassFramePublic(BaseModel):
+class PassFramePublic(Described):
     index: int
+    """the frame's place in the upload (0-based)"""
     name: str
+    """the frame's file name or stack member"""
     observed_at: datetime
+    """when the frame was observed (UTC)"""
     attitude: AttitudePublic = Field(description="the frame's fitted attitude, in its own observation frame")
     attitude_network: AttitudePublic | None = None
+    """Swin's own estimate for this frame"""
     refined: bool
+    """whether the frame was fitted"""
     quality: QualityPublic
+    """the frame's checks and bounds"""
     alternatives: list[AlternativePublic]
+    """other attitudes that fit the frame nearly as well"""
     attitude_lvlh: AttitudePublic = Field(description="the branch the fusion took for this frame, in LVLH")
     branch: str = Field(description="answer, near-mirror, or alternative N: which of the frame's candidates agreed")
     used: bool
+    """whether the fusion used this frame"""
     rejected_because: str | None = None
+    """why it was not used, in words; null when used"""
     residual_deg: float = Field(description="rotation angle between this frame's branch and the fused attitude")
 
 
@@ -626,32 +777,42 @@ class PassAttitudeJ2000(AttitudePublic):
     at: datetime = Field(description="LVLH turns with the orbit: the J2000 attitude holds at this moment (mid-pass)")
 
 
-class PassPublic(BaseModel):
+class PassPublic(Described):
     id: str
+    """the pass's id"""
     created_at: datetime
+    """when it was stored (UTC)"""
     plan_id: str | None
+    """the plan the pass belongs to"""
     target: str
+    """the target model the frames were fitted to"""
     attitude_lvlh: AttitudePublic = Field(
         description="the fused attitude, body to LVLH (x radial, y along-track, z normal)"
     )
     attitude_j2000: PassAttitudeJ2000
+    """the fused attitude in J2000/GCRS at the pass's middle"""
     uncertainty_deg: list[float] = Field(description="90 % bound on the fused LVLH Euler z, y, x (deg)")
     trusted: bool = Field(
         default=True,
         description="false when fewer than 3 trusted frames agree: the fused attitude rests on too little",
     )
     used: int
+    """how many frames the fusion used"""
     rejected: int
+    """how many it did not use"""
     stable: bool = Field(description="false when the frames show a body rate beyond their scatter")
     rate_deg_s: list[float] = Field(description="the fitted body rate (deg/s, body axes)")
     rate_sigma_deg_s: list[float | None]
+    """the fitted turning rate's standard error, deg/s (the turning model)"""
     turning_chi2: float | None = Field(
         default=None,
         description="how much better (chi-square, 3 degrees of freedom) a constant-rate model fits the frames than a "
         "still attitude; the target is called turning over 30",
     )
     stability: str
+    """the stability verdict in words: still in LVLH, or turning at a rate"""
     frames: list[PassFramePublic]
+    """every frame's own answer and its part in the fusion"""
 
     @staticmethod
     def row_json(p: Any) -> dict[str, Any]:
