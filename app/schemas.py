@@ -38,7 +38,15 @@ def utc_or_none(moment: datetime | None) -> datetime | None:
     return None if moment is None else as_utc(moment)
 
 
-IsoDateTime = Annotated[datetime, BeforeValidator(_iso_only), AfterValidator(as_utc)]
+def _as_utc_in_range(moment: datetime) -> datetime:
+    """The same instant in UTC; one that UTC cannot hold (0001-01-01T00:00+14:00) is a 422, not a crash."""
+    try:
+        return as_utc(moment)
+    except OverflowError:
+        raise ValueError("this date-time falls outside years 1-9999 once in UTC; give a real epoch") from None
+
+
+IsoDateTime = Annotated[datetime, BeforeValidator(_iso_only), AfterValidator(_as_utc_in_range)]
 
 CONTROL_CHARACTERS = re.compile(r"[\x00-\x1f\x7f]")
 

@@ -149,6 +149,15 @@ class Case:
 
 PLANS, EST = "/v1/plans", "/v1/estimates"
 CASES = [
+    # A date-time UTC cannot hold (found by make fuzz: it was a 500)
+    Case(
+        "epoch_beyond_utc",
+        "POST",
+        PLANS,
+        _plan(**{"target.elements.epoch": "0001-01-01T00:00:00+14:00"}),
+        422,
+        "outside years 1-9999",
+    ),
     # TLEs
     Case(
         "tle_line_too_short",
