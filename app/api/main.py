@@ -15,6 +15,14 @@ def _query_names(dep: Dependant) -> set[str]:
     return names
 
 
+def _form_names(dep: Dependant) -> set[str]:
+    """Every form field a route takes, its dependencies' included (the estimate routes share theirs)."""
+    names = {p.alias for p in dep.body_params}
+    for sub in dep.dependencies:
+        names |= _form_names(sub)
+    return names
+
+
 def reject_unknown_query(request: Request, _operator: CurrentOperator) -> None:
     """Refuse query parameters a route does not take: a misspelt filter must not silently list everything.
 
@@ -37,7 +45,7 @@ async def reject_unknown_form_fields(request: Request, _operator: CurrentOperato
     route = request.scope.get("route")
     if not isinstance(route, APIRoute) or not request.headers.get("content-type", "").startswith("multipart/"):
         return
-    allowed = {p.alias for p in route.dependant.body_params}
+    allowed = _form_names(route.dependant)
     unknown = sorted(set((await request.form()).keys()) - allowed)
     if unknown:
         raise InputError(

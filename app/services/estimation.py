@@ -6,6 +6,7 @@ Uploads are decoded in ``uploads``; images are written and stored in ``images``.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
 
@@ -170,27 +171,37 @@ def attitudes_in_frames(
     return out
 
 
+@dataclass(frozen=True)
+class EstimateRequest:
+    """What an estimate's form asks, beside its frames (the single and the batch route take the same)."""
+
+    resample: bool = False
+    plan_id: str | None = None
+    observed_at: datetime | None = None
+    normalised: bool = False
+    refine: bool = True
+    target: str | None = None
+    cells_m: tuple[float, float] | None = None
+
+
 def estimate_and_store(
     *,
     session: Any,
     operator_id: str,
     settings: Any,
     est: Any,
-    uploads: list[Upload],
-    resample: bool,
-    plan_id: str | None,
-    observed_at: datetime | None,
-    snr_db: float | None,
-    normalised: bool = False,
     checker: Any,
-    refine: bool = True,
-    cells_m: tuple[float, float] | None = None,
+    uploads: list[Upload],
+    asked: EstimateRequest,
+    snr_db: float | None = None,
 ) -> list[Estimate]:
     """Validate everything, run the models on one batch, store the images, then the rows in one transaction.
 
     The single and batch upload routes both end here; the images are stored before their rows, and
     again after them, because a concurrent delete of an estimate with the same image may remove it.
     """
+    resample, plan_id, observed_at = asked.resample, asked.plan_id, asked.observed_at
+    normalised, refine, cells_m = asked.normalised, asked.refine, asked.cells_m
     if not uploads:
         raise InputError(["file"], "no frames in the upload")
     if len(uploads) > settings.max_batch_frames:

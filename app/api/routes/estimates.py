@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
-from fastapi import APIRouter, File, Form, HTTPException, Query, UploadFile
+from fastapi import APIRouter, Depends, File, Form, HTTPException, Query, UploadFile
 from fastapi import Path as PathParam
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse, Response
@@ -63,6 +63,31 @@ FILE = (
 )
 
 
+def estimate_form(
+    resample: Annotated[bool, Form(description=RESAMPLE)] = False,
+    plan_id: Annotated[Text | None, Form(max_length=36, description=PLAN_ID)] = None,
+    observed_at: Annotated[IsoDateTime | None, Form(description=OBSERVED_AT)] = None,
+    normalised: Annotated[bool, Form(description=NORMALISED)] = False,
+    refine: Annotated[bool, Form(description=REFINE)] = True,
+    target: Annotated[Text | None, Form(max_length=200, description=TARGET)] = None,
+    range_cell_m: Annotated[float | None, Form(gt=0, le=100, description=RANGE_CELL)] = None,
+    cross_range_cell_m: Annotated[float | None, Form(gt=0, le=100, description=CROSS_RANGE_CELL)] = None,
+) -> svc.EstimateRequest:
+    """The form fields both estimate routes take, read once."""
+    return svc.EstimateRequest(
+        resample=resample,
+        plan_id=plan_id,
+        observed_at=as_utc(observed_at),
+        normalised=normalised,
+        refine=refine,
+        target=target,
+        cells_m=cells_from_form(range_cell_m, cross_range_cell_m),
+    )
+
+
+EstimateFormDep = Annotated[svc.EstimateRequest, Depends(estimate_form)]
+
+
 @router.post(
     "",
     status_code=201,
@@ -78,20 +103,12 @@ async def create_estimate(
     settings: SettingsDep,
     est: EstimatorDep,
     checkers: CheckersDep,
+    asked: EstimateFormDep,
     file: Annotated[UploadFile, File(description=FILE)],
-    resample: Annotated[bool, Form(description=RESAMPLE)] = False,
-    plan_id: Annotated[Text | None, Form(max_length=36, description=PLAN_ID)] = None,
-    observed_at: Annotated[IsoDateTime | None, Form(description=OBSERVED_AT)] = None,
     snr_db: Annotated[float | None, Form(ge=-100, le=200, description=SNR_DB)] = None,
-    normalised: Annotated[bool, Form(description=NORMALISED)] = False,
-    refine: Annotated[bool, Form(description=REFINE)] = True,
-    target: Annotated[Text | None, Form(max_length=200, description=TARGET)] = None,
-    range_cell_m: Annotated[float | None, Form(gt=0, le=100, description=RANGE_CELL)] = None,
-    cross_range_cell_m: Annotated[float | None, Form(gt=0, le=100, description=CROSS_RANGE_CELL)] = None,
 ) -> dict[str, Any]:
     """Estimate the attitude of one ISAR frame: Swin's answer, fitted to the target's projection and checked; stored."""
-    cells_m = cells_from_form(range_cell_m, cross_range_cell_m)
-    checker = checker_for(checkers, target)
+    checker = checker_for(checkers, asked.target)
     data = await read_upload(file, settings.max_upload_bytes)
     # Decoding, the models and the database run in a worker thread, so the event loop keeps serving meanwhile.
     uploads = await run_in_threadpool(
@@ -105,15 +122,10 @@ async def create_estimate(
         operator_id=operator.id,
         settings=settings,
         est=est,
-        uploads=uploads,
-        resample=resample,
-        plan_id=plan_id,
-        observed_at=as_utc(observed_at),
-        snr_db=snr_db,
-        normalised=normalised,
         checker=checker,
-        refine=refine,
-        cells_m=cells_m,
+        uploads=uploads,
+        asked=asked,
+        snr_db=snr_db,
     )
     return EstimatePublic.row_json(rows[0])
 
@@ -127,19 +139,11 @@ async def create_estimates_batch(
     settings: SettingsDep,
     est: EstimatorDep,
     checkers: CheckersDep,
+    asked: EstimateFormDep,
     files: Annotated[list[UploadFile], File(description="several frames, or one .npz stack [N, H, W]; " + FILE)],
-    resample: Annotated[bool, Form(description=RESAMPLE)] = False,
-    plan_id: Annotated[Text | None, Form(max_length=36, description=PLAN_ID)] = None,
-    observed_at: Annotated[IsoDateTime | None, Form(description=OBSERVED_AT)] = None,
-    normalised: Annotated[bool, Form(description=NORMALISED)] = False,
-    refine: Annotated[bool, Form(description=REFINE)] = True,
-    target: Annotated[Text | None, Form(max_length=200, description=TARGET)] = None,
-    range_cell_m: Annotated[float | None, Form(gt=0, le=100, description=RANGE_CELL)] = None,
-    cross_range_cell_m: Annotated[float | None, Form(gt=0, le=100, description=CROSS_RANGE_CELL)] = None,
 ) -> dict[str, Any]:
     """Estimate several frames as one batch through the models, each fitted and checked; one stored row each."""
-    cells_m = cells_from_form(range_cell_m, cross_range_cell_m)
-    checker = checker_for(checkers, target)
+    checker = checker_for(checkers, asked.target)
     uploads = await read_uploads(files, settings)
     rows = await run_in_threadpool(
         svc.estimate_and_store,
@@ -147,15 +151,9 @@ async def create_estimates_batch(
         operator_id=operator.id,
         settings=settings,
         est=est,
-        uploads=uploads,
-        resample=resample,
-        plan_id=plan_id,
-        observed_at=as_utc(observed_at),
-        snr_db=None,
-        normalised=normalised,
         checker=checker,
-        refine=refine,
-        cells_m=cells_m,
+        uploads=uploads,
+        asked=asked,
     )
     return {"data": [EstimatePublic.row_json(r) for r in rows], "count": len(rows)}
 
