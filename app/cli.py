@@ -12,6 +12,7 @@ import math
 import os
 import sys
 import time
+from collections.abc import Callable
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -204,6 +205,28 @@ def call_server(args: argparse.Namespace, method: str, path: str, timeout: float
     return r
 
 
+def _print_listing(
+    args: argparse.Namespace,
+    path: str,
+    filters: dict[str, Any],
+    title: str,
+    header: str,
+    row: Callable[[dict[str, Any]], str],
+) -> int:
+    """GET a listing route (``--limit`` and the filters given) and print it as JSON or as a table of ``row``s
+    under ``title`` (a format of ``count``, all that match, and ``shown``)."""
+    params = {"limit": args.limit, **{k: v for k, v in filters.items() if v}}
+    body = call_server(args, "GET", path, params=params).json()
+    if args.json:
+        print(json.dumps(body, indent=2))
+        return 0
+    print(title.format(count=body["count"], shown=len(body["data"])))
+    print(header)
+    for item in body["data"]:
+        print(row(item))
+    return 0
+
+
 def cmd_plans(args: argparse.Namespace) -> int:
     from urllib.parse import quote
 
@@ -218,24 +241,21 @@ def cmd_plans(args: argparse.Namespace) -> int:
             )
             print(format_plan(body))
         return 0
-    params: dict[str, Any] = {"limit": args.limit}
-    if args.target_name:
-        params["target_name"] = args.target_name
-    body = call_server(args, "GET", "/v1/plans", params=params).json()
-    if args.json:
-        print(json.dumps(body, indent=2))
-        return 0
-    print(f"{body['count']} plans; newest {len(body['data'])}:")
-    print(
-        f"{'id':<36}  {'created (UTC)':<24}  {'target':<16} {'observer':<16} {'station':<14} {'T_access (UTC)':<24} {'miss (km)':>9}"
-    )
-    for p in body["data"]:
+
+    def row(p: dict[str, Any]) -> str:
         miss = "-" if p["miss_km"] is None else f"{p['miss_km']:9.3f}"
-        print(
+        return (
             f"{p['id']:<36}  {utc_text(p['created_at']):<24}  {p['target_name'][:16]:<16} {p['observer_name'][:16]:<16} "
             f"{p['station_name'][:14]:<14} {utc_text(p['t_access']):<24} {miss:>9}"
         )
-    return 0
+
+    header = (
+        f"{'id':<36}  {'created (UTC)':<24}  {'target':<16} {'observer':<16} {'station':<14} {'T_access (UTC)':<24} "
+        f"{'miss (km)':>9}"
+    )
+    return _print_listing(
+        args, "/v1/plans", {"target_name": args.target_name}, "{count} plans; newest {shown}:", header, row
+    )
 
 
 def cmd_estimates(args: argparse.Namespace) -> int:
@@ -250,23 +270,20 @@ def cmd_estimates(args: argparse.Namespace) -> int:
                 body, prefix=f"estimate {body['id']} ({body['input_name']}, {utc_text(body['created_at'])}): "
             )
         return 0
-    params: dict[str, Any] = {"limit": args.limit}
-    if args.plan_id:
-        params["plan_id"] = args.plan_id
-    body = call_server(args, "GET", "/v1/estimates", params=params).json()
-    if args.json:
-        print(json.dumps(body, indent=2))
-        return 0
-    print(f"{body['count']} estimates; newest {len(body['data'])}:")
-    print(f"{'id':<36}  {'created (UTC)':<24}  {'input':<20} {'z, y, x (deg)':<22} {'trusted':<7}  plan")
-    for e in body["data"]:
+
+    def row(e: dict[str, Any]) -> str:
         z, y, x = e["attitude"]["euler_zyx_deg"]
-        trusted = "yes" if e.get("quality", {}).get("trusted") else "no"
-        print(
+        quality = e.get("quality")  # null on estimates made before the checks
+        trusted = "-" if quality is None else "yes" if quality["trusted"] else "no"
+        return (
             f"{e['id']:<36}  {utc_text(e['created_at']):<24}  {e['input_name'][:20]:<20} "
             f"{f'{z:.2f}, {y:.2f}, {x:.2f}':<22} {trusted:<7}  {e.get('plan_id') or '-'}"
         )
-    return 0
+
+    header = f"{'id':<36}  {'created (UTC)':<24}  {'input':<20} {'z, y, x (deg)':<22} {'trusted':<7}  plan"
+    return _print_listing(
+        args, "/v1/estimates", {"plan_id": args.plan_id}, "{count} estimates; newest {shown}:", header, row
+    )
 
 
 def cmd_stations(args: argparse.Namespace) -> int:
@@ -283,20 +300,18 @@ def cmd_stations(args: argparse.Namespace) -> int:
     if args.stations_cmd == "show":
         print(json.dumps(call_server(args, "GET", f"/v1/stations/{quote(args.name, safe='')}").json(), indent=2))
         return 0
-    body = call_server(args, "GET", "/v1/stations", params={"limit": args.limit}).json()
-    if args.json:
-        print(json.dumps(body, indent=2))
-        return 0
-    print(f"{body['count']} stations:")
-    print(
-        f"{'name':<24} {'lat (deg)':>10} {'lon (deg)':>10} {'alt (m)':>8} {'min el (deg)':>12} {'mask points':>11}  refraction"
-    )
-    for st in body["data"]:
-        print(
+
+    def row(st: dict[str, Any]) -> str:
+        return (
             f"{st['name'][:24]:<24} {st['latitude_deg']:10.4f} {st['longitude_deg']:10.4f} {st['altitude_m']:8.0f} "
             f"{st['min_elevation_deg']:12.1f} {len(st.get('mask') or []):11d}  {'on' if st['refraction'] else 'off'}"
         )
-    return 0
+
+    header = (
+        f"{'name':<24} {'lat (deg)':>10} {'lon (deg)':>10} {'alt (m)':>8} {'min el (deg)':>12} {'mask points':>11}  "
+        "refraction"
+    )
+    return _print_listing(args, "/v1/stations", {}, "{count} stations:", header, row)
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
@@ -846,7 +861,6 @@ def cmd_pass(args: argparse.Namespace) -> int:
         ) from None
     if args.server:
         return _pass_on_server(args, data, rec)
-    from app.services import estimation as svc
     from app.services import passes as pass_svc
     from app.services import uploads as upload_svc
 
@@ -861,21 +875,16 @@ def cmd_pass(args: argparse.Namespace) -> int:
         uploads = upload_svc.decode(data, "frames.npz")
         if len(uploads) != len(times):
             raise CliError(f"frames.npz holds {len(uploads)} frames and pass.json {len(times)} times")
-        t0 = time.perf_counter()
-        frames, _, checks, _ = svc.check_frames(
-            est=est, checker=checker, uploads=uploads, resample=False, normalised=True, cells_m=None, search=False
-        )
-        t1 = time.perf_counter()
-        result, _ = pass_svc.fuse_pass(
+        fused = pass_svc.fit_and_fuse(
             est=est,
             checker=checker,
-            frames=frames,
-            checks=checks,
+            uploads=uploads,
             plan_request=request,
             observed_at=times,
+            normalised=True,
             names=[f"frame {k}" for k in range(len(times))],
         )
-        t2 = time.perf_counter()
+        result = fused.result
     except InputError as exc:
         raise CliError(_input_line(exc)) from None
     except InferenceError as exc:
@@ -884,7 +893,7 @@ def cmd_pass(args: argparse.Namespace) -> int:
         print(json.dumps(result, indent=1, default=str))
     else:
         _print_pass(result, rec)
-        print(f"{len(times)} frames: estimated and fitted in {t1 - t0:.1f} s, fused in {t2 - t1:.1f} s")
+        print(f"{len(times)} frames: estimated and fitted in {fused.fit_s:.1f} s, fused in {fused.fuse_s:.1f} s")
     if args.plot:
         _plot_pass(result, rec, args.plot)
         print(f"plot written to {args.plot}", file=sys.stderr)

@@ -19,7 +19,6 @@ from __future__ import annotations
 import json
 import math
 import sys
-import time
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -27,7 +26,6 @@ from typing import Any
 import numpy as np
 
 from app.schemas import PAPER_EXAMPLE, AccessCreate
-from app.services import estimation as svc
 from app.services import passes as pass_svc
 from app.services import uploads as upload_svc
 from app.services.planning import run_access
@@ -65,21 +63,15 @@ def one_pass(est: Any, checker: Any, window: dict[str, Any], opts: pass_svc.Pass
     uploads = [
         upload_svc.Upload(f"frame {k}", "", im.shape, "float32", im.astype(np.float64)) for k, im in enumerate(images)
     ]
-    t0 = time.perf_counter()
-    frames, _, checks, _ = svc.check_frames(
-        est=est, checker=checker, uploads=uploads, resample=False, normalised=True, cells_m=None, search=False
-    )
-    result, checks = pass_svc.fuse_pass(
+    fused = pass_svc.fit_and_fuse(
         est=est,
         checker=checker,
-        frames=frames,
-        checks=checks,
+        uploads=uploads,
         plan_request=PAPER_EXAMPLE,
         observed_at=[f["observed_at"] for f in meta],
-        names=[u.name for u in uploads],
+        normalised=True,
     )
-
-    seconds = time.perf_counter() - t0
+    result, checks, seconds = fused.result, fused.checks, fused.fit_s + fused.fuse_s
     inside = [k for k, f in enumerate(meta) if max(abs(a) for a in f["attitude_deg"]) <= 45.0]
     single = [
         angle_deg(rotation_matrix(*checks[k].angles_deg), rotation_matrix(*meta[k]["attitude_deg"])) for k in inside

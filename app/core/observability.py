@@ -50,6 +50,10 @@ class JsonFormatter(logging.Formatter):
     _SKIP = frozenset(vars(logging.makeLogRecord({})).keys()) | {"message", "asctime", "color_message"}
 
     def format(self, record: logging.LogRecord) -> str:
+        return json.dumps(self.fields(record), default=str)
+
+    def fields(self, record: logging.LogRecord) -> dict[str, Any]:
+        """The record as the JSON line holds it."""
         out: dict[str, Any] = {
             "ts": datetime.fromtimestamp(record.created, UTC).isoformat(timespec="milliseconds"),
             "level": record.levelname.lower(),
@@ -64,7 +68,7 @@ class JsonFormatter(logging.Formatter):
                 out[key] = value
         if record.exc_info:
             out["exc"] = "".join(traceback.format_exception(*record.exc_info)).rstrip()
-        return json.dumps(out, default=str)
+        return out
 
 
 class TextFormatter(JsonFormatter):
@@ -74,7 +78,7 @@ class TextFormatter(JsonFormatter):
     """
 
     def format(self, record: logging.LogRecord) -> str:
-        line = json.loads(super().format(record))
+        line = self.fields(record)
         ts = line.pop("ts").replace("+00:00", "Z")
         level, msg, exc = line.pop("level"), line.pop("msg"), line.pop("exc", None)
         line.pop("logger", None)

@@ -341,10 +341,14 @@ TRACK_STEP_S = 20.0
 TRACK_HALF_SPAN_S = 3000.0  # about half a low orbit either side of the chosen moment
 
 
-def _lines(lat: Vec, lon: Vec) -> list[list[list[float]]]:
-    """A track as GeoJSON line parts, cut where it crosses the antimeridian (RFC 7946 section 3.1.9)."""
+def _lines(lat: Vec, lon: Vec, keep: NDArray[np.bool_] | None = None) -> list[list[list[float]]]:
+    """A track as GeoJSON line parts, cut where it crosses the antimeridian (RFC 7946 section 3.1.9) and,
+    with ``keep``, where it leaves the kept points."""
     parts: list[list[list[float]]] = [[]]
     for k in range(lat.size):
+        if keep is not None and not keep[k]:
+            parts.append([])
+            continue
         if k and abs(lon[k] - lon[k - 1]) > 180.0:
             parts.append([])
         parts[-1].append([round(float(lon[k]), 5), round(float(lat[k]), 5)])
@@ -388,18 +392,10 @@ def geojson(plan: Plan, names: dict[str, str], windows: list[dict[str, Any]]) ->
         ),
         _feature(
             "target_in_view",
-            {
-                "type": "MultiLineString",
-                "coordinates": _lines(np.where(seen, lat, np.nan), np.where(seen, lon, np.nan)),
-            },
+            {"type": "MultiLineString", "coordinates": _lines(lat, lon, keep=seen)},
             name=names["target"],
         ),
     ]
-    # NaN breaks the in-view line into its passes; drop the NaN points themselves.
-    features[-1]["geometry"]["coordinates"] = [
-        [p for p in part if not math.isnan(p[0])] for part in features[-1]["geometry"]["coordinates"]
-    ]
-    features[-1]["geometry"]["coordinates"] = [p for p in features[-1]["geometry"]["coordinates"] if len(p) > 1]
     height = float(np.interp(t_c, t, h))
     c_lat, c_lon = visibility_circle(st, height)
     features.append(

@@ -16,6 +16,7 @@ through the plan's geometry, then ``inference.fusion.fuse``.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import asdict, dataclass
 from datetime import datetime, timedelta
 from typing import Any
@@ -24,7 +25,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.errors import InputError
-from app.services.estimation import checked_json, frames_at, frames_at_times, matrix_attitude_json, target_track
+from app.services.estimation import (
+    check_frames,
+    checked_json,
+    frames_at,
+    frames_at_times,
+    matrix_attitude_json,
+    target_track,
+)
 from inference.frames import euler_from_matrix, rotation_matrix
 from inference.fusion import PassFrame, angle_deg, fuse
 
@@ -288,6 +296,50 @@ def recheck_reversed(*, est: Any, checker: Any, frames: Vec, checks: list[Any]) 
             features={**c.features, "reversed": 1.0},
         )
     return out
+
+
+@dataclass(frozen=True)
+class FusedPass:
+    """A pass fitted and fused: the answer, the checks it rests on, the per-frame timings and the two stages' times."""
+
+    result: dict[str, Any]
+    checks: list[Any]
+    timings_s: dict[str, float]
+    fit_s: float
+    fuse_s: float
+
+
+def fit_and_fuse(
+    *,
+    est: Any,
+    checker: Any,
+    uploads: list[Any],
+    plan_request: dict[str, Any],
+    observed_at: list[datetime],
+    normalised: bool,
+    cells_m: tuple[float, float] | None = None,
+    names: list[str] | None = None,
+) -> FusedPass:
+    """Fit every frame of a pass and fuse them: the one path of POST /v1/passes, ``gsa pass`` and the benchmark.
+
+    The single-frame library search stays off (``search=False``): a pass's other frames stand in for
+    one that Swin misreads. ``names`` defaults to the uploads' names.
+    """
+    t0 = time.perf_counter()
+    frames, _, checks, per_frame = check_frames(
+        est=est, checker=checker, uploads=uploads, resample=False, normalised=normalised, cells_m=cells_m, search=False
+    )
+    t1 = time.perf_counter()
+    result, checks = fuse_pass(
+        est=est,
+        checker=checker,
+        frames=frames,
+        checks=checks,
+        plan_request=plan_request,
+        observed_at=observed_at,
+        names=names if names is not None else [u.name for u in uploads],
+    )
+    return FusedPass(result, checks, per_frame, t1 - t0, time.perf_counter() - t1)
 
 
 def fuse_pass(

@@ -97,7 +97,11 @@ def _npy(data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE) -> NDArray[An
         raise InputError(_loc(name), f"not a readable .npy array: {exc}") from None
 
 
-def _npz_arrays(data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE) -> list[tuple[str, NDArray[Any]]]:
+def _npz_arrays(
+    data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE
+) -> tuple[list[tuple[str, NDArray[Any]]], bool]:
+    """The archive's arrays by member name, checked against the limits, and whether it is a ``gsa simulate``
+    shard (then its frames alone)."""
     try:
         with zipfile.ZipFile(io.BytesIO(data)) as zf:
             members = zf.infolist()
@@ -115,10 +119,10 @@ def _npz_arrays(data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE) -> lis
                 raise InputError(
                     _loc(name), f"the .npz archive unpacks to {total} bytes, over {4 * MAX_NPZ_MEMBER_BYTES}"
                 )
-            names = {m.filename for m in members}
-            if SHARD_MEMBERS <= names:  # a gsa simulate shard: its frames, not its labels and truths
+            shard = SHARD_MEMBERS <= {m.filename for m in members}
+            if shard:  # a gsa simulate shard: its frames, not its labels and truths
                 members = [m for m in members if m.filename == "image.npy"]
-            return [(m.filename.removesuffix(".npy"), _npy(zf.read(m), name, max_side)) for m in members]
+            return [(m.filename.removesuffix(".npy"), _npy(zf.read(m), name, max_side)) for m in members], shard
     except (
         zipfile.BadZipFile,
         zipfile.LargeZipFile,
@@ -129,11 +133,6 @@ def _npz_arrays(data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE) -> lis
         zlib.error,
     ) as exc:
         raise InputError(_loc(name), f"not a readable .npz archive: {exc}") from None
-
-
-def _is_shard(data: bytes) -> bool:
-    with zipfile.ZipFile(io.BytesIO(data)) as zf:
-        return SHARD_MEMBERS <= set(zf.namelist())
 
 
 def _image(data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE) -> NDArray[Any]:
@@ -170,8 +169,7 @@ def decode(data: bytes, name: str, allow_stack: bool = True, max_side: int = DEF
     if head.startswith(b"\x93NUMPY"):
         arrays = [(name, _npy(data, name, max_side))]
     elif head.startswith(b"PK"):
-        arrays = _npz_arrays(data, name, max_side)
-        shard = [label for label, _ in arrays] == ["image"] and _is_shard(data)
+        arrays, shard = _npz_arrays(data, name, max_side)
     elif head.startswith(b"\x89PNG") or head[:4] in (b"II*\x00", b"MM\x00*"):
         arrays = [(name, _image(data, name, max_side))]
     else:

@@ -22,7 +22,6 @@ from app.api.deps import (
 from app.db.models import Pass, utcnow
 from app.errors import InputError
 from app.schemas import IsoDateTime, PassPublic, Text
-from app.services import estimation as svc
 from app.services import passes as pass_svc
 from app.services import uploads as upload_svc
 
@@ -56,19 +55,16 @@ def _fuse(
     if plan is None:
         raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
     pass_svc.check_times(plan.result, observed_at)
-    frames, _, checks, per_frame = svc.check_frames(
-        est=est, checker=checker, uploads=uploads, resample=False, normalised=normalised, cells_m=cells_m, search=False
-    )
-    result, _ = pass_svc.fuse_pass(
+    fused = pass_svc.fit_and_fuse(
         est=est,
         checker=checker,
-        frames=frames,
-        checks=checks,
+        uploads=uploads,
         plan_request=plan.request,
         observed_at=observed_at,
-        names=[u.name for u in uploads],
+        normalised=normalised,
+        cells_m=cells_m,
     )
-    result = {**result, "target": checker.model.name, "timings_s": per_frame}
+    result = {**fused.result, "target": checker.model.name, "timings_s": fused.timings_s}
     row = Pass(operator_id=operator_id, created_at=utcnow(), plan_id=plan_id, result=_jsonable(result))
     session.add(row)
     session.commit()
