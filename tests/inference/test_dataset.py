@@ -12,6 +12,7 @@ from inference.simulation.dataset import DatasetSpec, frame_truth, generate, loa
 from inference.simulation.isar import Radar
 
 SMALL = Radar(n_range=64, n_azimuth=64, bandwidth_hz=0.4e9, aperture_deg=5.1 / 4)  # 24 m x 29 m at 64 x 64
+SMALL_ARGS = ("--n-range", "64", "--n-azimuth", "64", "--bandwidth-hz", "0.4e9", "--aperture-deg", "1.275")  # SMALL
 
 
 def test_same_data_whatever_the_workers(tmp_path):
@@ -86,14 +87,7 @@ def test_simulate_command(tmp_path):
         "0:10",
         "--shard-size",
         "2",
-        "--n-range",
-        "64",
-        "--n-azimuth",
-        "64",
-        "--bandwidth-hz",
-        "0.4e9",
-        "--aperture-deg",
-        "1.275",
+        *SMALL_ARGS,
         "--split",
         "--workers",
         "1",
@@ -113,14 +107,7 @@ def test_simulate_command(tmp_path):
         "1",
         "--n-train",
         "1",
-        "--n-range",
-        "64",
-        "--n-azimuth",
-        "64",
-        "--bandwidth-hz",
-        "0.4e9",
-        "--aperture-deg",
-        "1.275",
+        *SMALL_ARGS,
         "--workers",
         "1",
         "--out",
@@ -135,14 +122,7 @@ def test_simulate_command(tmp_path):
         str(tmp_path / "p.png"),
         "--n",
         "3",
-        "--n-range",
-        "64",
-        "--n-azimuth",
-        "64",
-        "--bandwidth-hz",
-        "0.4e9",
-        "--aperture-deg",
-        "1.275",
+        *SMALL_ARGS,
         cwd=tmp_path,
     )
     assert prev.returncode == 0 and (tmp_path / "p.png").stat().st_size > 5000
