@@ -21,7 +21,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.common import machine, median_time  # noqa: E402
 from planner.access import access_windows  # noqa: E402
 from planner.alignment import HeightBox, ObserverPlaneModel, node_miss_km  # noqa: E402
-from planner.plan import Orbit, PlanOptions, make_plan  # noqa: E402
+from planner.orbits import Orbit  # noqa: E402
+from planner.plan import PlanOptions, make_plan  # noqa: E402
 from planner.propagation import EarthFrames, SGP4Trajectory, Station, skyfield_times, timescale  # noqa: E402
 from planner.tle import parse_tle  # noqa: E402
 from tests.utils.orbits import (  # noqa: E402
@@ -58,9 +59,9 @@ def bench_brute_force(plan) -> dict[str, float]:
     w = plan.windows
     n_moments = int(np.sum(np.ceil(w.set_s - w.rise_s) + 1))
     tgt = plan.target_trajectory
-    from planner.plan import observer_trajectory
+    from planner.orbits import elements_trajectory
 
-    obs = observer_trajectory(PAPER_OBSERVER, PAPER_EPOCH, plan.duration_s, "osculating", False)
+    obs = elements_trajectory(PAPER_OBSERVER, PAPER_EPOCH, 0.0, plan.duration_s, "osculating")
     model = ObserverPlaneModel(obs, PAPER_OBSERVER.a_km, PAPER_OBSERVER.e, math.radians(99.0), 0.0)
     t = np.linspace(w.rise_s[0], w.set_s[0], 20)
 

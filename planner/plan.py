@@ -18,17 +18,15 @@ from numpy.typing import NDArray
 
 from planner.access import MAX_SPAN_S, AccessWindows, access_windows, validate_station
 from planner.alignment import Candidate, HeightBox, ObserverPlaneModel, align_nodes
-from planner.constants import MIN_PERIGEE_HEIGHT_KM, MU_EARTH_KM3_S2, R_EARTH_KM
-from planner.elements import Elements, height_change_dv_km_s, state_to_elements
+from planner.constants import MIN_PERIGEE_HEIGHT_KM, MU_EARTH_KM3_S2
+from planner.elements import Elements, height_change_dv_km_s
 from planner.errors import PlannerError, PlanningStopped, SearchRangeError
 from planner.illumination import phase_angle_deg, sun_position_km, sunlit
 from planner.manoeuvre import Encounter, Phasing, encounter, phase
+from planner.orbits import Orbit, Reading, earth_frames, elements_trajectory, osculating_elements, trajectory
 from planner.propagation import (
     EarthFrames,
-    NumericalJ2Trajectory,
     Pole,
-    SecularJ2Trajectory,
-    SGP4Trajectory,
     Station,
     Trajectory,
     as_utc,
@@ -37,32 +35,10 @@ from planner.propagation import (
     seconds_between,
 )
 from planner.search import bisect_roots
-from planner.tle import TLE
 
 Vec = NDArray[np.float64]
 STANDOFF_RANGE_KM = (0.5, 500.0)  # under 0.5 km the fly-by is a collision risk; over 500 km, no imaging
-Reading = Literal["osculating", "mean"]
 Criterion = Literal["smallest_change", "least_dv"]
-
-
-@dataclass(frozen=True, slots=True)
-class Orbit:
-    """A satellite: a name and either Table-1 elements or a TLE."""
-
-    name: str
-    elements: Elements | None = None
-    tle: TLE | None = None
-
-    def __post_init__(self) -> None:
-        if (self.elements is None) == (self.tle is None):
-            raise PlannerError(f"{self.name}: give exactly one of elements or tle", field="elements")
-
-    @property
-    def epoch(self) -> datetime:
-        if self.elements is not None:
-            return as_utc(self.elements.epoch)
-        assert self.tle is not None
-        return self.tle.epoch
 
 
 @dataclass(frozen=True, slots=True)
@@ -233,50 +209,6 @@ def check_box_reachable(elements: Elements, box: HeightBox) -> None:
     )
 
 
-def target_trajectory(
-    orbit: Orbit, epoch: datetime, frames: EarthFrames, t1_s: float, reading: Reading, pole: Pole | None = None
-) -> Trajectory:
-    """Return the target's trajectory over ``[0, t1_s]`` after ``epoch``: SGP4 for a TLE, else by ``reading``.
-
-    J2 acts about ``pole`` (default: the pole of date fitted over the span).
-    """
-    if orbit.tle is not None:
-        return SGP4Trajectory(orbit.tle, epoch, frames)
-    assert orbit.elements is not None
-    pole = pole or pole_of_date(epoch, min(0.0, seconds_between(epoch, orbit.epoch)), t1_s)
-    if reading == "mean":
-        return SecularJ2Trajectory(orbit.elements, epoch, pole)
-    return NumericalJ2Trajectory.from_elements(orbit.elements, epoch, 0.0, t1_s, pole)
-
-
-def _observer_elements(orbit: Orbit, epoch: datetime, frames: EarthFrames) -> Elements:
-    """Return elements of the observer at the plan epoch (a TLE's osculating GCRS state there)."""
-    if orbit.elements is not None:
-        return orbit.elements
-    assert orbit.tle is not None
-    r, v = SGP4Trajectory(orbit.tle, epoch, frames).state(0.0)
-    a, e, i, raan, argp, m = (float(x) for x in state_to_elements(r[:, 0], v[:, 0]))
-    return Elements(
-        epoch,
-        a * (1 + e) - R_EARTH_KM,
-        a * (1 - e) - R_EARTH_KM,
-        math.degrees(i),
-        math.degrees(raan),
-        math.degrees(argp),
-        math.degrees(m),
-    )
-
-
-def observer_trajectory(
-    elements: Elements, epoch: datetime, t1_s: float, reading: Reading, tle_based: bool, pole: Pole | None = None
-) -> Trajectory:
-    """Return the observer's trajectory from its elements (a TLE observer's are osculating: numerical J2)."""
-    pole = pole or pole_of_date(epoch, min(0.0, seconds_between(epoch, elements.epoch)), t1_s)
-    if reading == "mean" and not tle_based:
-        return SecularJ2Trajectory(elements, epoch, pole)
-    return NumericalJ2Trajectory.from_elements(elements, epoch, 0.0, t1_s, pole)
-
-
 StopCheck = Callable[[], str | None]
 
 
@@ -317,21 +249,23 @@ def make_plan(
     t1 = opts.duration_s
     # Frames and trajectories reach past the span: the encounter is followed for one
     # observer orbit after T_access (at most a day for any Earth orbit planned here).
-    frames = EarthFrames(epoch, -3600.0, t1 + 2 * 86400.0)
+    frames = earth_frames(epoch, 0.0, t1 + 2 * 86400.0)
     eop_note = earth_orientation_note(epoch, 0.0, t1)
     if eop_note:
         notes.append(eop_note)
     notes += tle_age_notes((target, observer), epoch, t1, opts.max_tle_age_days)
-    obs_el = _observer_elements(observer, epoch, frames)
+    obs_el = osculating_elements(observer, epoch, frames)
     check_box_reachable(obs_el, opts.box)
     # One pole of date for the plan: J2 acts about it in every propagation and verification.
     t_first = min(0.0, seconds_between(epoch, obs_el.epoch), seconds_between(epoch, target.epoch))
     obs_period_s = 2 * math.pi * math.sqrt(obs_el.a_km**3 / MU_EARTH_KM3_S2)
     t_end = t1 + min(obs_period_s, 86400.0) + 600.0
     pole = pole_of_date(epoch, t_first, t_end)
-    tgt = target_trajectory(target, epoch, frames, t_end, opts.reading, pole)
+    tgt = trajectory(target, epoch, frames, 0.0, t_end, opts.reading, pole)
     tle_obs = observer.tle is not None
-    obs_base = observer_trajectory(obs_el, epoch, t_end, opts.reading, tle_obs, pole)
+    # A TLE observer's elements are an osculating state: only the numerical propagation reads them right.
+    obs_reading: Reading = "osculating" if tle_obs else opts.reading
+    obs_base = elements_trajectory(obs_el, epoch, 0.0, t_end, obs_reading, pole)
     t_ref = 0.0 if tle_obs else seconds_between(epoch, obs_el.epoch)
     check_not_coplanar(tgt, obs_base, t1)
     timings["propagation"] = time.perf_counter() - clock
@@ -357,7 +291,7 @@ def make_plan(
     def changed_observer(cand: Candidate) -> Trajectory:
         key = (cand.delta_ha_km, cand.delta_hp_km)
         if key not in cache:
-            cache[key] = observer_trajectory(obs_el.with_heights(*key), epoch, t_end, opts.reading, tle_obs, pole)
+            cache[key] = elements_trajectory(obs_el.with_heights(*key), epoch, 0.0, t_end, obs_reading, pole)
         return cache[key]
 
     refined = []

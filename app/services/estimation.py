@@ -99,30 +99,20 @@ def target_track(plan_request: dict[str, Any], epoch: datetime, t0_s: float, t1_
     """Return a stored plan's target trajectory over ``[t0_s, t1_s]`` after ``epoch``, its station and Earth frames."""
     from app.schemas import PlanCreate
     from app.services.planning import plan_options, to_orbit, to_station
-    from planner.plan import target_trajectory
-    from planner.propagation import EarthFrames, as_utc, seconds_between
+    from planner.orbits import earth_frames, trajectory
+    from planner.propagation import as_utc, seconds_between
 
     req = PlanCreate.model_validate(plan_request)
     target = to_orbit(req.target, "target")
     station = to_station(req.ground_station)
     reading = plan_options(req).reading
     epoch = as_utc(epoch)
-    frames = EarthFrames(epoch, t0_s - 3600.0, t1_s + 3600.0)
+    frames = earth_frames(epoch, t0_s, t1_s)
     if target.tle is None and reading != "mean":
         assert target.elements is not None
         if abs(seconds_between(epoch, target.elements.epoch)) > 60 * 86400:
             raise InputError(["observed_at"], "observed_at is more than 60 days from the target's epoch")
-    if target.tle is None and reading == "mean":
-        from planner.propagation import SecularJ2Trajectory
-
-        assert target.elements is not None
-        return SecularJ2Trajectory(target.elements, epoch), station, frames
-    if target.tle is None:
-        from planner.propagation import NumericalJ2Trajectory
-
-        assert target.elements is not None
-        return NumericalJ2Trajectory.from_elements(target.elements, epoch, t0_s - 1.0, t1_s + 1.0), station, frames
-    return target_trajectory(target, epoch, frames, t1_s, reading), station, frames
+    return trajectory(target, epoch, frames, t0_s - 1.0, t1_s + 1.0, reading), station, frames
 
 
 def frames_at(plan_request: dict[str, Any], observed_at: datetime) -> dict[str, NDArray[np.float64]]:

@@ -17,8 +17,9 @@ from planner.alignment import Candidate, HeightBox
 from planner.ccsds import elements_from_opm, omm_fields_from_kvn
 from planner.elements import Elements
 from planner.errors import PlannerError, PlanningStopped
-from planner.plan import Feasibility, Orbit, Plan, PlanOptions, StopCheck, make_plan
-from planner.propagation import EarthFrames, Station, as_utc, utc
+from planner.orbits import Orbit, earth_frames, trajectory
+from planner.plan import Feasibility, Plan, PlanOptions, StopCheck, make_plan
+from planner.propagation import Station, as_utc, utc
 from planner.tle import omm_fields_from_text, parse_tle, tle_from_omm, tle_lines
 
 
@@ -300,15 +301,13 @@ def run_access(req: AccessCreate, max_epoch_gap_days: float | None = None) -> di
     _osculating_states(((req.target, "target"),), req.reading, ["reading"])
     target = to_orbit(req.target, "target")
     station = to_station(req.ground_station)
-    from planner.plan import target_trajectory
-
     epoch = as_utc(req.start) if req.start else target.epoch
     t1 = req.duration_days * 86400.0
     if max_epoch_gap_days is not None:
         check_epoch_gap(target, req.target, "target", epoch, t1, max_epoch_gap_days)
-    frames = EarthFrames(epoch, -3600.0, t1 + 3600.0)
+    frames = earth_frames(epoch, 0.0, t1)
     try:
-        traj = target_trajectory(target, epoch, frames, t1, req.reading)
+        traj = trajectory(target, epoch, frames, 0.0, t1, req.reading)
         w = access_windows(traj, station, frames, 0.0, t1)
     except PlannerError as exc:
         raise InputError([exc.field or "request"], str(exc)) from None

@@ -5,7 +5,8 @@ import pytest
 
 from planner.elements import elements_to_state
 from planner.illumination import sun_position_km, sunlit
-from planner.plan import Orbit, PlanOptions, make_plan
+from planner.orbits import Orbit
+from planner.plan import PlanOptions, make_plan
 from planner.propagation import ephemeris, skyfield_times
 from tests.utils.j2 import propagate_tod_j2
 from tests.utils.orbits import PAPER_EPOCH, PAPER_OBSERVER, PAPER_STATION, PAPER_TARGET
@@ -32,10 +33,10 @@ def test_phasing_against_independent_integration(plan):
     stand-off point beside the target, which the same integrator carries from its epoch: within 10 m at
     T_access; the separation is the 5-km stand-off, not a collision course."""
     ph = plan.phasing
-    from planner.plan import observer_trajectory
+    from planner.orbits import elements_trajectory
 
     changed = PAPER_OBSERVER.with_heights(plan.chosen.delta_ha_km, plan.chosen.delta_hp_km)
-    obs = observer_trajectory(changed, PAPER_EPOCH, plan.duration_s, "osculating", False)
+    obs = elements_trajectory(changed, PAPER_EPOCH, 0.0, plan.duration_s, "osculating")
     r1, v1 = obs.state(ph.t_burn_s)
     r_obs = propagate_tod_j2(PAPER_EPOCH, r1[:, 0], v1[:, 0] + ph.dv_km_s, ph.t_burn_s, ph.t_access_s)
     r0, v0 = elements_to_state(*PAPER_TARGET.radians())
@@ -49,10 +50,10 @@ def test_encounter_against_an_independent_scan(plan):
     the target's angular rate seen from the observer, from the independent integrator sampled every 0.1 s
     near the fly-by and every 10 s elsewhere."""
     ph, meet = plan.phasing, plan.encounter
-    from planner.plan import observer_trajectory
+    from planner.orbits import elements_trajectory
 
     changed = PAPER_OBSERVER.with_heights(plan.chosen.delta_ha_km, plan.chosen.delta_hp_km)
-    obs = observer_trajectory(changed, PAPER_EPOCH, plan.duration_s, "osculating", False)
+    obs = elements_trajectory(changed, PAPER_EPOCH, 0.0, plan.duration_s, "osculating")
     r1, v1 = obs.state(ph.t_burn_s)
     period = 2 * np.pi * np.sqrt(PAPER_OBSERVER.a_km**3 / 398600.4418)
     t_end = ph.t_access_s + period
@@ -86,10 +87,9 @@ def test_least_dv_is_no_dearer_than_smallest_change(plan):
 def test_sunlit_against_skyfield(plan):
     eph = ephemeris()
     t = np.linspace(0.0, 86400.0, 48)
-    from planner.plan import target_trajectory
-    from planner.propagation import EarthFrames
+    from planner.orbits import earth_frames, trajectory
 
-    tgt = target_trajectory(Orbit("T", PAPER_TARGET), PAPER_EPOCH, EarthFrames(PAPER_EPOCH, 0, 3600), 86400.0, "mean")
+    tgt = trajectory(Orbit("T", PAPER_TARGET), PAPER_EPOCH, earth_frames(PAPER_EPOCH, 0, 86400), 0.0, 86400.0, "mean")
     r, v = tgt.state(t)
     ours = sunlit(r, sun_position_km(PAPER_EPOCH, t))
     from skyfield.constants import AU_KM, DAY_S
