@@ -144,3 +144,23 @@ def test_light_entry_points_leave_torch_and_the_simulator_out():
     )
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
     assert json.loads(out.stdout.strip().splitlines()[-1]) == []
+
+
+def test_the_planner_surface_names_real_objects_and_costs_nothing_to_import():
+    """Every name in ``planner.__all__`` is the object its module defines; ``import planner`` loads none of them."""
+    code = (
+        "import json, sys\n"
+        "import planner\n"
+        "before = sorted(m for m in sys.modules if m.startswith('planner.') or m == 'skyfield')\n"
+        "import importlib\n"
+        "where = vars(planner)['_WHERE']\n"
+        "bad = [n for n in planner.__all__ if getattr(planner, n) is not getattr(importlib.import_module('planner.' + where[n]), n)]\n"
+        "print(json.dumps([before, bad]))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
+    before, bad = json.loads(out.stdout.strip().splitlines()[-1])
+    assert before == [] and bad == []
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        import planner
+
+        planner.nothing  # noqa: B018
