@@ -2,16 +2,23 @@
 
 from __future__ import annotations
 
+import math
 import re
 from datetime import datetime
-from typing import Annotated, Any, Literal, overload
+from typing import TYPE_CHECKING, Annotated, Any, Literal, overload
 
+import numpy as np
 from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Discriminator, Field, Tag, model_validator
 from pydantic.json_schema import SkipJsonSchema
 
 from planner.access import validate_mask
 from planner.errors import PlannerError
-from planner.propagation import as_utc
+from planner.propagation import as_utc, utc
+
+if TYPE_CHECKING:
+    from planner.access import AccessWindows
+    from planner.alignment import Candidate
+    from planner.plan import Feasibility, Plan
 
 _ISO_DATE = re.compile(r"^\d{4}-\d{2}-\d{2}")
 
@@ -62,6 +69,10 @@ def _no_control(value: str | None) -> str | None:
 Text = Annotated[str, AfterValidator(_no_control)]
 Name = Annotated[str, Field(min_length=1, max_length=200, pattern=r"^[^/\\\x00-\x1f]+$")]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+
+def _finite_or_null(x: float | None) -> float | None:
+    return None if x is None or not math.isfinite(x) else float(x)
 
 
 class Described(BaseModel):
@@ -460,6 +471,26 @@ class WindowPublic(Described):
     set_clipped: bool
     """true when it was still in progress at the span's end"""
 
+    @classmethod
+    def from_windows(cls, epoch: datetime, w: AccessWindows) -> list[WindowPublic]:
+        """Return the planner's windows (seconds after ``epoch``) as UTC records."""
+        return [
+            cls(
+                rise=utc(epoch, w.rise_s[k]),
+                culmination=utc(epoch, w.culmination_s[k]),
+                set=utc(epoch, w.set_s[k]),
+                duration_s=float(w.set_s[k] - w.rise_s[k]),
+                max_elevation_deg=float(w.max_elevation_deg[k]),
+                rise_azimuth_deg=float(w.rise_azimuth_deg[k]),
+                culmination_azimuth_deg=float(w.culmination_azimuth_deg[k]),
+                set_azimuth_deg=float(w.set_azimuth_deg[k]),
+                min_range_km=float(w.min_range_km[k]),
+                rise_clipped=bool(w.rise_clipped[k]),
+                set_clipped=bool(w.set_clipped[k]),
+            )
+            for k in range(len(w))
+        ]
+
 
 class FeasibilityPublic(Described):
     sunlit: bool
@@ -472,6 +503,16 @@ class FeasibilityPublic(Described):
     """observer-target distance at t_access, km (the chosen candidate's, once planned)"""
     phase_angle_deg: float | None
     """Sun-target-observer angle at t_access, deg (the chosen candidate's)"""
+
+    @classmethod
+    def from_feasibility(cls, f: Feasibility) -> FeasibilityPublic:
+        return cls(
+            sunlit=f.sunlit,
+            feasible=f.feasible,
+            reasons=list(f.reasons),
+            observer_range_km=_finite_or_null(f.observer_range_km),
+            phase_angle_deg=_finite_or_null(f.phase_angle_deg),
+        )
 
 
 class CandidatePublic(Described):
@@ -495,6 +536,23 @@ class CandidatePublic(Described):
     feasibility: FeasibilityPublic
     """whether this candidate can be imaged: light, range, phase angle"""
 
+    @classmethod
+    def from_candidate(cls, epoch: datetime, c: Candidate, f: Feasibility) -> CandidatePublic:
+        return cls(
+            pass_index=c.pass_index,
+            node=c.node,
+            t_access=utc(epoch, c.t_access_s),
+            delta_ha_km=c.delta_ha_km,
+            delta_hp_km=c.delta_hp_km,
+            miss_km=c.miss_km,
+            change_km=c.change_km,
+            t_access_range=[utc(epoch, t) for t in c.t_access_range_s] if c.t_access_range_s else None,
+            family=[
+                [round(float(a), 4), round(float(p), 4)] for a, p in zip(c.family_dha_km, c.family_dhp_km, strict=True)
+            ],
+            feasibility=FeasibilityPublic.from_feasibility(f),
+        )
+
 
 class VerificationPublic(Described):
     miss_km: float = Field(
@@ -517,6 +575,22 @@ class VerificationPublic(Described):
         description="the target's angular rate seen from the observer at T_access (what an optical tracker must follow)"
     )
 
+    @classmethod
+    def from_plan(cls, plan: Plan) -> VerificationPublic:
+        ph, meet = plan.phasing, plan.encounter
+        assert ph is not None and meet is not None
+        return cls(
+            miss_km=ph.miss_km,
+            two_body_miss_km=ph.two_body_miss_km,
+            corrections=ph.corrections,
+            relative_speed_km_s=meet.relative_speed_km_s,
+            standoff_km=float(np.linalg.norm(ph.standoff_km_vec)),
+            separation_km=meet.separation_km,
+            closest_approach_km=meet.closest_approach_km,
+            closest_approach_time=utc(plan.epoch, meet.closest_approach_s),
+            target_angular_rate_deg_s=meet.target_angular_rate_deg_s,
+        )
+
 
 class PhasingPublic(Described):
     t_burn: datetime
@@ -533,6 +607,22 @@ class PhasingPublic(Described):
     """the burn's size, m/s"""
     verification: VerificationPublic
     """the burn flown by the numerical J2 propagator, and the encounter it gives"""
+
+    @classmethod
+    def from_plan(cls, plan: Plan) -> PhasingPublic | None:
+        ph = plan.phasing
+        if ph is None:
+            return None
+        return cls(
+            t_burn=utc(plan.epoch, ph.t_burn_s),
+            t_access=utc(plan.epoch, ph.t_access_s),
+            revolutions_before=ph.revolutions_before,
+            lambert_revolutions=ph.lambert_revolutions,
+            dv_m_s=[float(x) * 1000.0 for x in ph.dv_km_s],
+            dv_rtn_m_s=[float(x) * 1000.0 for x in ph.dv_rtn_km_s],
+            dv_total_m_s=ph.dv_total_km_s * 1000.0,
+            verification=VerificationPublic.from_plan(plan),
+        )
 
 
 class PlanResult(Described):
@@ -556,6 +646,28 @@ class PlanResult(Described):
     """where the planning time went, seconds"""
     notes: list[str]
     """what the planner wants the operator to know, in words"""
+
+    @classmethod
+    def from_plan(cls, plan: Plan) -> PlanResult:
+        """Return the planner's ``Plan`` as the stored and returned result (times in UTC, speeds in m/s)."""
+        ep = plan.epoch
+        chosen = None
+        if plan.chosen is not None and plan.chosen_feasibility is not None:
+            chosen = CandidatePublic.from_candidate(ep, plan.chosen, plan.chosen_feasibility)
+        return cls(
+            epoch=ep,
+            duration_days=plan.duration_s / 86400.0,
+            reading=plan.reading,
+            access_windows=WindowPublic.from_windows(ep, plan.windows),
+            candidates=[
+                CandidatePublic.from_candidate(ep, c, f) for c, f in zip(plan.candidates, plan.feasibility, strict=True)
+            ],
+            chosen=chosen,
+            alignment_dv_m_s=None if plan.alignment_dv_km_s is None else plan.alignment_dv_km_s * 1000.0,
+            phasing=PhasingPublic.from_plan(plan),
+            timings_s={k: round(v, 4) for k, v in plan.timings_s.items()},
+            notes=plan.notes,
+        )
 
 
 class PlanPublic(PlanResult):

@@ -2,24 +2,30 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import replace
 from datetime import UTC, datetime, timedelta
 from typing import Any, TypeVar
 
-import numpy as np
-
 from app.errors import InputError
-from app.schemas import ORBIT_SOURCES, AccessCreate, OrbitIn, PlanCreate, StationIn
-from planner.access import AccessWindows, access_windows
-from planner.alignment import Candidate, HeightBox
+from app.schemas import (
+    ORBIT_SOURCES,
+    AccessCreate,
+    AccessPublic,
+    OrbitIn,
+    PlanCreate,
+    PlanResult,
+    StationIn,
+    WindowPublic,
+)
+from planner.access import access_windows
+from planner.alignment import HeightBox
 from planner.ccsds import elements_from_opm, omm_fields_from_kvn
 from planner.elements import Elements
 from planner.errors import PlannerError, PlanningStopped
 from planner.orbits import Orbit, earth_frames, trajectory
-from planner.plan import Feasibility, Plan, PlanOptions, StopCheck, make_plan
-from planner.propagation import Station, as_utc, utc
+from planner.plan import Plan, PlanOptions, StopCheck, make_plan
+from planner.propagation import Station, as_utc
 from planner.tle import omm_fields_from_text, parse_tle, tle_from_omm, tle_lines
 
 
@@ -142,103 +148,9 @@ def plan_options(req: PlanCreate) -> PlanOptions:
         raise InputError(["search", exc.field or "search"], str(exc)) from None
 
 
-def _num(x: float | None) -> float | None:
-    return None if x is None or not math.isfinite(x) else float(x)
-
-
-def windows_json(epoch: datetime, w: AccessWindows) -> list[dict[str, Any]]:
-    return [
-        {
-            "rise": utc(epoch, w.rise_s[k]).isoformat(),
-            "culmination": utc(epoch, w.culmination_s[k]).isoformat(),
-            "set": utc(epoch, w.set_s[k]).isoformat(),
-            "duration_s": float(w.set_s[k] - w.rise_s[k]),
-            "max_elevation_deg": float(w.max_elevation_deg[k]),
-            "rise_azimuth_deg": float(w.rise_azimuth_deg[k]),
-            "culmination_azimuth_deg": float(w.culmination_azimuth_deg[k]),
-            "set_azimuth_deg": float(w.set_azimuth_deg[k]),
-            "min_range_km": float(w.min_range_km[k]),
-            "rise_clipped": bool(w.rise_clipped[k]),
-            "set_clipped": bool(w.set_clipped[k]),
-        }
-        for k in range(len(w))
-    ]
-
-
-def _feasibility_json(f: Feasibility) -> dict[str, Any]:
-    return {
-        "sunlit": f.sunlit,
-        "feasible": f.feasible,
-        "reasons": list(f.reasons),
-        "observer_range_km": _num(f.observer_range_km),
-        "phase_angle_deg": _num(f.phase_angle_deg),
-    }
-
-
-def _candidate_json(epoch: datetime, c: Candidate, f: Feasibility) -> dict[str, Any]:
-    return {
-        "pass_index": c.pass_index,
-        "node": c.node,
-        "t_access": utc(epoch, c.t_access_s).isoformat(),
-        "delta_ha_km": c.delta_ha_km,
-        "delta_hp_km": c.delta_hp_km,
-        "miss_km": c.miss_km,
-        "change_km": c.change_km,
-        "t_access_range": [utc(epoch, t).isoformat() for t in c.t_access_range_s] if c.t_access_range_s else None,
-        "family": [
-            [round(float(a), 4), round(float(p), 4)] for a, p in zip(c.family_dha_km, c.family_dhp_km, strict=True)
-        ],
-        "feasibility": _feasibility_json(f),
-    }
-
-
-def _verification_json(epoch: datetime, plan: Plan) -> dict[str, Any]:
-    ph, meet = plan.phasing, plan.encounter
-    assert ph is not None and meet is not None
-    return {
-        "miss_km": ph.miss_km,
-        "two_body_miss_km": ph.two_body_miss_km,
-        "corrections": ph.corrections,
-        "relative_speed_km_s": meet.relative_speed_km_s,
-        "standoff_km": float(np.linalg.norm(ph.standoff_km_vec)),
-        "separation_km": meet.separation_km,
-        "closest_approach_km": meet.closest_approach_km,
-        "closest_approach_time": utc(epoch, meet.closest_approach_s).isoformat(),
-        "target_angular_rate_deg_s": meet.target_angular_rate_deg_s,
-    }
-
-
 def plan_json(plan: Plan) -> dict[str, Any]:
-    """Return the plan as a JSON-ready dict (the stored and returned result)."""
-    ep = plan.epoch
-    phasing = None
-    if plan.phasing is not None:
-        ph = plan.phasing
-        phasing = {
-            "t_burn": utc(ep, ph.t_burn_s).isoformat(),
-            "t_access": utc(ep, ph.t_access_s).isoformat(),
-            "revolutions_before": ph.revolutions_before,
-            "lambert_revolutions": ph.lambert_revolutions,
-            "dv_m_s": [float(x) * 1000.0 for x in ph.dv_km_s],
-            "dv_rtn_m_s": [float(x) * 1000.0 for x in ph.dv_rtn_km_s],
-            "dv_total_m_s": ph.dv_total_km_s * 1000.0,
-            "verification": _verification_json(ep, plan),
-        }
-    chosen = None
-    if plan.chosen is not None and plan.chosen_feasibility is not None:
-        chosen = _candidate_json(ep, plan.chosen, plan.chosen_feasibility)
-    return {
-        "epoch": ep.isoformat(),
-        "duration_days": plan.duration_s / 86400.0,
-        "reading": plan.reading,
-        "access_windows": windows_json(ep, plan.windows),
-        "candidates": [_candidate_json(ep, c, f) for c, f in zip(plan.candidates, plan.feasibility, strict=True)],
-        "chosen": chosen,
-        "alignment_dv_m_s": None if plan.alignment_dv_km_s is None else plan.alignment_dv_km_s * 1000.0,
-        "phasing": phasing,
-        "timings_s": {k: round(v, 4) for k, v in plan.timings_s.items()},
-        "notes": plan.notes,
-    }
+    """Return the plan as a JSON-ready dict (the stored and returned result): ``PlanResult.from_plan``, dumped."""
+    return PlanResult.from_plan(plan).model_dump(mode="json")
 
 
 def check_epoch_gap(
@@ -311,7 +223,9 @@ def run_access(req: AccessCreate, max_epoch_gap_days: float | None = None) -> di
         w = access_windows(traj, station, frames, 0.0, t1)
     except PlannerError as exc:
         raise InputError([exc.field or "request"], str(exc)) from None
-    return {"epoch": epoch.isoformat(), "duration_days": req.duration_days, "access_windows": windows_json(epoch, w)}
+    return AccessPublic(
+        epoch=epoch, duration_days=req.duration_days, access_windows=WindowPublic.from_windows(epoch, w)
+    ).model_dump(mode="json")
 
 
 ACCESS_CSV_COLUMNS = (
