@@ -1,0 +1,187 @@
+"""The ``gsa`` command line: the parser, and each command imported from its module only when it runs.
+
+``common`` (settings, the one-line errors, the client options) is all the parser needs;
+``service`` (serve, db, keys), ``planning`` (plan, access, plans, stations), ``estimates``
+(estimate, estimates) and ``passes`` (simulate --pass, pass) hold the commands, and the
+inference commands (simulate, train, ...) bring their own arguments from ``inference``.
+Bad input prints one line on stderr and exits with status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Callable
+from typing import Any
+
+from app.cli.common import EXAMPLE_PLANS, CliError, add_client_options
+
+
+def _lazy(module: str, name: str) -> Callable[[argparse.Namespace], int]:
+    """Return a command that imports ``app.cli.MODULE`` only when it runs, and calls its ``name``."""
+
+    def command(args: argparse.Namespace) -> int:
+        return int(getattr(importlib.import_module(f"app.cli.{module}"), name)(args))
+
+    return command
+
+
+def add_inference_command(sub: Any, name: str, module: str, help: str) -> argparse.ArgumentParser:
+    """Register ``gsa NAME``, whose arguments and ``run`` live in ``inference.MODULE``.
+
+    Its InferenceError (bad input) becomes the one-line error and exit 2 of every command.
+    """
+    mod = importlib.import_module(f"inference.{module}")
+    p = sub.add_parser(name, help=help)
+    mod.add_arguments(p)
+
+    def command(args: argparse.Namespace) -> int:
+        from inference.errors import InferenceError
+
+        try:
+            return int(mod.run(args))
+        except InferenceError as exc:
+            raise CliError(str(exc)) from None
+
+    p.set_defaults(func=command)
+    return p
+
+
+# The inference commands: name, module of inference (its add_arguments and run), help.
+INFERENCE_COMMANDS = (
+    ("simulate", "simulation.dataset", "simulate a labelled ISAR data set (or --preview a few frames)"),
+    ("train", "training.train", "train UNet++ and Swin on a simulated data set"),
+    ("finetune", "training.finetune", "fine-tune Swin's last stage of a trained run on cached features (CPU)"),
+    ("export", "export", "export a training run to ONNX with a model card"),
+    ("calibrate", "trust", "fit the attitude checks' thresholds and 90-percent bounds on fresh frames (trust.json)"),
+    ("compare", "evaluation.compare", "set training runs side by side: Swin's test error per epoch"),
+    ("evaluate", "evaluation.evaluate", "the paper's Tables 4 and 7 for the ONNX models"),
+)
+
+
+def command_name(argv: list[str]) -> str | None:
+    """Return the subcommand ``argv`` names (its first word that is not an option), if any."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
+def build_parser(load: str | None = None) -> argparse.ArgumentParser:
+    """Build gsa's parser; only the inference command ``load`` gets its real arguments (and imports its module)."""
+    p = argparse.ArgumentParser(prog="gsa", description="GSA-ISAR: GSA scene planning and ISAR attitude estimation")
+    sub = p.add_subparsers(dest="cmd", required=True)
+    s = sub.add_parser("serve", help="migrate the database and start the API")
+    s.add_argument("--host")
+    s.add_argument("--port", type=int)
+    s.add_argument("--workers", type=int, default=1)
+    s.set_defaults(func=_lazy("service", "cmd_serve"))
+    db = sub.add_parser("db", help="database maintenance")
+    dbs = db.add_subparsers(dest="db_cmd", required=True)
+    dbs.add_parser("upgrade", help="apply all migrations").set_defaults(func=_lazy("service", "cmd_db_upgrade"))
+    k = sub.add_parser("keys", help="API keys")
+    ks = k.add_subparsers(dest="keys_cmd", required=True)
+    kc = ks.add_parser("create", help="create a key and print it once")
+    kc.add_argument("name")
+    kc.add_argument("--operator", help="operator the key belongs to (default: NAME)")
+    ks.add_parser("list", help="list keys")
+    kr = ks.add_parser("revoke", help="revoke a key")
+    kr.add_argument("id")
+    k.set_defaults(func=_lazy("service", "cmd_keys"))
+    pl = sub.add_parser("plan", help="plan a GSA scene from a JSON request (the body of POST /v1/plans)")
+    pl.add_argument("file", nargs="?", help="the request (JSON); or --example")
+    pl.add_argument("--example", choices=sorted(EXAMPLE_PLANS), help="plan a shipped example (examples/*.json)")
+    add_client_options(pl, "plan on a running service (stored there; a station may be named)")
+    pl.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    pl.add_argument("--plot", metavar="PNG", help="draw ground track, elevation and alignment error")
+    pl.add_argument(
+        "--export",
+        metavar="DIR",
+        help="also write the plan as opm.txt, oem.txt (CCSDS KVN), plan.czml, plan.geojson, access.csv and pointing.csv",
+    )
+    pl.set_defaults(func=_lazy("planning", "cmd_plan"))
+    for noun, func in (("plans", _lazy("planning", "cmd_plans")), ("estimates", _lazy("estimates", "cmd_estimates"))):
+        c = sub.add_parser(noun, help=f"your {noun} stored on the service (list, show)")
+        cs = c.add_subparsers(dest=f"{noun}_cmd", required=True)
+        cl = cs.add_parser("list", help=f"your {noun}, newest first")
+        cl.add_argument("--limit", type=int, default=20)
+        cl.add_argument("--json", action="store_true")
+        if noun == "plans":
+            cl.add_argument("--target-name", help="only this target's plans")
+        else:
+            cl.add_argument("--plan-id", help="only the estimates tied to this plan")
+        cw = cs.add_parser("show", help=f"one of your {noun}")
+        cw.add_argument("id")
+        cw.add_argument("--json", action="store_true")
+        for q in (cl, cw):
+            add_client_options(q, "the service")
+        c.set_defaults(func=func)
+    st = sub.add_parser("stations", help="your named stations on the service (list, show, add, delete)")
+    sts = st.add_subparsers(dest="stations_cmd", required=True)
+    stl = sts.add_parser("list", help="your stations by name")
+    stl.add_argument("--limit", type=int, default=100)
+    stl.add_argument("--json", action="store_true")
+    sta = sts.add_parser("add", help="store a station from a JSON file (name, latitude_deg, longitude_deg, mask, ...)")
+    sta.add_argument("file")
+    for verb in ("show", "delete"):
+        sts.add_parser(verb, help=f"{verb} one station").add_argument("name")
+    for q in sts.choices.values():
+        add_client_options(q, "the service")
+    st.set_defaults(func=_lazy("planning", "cmd_stations"))
+    ac = sub.add_parser("access", help="access windows from a JSON request (the body of POST /v1/access-windows)")
+    ac.add_argument("file")
+    ac.add_argument("--json", action="store_true")
+    ac.set_defaults(func=_lazy("planning", "cmd_access"))
+    for name, module, help in INFERENCE_COMMANDS:
+        if name == load:
+            p_inf = add_inference_command(sub, name, module, help)
+            if name == "simulate":  # --pass needs the planner's geometry, so it lives here, not in inference
+                from app.cli.passes import add_pass_arguments, pass_or_data_set
+
+                add_pass_arguments(p_inf)
+                p_inf.set_defaults(func=pass_or_data_set(p_inf.get_default("func")))
+        else:
+            # Not asked for: a stand-in that keeps `gsa --help` from importing torch and the simulator.
+            sub.add_parser(name, help=help, add_help=False)
+    es = sub.add_parser("estimate", help="estimate the attitude in one ISAR frame (.npy, .npz, PNG, TIFF)")
+    es.add_argument("file")
+    es.add_argument("--models", help="model directory (default: GSA_MODEL_DIR or the shipped models)")
+    es.add_argument("--resample", action="store_true", help="resample a frame of another size")
+    es.add_argument(
+        "--frame", type=int, help="frame K of a stack (.npz [N, H, W], e.g. a gsa simulate shard, read as it is)"
+    )
+    es.add_argument(
+        "--normalised",
+        action="store_true",
+        help="the frame is already normalised (a frame of a gsa simulate data set): take it as sent",
+    )
+    add_client_options(es)
+    es.add_argument("--plot", metavar="PNG", help="draw the input and the enhanced frame with the fitted outline")
+    es.add_argument("--no-refine", action="store_true", help="answer Swin's estimate, without the fit")
+    es.add_argument("--target", help="the target the frame shows (default GSA_DEFAULT_TARGET: tiangong-like)")
+    es.add_argument("--plan-id", help="with --server: one of your plans, to place the attitude in LVLH and J2000")
+    es.add_argument("--observed-at", help="with --server and --plan-id: when the frame was observed (ISO 8601 UTC)")
+    es.add_argument("--range-cell-m", type=float, help="the frame's range cell (rows) in metres: resample in metres")
+    es.add_argument("--cross-range-cell-m", type=float, help="the frame's cross-range cell (columns) in metres")
+    es.set_defaults(func=_lazy("estimates", "cmd_estimate"))
+    ps = sub.add_parser("pass", help="fuse a pass's frames into one attitude in the target's orbital frame (LVLH)")
+    ps.add_argument("folder", help="a folder with frames.npz and pass.json, as gsa simulate --pass writes")
+    ps.add_argument("--plan", metavar="PLAN.json", help="the plan request the pass belongs to (default: pass.json's)")
+    ps.add_argument("--models", help="model directory (default: GSA_MODEL_DIR or the shipped models)")
+    ps.add_argument("--target", help="the target the frames show (default GSA_DEFAULT_TARGET: tiangong-like)")
+    ps.add_argument("--json", action="store_true", help="print the fused pass as JSON")
+    ps.add_argument("--plot", metavar="PNG", help="draw each frame's LVLH attitude with its bound beside the fused one")
+    add_client_options(ps, "send it to a running service (POST /v1/passes) instead")
+    ps.add_argument("--plan-id", help="with --server: the stored plan the pass belongs to")
+    ps.set_defaults(func=_lazy("passes", "cmd_pass"))
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    args = build_parser(command_name(argv)).parse_args(argv)
+    try:
+        return int(args.func(args))
+    except CliError as exc:
+        print(f"gsa: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130

@@ -1,0 +1,378 @@
+"""gsa simulate --pass and gsa pass: a simulated pass over a plan's station, and its frames fused."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+from pydantic import ValidationError
+
+from app.cli.common import (
+    CliError,
+    call_server,
+    input_line,
+    load_settings,
+    local_models,
+    read_json,
+    validation_line,
+)
+
+
+def add_pass_arguments(p: argparse.ArgumentParser) -> None:
+    """``gsa simulate --pass``: the frames of one radar pass instead of a data set."""
+    g = p.add_argument_group("a radar pass (--pass REQUEST.json): the frames the station's radar forms over one pass")
+    g.add_argument(
+        "--pass",
+        dest="pass_request",
+        metavar="REQUEST.json",
+        help="a plan request (the body of POST /v1/plans): its target over one of its access windows to its "
+        "station; with --out DIR writes DIR/frames.npz, DIR/pass.json and DIR/frames.png",
+    )
+    g.add_argument("--window", type=int, help="which of the plan's access windows (default: the highest)")
+    g.add_argument("--frames", type=int, default=60, help="at most this many frames, thinned evenly (default 60)")
+    g.add_argument(
+        "--step-deg", type=float, help="between frame centres, in line-of-sight sweep (default: the aperture)"
+    )
+    g.add_argument(
+        "--attitude-lvlh",
+        metavar="Z,Y,X",
+        help="the target's attitude, body to LVLH, deg (default: drawn so mid-pass looks within --max-angle-deg)",
+    )
+    g.add_argument(
+        "--spin-deg-s", type=float, default=0.0, help="spin about --spin-axis (deg/s, default 0: still in LVLH)"
+    )
+    g.add_argument("--spin-axis", default="0,0,1", metavar="X,Y,Z", help="the spin's body axis (default 0,0,1)")
+    g.add_argument(
+        "--snr-reference",
+        metavar="DB@KM",
+        help="SNR from range by the radar equation: DB at KM, falling as range to the fourth power",
+    )
+    g.add_argument(
+        "--within-deg",
+        type=float,
+        help="keep only frames whose observation-frame angles are within this (the networks' range: 45)",
+    )
+
+
+def pass_or_data_set(data_set: Any) -> Any:
+    """``gsa simulate``: a pass with --pass, else the data set command."""
+
+    def command(args: argparse.Namespace) -> int:
+        return cmd_simulate_pass(args) if args.pass_request else int(data_set(args))
+
+    return command
+
+
+def _floats(text: str, n: int, flag: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != n or not all(math.isfinite(v) for v in values):
+        raise CliError(f"{flag} {text!r}: write {n} numbers separated by commas")
+    return values
+
+
+def _plan_for_pass(request: Any) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """A plan request, checked, and its target's access windows to its station over the request's span."""
+    from app.errors import InputError
+    from app.schemas import AccessCreate, PlanCreate
+    from app.services.planning import run_access
+
+    try:
+        req = PlanCreate.model_validate(request)
+        acc = AccessCreate(
+            target=req.target,
+            ground_station=req.ground_station,
+            start=req.search.start,
+            duration_days=req.search.duration_days,
+            reading=req.search.reading,
+        )
+        windows = run_access(acc)["access_windows"]
+    except ValidationError as exc:
+        raise CliError(validation_line(exc)) from None
+    except InputError as exc:
+        raise CliError(input_line(exc)) from None
+    return req.model_dump(mode="json", exclude_none=True), windows
+
+
+def cmd_simulate_pass(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from app.errors import InputError
+    from app.services import passes as pass_svc
+    from inference.simulation.dataset import parse_snr
+    from inference.simulation.isar import Radar
+
+    if not args.out:
+        raise CliError("give --out DIR for the pass's frames")
+    out = Path(args.out)
+    if out.exists():
+        raise CliError(f"{out} exists: give a new directory")
+    lo, hi = parse_snr(args.snr_db)
+    ref = None
+    if args.snr_reference:
+        db, sep, km = args.snr_reference.partition("@")
+        try:
+            ref = (float(db), float(km))
+        except ValueError:
+            raise CliError(f"--snr-reference {args.snr_reference!r}: write DB@KM, e.g. 12@800") from None
+        if not sep or not all(math.isfinite(v) for v in ref) or ref[1] <= 0:
+            raise CliError(f"--snr-reference {args.snr_reference!r}: write DB@KM with KM over 0, e.g. 12@800")
+    try:
+        radar = Radar(args.carrier_hz, args.bandwidth_hz, args.n_range, args.n_azimuth, args.aperture_deg)
+        request, windows = _plan_for_pass(read_json(args.pass_request))
+        opts = pass_svc.PassOptions(
+            window=args.window,
+            aperture_deg=args.aperture_deg,
+            step_deg=args.step_deg,
+            max_frames=args.frames,
+            attitude_lvlh_deg=_floats(args.attitude_lvlh, 3, "--attitude-lvlh") if args.attitude_lvlh else None,  # type: ignore[arg-type]
+            max_angle_deg=min(args.max_angle_deg, 89.0),
+            spin_deg_s=args.spin_deg_s,
+            spin_axis=_floats(args.spin_axis, 3, "--spin-axis"),  # type: ignore[arg-type]
+            snr_db=None if lo is None or hi is None else (lo, hi),
+            snr_reference=ref,
+            within_deg=args.within_deg,
+            seed=args.seed,
+        )
+        index, window = pass_svc.choose_window(windows, opts.window)
+        rng = np.random.default_rng(opts.seed)
+        meta = pass_svc.pass_geometry_frames(request, window, opts, rng)
+        model = None
+        if args.model:
+            from inference.simulation.dataset import DatasetSpec, build_model
+
+            model = build_model(DatasetSpec(n=1, model_path=args.model, model_scale=args.model_scale), radar)
+        print(
+            f"window {index}: {window['rise']} to {window['set']}, culminating at "
+            f"{window['max_elevation_deg']:.1f} deg; rendering {len(meta)} frames",
+            file=sys.stderr,
+        )
+        images, snrs = pass_svc.render_pass(meta, opts, rng, radar, model)
+    except InputError as exc:
+        raise CliError(input_line(exc)) from None
+    record = pass_svc.pass_record(
+        meta, snrs, opts, index, window, request, (radar.range_cell_m, radar.cross_range_cell_m)
+    )
+    partial = out.with_name(out.name + ".partial")
+    partial.mkdir(parents=True, exist_ok=False)
+    np.savez_compressed(partial / "frames.npz", image=images.astype(np.float32))
+    (partial / "pass.json").write_text(json.dumps(record, indent=1))
+    _contact_sheet(images, record, partial / "frames.png")
+    partial.rename(out)
+    inside = sum(max(abs(a) for a in f["attitude_observation"]["euler_zyx_deg"]) <= 45.0 for f in record["frames"])
+    print(
+        f"{len(meta)} frames in {out} ({inside} within the networks' 45 deg range); upload frames.npz with "
+        "normalised=true and each frame's observed_at from pass.json"
+    )
+    return 0
+
+
+def _contact_sheet(images: Any, record: dict[str, Any], path: Path, most: int = 12) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    pick = np.unique(np.linspace(0, len(images) - 1, min(most, len(images))).round().astype(int))
+    cols = min(6, len(pick))
+    rows = -(-len(pick) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(2.2 * cols, 2.75 * rows), squeeze=False)
+    for ax in axes.ravel():
+        ax.axis("off")
+    for ax, k in zip(axes.ravel(), pick, strict=False):
+        f = record["frames"][k]
+        z, y, x = f["attitude_observation"]["euler_zyx_deg"]
+        ax.imshow(images[k], cmap="gray", vmin=0, vmax=1)
+        snr = "noise-free" if f["snr_db"] is None else f"{f['snr_db']:.0f} dB"
+        ax.set_title(f"{f['observed_at'][11:19]}Z, {snr}\n{z:.0f} / {y:.0f} / {x:.0f} deg", fontsize=7)
+    w = record["window"]
+    fig.suptitle(
+        f"pass {w['rise'][:19]} to {w['set'][11:19]} UTC, max elevation {w['max_elevation_deg']:.0f} deg "
+        "(frame time, SNR, attitude in its observation frame)",
+        fontsize=9,
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def cmd_pass(args: argparse.Namespace) -> int:
+    """Fuse a simulated (or any) pass: each frame estimated and fitted, placed in LVLH, fused."""
+
+    from app.errors import InputError
+    from inference.errors import InferenceError
+
+    folder = Path(args.folder)
+    rec = read_json(str(folder / "pass.json"))
+    try:
+        data = (folder / "frames.npz").read_bytes()
+    except OSError as exc:
+        raise CliError(f"cannot read {folder / 'frames.npz'}: {exc.strerror}") from None
+    try:
+        times = [datetime.fromisoformat(f["observed_at"]) for f in rec["frames"]]
+    except (KeyError, TypeError, ValueError):
+        raise CliError(
+            f"{folder / 'pass.json'} has no frames with an observed_at each (write it with gsa simulate --pass)"
+        ) from None
+    if args.server:
+        return _pass_on_server(args, data, rec)
+    from app.services import passes as pass_svc
+    from app.services import uploads as upload_svc
+
+    settings = load_settings()
+    request = rec.get("plan_request")
+    if args.plan:
+        request, _ = _plan_for_pass(read_json(args.plan))
+    if request is None:
+        raise CliError("give --plan PLAN.json: the pass record names no plan")
+    try:
+        est, checker = local_models(args, settings)
+        uploads = upload_svc.decode(data, "frames.npz")
+        if len(uploads) != len(times):
+            raise CliError(f"frames.npz holds {len(uploads)} frames and pass.json {len(times)} times")
+        fused = pass_svc.fit_and_fuse(
+            est=est,
+            checker=checker,
+            uploads=uploads,
+            plan_request=request,
+            observed_at=times,
+            normalised=True,
+            names=[f"frame {k}" for k in range(len(times))],
+        )
+        result = fused.result
+    except InputError as exc:
+        raise CliError(input_line(exc)) from None
+    except InferenceError as exc:
+        raise CliError(str(exc)) from None
+    if args.json:
+        print(json.dumps(result, indent=1, default=str))
+    else:
+        _print_pass(result, rec)
+        print(f"{len(times)} frames: estimated and fitted in {fused.fit_s:.1f} s, fused in {fused.fuse_s:.1f} s")
+    if args.plot:
+        _plot_pass(result, rec, args.plot)
+        print(f"plot written to {args.plot}", file=sys.stderr)
+    return 0
+
+
+def _pass_on_server(args: argparse.Namespace, data: bytes, rec: dict[str, Any]) -> int:
+
+    if not args.plan_id:
+        raise CliError("--server needs --plan-id: the stored plan the pass belongs to")
+    form: dict[str, Any] = {
+        "plan_id": args.plan_id,
+        "normalised": "true",
+        "observed_at": [f["observed_at"] for f in rec["frames"]],
+    }
+    if args.target:
+        form["target"] = args.target
+    r = call_server(args, "POST", "/v1/passes", files={"files": ("frames.npz", data)}, data=form, timeout=300)
+    body = r.json()
+    if args.json:
+        print(json.dumps(body, indent=1))
+    else:
+        print(f"pass {body['id']}:")
+        _print_pass(body, rec)
+    if args.plot:
+        _plot_pass(body, rec, args.plot)
+    return 0
+
+
+def _truth_lvlh(rec: dict[str, Any], k: int) -> Any:
+    from inference.frames import rotation_matrix
+
+    f = rec["frames"][k]
+    return rotation_matrix(*f["attitude_lvlh"]["euler_zyx_deg"]) if "attitude_lvlh" in f else None
+
+
+def _print_pass(result: dict[str, Any], rec: dict[str, Any]) -> None:
+    import numpy as np
+
+    from inference.frames import rotation_matrix
+    from inference.fusion import angle_deg
+
+    z, y, x = result["attitude_lvlh"]["euler_zyx_deg"]
+    bz, by, bx = result["uncertainty_deg"]
+    print(
+        f"fused, body to LVLH: z {z:.2f} y {y:.2f} x {x:.2f} deg (90 % bound {bz:.2f} / {by:.2f} / {bx:.2f}); "
+        f"{result['used']} frames used, {result['rejected']} rejected"
+        f"{'' if result.get('trusted', True) else '; NOT TRUSTED'}"
+    )
+    print(result["stability"])
+    errors = []
+    for f in result["frames"]:
+        truth = _truth_lvlh(rec, f["index"]) if f["index"] < len(rec.get("frames", [])) else None
+        err = ""
+        if truth is not None:
+            errors.append(angle_deg(rotation_matrix(*f["attitude_lvlh"]["euler_zyx_deg"]), truth))
+            err = f", {errors[-1]:.2f} deg from the truth"
+        why = f["rejected_because"] or ""
+        state = "used" if f["used"] else f"rejected: {why if len(why) <= 90 else why[:87] + '...'}"
+        at = f["observed_at"] if isinstance(f["observed_at"], str) else f["observed_at"].isoformat()
+        print(f"  {at[11:19]} {f['branch']:<12} residual {f['residual_deg']:.2f} deg{err}; {state}")
+    truth = _truth_lvlh(rec, 0) if rec.get("frames") else None
+    if errors and truth is not None and result["stable"]:
+        off = angle_deg(rotation_matrix(z, y, x), truth)
+        print(
+            f"against the simulated truth: fused {off:.3f} deg, single frames' median {float(np.median(errors)):.3f} deg"
+        )
+
+
+def _plot_pass(result: dict[str, Any], rec: dict[str, Any], path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    def when(v: Any) -> datetime:
+        return v if isinstance(v, datetime) else datetime.fromisoformat(v)
+
+    times = [when(f["observed_at"]) for f in result["frames"]]
+    t0 = min(times)
+    t = np.array([(x - t0).total_seconds() for x in times])
+    each = np.array([f["attitude_lvlh"]["euler_zyx_deg"] for f in result["frames"]])
+    bounds = np.array(
+        [[b if b is not None else np.nan for b in f["quality"]["uncertainty_deg"]] for f in result["frames"]]
+    )
+    used = np.array([f["used"] for f in result["frames"]])
+    fused = np.array(result["attitude_lvlh"]["euler_zyx_deg"])
+    ub = np.array(result["uncertainty_deg"])
+    fig, axes = plt.subplots(3, 1, figsize=(8, 7.5), sharex=True)
+    for i, (ax, name) in enumerate(zip(axes, ("z (yaw)", "y (pitch)", "x (roll)"), strict=True)):
+        ax.errorbar(t[used], each[used, i], yerr=bounds[used, i], fmt="o", ms=4, capsize=2, label="frame (90 % bound)")
+        span = each[used, i] if used.any() else each[:, i]
+        pad = max(1.0, 0.5 * float(np.ptp(span)), 3.0 * float(np.nanmax(bounds[used, i])) if used.any() else 1.0)
+        lo, hi = float(span.min()) - pad, float(span.max()) + pad
+        if (~used).any():  # rejected frames far off are drawn at the edge, so the used ones keep their scale
+            ax.plot(t[~used], np.clip(each[~used, i], lo, hi), "x", color="tab:red", ms=7, label="rejected (clipped)")
+        ax.set_ylim(lo, hi)
+        if result["stable"]:
+            ax.axhline(fused[i], color="tab:orange", label="fused")
+            ax.axhspan(fused[i] - ub[i], fused[i] + ub[i], color="tab:orange", alpha=0.2)
+        truth = [_truth_lvlh(rec, f["index"]) for f in result["frames"] if f["index"] < len(rec.get("frames", []))]
+        if truth and truth[0] is not None and len(truth) == len(t):
+            from inference.frames import euler_from_matrix
+
+            tv = np.array([euler_from_matrix(r) for r in truth])
+            ax.plot(t, tv[:, i], "k--", lw=1, label="truth")
+        ax.set_ylabel(f"{name}, deg")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8, ncol=4)
+    axes[-1].set_xlabel(f"seconds after {t0:%Y-%m-%d %H:%M:%S} UTC")
+    fig.suptitle(
+        f"pass attitude, body to LVLH: {result['used']} used, {result['rejected']} rejected; "
+        f"{'stable' if result['stable'] else 'TURNING'}",
+        fontsize=10,
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

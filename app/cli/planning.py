@@ -1,0 +1,231 @@
+"""gsa plan, gsa access, gsa plans and gsa stations: planning locally or on the service, and their tables."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from pydantic import ValidationError
+
+from app.cli.common import (
+    EXAMPLE_PLANS,
+    EXAMPLES_DIR,
+    CliError,
+    call_server,
+    input_line,
+    print_listing,
+    read_json,
+    utc_text,
+    validation_line,
+)
+
+
+def cmd_plans(args: argparse.Namespace) -> int:
+    from urllib.parse import quote
+
+    if args.plans_cmd == "show":
+        body = call_server(args, "GET", f"/v1/plans/{quote(args.id, safe='')}").json()
+        if args.json:
+            print(json.dumps(body, indent=2))
+        else:
+            print(
+                f"plan {body['id']}: {body['target_name']} / {body['observer_name']} / {body['station_name']}, "
+                f"created {utc_text(body['created_at'])}"
+            )
+            print(format_plan(body))
+        return 0
+
+    def row(p: dict[str, Any]) -> str:
+        miss = "-" if p["miss_km"] is None else f"{p['miss_km']:9.3f}"
+        return (
+            f"{p['id']:<36}  {utc_text(p['created_at']):<24}  {p['target_name'][:16]:<16} {p['observer_name'][:16]:<16} "
+            f"{p['station_name'][:14]:<14} {utc_text(p['t_access']):<24} {miss:>9}"
+        )
+
+    header = (
+        f"{'id':<36}  {'created (UTC)':<24}  {'target':<16} {'observer':<16} {'station':<14} {'T_access (UTC)':<24} "
+        f"{'miss (km)':>9}"
+    )
+    return print_listing(
+        args, "/v1/plans", {"target_name": args.target_name}, "{count} plans; newest {shown}:", header, row
+    )
+
+
+def cmd_stations(args: argparse.Namespace) -> int:
+    from urllib.parse import quote
+
+    if args.stations_cmd == "add":
+        body = call_server(args, "POST", "/v1/stations", json=read_json(args.file)).json()
+        print(f"station {body['name']!r} stored")
+        return 0
+    if args.stations_cmd == "delete":
+        call_server(args, "DELETE", f"/v1/stations/{quote(args.name, safe='')}")
+        print(f"station {args.name!r} deleted")
+        return 0
+    if args.stations_cmd == "show":
+        print(json.dumps(call_server(args, "GET", f"/v1/stations/{quote(args.name, safe='')}").json(), indent=2))
+        return 0
+
+    def row(st: dict[str, Any]) -> str:
+        return (
+            f"{st['name'][:24]:<24} {st['latitude_deg']:10.4f} {st['longitude_deg']:10.4f} {st['altitude_m']:8.0f} "
+            f"{st['min_elevation_deg']:12.1f} {len(st.get('mask') or []):11d}  {'on' if st['refraction'] else 'off'}"
+        )
+
+    header = (
+        f"{'name':<24} {'lat (deg)':>10} {'lon (deg)':>10} {'alt (m)':>8} {'min el (deg)':>12} {'mask points':>11}  "
+        "refraction"
+    )
+    return print_listing(args, "/v1/stations", {}, "{count} stations:", header, row)
+
+
+def cmd_plan(args: argparse.Namespace) -> int:
+    from app.errors import InputError
+    from app.schemas import PlanCreate
+    from app.services.planning import run_plan
+
+    if args.export and Path(args.export).exists() and any(Path(args.export).iterdir()):
+        raise CliError(f"{args.export} is not empty: give a new or empty directory for --export")
+    if bool(args.file) == bool(args.example):
+        raise CliError("give a request file (the body of POST /v1/plans) or --example paper|iss, not both")
+    source = args.file or str(EXAMPLES_DIR / EXAMPLE_PLANS[args.example])
+    if args.example and not Path(source).is_file():
+        raise CliError(f"{source} is missing: the examples live in the repository's examples/ folder")
+    if args.server:
+        if args.export or args.plot:
+            raise CliError("--export and --plot plan locally; with --server, GET /v1/plans/ID/export/... instead")
+        body = call_server(args, "POST", "/v1/plans", json=read_json(source), timeout=600).json()
+        print(json.dumps(body, indent=2) if args.json else f"plan {body['id']} stored\n" + format_plan(body))
+        return 0
+    try:
+        req = PlanCreate.model_validate(read_json(source))
+        plan, result = run_plan(req)
+    except ValidationError as exc:
+        raise CliError(validation_line(exc)) from None
+    except InputError as exc:
+        raise CliError(input_line(exc)) from None
+    assert not isinstance(req.ground_station, str)  # run_plan refuses a station name: only the server resolves one
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        print(format_plan(result))
+    if args.export:
+        _export_plan(plan, result, req, Path(args.export))
+    if args.plot:
+        from planner.plot import plot_plan
+
+        plot_plan(plan, args.plot, title=f"{req.target.name} / {req.observer.name} / {req.ground_station.name}")
+        print(f"plot written to {args.plot}", file=sys.stderr)
+    return 0
+
+
+def _export_plan(plan: Any, result: dict[str, Any], req: Any, folder: Path) -> None:
+    """Write the plan in every export format into ``folder`` (as GET /v1/plans/{id}/export/... serves them)."""
+    from app.errors import InputError
+    from app.services import exports
+    from app.services.planning import access_csv
+
+    folder.mkdir(parents=True, exist_ok=True)
+    name = "local"
+    files = {
+        "access.csv": access_csv(result["access_windows"]),
+        "pointing.csv": exports.pointing_csv(plan, result["access_windows"]),
+    }
+    names = {"target": req.target.name, "observer": req.observer.name, "station": req.ground_station.name}
+    files["plan.geojson"] = exports.geojson(plan, names, result["access_windows"])
+    try:
+        arc = exports.plan_arc(plan, result)
+    except InputError as exc:
+        print(f"note: no OPM, OEM or CZML: {exc.message}", file=sys.stderr)
+    else:
+        files["opm.txt"] = exports.opm(arc, name, req.observer.name)
+        files["oem.txt"] = exports.oem(arc, name, req.target.name, req.observer.name)
+        files["plan.czml"] = exports.czml(arc, name, names, req.ground_station.model_dump(), result["access_windows"])
+    for fname, body in files.items():
+        (folder / fname).write_text(body)
+    print(f"wrote {', '.join(sorted(files))} to {folder}", file=sys.stderr)
+
+
+def cmd_access(args: argparse.Namespace) -> int:
+    from app.errors import InputError
+    from app.schemas import AccessCreate
+    from app.services.planning import run_access
+
+    try:
+        result = run_access(AccessCreate.model_validate(read_json(args.file)))
+    except ValidationError as exc:
+        raise CliError(validation_line(exc)) from None
+    except InputError as exc:
+        raise CliError(input_line(exc)) from None
+    print(json.dumps(result, indent=2) if args.json else format_windows(result["access_windows"]))
+    return 0
+
+
+def format_windows(windows: list[dict[str, Any]]) -> str:
+    lines = [
+        f"{'rise (UTC)':<25} {'culmination (UTC)':<25} {'set (UTC)':<25} {'max el (deg)':>12} "
+        f"{'min range (km)':>14} {'duration (s)':>12}"
+    ]
+    for w in windows:
+        lines.append(
+            f"{utc_text(w['rise']):<25} {utc_text(w['culmination']):<25} {utc_text(w['set']):<25} "
+            f"{w['max_elevation_deg']:12.2f} {w['min_range_km']:14.1f} {w['duration_s']:12.1f}"
+        )
+    return "\n".join(lines)
+
+
+def format_plan(r: dict[str, Any]) -> str:
+    """Return a plan as a readable report: every time in UTC with Z, every number with its unit."""
+    out = [f"epoch {utc_text(r['epoch'])}, {r['duration_days']:g} days, elements read as {r['reading']}"]
+    out.append(f"\n{len(r['access_windows'])} access windows")
+    out.append(format_windows(r["access_windows"][:10]))
+    if len(r["access_windows"]) > 10:
+        out.append(f"... and {len(r['access_windows']) - 10} more")
+    out.append(f"\n{len(r['candidates'])} candidates (best of each pass, ranked by miss); * marks the chosen one")
+    out.append(
+        f"{'#':>4} {'T_access (UTC)':<25} {'dHa (km)':>9} {'dHp (km)':>9} {'miss (km)':>10} {'node':>5} {'sunlit':>7}"
+    )
+    chosen_at = (r.get("chosen") or {}).get("t_access")
+    shown = [(k, c) for k, c in enumerate(r["candidates"]) if k < 15 or c["t_access"] == chosen_at]
+    for n, (k, c) in enumerate(shown):
+        if n and k != shown[n - 1][0] + 1:
+            out.append("   ...")
+        mark = "*" if c["t_access"] == chosen_at else " "
+        out.append(
+            f"{mark}{k:3d} {utc_text(c['t_access']):<25} {c['delta_ha_km']:9.1f} {c['delta_hp_km']:9.1f} "
+            f"{c['miss_km']:10.3f} {c['node']:>5} {('yes' if c['feasibility']['sunlit'] else 'no'):>7}"
+        )
+    ch = r.get("chosen")
+    if ch:
+        out.append(
+            f"\nchosen: T_access {utc_text(ch['t_access'])}, dHa {ch['delta_ha_km']:.1f} km, dHp {ch['delta_hp_km']:.1f} km"
+        )
+        out.append(f"  node-line miss with the changed observer's own propagation: {ch['miss_km']:.3f} km")
+        out.append(f"  height change costs {r['alignment_dv_m_s']:.1f} m/s")
+    ph = r.get("phasing")
+    if ph:
+        v = ph["verification"]
+        out.append(
+            f"phasing: burn {utc_text(ph['t_burn'])} ({ph['revolutions_before']} rev before), "
+            f"dv {ph['dv_total_m_s']:.1f} m/s, RTN [{', '.join(f'{x:.1f}' for x in ph['dv_rtn_m_s'])}] m/s"
+        )
+        out.append(
+            f"verification (numerical J2): {v['miss_km'] * 1000:.1f} m from the aim point at T_access "
+            f"(two-body Lambert alone: {v['two_body_miss_km']:.1f} km), relative speed {v['relative_speed_km_s']:.2f} km/s"
+        )
+        out.append(
+            f"encounter: stand-off {v['standoff_km']:.2f} km, separation {v['separation_km']:.3f} km at T_access, "
+            f"closest approach {v['closest_approach_km']:.3f} km at {utc_text(v['closest_approach_time'])}, "
+            f"target angular rate {v['target_angular_rate_deg_s']:.2f} deg/s"
+        )
+    if ch:
+        f = ch["feasibility"]
+        out.append(
+            f"feasible: {'yes' if f['feasible'] else 'no'}" + (f" ({'; '.join(f['reasons'])})" if f["reasons"] else "")
+        )
+    for note in r["notes"]:
+        out.append(f"note: {note}")
+    return "\n".join(out)
