@@ -10,16 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
+from inference.frames import rotation_matrix
 from inference.simulation.dataset import DatasetSpec, generate, render_frames
-from inference.simulation.isar import (
-    Imager,
-    Radar,
-    polar_echo_direct,
-    polar_format,
-    projection_matrix,
-    rotation_matrix,
-    visible,
-)
+from inference.simulation.radar import Imager, Radar, polar_echo_direct, polar_format, projection_matrix
+from inference.simulation.scene import visible
 from inference.simulation.targets import tiangong_like
 
 

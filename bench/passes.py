@@ -103,7 +103,7 @@ def one_pass(est: Any, checker: Any, window: dict[str, Any], opts: pass_svc.Pass
 
 
 def main() -> int:
-    from inference.simulation.isar import Radar
+    from inference.simulation.radar import Radar
 
     est = Estimator.load()
     checker = load_checkers(est.model_dir, est.img_size).get("tiangong-like")
@@ -286,7 +286,7 @@ def _plot(single: np.ndarray, fused: np.ndarray, rates: np.ndarray) -> None:
 
 if __name__ == "__main__":
     if sys.argv[1:] == ["--write"]:
-        from inference.simulation.isar import Radar
+        from inference.simulation.radar import Radar
 
         saved = json.loads(RESULTS.read_text())
         write(saved["still"], saved["spin"], saved["thirty"], Radar())

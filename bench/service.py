@@ -19,8 +19,10 @@ def bench_service(model_dir: Path, clients: int = 8, per_client: int = 12) -> li
     import httpx
 
     from bench.common import median_time
+    from inference.frames import normalise_frame
     from inference.runtime import Estimator
-    from inference.simulation.isar import Imager, Radar, normalise_frame, simulate
+    from inference.simulation.radar import Imager, Radar
+    from inference.simulation.scene import simulate
     from inference.simulation.targets import tiangong_like
     from tests.utils.server import Server
 

@@ -4,7 +4,7 @@ Writes the "Attitude fit and trust" section of BENCHMARKS.md and bench/attitude-
 Run with `python -m bench.trust` (part of `make bench`; about 8 minutes on 2 cores).
 
 Frames: the fresh SNR sets of Table 7 (inference.evaluation.evaluate.snr_spec, never trained on), the
-simulator variants of inference.simulation.isar.VARIANTS (none was used in training; seed 80000 + 100 k
+simulator variants of inference.simulation.scene.VARIANTS (none was used in training; seed 80000 + 100 k
 for variant k, SNR uniform in -3..15 dB), and the catalogue of frames that must be flagged
 (inference.simulation.catalogue). The truth is the simulator's.
 """
@@ -25,7 +25,7 @@ from inference.frames import geodesic_deg
 from inference.runtime import Estimator
 from inference.simulation.catalogue import FRESH_SEED, KINDS, bad_frames, good_frames, simulated
 from inference.simulation.dataset import DatasetSpec
-from inference.simulation.isar import VARIANTS
+from inference.simulation.scene import VARIANTS
 from inference.trust import load_checkers
 
 TITLE = "Attitude fit and trust"

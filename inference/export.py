@@ -220,7 +220,7 @@ def _export_into(
         "name": f"gsa-isar-{cfg['name']}",
         "exported": datetime.now(UTC).isoformat(timespec="seconds"),
         "opset": OPSET,
-        "input": "frame [batch, 1, H, W] float32: inference.simulation.isar.normalise_frame output",
+        "input": "frame [batch, 1, H, W] float32: inference.frames.normalise_frame output",
         "outputs": {"unetpp": "enhanced frame [batch, 1, H, W]", "swin": f"Euler z, y, x / {ANGLE_SCALE_DEG} deg"},
         "angle_scale_deg": ANGLE_SCALE_DEG,
         "enhance": bool(enhance),

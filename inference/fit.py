@@ -2,7 +2,7 @@
 
 numpy and scipy only, so the service runs it beside ONNX Runtime without torch.
 
-The renderer. ``inference.simulation.isar.label_mask`` marks every pixel that some surface point
+The renderer. ``inference.simulation.scene.label_mask`` marks every pixel that some surface point
 rounds into, then closes the mask with a 3 x 3 cross. ``Renderer.occupancy`` does the
 same with two changes that make it smooth in the attitude: a point's count moves to
 the neighbouring pixel linearly within 0.1 pixel of the boundary between them (instead
@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from inference.frames import geodesic_deg, rotation_matrices
-from inference.simulation.isar import Radar, projection_matrix
+from inference.simulation.radar import Radar, projection_matrix
 from inference.simulation.targets import TargetModel, surface_normals
 
 Vec = NDArray[np.float64]
@@ -415,7 +415,7 @@ def brightness_agreement(renderer: Renderer, frame: Vec, angles_deg: Vec, mask: 
     """Return how well an attitude explains which parts of the frame are bright: a correlation in [-1, 1].
 
     What the silhouette cannot show: the scatterers the radar sees at that attitude (facing
-    it, not hidden behind nearer parts: ``inference.simulation.isar.visible``), each with its expected
+    it, not hidden behind nearer parts: ``inference.simulation.scene.visible``), each with its expected
     aspect-dependent power (``expected_magnitude``), splatted and blurred by 1.5 pixels, in
     log scale, against the normalised frame (itself in dB) blurred alike, over ``mask``. The
     near-mirror's silhouette can match within a tenth of a percent while its bright parts
@@ -423,7 +423,7 @@ def brightness_agreement(renderer: Renderer, frame: Vec, angles_deg: Vec, mask: 
     """
     from scipy.ndimage import gaussian_filter
 
-    from inference.simulation.isar import expected_magnitude, visible
+    from inference.simulation.scene import expected_magnitude, visible
 
     model, radar = renderer.model, renderer.radar
     rot = rotation_matrices(np.asarray(angles_deg, float))[0]

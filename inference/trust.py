@@ -51,7 +51,7 @@ from inference.fit import (
     silhouette_iou,
 )
 from inference.frames import geodesic_deg
-from inference.simulation.isar import Radar
+from inference.simulation.radar import Radar
 from inference.simulation.targets import TargetModel
 
 Vec = NDArray[np.float64]
@@ -433,7 +433,7 @@ class Checkers:
 
     def get(self, name: str) -> Checker:
         from inference.errors import ModelFileError
-        from inference.simulation.isar import check_fits
+        from inference.simulation.scene import check_fits
 
         with self._lock:
             if name in self._built:
@@ -525,8 +525,9 @@ def load_checkers(
     not fit the frame, takes a built-in target's name, or the default target is unknown.
     """
     from inference.errors import ModelFileError
-    from inference.simulation.isar import check_fits
-    from inference.simulation.targets import BUILTIN_TARGETS, load_model
+    from inference.simulation.meshes import load_model
+    from inference.simulation.scene import check_fits
+    from inference.simulation.targets import BUILTIN_TARGETS
 
     radar, trained = card_radar_and_target(model_dir, img_size)
     extra = None

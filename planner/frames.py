@@ -9,7 +9,7 @@ axes, stacked (N, 3, 3).
   the rate of change of that line of sight *as the target sees it* (in its own LVLH frame:
   a target held fixed in LVLH turns with that frame, and only the line of sight's motion
   relative to the body forms the image), Z = X cross Y. This is the frame the simulator
-  images in (``inference.simulation.isar``: the line of sight sweeps from -Y to +Y through X).
+  images in (``inference.simulation.radar``: the line of sight sweeps from -Y to +Y through X).
 """
 
 from __future__ import annotations

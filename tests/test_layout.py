@@ -140,7 +140,7 @@ def test_light_entry_points_leave_torch_and_the_simulator_out():
         "import app.main\n"
         "from app.cli import build_parser\n"
         "build_parser().format_help()\n"
-        "heavy = ('torch', 'app.cli.planning', 'app.cli.estimates', 'app.cli.passes', 'app.cli.service', 'inference.simulation.isar', 'inference.simulation.targets', 'inference.simulation.dataset', 'inference.training.train', 'scipy.ndimage')\n"
+        "heavy = ('torch', 'app.cli.planning', 'app.cli.estimates', 'app.cli.passes', 'app.cli.service', 'inference.simulation.radar', 'inference.simulation.scene', 'inference.simulation.targets', 'inference.simulation.dataset', 'inference.training.train', 'scipy.ndimage')\n"
         "print(json.dumps([m for m in heavy if m in sys.modules]))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)

@@ -107,7 +107,7 @@ def cmd_simulate_pass(args: argparse.Namespace) -> int:
     from app.errors import InputError
     from app.services import passes as pass_svc
     from inference.simulation.dataset import parse_snr
-    from inference.simulation.isar import Radar
+    from inference.simulation.radar import Radar
 
     if not args.out:
         raise CliError("give --out DIR for the pass's frames")

@@ -184,7 +184,7 @@ def render_pass(
 ) -> tuple[Vec, Vec]:
     """Render each frame at its attitude; return the normalised frames [N, H, W] and their SNRs (dB, NaN: none)."""
     from inference.simulation.catalogue import at_attitudes
-    from inference.simulation.isar import DEFAULT_SCATTERING
+    from inference.simulation.scene import DEFAULT_SCATTERING
 
     n = len(frames_meta)
     if opts.snr_reference is not None:

@@ -22,7 +22,7 @@ from inference.files import write_json
 from inference.frames import geodesic_deg
 from inference.runtime import Estimator
 from inference.simulation.dataset import DatasetSpec, load_manifest, load_range, render_frames, split_ranges
-from inference.simulation.isar import Radar
+from inference.simulation.radar import Radar
 
 PAPER = {
     "without enhancement": (1.387, 1.223, 1.797),

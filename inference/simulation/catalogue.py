@@ -28,7 +28,8 @@ from numpy.typing import NDArray
 
 from inference.frames import normalise_frame
 from inference.simulation.dataset import DatasetSpec, frame_truth
-from inference.simulation.isar import DEFAULT_SCATTERING, Imager, Radar, Scattering, simulate
+from inference.simulation.radar import Imager, Radar
+from inference.simulation.scene import DEFAULT_SCATTERING, Scattering, simulate
 from inference.simulation.targets import TargetModel, comsat_like, tiangong_like
 
 KINDS = (

@@ -32,8 +32,10 @@ from numpy.typing import NDArray
 from inference.errors import DatasetError, module_main
 from inference.files import read_json, sha256_file, write_json
 from inference.frames import normalise_frame
-from inference.simulation.isar import Imager, Radar, check_fits, draw_scattering, simulate
-from inference.simulation.targets import TargetModel, load_model, tiangong_like
+from inference.simulation.meshes import load_model
+from inference.simulation.radar import Imager, Radar
+from inference.simulation.scene import check_fits, draw_scattering, simulate
+from inference.simulation.targets import TargetModel, tiangong_like
 
 FORMAT_VERSION = 1
 
@@ -191,7 +193,7 @@ def generate(
         },
         "frames": spec.n,
         "split": {"train": [0, spec.n_train], "test": [spec.n_train, spec.n]} if spec.n_train is not None else None,
-        "normalisation": "inference.simulation.isar.normalise_frame (40 dB below the 99.5th percentile)",
+        "normalisation": "inference.frames.normalise_frame (40 dB below the 99.5th percentile)",
         "shards": shards,
         "content_sha256": hashlib.sha256("".join(s["sha256"] for s in shards).encode()).hexdigest(),
         "generated_in_s": round(elapsed, 2),
@@ -360,7 +362,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--aperture-deg", type=float, default=5.1)
     p.add_argument(
         "--variety",
-        help="draw each frame's scattering from a preset (robust: inference.simulation.isar.VARIETY_PRESETS)",
+        help="draw each frame's scattering from a preset (robust: inference.simulation.scene.VARIETY_PRESETS)",
     )
     p.add_argument(
         "--variety-set",

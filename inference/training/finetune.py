@@ -38,7 +38,7 @@ from inference.files import sha256_file, write_json
 from inference.frames import ANGLE_SCALE_DEG
 from inference.networks.swin import SwinTransformer
 from inference.simulation.dataset import DatasetSpec, frame_truth, load_manifest, load_range, render_frames
-from inference.simulation.isar import Radar
+from inference.simulation.radar import Radar
 from inference.training.checkpoints import averaged_weights, load_trained, save_checkpoint
 from inference.training.options import (
     VAL_SEED,

@@ -55,7 +55,8 @@ def test_estimate_locally_with_plot(tmp_path, smoke_models):
 
     import numpy as np
 
-    from inference.simulation.isar import Imager, simulate
+    from inference.simulation.radar import Imager
+    from inference.simulation.scene import simulate
     from inference.simulation.targets import tiangong_like
     from tests.utils.models import SMOKE_RADAR
 
@@ -78,7 +79,7 @@ def test_estimate_locally_with_plot(tmp_path, smoke_models):
     bad = _gsa("estimate", str(tmp_path / "bad.npy"), "--models", str(smoke_models), cwd=tmp_path)
     assert bad.returncode == 2 and "2-D" in bad.stderr and bad.stderr.count("\n") == 1
     # --normalised takes a data set's (already normalised) frame as sent, and refuses one that is not.
-    from inference.simulation.isar import normalise_frame
+    from inference.frames import normalise_frame
 
     np.save(tmp_path / "n.npy", normalise_frame(np.abs(frame)))
     ok = _gsa("estimate", str(tmp_path / "n.npy"), "--normalised", "--models", str(smoke_models), cwd=tmp_path)

@@ -6,7 +6,8 @@ from scipy.spatial.transform import Rotation
 
 from inference.fit import Renderer, fit, mirror, silhouette_iou
 from inference.frames import geodesic_deg, rotation_matrices, rotation_matrix
-from inference.simulation.isar import Imager, Radar, label_mask
+from inference.simulation.radar import Imager, Radar
+from inference.simulation.scene import label_mask
 from inference.simulation.targets import comsat_like, tiangong_like
 from inference.trust import Checker
 

@@ -4,7 +4,7 @@ from pathlib import Path
 
 from inference.export import export
 from inference.simulation.dataset import DatasetSpec, generate
-from inference.simulation.isar import Radar
+from inference.simulation.radar import Radar
 from inference.training.options import recipe
 from inference.training.train import train
 

@@ -13,7 +13,9 @@ from app.main import create_app
 from app.schemas import PAPER_EXAMPLE
 from app.services.uploads import decode, prepare
 from inference.errors import ModelFileError
-from inference.simulation.isar import Imager, normalise_frame, simulate
+from inference.frames import normalise_frame
+from inference.simulation.radar import Imager
+from inference.simulation.scene import simulate
 from inference.simulation.targets import tiangong_like
 from tests.conftest import KEY_A, KEY_B
 from tests.utils.models import SMOKE_RADAR

@@ -9,7 +9,8 @@ from sqlalchemy import create_engine, func, select
 
 from app.db.models import Pass
 from app.schemas import PAPER_EXAMPLE
-from inference.simulation.isar import Imager, simulate
+from inference.simulation.radar import Imager
+from inference.simulation.scene import simulate
 from inference.simulation.targets import tiangong_like
 from tests.conftest import KEY_A, KEY_B
 from tests.utils.models import SMOKE_RADAR

@@ -11,7 +11,7 @@ from inference.errors import InferenceError, ModelFileError
 from inference.export import export
 from inference.networks.build import build_models, get_config
 from inference.simulation.dataset import DatasetSpec, generate, load_manifest, render_frames
-from inference.simulation.isar import Radar
+from inference.simulation.radar import Radar
 from inference.training.checkpoints import load_trained
 from inference.training.finetune import finetune, validation_spec
 from inference.training.options import FinetuneOptions, recipe

@@ -20,7 +20,7 @@ from inference.training.options import (
 )
 from inference.training.train import add_arguments
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def test_the_shipped_recipe_is_what_the_shipped_networks_training_record_says():

@@ -15,7 +15,7 @@ from inference.networks.swin import SwinTransformer, window_partition, window_re
 from inference.networks.unetpp import UNetPlusPlus, relative_frobenius_loss
 from inference.runtime import Estimator
 from inference.simulation.dataset import DatasetSpec, generate
-from inference.simulation.isar import Radar
+from inference.simulation.radar import Radar
 from inference.training.options import recipe
 from inference.training.train import train
 
@@ -467,7 +467,7 @@ def test_training_refuses_bad_data(smoke_data, tmp_path):
 
 
 def test_quaternion_matches_rotation_matrix():
-    from inference.simulation.isar import rotation_matrix
+    from inference.frames import rotation_matrix
 
     z, y, x = 30.0, -20.0, 10.0
     w, qx, qy, qz = euler_to_quaternion(z, y, x)
