@@ -314,6 +314,11 @@ class StationPublic(StationIn):
     created_at: datetime
     """when it was stored (UTC)"""
 
+    @staticmethod
+    def row_json(row: Any) -> dict[str, Any]:
+        """Return a stored station row (app.db.models.GroundStation) as this schema's JSON-ready dict."""
+        return {**row.station, "created_at": utc_or_none(row.created_at)}
+
 
 class StationsPublic(Described):
     data: list[StationPublic]
@@ -681,6 +686,18 @@ class PlanPublic(PlanResult):
     """the observer's name"""
     station_name: str
     """the station's name"""
+
+    @staticmethod
+    def row_json(plan: Any) -> dict[str, Any]:
+        """Return a stored plan row (app.db.models.Plan) as this schema's JSON-ready dict."""
+        return {
+            **plan.result,
+            "id": plan.id,
+            "created_at": utc_or_none(plan.created_at),
+            "target_name": plan.target_name,
+            "observer_name": plan.observer_name,
+            "station_name": plan.station_name,
+        }
 
 
 class PlanSummary(Described):

@@ -23,17 +23,6 @@ router = APIRouter(prefix="/plans", tags=["plans"])
 NOT_FOUND: dict[int | str, dict[str, Any]] = {404: {"description": "no plan with this id belongs to the caller"}}
 
 
-def _public(plan: Any) -> dict[str, Any]:
-    return {
-        **plan.result,
-        "id": plan.id,
-        "created_at": as_utc(plan.created_at),
-        "target_name": plan.target_name,
-        "observer_name": plan.observer_name,
-        "station_name": plan.station_name,
-    }
-
-
 def _budget(settings: Any, gone: threading.Event | None = None) -> StopCheck:
     """A plan's stop check: the caller gone, or over its time (GSA_PLAN_TIMEOUT_S) or memory (GSA_PLAN_MEMORY_MB) budget.
 
@@ -106,7 +95,7 @@ async def create_plan(
     plan = await run_in_threadpool(
         crud.create_plan, session=session, operator_id=operator.id, request=stored, result=result
     )
-    return _public(plan)
+    return PlanPublic.row_json(plan)
 
 
 @router.get("", response_model=PlansPublic)
@@ -153,7 +142,7 @@ def read_plan(session: SessionDep, operator: CurrentOperator, plan_id: Annotated
     plan = crud.get_plan(session=session, operator_id=operator.id, plan_id=plan_id)
     if plan is None:
         raise HTTPException(status_code=404, detail="Plan not found")
-    return _public(plan)
+    return PlanPublic.row_json(plan)
 
 
 @router.get(

@@ -8,17 +8,13 @@ from fastapi import APIRouter, HTTPException, Path, Response
 
 from app import crud
 from app import openapi_examples as examples
-from app.api.deps import CurrentOperator, PageDep, SessionDep, as_utc
+from app.api.deps import CurrentOperator, PageDep, SessionDep
 from app.schemas import StationCreate, StationPublic, StationsPublic, Text
 
 router = APIRouter(prefix="/stations", tags=["stations"])
 
 NOT_FOUND: dict[int | str, dict[str, Any]] = {404: {"description": "the caller has no station of this name"}}
 StationPath = Annotated[Text, Path(min_length=1, max_length=200, description="the station's name, as stored")]
-
-
-def _public(row: Any) -> dict[str, Any]:
-    return {**row.station, "created_at": as_utc(row.created_at)}
 
 
 @router.post(
@@ -43,7 +39,7 @@ def create_station(session: SessionDep, operator: CurrentOperator, station_in: S
             detail=f"a station named {station_in.name!r} is already stored: DELETE /v1/stations/{station_in.name} "
             "first, or choose another name",
         )
-    return _public(row)
+    return StationPublic.row_json(row)
 
 
 @router.get("", response_model=StationsPublic)
@@ -54,7 +50,7 @@ def list_stations(
 ) -> dict[str, Any]:
     """List the caller's stations by name."""
     rows, total = crud.list_stations(session=session, operator_id=operator.id, limit=page.limit, offset=page.offset)
-    return {"data": [_public(r) for r in rows], "count": total}
+    return {"data": [StationPublic.row_json(r) for r in rows], "count": total}
 
 
 @router.get("/{name}", response_model=StationPublic, responses=NOT_FOUND)
@@ -63,7 +59,7 @@ def get_station(session: SessionDep, operator: CurrentOperator, name: StationPat
     row = crud.get_station(session=session, operator_id=operator.id, name=name)
     if row is None:
         raise HTTPException(status_code=404, detail="Station not found")
-    return _public(row)
+    return StationPublic.row_json(row)
 
 
 @router.delete("/{name}", status_code=204, responses=NOT_FOUND)
