@@ -246,6 +246,8 @@ def _export_into(
         # The radar and target the training frames were simulated with: what the fit renders.
         "radar": (training.get("data") or {}).get("radar"),
         "target": (training.get("data") or {}).get("target"),
+        "target_model": (training.get("data") or {}).get("target_model"),
+        "max_angle_deg": (training.get("data") or {}).get("max_angle_deg"),
         **(extra or {}),
     }
     write_json(out / "model_card.json", card)

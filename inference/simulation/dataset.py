@@ -34,7 +34,7 @@ from inference.files import read_json, sha256_file, write_json
 from inference.frames import normalise_frame
 from inference.simulation.meshes import load_model
 from inference.simulation.radar import Imager, Radar
-from inference.simulation.scene import check_fits, draw_scattering, simulate
+from inference.simulation.scene import check_fits, draw_scattering, mirror_pair_iou, simulate
 from inference.simulation.targets import TargetModel, tiangong_like
 
 FORMAT_VERSION = 1
@@ -190,6 +190,10 @@ def generate(
             "radius_m": model.radius_m,
             "scatterers": int(len(model.scatterers)),
             "mirror_planes": model.mirror_planes,
+            "symmetries": model.symmetries(),
+            "mirror_pair_label_iou": mirror_pair_iou(model, Imager(radar)),
+            "mesh_sha256": sha256_file(Path(spec.model_path)) if spec.model_path else None,
+            "scale": spec.model_scale,
         },
         "frames": spec.n,
         "split": {"train": [0, spec.n_train], "test": [spec.n_train, spec.n]} if spec.n_train is not None else None,

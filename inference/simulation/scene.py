@@ -319,3 +319,27 @@ VARIETY_PRESETS: dict[str, dict[str, tuple[Any, ...]]] = {
         "blur_px": (0.0, 1.0),
     },
 }
+
+
+def mirror_pair_iou(
+    model: TargetModel, imager: Imager, n: int = 64, seed: int = 0, max_angle_deg: float = 45.0
+) -> dict[str, float]:
+    """How alike the labels of an attitude (z, y, x) and its near-mirror (z, -y, -x) are, over ``n`` random attitudes.
+
+    The near-mirror is the reflection through the body xy plane seen through the image
+    plane: ``R(z, -y, -x) = N R(z, y, x) N`` with ``N = diag(1, 1, -1)``, so a target exactly
+    symmetric about its body xy plane gives identical labels (IoU 1) and a frame cannot tell
+    the two apart. Returns the mean, median and smallest IoU.
+    """
+    rng = np.random.default_rng(seed)
+    ious = []
+    for z, y, x in rng.uniform(-max_angle_deg, max_angle_deg, (n, 3)):
+        a = label_mask(imager, model.surface @ rotation_matrix(z, y, x).T)
+        b = label_mask(imager, model.surface @ rotation_matrix(z, -y, -x).T)
+        ious.append(float(np.count_nonzero(a & b)) / max(float(np.count_nonzero(a | b)), 1.0))
+    return {
+        "mean": round(float(np.mean(ious)), 4),
+        "median": round(float(np.median(ious)), 4),
+        "min": round(float(np.min(ious)), 4),
+        "attitudes": n,
+    }

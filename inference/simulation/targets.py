@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -46,16 +47,62 @@ class TargetModel:
 
     @property
     def mirror_planes(self) -> list[str]:
-        """Return the body planes the surface is (nearly) symmetric about: a frame cannot tell mirrored attitudes apart."""
-        planes = []
+        """Return the body planes the surface is (nearly) symmetric about: a frame cannot tell mirrored attitudes apart.
+
+        A plane counts when 95 % of the mirrored surface lies within 15 cm of the surface; the
+        near-symmetries below that, with their strength, are ``symmetries()``.
+        """
         tree = _kd(self.surface)
-        for axis, name in enumerate(("yz", "xz", "xy")):
-            mirrored = self.surface.copy()
-            mirrored[:, axis] *= -1.0
-            d, _ = tree.query(mirrored[:: max(1, len(mirrored) // 2000)])
-            if np.percentile(d, 95) < 0.15:
-                planes.append(name)
-        return planes
+        probe = self.surface[:: max(1, len(self.surface) // 2000)]
+        return [
+            name for axis, name in enumerate(PLANES) if np.percentile(_mirror_gaps(tree, probe, axis, 0.0), 95) < 0.15
+        ]
+
+    def symmetries(self, tolerance_m: float = 0.15) -> list[dict[str, Any]]:
+        """How nearly the surface is symmetric about each body plane (yz, xz, xy) and the best plane parallel to it.
+
+        For each plane through the centroid: ``share_within`` of the mirrored surface points within
+        ``tolerance_m`` of the surface (1.0: an exact mirror plane) and ``p95_m``, the 95th
+        percentile of their distances. ``offset_m`` and ``offset_share_within`` are the same for the
+        parallel plane (searched in 2 cm steps within 1 m) that the surface is most symmetric about:
+        a hull symmetric about a plane a little off its centroid is still a near-mirror ambiguity
+        for a frame that sees it across that plane, even when it is not an exact mirror plane.
+        """
+        tree = _kd(self.surface)
+        probe = self.surface[:: max(1, len(self.surface) // 2000)]
+        out = []
+        for axis, name in enumerate(PLANES):
+
+            def share(c: float, axis: int = axis) -> tuple[float, float]:
+                """The share within tolerance, then (among equal shares) the smaller mean gap."""
+                gaps = _mirror_gaps(tree, probe, axis, c)
+                return float(np.mean(gaps <= tolerance_m)), -float(gaps.mean())
+
+            coarse = max(np.arange(-1.0, 1.0 + 1e-9, 0.1), key=share)  # then 2 cm steps about the best 10 cm one
+            best = max(np.clip(coarse + np.arange(-0.08, 0.08 + 1e-9, 0.02), -1.0, 1.0), key=share)
+            gaps = _mirror_gaps(tree, probe, axis, 0.0)
+            out.append(
+                {
+                    "plane": name,
+                    "tolerance_m": tolerance_m,
+                    "share_within": round(float(np.mean(gaps <= tolerance_m)), 4),
+                    "p95_m": round(float(np.percentile(gaps, 95)), 4),
+                    "offset_m": round(float(best), 2),
+                    "offset_share_within": round(share(best)[0], 4),
+                }
+            )
+        return out
+
+
+PLANES = ("yz", "xz", "xy")
+
+
+def _mirror_gaps(tree: Any, probe: Vec, axis: int, offset_m: float) -> Vec:
+    """Distances from ``probe`` points mirrored through the plane ``axis = offset_m`` to the surface (``tree``)."""
+    mirrored = probe.copy()
+    mirrored[:, axis] = 2.0 * offset_m - mirrored[:, axis]
+    d, _ = tree.query(mirrored)
+    return np.asarray(d)
 
 
 def _kd(points: Vec):  # type: ignore[no-untyped-def]

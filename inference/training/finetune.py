@@ -39,12 +39,14 @@ from inference.frames import ANGLE_SCALE_DEG
 from inference.networks.swin import SwinTransformer
 from inference.simulation.dataset import DatasetSpec, frame_truth, load_manifest, load_range, render_frames
 from inference.simulation.radar import Radar
+from inference.training.augment import perturb_silhouettes
 from inference.training.checkpoints import averaged_weights, load_trained, save_checkpoint
 from inference.training.options import (
     VAL_SEED,
     FinetuneOptions,
     add_option_arguments,
     check_schedule,
+    check_share,
     options_from_args,
 )
 from inference.training.train import split_indices
@@ -141,6 +143,7 @@ def finetune(
     if epochs < 1:
         raise InferenceError(f"epochs {epochs} must be at least 1", field="epochs")
     check_schedule(lr_decay, ema)
+    check_share(opts.silhouette_noise)
     if n_val < 16:
         raise InferenceError(f"n_val {n_val} is too few to choose weights by; give at least 16", field="n_val")
     if Path(out_dir).resolve() == Path(run_dir).resolve():
@@ -173,11 +176,15 @@ def finetune(
     swin.eval()
 
     @torch.no_grad()
-    def features(frames: NDArray[Any]) -> NDArray[np.float16]:
+    def features(frames: NDArray[Any], perturb_seed: int | None = None) -> NDArray[np.float16]:
+        """Swin's front output for frames; with ``perturb_seed``, of silhouettes perturbed (silhouette_noise)."""
         x = np.asarray(frames, np.float32)
         if enhance:
             x = est.enhance(x) if est is not None else unet(torch.from_numpy(x)[:, None])[:, 0].numpy()
-        return swin.front(torch.from_numpy(np.ascontiguousarray(x))[:, None], train_stages).numpy().astype(np.float16)
+        t = torch.from_numpy(np.ascontiguousarray(x))[:, None]
+        if perturb_seed is not None and opts.silhouette_noise:
+            t = perturb_silhouettes(t, opts.silhouette_noise, torch.Generator().manual_seed(perturb_seed))
+        return swin.front(t, train_stages).numpy().astype(np.float16)
 
     for rows in (train_idx, test_idx):
         if np.any(np.diff(rows) != 1):
@@ -197,17 +204,25 @@ def finetune(
     }
     t_start = time.perf_counter()
 
-    def data_rows(rows: NDArray[np.int64]) -> Callable[[int, int], NDArray[np.float16]]:
+    def data_rows(rows: NDArray[np.int64], perturb: bool = False) -> Callable[[int, int], NDArray[np.float16]]:
+        """Features of the split's rows ``a..b``; perturbed ones drawn from a seed of the run's and the chunk's,
+        so a cache cut off and resumed holds what one uninterrupted pass would."""
         lo = int(rows[0])  # the split's rows are contiguous: read them shard by shard
-        return lambda a, b: features(load_range(data_dir, lo + a, lo + b, keys=("image",), verify=False)["image"])
+        return lambda a, b: features(
+            load_range(data_dir, lo + a, lo + b, keys=("image",), verify=False)["image"],
+            perturb_seed=(seed * 1_000_003 + lo + a) if perturb else None,
+        )
 
     val_spec = validation_spec(manifest, n_val, val_seed)
     radar = Radar(**manifest["radar"])
     shape = probe.shape[1:]
     data_id = {**identity, "data": manifest["content_sha256"]}
+    train_id = {**data_id, "rows": list(_span(train_idx))}
+    if opts.silhouette_noise:  # (absent when off, so the caches made before the option still serve)
+        train_id.update(silhouette_noise=opts.silhouette_noise, perturb_seed=seed)
     feats = {
-        "train": FeatureCache(cache, "train", len(train_idx), shape, {**data_id, "rows": list(_span(train_idx))}).fill(
-            data_rows(train_idx), "training frames"
+        "train": FeatureCache(cache, "train", len(train_idx), shape, train_id).fill(
+            data_rows(train_idx, perturb=True), "training frames"
         ),
         "val": FeatureCache(cache, "val", n_val, shape, {**identity, "val": asdict(val_spec)}).fill(
             lambda a, b: features(render_frames(val_spec, radar, a, b)["image"]),
@@ -303,6 +318,7 @@ def finetune(
         "lr": lr,
         "lr_decay": lr_decay,
         "batch_size": batch_size,
+        "silhouette_noise": opts.silhouette_noise,
         "ema": ema,
         "seed": seed,
         "train_frames": int(len(train_idx)),

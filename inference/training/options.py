@@ -60,6 +60,11 @@ class TrainOptions:
     swin_depths: tuple[int, ...] | None = _opt(None, "override the config's Swin depths, e.g. 2,2,2,2")
     swin_heads: tuple[int, ...] | None = _opt(None, "override the config's Swin heads per stage, e.g. 1,2,4,8")
     max_train_frames: int | None = _opt(None, "train on the first N training frames only")
+    silhouette_noise: float = _opt(
+        0.0,
+        "share of Swin's training inputs perturbed like an enhancer's mistakes: eroded or dilated by 1 px, a part "
+        "missing, edges jittered (inference.training.augment); 0: off",
+    )
     seed: int = _opt(0, "seed of the initial weights and the batch order")
     # Machine knobs: where and how long, not what is learnt.
     device: str | None = _opt(None, "torch device (default: cuda when there is one)")
@@ -85,6 +90,7 @@ class TrainOptions:
         if not self.lr > 0:
             raise InferenceError(f"lr {self.lr} must be positive", field="lr")
         check_schedule(self.lr_decay, self.ema)
+        check_share(self.silhouette_noise)
         if self.mode not in ("joint", "two-stage"):
             raise InferenceError(f"mode {self.mode!r} must be 'joint' or 'two-stage'", field="mode")
         if self.ema is not None and self.mode == "two-stage":
@@ -96,6 +102,15 @@ class TrainOptions:
         for name, given, file in (("unet_from", self.unet_from, "unetpp.pt"), ("swin_from", self.swin_from, "swin.pt")):
             if given is not None and not Path(given).is_file():
                 raise InferenceError(f"{given} does not exist; give an earlier run's {file}", field=name)
+
+
+def check_share(silhouette_noise: float) -> None:
+    """Refuse a share of perturbed silhouettes outside [0, 1]."""
+    if not 0.0 <= silhouette_noise <= 1.0:
+        raise InferenceError(
+            f"silhouette_noise {silhouette_noise} must be in [0, 1] (the share of Swin's inputs perturbed)",
+            field="silhouette_noise",
+        )
 
 
 def check_schedule(lr_decay: float, ema: float | None) -> None:
@@ -116,6 +131,9 @@ RECIPES: dict[str, TrainOptions] = {
     # Table 4's "without enhancement" row and the two-stage comparison, on the shipped schedule.
     "noenhance": replace(_SHIPPED, enhance=False),
     "twostage": replace(_SHIPPED, mode="two-stage"),
+    # Issue 18's robust networks: the shipped schedule, half of Swin's inputs perturbed silhouettes
+    # (train it on a `gsa simulate --variety robust` set).
+    "robust": replace(_SHIPPED, silhouette_noise=0.5),
     # The compact shape on the paper's schedule at batch 16 (what `--config compact` always meant).
     "compact": TrainOptions(config="compact", batch_size=16),
     # What a 2-core CPU trains in under an hour.
@@ -149,6 +167,11 @@ class FinetuneOptions:
     n_val: int = _opt(1000, "frames of the fresh validation set")
     val_seed: int = _opt(VAL_SEED, "seed of the validation set (no training or SNR test set uses it)")
     max_train_frames: int | None = _opt(None, "train on the first N training frames only")
+    silhouette_noise: float = _opt(
+        0.0,
+        "share of the training frames whose enhanced silhouette is perturbed before caching (eroded or dilated "
+        "by 1 px, a part missing, edges jittered); validation and test frames stay as they are",
+    )
     seed: int = _opt(0, "seed of the batch order")
     threads: int | None = _opt(None, "torch CPU threads (default: all cores)")
     cache_dir: str | None = _opt(

@@ -41,6 +41,7 @@ from inference.networks.build import ModelConfig, build_models, get_config
 from inference.networks.swin import angle_loss
 from inference.networks.unetpp import relative_frobenius_loss
 from inference.simulation.dataset import load_arrays, load_manifest, split_ranges
+from inference.training.augment import perturb_silhouettes
 from inference.training.checkpoints import save_checkpoint
 from inference.training.options import (
     RECIPES,
@@ -171,6 +172,7 @@ class _Run:
     history: list[dict[str, Any]] = field(default_factory=list)
     start_epoch: int = 0
     cache: np.ndarray | None = None  # UNet++ output for every frame once UNet++ is frozen
+    gen: torch.Generator | None = None  # draws the perturbed silhouettes (silhouette_noise), on the run's device
 
 
 def train(data_dir: str | Path, out_dir: str | Path, options: TrainOptions | None = None) -> dict[str, Any]:
@@ -195,6 +197,7 @@ def train(data_dir: str | Path, out_dir: str | Path, options: TrainOptions | Non
     if opts.compile_models and run.dev.type == "cuda":
         run_u, run_s = torch.compile(run.unet), torch.compile(run.swin)
     rng = np.random.default_rng(opts.seed + run.start_epoch)
+    run.gen = torch.Generator(device=run.dev).manual_seed(opts.seed + run.start_epoch)
     t_start = time.perf_counter()
     for epoch in range(run.start_epoch, opts.epochs):
         t_epoch = time.perf_counter()
@@ -349,6 +352,8 @@ def _epoch(
             else:  # raw frames (no enhancement), or frames the frozen UNet++ already enhanced
                 loss_u = torch.zeros((), device=dev)
                 swin_in = x
+            if train_swin and opts.silhouette_noise and run.gen is not None:
+                swin_in = perturb_silhouettes(swin_in, opts.silhouette_noise, run.gen)
             loss_s = angle_loss(run_s(swin_in).float(), a)
         if train_swin:
             run.opt_s.zero_grad(set_to_none=True)
@@ -459,6 +464,9 @@ def _record(run: _Run) -> dict[str, Any]:
             "test": int(len(run.test_idx)),
             "radar": run.manifest.get("radar"),
             "target": (run.manifest.get("model") or {}).get("name"),
+            # The target as the data set describes it (size, mesh sha256, symmetries) and the angle range.
+            "target_model": run.manifest.get("model"),
+            "max_angle_deg": (run.manifest.get("spec") or {}).get("max_angle_deg"),
         },
         "hardware": {
             "device": str(dev),

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from inference.errors import ModelFileError
+from inference.simulation.meshes import load_model
 from inference.simulation.radar import Radar
 from inference.simulation.scene import check_fits
-from inference.simulation.meshes import load_model
 
 RADAR = Radar()
 
