@@ -80,11 +80,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     engine = make_engine(settings.database_url)
     # The models load once, here: a missing or corrupt file stops the service, naming the file.
-    from inference.runtime import Estimator
+    # One model set per target they were trained on (GSA_MODEL_DIR and GSA_EXTRA_MODEL_DIRS).
+    from inference.runtime import ModelSets
 
-    app.state.estimator = Estimator.load(
-        settings.model_dir, threads=settings.ort_threads or None, run_batch=settings.ort_run_batch
+    app.state.model_sets = ModelSets.load(
+        settings.model_dir,
+        settings.extra_model_dir_list,
+        threads=settings.ort_threads or None,
+        run_batch=settings.ort_run_batch,
     )
+    app.state.estimator = app.state.model_sets.default
     # The targets the fit knows; an operator's mesh that cannot be read, or does not fit the
     # frame, stops the service here, naming the file. The default target's renderer is built now.
     from inference.trust import load_checkers
@@ -96,6 +101,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         settings.target_scale,
         settings.default_target,
     )
+    unknown = [d for d in app.state.model_sets.describe() if d["target"] not in app.state.checkers.names]
+    if unknown:
+        from inference.errors import ModelFileError
+
+        raise ModelFileError(
+            f"model set {unknown[0]['dir']} is trained on {unknown[0]['target']!r}, a target this service does not "
+            "know: give its mesh as GSA_TARGET_MODEL",
+            field="extra_model_dirs",
+        )
     app.state.settings = settings
     app.state.key_secret = load_key_secret(settings.key_secret, settings.data_dir)
     app.state.engine = engine
@@ -117,6 +131,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             "status": "ready" if db["ok"] else "not ready",
             "database": db,
             "models": app.state.estimator.identity,
+            "model_sets": app.state.model_sets.describe(),
             "targets": app.state.checkers.names,
         }
         return body if db["ok"] else JSONResponse(status_code=503, content=body)

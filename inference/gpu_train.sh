@@ -21,6 +21,12 @@
 # set against the 0.105 s/step measured in eager mode on an H100 (2026-11-23). Only numpy, scipy, torch and onnxruntime are needed.
 # Back home: tar xzf records.tgz; python -m inference.training.pipeline join --pieces DIR --run runs/gpu-compact
 #
+# Issue 18's robust networks: GSA_GPU_VARIETY=robust simulates the training set with each frame's scattering
+# drawn from the robust preset (inference.simulation.scene.VARIETY_PRESETS; the SNR test sets stay default
+# frames), and GSA_GPU_RECIPE=robust trains compact on it with half of Swin's inputs perturbed silhouettes
+# (inference/training/augment.py). The varied simulator is slower: see BENCHMARKS.md, "ISAR simulation",
+# and size GSA_GPU_N to what 16 cores simulate inside the first command.
+#
 # To continue the shipped compact weights instead of starting afresh, point GSA_GPU_FROM at their
 # float16 pieces (records/checkpoints/compact-e15-cpu-tail: the H100's epoch 15 with Swin's
 # last stage fine-tuned on a CPU) and give the schedule to go on with,
@@ -36,6 +42,9 @@ EMA=()
 [ "${GSA_GPU_EMA:-0.999}" != 0 ] && EMA=(--ema "${GSA_GPU_EMA:-0.999}")
 OUT=${OUT:-$W/out}
 SECOND=${GSA_GPU_SECOND:-paper}
+RECIPE=${GSA_GPU_RECIPE:-shipped}
+VARIETY=()
+[ -n "${GSA_GPU_VARIETY:-}" ] && VARIETY=(--variety "$GSA_GPU_VARIETY")
 [ "${GSA_GPU_PAPER:-1}" = 0 ] && SECOND=none
 RUNS="compact paper noenhance twostage"
 export OMP_NUM_THREADS=1 PYTHONUNBUFFERED=1
@@ -77,6 +86,9 @@ pieces() {  # the compact run's newest weights: float16 pieces and pieces.json (
     python3 -m inference.training.pipeline pack --run "$W/compact" --out "$W/pack" && mv "$W"/pack/*.part* "$W/pack/pieces.json" "$OUT"/
 }
 
+case "$RECIPE" in shipped | robust) ;; *)
+    echo "GSA_GPU_RECIPE=$RECIPE: give shipped or robust" >&2; exit 2 ;;
+esac
 case "$SECOND" in paper | noenhance | twostage | none) ;; *)
     echo "GSA_GPU_SECOND=$SECOND: give paper, noenhance, twostage or none" >&2; exit 2 ;;
 esac
@@ -85,7 +97,7 @@ launch)
     nvidia-smi --query-gpu=name,memory.total,memory.used,clocks.max.sm --format=csv
     python3 -c "import torch, onnxruntime, scipy, numpy; print('torch', torch.__version__, 'ort', onnxruntime.__version__, 'cuda', torch.cuda.is_available())"
     mkdir -p "$W"
-    python3 -m inference.training.pipeline prepare --work "$W" --n "$N" --n-train "$((N - TEST))" --n-snr "$SNR_N" 2>&1 | grep -E '000/|error' | tail -4
+    python3 -m inference.training.pipeline prepare --work "$W" --n "$N" --n-train "$((N - TEST))" --n-snr "$SNR_N" "${VARIETY[@]}" 2>&1 | grep -E '000/|error' | tail -4
     echo "[$(( $(date +%s) - T0 )) s] data ready"
     extra=()
     if [ -n "${GSA_GPU_FROM:-}" ]; then
@@ -100,10 +112,10 @@ launch)
     launch_run() {  # NAME RECIPE [FLAGS...]: one recipe in the background, its log and pid in $W
         local name=$1 recipe=$2; shift 2
         setsid nohup python3 -m inference.training.pipeline run --work "$W" --name "$name" --recipe "$recipe" \
-            --n "$N" --max-minutes "$MINUTES" "$@" >"$W/$name.log" 2>&1 </dev/null &
+            --n "$N" --max-minutes "$MINUTES" "${VARIETY[@]}" "$@" >"$W/$name.log" 2>&1 </dev/null &
         echo $! >"$W/$name.pid"
     }
-    launch_run compact shipped "${EMA[@]}" "${extra[@]}"
+    launch_run compact "$RECIPE" "${EMA[@]}" "${extra[@]}"
     case "$SECOND" in
         paper) launch_run paper paper --max-train-frames 4000 ;;
         noenhance) launch_run noenhance noenhance "${EMA[@]}" ;;

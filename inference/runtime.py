@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import threading
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -144,6 +145,7 @@ class Estimator:
             "config": self.card["config"]["name"],
             "unetpp_sha256": self.card["files"]["unetpp"]["sha256"],
             "swin_sha256": self.card["files"]["swin"]["sha256"],
+            "trained_on": card_target(self.card),
         }
 
     def _run(self, role: str, frames: NDArray[np.float32]) -> NDArray[np.float32]:
@@ -233,3 +235,71 @@ class Estimator:
                 j.done = True
                 k += n
             self._cv.notify_all()
+
+
+# The target a card that names none was trained on (inference.simulation.targets.DEFAULT_TARGET; a test
+# keeps the two equal without this module importing the simulator).
+UNNAMED_CARD_TARGET = "tiangong-like"
+
+
+def card_target(card: dict[str, Any]) -> str:
+    """The target a model set was trained on: its card's, or the default target for older cards."""
+    return str(card.get("target") or UNNAMED_CARD_TARGET)
+
+
+class ModelSets:
+    """The model sets a service runs, one per target they were trained on; one of them is the default.
+
+    A request for a target with its own set is answered by that set's networks; any other
+    target by the default set's (the fit then renders the asked target from Swin's answer).
+    """
+
+    def __init__(self, sets: dict[str, Estimator], default: str) -> None:
+        if default not in sets:
+            raise ValueError(f"default model set {default!r} is not among {sorted(sets)}")
+        self.sets = sets
+        self.default_name = default
+
+    @classmethod
+    def load(
+        cls,
+        default_dir: str | Path = DEFAULT_MODEL_DIR,
+        extra_dirs: Sequence[str | Path] = (),
+        threads: int | None = None,
+        run_batch: int = DEFAULT_RUN_BATCH,
+    ) -> ModelSets:
+        """Load the default set and each extra directory's; refuse two sets of one target or of other frame sizes."""
+        default = Estimator.load(default_dir, threads=threads, run_batch=run_batch)
+        sets = {card_target(default.card): default}
+        for d in extra_dirs:
+            est = Estimator.load(d, threads=threads, run_batch=run_batch)
+            name = card_target(est.card)
+            if name in sets:
+                raise ModelFileError(
+                    f"model set {d} is trained on {name!r}, as {sets[name].model_dir} is: one set per target",
+                    field="model",
+                )
+            if est.img_size != default.img_size:
+                raise ModelFileError(
+                    f"model set {d} takes {est.img_size} px frames, the default set {default.img_size} px: "
+                    "every set must take the same frames",
+                    field="model",
+                )
+            sets[name] = est
+        return cls(sets, card_target(default.card))
+
+    @property
+    def default(self) -> Estimator:
+        return self.sets[self.default_name]
+
+    def for_target(self, target: str | None) -> tuple[str, Estimator]:
+        """The set trained on ``target`` (its name and estimator), or the default set when none is."""
+        name = target if target in self.sets else self.default_name
+        return name, self.sets[name]
+
+    def describe(self) -> list[dict[str, Any]]:
+        """Each set: the target it was trained on, whether it is the default, its folder and files."""
+        return [
+            {"target": name, "default": name == self.default_name, "dir": str(est.model_dir), **est.identity}
+            for name, est in self.sets.items()
+        ]

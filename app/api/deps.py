@@ -16,7 +16,7 @@ from app.core.security import digests_equal, key_fingerprint
 from app.db.models import Operator
 from app.errors import InputError
 from app.schemas import CONTROL_CHARACTERS, utc_or_none
-from inference.runtime import Estimator
+from inference.runtime import Estimator, ModelSets
 
 if TYPE_CHECKING:  # the fit's module imports the simulator's geometry: kept out of `gsa --help`
     from inference.trust import Checkers
@@ -83,6 +83,19 @@ def get_estimator(request: Request) -> Estimator:
 
 
 EstimatorDep = Annotated[Estimator, Depends(get_estimator)]
+
+
+def get_model_sets(request: Request) -> ModelSets:
+    """The model sets loaded at start-up, one per target they were trained on (``inference.runtime.ModelSets``)."""
+    return cast(ModelSets, request.app.state.model_sets)
+
+
+ModelSetsDep = Annotated[Any, Depends(get_model_sets)]
+
+
+def models_for(model_sets: Any, checker: Any) -> Estimator:
+    """The networks for the checker's target: its own model set, or the default set's."""
+    return cast(Estimator, model_sets.for_target(checker.model.name)[1])
 
 
 def get_checkers(request: Request) -> Checkers:

@@ -48,6 +48,9 @@ class Settings(BaseSettings):
     max_image_side: int = Field(default=4096, ge=8, le=65_536)
     max_batch_frames: int = Field(default=64, ge=1, le=4096)
     model_dir: Path = DEFAULT_MODEL_DIR
+    extra_model_dirs: str = Field(
+        default="", description="more model sets, comma-separated folders, each trained on another target"
+    )
     ort_threads: int = Field(default=0, ge=0, le=256, description="0: all cores")
     ort_run_batch: int = Field(default=DEFAULT_RUN_BATCH, ge=1, le=256, description="frames per ONNX Runtime run")
     target_model: Path | None = None
@@ -63,6 +66,10 @@ class Settings(BaseSettings):
         if not self.database_url:
             self.database_url = f"sqlite:///{(self.data_dir / 'gsa.db').as_posix()}"
         return self
+
+    @property
+    def extra_model_dir_list(self) -> list[Path]:
+        return [Path(d.strip()) for d in self.extra_model_dirs.split(",") if d.strip()]
 
     @property
     def env_api_keys(self) -> list[str]:

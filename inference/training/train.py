@@ -510,7 +510,7 @@ def plot_history(history: list[dict[str, Any]], path: Path) -> None:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--data", required=True, help="data set directory (from `gsa simulate`)")
+    p.add_argument("--data", help="data set directory (from `gsa simulate`); or --model to simulate one first")
     p.add_argument("--out", default="runs/train", help="output directory (checkpoints, weights, loss plot)")
     p.add_argument(
         "--recipe",
@@ -518,11 +518,57 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         choices=sorted(RECIPES),
         help="named options to start from (shipped: how the shipped models were trained); the flags below override it",
     )
+    t = p.add_argument_group("another target: simulate its data set into OUT/data first (once), then train")
+    t.add_argument("--model", metavar="FILE", help="the target's mesh (.obj, .ply) in metres")
+    t.add_argument("--model-scale", type=float, default=1.0, help="scale the mesh by this")
+    t.add_argument("--n", type=int, default=5000, help="frames to simulate (default 5000)")
+    t.add_argument("--n-train", type=int, help="of which training frames (default 80 %%)")
+    t.add_argument("--variety", help="vary each frame's scattering (a preset: robust)")
     add_option_arguments(p, TrainOptions)
 
 
+def target_data(
+    out: Path, model: str, scale: float, n: int, n_train: int | None, variety: str | None, img_size: int = 256
+) -> Path:
+    """Simulate ``model``'s data set into ``OUT/data`` unless it is there already; return its directory.
+
+    Frames of another size than the radar's 256 keep its 24 x 29 m scene (coarser cells). The model
+    is read and checked against the frame, and the variety preset too, before any work.
+    """
+    from inference.simulation.dataset import DatasetSpec, default_train_frames, generate
+    from inference.simulation.radar import Radar
+
+    base = Radar()
+    k = img_size / base.n_range
+    radar = Radar(
+        n_range=img_size, n_azimuth=img_size, bandwidth_hz=base.bandwidth_hz * k, aperture_deg=base.aperture_deg * k
+    )
+
+    data = out / "data"
+    if (data / "manifest.json").is_file():
+        have = load_manifest(data)["spec"]
+        if have.get("model_path") != str(model) or have.get("n") != n:
+            raise DatasetError(f"{data} holds another data set; give a new --out", field="out")
+        return data
+    if n < 2:
+        raise DatasetError(f"n {n} must be at least 2 (training and test frames)", field="n")
+    n_train = default_train_frames(n) if n_train is None else n_train
+    spec = DatasetSpec(n=n, n_train=n_train, model_path=str(model), model_scale=scale, variety=variety)
+    generate(spec, data, radar)
+    return data
+
+
 def run(args: argparse.Namespace) -> int:
-    rec = train(args.data, args.out, options_from_args(TrainOptions, args, base=recipe(args.recipe)))
+    if (args.data is None) == (args.model is None):
+        raise InferenceError(
+            "give --data (a simulated set) or --model FILE (a target to simulate), one of them", field="data"
+        )
+    opts = options_from_args(TrainOptions, args, base=recipe(args.recipe))
+    data = args.data
+    if args.model is not None:
+        size = get_config(opts.config).img_size
+        data = target_data(Path(args.out), args.model, args.model_scale, args.n, args.n_train, args.variety, size)
+    rec = train(data, args.out, opts)
     last = rec["history"][-1] if rec["history"] else None
     if last:
         z, y, x = last["test_mae_deg"]

@@ -16,13 +16,14 @@ from app import openapi_examples as examples
 from app.api.deps import (
     CheckersDep,
     CurrentOperator,
-    EstimatorDep,
+    ModelSetsDep,
     PageDep,
     SessionDep,
     SettingsDep,
     as_utc,
     cells_from_form,
     checker_for,
+    models_for,
     read_upload,
     read_uploads,
 )
@@ -101,7 +102,7 @@ async def create_estimate(
     session: SessionDep,
     operator: CurrentOperator,
     settings: SettingsDep,
-    est: EstimatorDep,
+    model_sets: ModelSetsDep,
     checkers: CheckersDep,
     asked: EstimateFormDep,
     file: Annotated[UploadFile, File(description=FILE)],
@@ -109,6 +110,7 @@ async def create_estimate(
 ) -> dict[str, Any]:
     """Estimate the attitude of one ISAR frame: Swin's answer, fitted to the target's projection and checked; stored."""
     checker = checker_for(checkers, asked.target)
+    est = models_for(model_sets, checker)
     data = await read_upload(file, settings.max_upload_bytes)
     # Decoding, the models and the database run in a worker thread, so the event loop keeps serving meanwhile.
     uploads = await run_in_threadpool(
@@ -137,13 +139,14 @@ async def create_estimates_batch(
     session: SessionDep,
     operator: CurrentOperator,
     settings: SettingsDep,
-    est: EstimatorDep,
+    model_sets: ModelSetsDep,
     checkers: CheckersDep,
     asked: EstimateFormDep,
     files: Annotated[list[UploadFile], File(description="several frames, or one .npz stack [N, H, W]; " + FILE)],
 ) -> dict[str, Any]:
     """Estimate several frames as one batch through the models, each fitted and checked; one stored row each."""
     checker = checker_for(checkers, asked.target)
+    est = models_for(model_sets, checker)
     uploads = await read_uploads(files, settings)
     rows = await run_in_threadpool(
         svc.estimate_and_store,

@@ -12,11 +12,12 @@ from app import crud
 from app.api.deps import (
     CheckersDep,
     CurrentOperator,
-    EstimatorDep,
+    ModelSetsDep,
     SessionDep,
     SettingsDep,
     cells_from_form,
     checker_for,
+    models_for,
     read_uploads,
 )
 from app.db.models import Pass, utcnow
@@ -88,7 +89,7 @@ async def create_pass(
     session: SessionDep,
     operator: CurrentOperator,
     settings: SettingsDep,
-    est: EstimatorDep,
+    model_sets: ModelSetsDep,
     checkers: CheckersDep,
     files: Annotated[
         list[UploadFile], File(description="the pass's frames: several files, or one .npz stack [N, H, W]")
@@ -107,6 +108,7 @@ async def create_pass(
     """Fit every frame of a pass, place each in the plan target's LVLH frame at its time, and fuse them; stored."""
     cells_m = cells_from_form(range_cell_m, cross_range_cell_m)
     checker = checker_for(checkers, target)
+    est = models_for(model_sets, checker)
     uploads = await read_uploads(files, settings)
     row = await run_in_threadpool(
         _fuse,
