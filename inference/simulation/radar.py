@@ -283,21 +283,65 @@ def window_1d(n: int, kind: str, sidelobe_db: float) -> Vec:
     return np.ones(n)
 
 
+def nufft_columns(
+    u: Vec, c: NDArray[np.complex128], n_r: int, spread: int = 3, chunk: int = 32
+) -> NDArray[np.complex128]:
+    """Return S[m, j] = sum_k c[k, j] exp(-2 pi i m (u[k, j] - n_r/2) / n_r) for every column j of u, c [K, J].
+
+    One 1-D type-1 NUFFT per column, all columns gridded at once (the same Gaussian gridding
+    as ``nufft_type1`` along its first axis, 2x oversampled, ``2 * spread`` taps per source),
+    then one FFT down the columns and the deconvolution; ``chunk`` columns at a time bound the
+    memory (K x chunk x 2 spread weights).
+    """
+    import scipy.fft
+
+    k_src, n_col = u.shape
+    over = 2
+    big = over * n_r
+    tau = math.pi * spread / (n_r * n_r * over * (over - 0.5))
+    h = 2.0 * np.pi / big
+    taps = np.arange(-spread + 1, spread + 1)
+    m = np.arange(-n_r // 2, n_r // 2)
+    deconv = np.sqrt(np.pi / tau) * np.exp(m**2 * tau) / big
+    out = np.empty((n_r, n_col), np.complex128)
+    for j0 in range(0, n_col, chunk):
+        j1 = min(j0 + chunk, n_col)
+        x = np.mod(2.0 * np.pi * (u[:, j0:j1] - n_r / 2) / n_r, 2.0 * np.pi)  # (K, J')
+        base = np.floor(x / h).astype(np.int64)
+        # Fast Gaussian gridding: exp(-(t h - d)^2 / 4 tau) = exp(-d^2 / 4 tau) exp(d h / 2 tau)^t exp(-(t h)^2 / 4 tau),
+        # d = x - base h: two exponentials a source instead of one a tap.
+        d = x - base * h
+        e1 = c[:, j0:j1] * np.exp(-(d**2) / (4.0 * tau))
+        e2 = np.exp(d * h / (2.0 * tau))
+        g = np.empty((*d.shape, len(taps)))  # real tap weights; times e1 below, real and imaginary parts apart
+        g[..., spread - 1] = 1.0
+        for t in range(spread, len(taps)):
+            g[..., t] = g[..., t - 1] * e2
+        inv = 1.0 / e2
+        for t in range(spread - 2, -1, -1):
+            g[..., t] = g[..., t + 1] * inv
+        g *= np.exp(-((taps * h) ** 2) / (4.0 * tau))
+        cols = j1 - j0
+        index = (np.mod(base[..., None] + taps, big) * cols + np.arange(cols)[None, :, None]).ravel()
+        grid = np.bincount(index, (g * e1.real[..., None]).ravel(), big * cols) + 1j * np.bincount(
+            index, (g * e1.imag[..., None]).ravel(), big * cols
+        )
+        spectrum = scipy.fft.fft(grid.reshape(big, cols), axis=0)
+        out[:, j0:j1] = spectrum[np.mod(m, big)] * deconv[:, None]
+    return out
+
+
 def polar_echo(radar: Radar, points_obs: Vec, amplitudes: NDArray[np.complex128]) -> NDArray[np.complex128]:
     """Return the echo on the radar's real polar samples (as ``polar_echo_direct``), by a 1-D NUFFT per aspect.
 
     Along each aspect the frequencies are uniform, so each column is a type-1 NUFFT of the
-    scatterers' ranges (design/measurements.md, "The NUFFT echo").
+    scatterers' ranges (``nufft_columns``, all aspects gridded together; design/measurements.md,
+    "The NUFFT echo").
     """
     nr, na = radar.n_range, radar.n_azimuth
     b = math.radians(radar.aperture_deg) / na * np.arange(-na // 2, na // 2, dtype=np.float64)
     los, _ = line_of_sight(math.radians(radar.pitch_deg), b)  # (3, na)
     ranges = points_obs @ los  # (K, na)
     kc = 4.0 * math.pi * radar.carrier_hz / C_M_S
-    cell = radar.range_cell_m
-    echo = np.empty((nr, na), np.complex128)
-    for j in range(na):
-        c = amplitudes * np.exp(-1j * kc * ranges[:, j])
-        u = ranges[:, j] / cell + nr / 2
-        echo[:, j] = nufft_type1(u, np.full(len(u), 4.0), c, nr, 8)[:, 0]
-    return echo
+    c = amplitudes[:, None] * np.exp(-1j * kc * ranges)
+    return nufft_columns(ranges / radar.range_cell_m + nr / 2, c, nr)
