@@ -34,6 +34,7 @@ browser:
 bench: $(STAMP)
 	$(BIN)/python -m bench.run
 	$(BIN)/python -m bench.trust
+	$(BIN)/python -m bench.robust
 	$(BIN)/python -m bench.passes
 	$(BIN)/python -m bench.load
 

@@ -189,7 +189,9 @@ def main() -> None:
         lines += bench_service(DEFAULT_MODEL_DIR)
     from bench.sections import kept_sections
 
-    lines += kept_sections(("Attitude fit and trust", "Load", "Fuzzing"))  # bench.trust, `make load`, `make fuzz`
+    lines += kept_sections(
+        ("Attitude fit and trust", "Robust networks", "Pass fusion", "Load", "Fuzzing")
+    )  # bench.trust, bench.robust, bench.passes, `make load`, `make fuzz`
     Path("BENCHMARKS.md").write_text("\n".join(lines))
     print("\n".join(lines))
 
