@@ -100,6 +100,7 @@ def main(argv: list[str] | None = None) -> None:
         f"Machine: {machine()}. Date: {datetime.now(UTC).date().isoformat()}. Command: `python -m bench.robust"
         + "".join(f" --models {m}" for m in args.models)
         + "` (see the module's text).",
+        *[f"- {name}: {_provenance(est.card)}" for name, est in sets.items()],
         "",
         f"### Swin on perturbed silhouettes ({N_SILHOUETTE} fresh frames, seed {SILHOUETTE_SEED})",
         "",
@@ -183,6 +184,22 @@ def main(argv: list[str] | None = None) -> None:
         _log("wrote BENCHMARKS.md")
 
 
+def _provenance(card: dict) -> str:
+    """One line on how a model set was made, from its card."""
+    ft = card.get("finetune")
+    if not ft:
+        data = (card.get("training") or {}).get("data") or {}
+        return f"{card.get('name')}, trained on {data.get('frames', '?')} frames ({card.get('target') or 'the default target'})"
+    data = ft.get("data") or {}
+    minutes = (ft.get("cache_seconds", 0) + ft.get("train_seconds", 0)) / 60
+    return (
+        f"{card.get('name')} with Swin's last {ft.get('train_stages')} stage(s) fine-tuned by `gsa finetune` for "
+        f"{ft.get('epochs')} epochs on {ft.get('train_frames')} frames (variety {data.get('variety') or 'none'}, "
+        f"silhouette noise {ft.get('silhouette_noise', 0)}; {minutes:.0f} min on {(ft.get('hardware') or {}).get('threads', '?')} "
+        f"threads), validation frames drawn like the training frames"
+    )
+
+
 def _plot(sil: dict[str, dict[str, dict[str, float]]], var: dict[str, dict[str, dict[str, float]]]) -> None:
     import matplotlib
 
@@ -202,7 +219,9 @@ def _plot(sil: dict[str, dict[str, dict[str, float]]], var: dict[str, dict[str, 
         ax[1].plot(np.arange(len(variants)) + j * width, [var[v][name]["fitted"] for v in variants], "k_", ms=14)
     ax[0].set_xticks(np.arange(len(keys)) + 0.4 - width / 2, keys, rotation=15, fontsize=8)
     ax[0].set(ylabel="Swin geodesic error, mean (deg)", title="Swin fed a silhouette one pixel off")
-    ax[1].set_xticks(np.arange(len(variants)) + 0.4 - width / 2, [v.replace(", ", ",\n") for v in variants], fontsize=7)
+    import textwrap
+
+    ax[1].set_xticks(np.arange(len(variants)) + 0.4 - width / 2, [textwrap.fill(v, 14) for v in variants], fontsize=7)
     ax[1].axhline(3.0, color="grey", ls=":", lw=1)
     ax[1].set(ylabel="geodesic error, mean (deg)", title="Held-out variants (bars: Swin; black: fitted)")
     for a in ax:

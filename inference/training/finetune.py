@@ -311,6 +311,11 @@ def finetune(
     modules.load_state_dict(best["state"])
     record = {
         "from_run": str(run_dir),
+        "data": {
+            "dir": str(data_dir),
+            "content_sha256": manifest["content_sha256"],
+            "variety": manifest["spec"].get("variety"),
+        },
         "enhancer": None if est is None else {"dir": str(enhancer), "unetpp_sha256": identity["enhancer"]},
         "train_stages": train_stages,
         "trained_parameters": sum(p.numel() for p in modules.parameters()),
