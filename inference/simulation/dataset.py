@@ -191,7 +191,7 @@ def generate(
             "scatterers": int(len(model.scatterers)),
             "mirror_planes": model.mirror_planes,
             "symmetries": model.symmetries(),
-            "mirror_pair_label_iou": mirror_pair_iou(model, Imager(radar)),
+            "mirror_pair_label_iou": mirror_pair_iou(model, Imager(radar), n=32),
             "mesh_sha256": sha256_file(Path(spec.model_path)) if spec.model_path else None,
             "scale": spec.model_scale,
         },
