@@ -89,14 +89,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         threads=settings.ort_threads or None,
         run_batch=settings.ort_run_batch,
     )
-    app.state.estimator = app.state.model_sets.default
     # The targets the fit knows; an operator's mesh that cannot be read, or does not fit the
     # frame, stops the service here, naming the file. The default target's renderer is built now.
     from inference.trust import load_checkers
 
     app.state.checkers = load_checkers(
         settings.model_dir,
-        app.state.estimator.img_size,
+        app.state.model_sets.default.img_size,
         settings.target_model,
         settings.target_scale,
         settings.default_target,
@@ -130,7 +129,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         body = {
             "status": "ready" if db["ok"] else "not ready",
             "database": db,
-            "models": app.state.estimator.identity,
+            "models": app.state.model_sets.default.identity,
             "model_sets": app.state.model_sets.describe(),
             "targets": app.state.checkers.names,
         }

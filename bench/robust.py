@@ -36,7 +36,7 @@ from inference.frames import geodesic_deg
 from inference.runtime import Estimator
 from inference.simulation.catalogue import simulated
 from inference.simulation.dataset import DatasetSpec
-from inference.simulation.scene import DEFAULT_SCATTERING, Scattering
+from inference.simulation.scene import DEFAULT_SCATTERING, Scattering, mask_iou
 from inference.trust import load_checkers
 
 TITLE = "Robust networks"
@@ -72,12 +72,6 @@ def silhouette_inputs(labels: np.ndarray) -> dict[str, np.ndarray]:
 def geodesic_summary(pred: np.ndarray, truth: np.ndarray) -> dict[str, float]:
     geo = geodesic_deg(pred, truth)
     return {"mean": float(geo.mean()), "p95": float(np.percentile(geo, 95)), "over10": float(np.mean(geo > 10))}
-
-
-def _iou(a: np.ndarray, b: np.ndarray) -> float:
-    return float(
-        np.mean([np.count_nonzero(x & y) / max(np.count_nonzero(x | y), 1) for x, y in zip(a, b, strict=True)])
-    )
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -144,7 +138,7 @@ def main(argv: list[str] | None = None) -> None:
             fitted = np.array(
                 [checker.check(frames[i], res.enhanced[i], res.angles_deg[i]).angles_deg for i in range(len(frames))]
             )
-            iou = _iou(res.enhanced > 0.5, labels)
+            iou = float(mask_iou(res.enhanced > 0.5, labels).mean())
             ms, mf = np.abs(res.angles_deg - truth).mean(axis=0), np.abs(fitted - truth).mean(axis=0)
             gs, gf = geodesic_summary(res.angles_deg, truth), geodesic_summary(fitted, truth)
             var_results.setdefault(variant, {})[name] = {"iou": iou, "swin": gs["mean"], "fitted": gf["mean"]}

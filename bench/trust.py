@@ -25,7 +25,7 @@ from inference.frames import geodesic_deg
 from inference.runtime import Estimator
 from inference.simulation.catalogue import FRESH_SEED, KINDS, bad_frames, good_frames, simulated
 from inference.simulation.dataset import DatasetSpec
-from inference.simulation.scene import VARIANTS
+from inference.simulation.scene import VARIANTS, mask_iou
 from inference.trust import load_checkers
 
 TITLE = "Attitude fit and trust"
@@ -152,9 +152,7 @@ def main() -> None:
         fitted = np.array([c.angles_deg for c in checks])
         (_, gs), (mf, gf) = _row(res.angles_deg, truth), _row(fitted, truth)
         sil = res.enhanced > 0.5
-        iou = np.mean(
-            [np.count_nonzero(s & t) / max(np.count_nonzero(s | t), 1) for s, t in zip(sil, labels, strict=True)]
-        )
+        iou = mask_iou(sil, labels).mean()
         flagged = np.mean([not c.quality.trusted for c in checks])
         medians[name] = (float(np.median(gs)), float(np.median(gf)))
         lines.append(
@@ -173,7 +171,7 @@ def main() -> None:
     per = (time.perf_counter() - t0) / spec.n
     gf = geodesic_deg(np.array([c.angles_deg for c in oc]), truth)
     sil = res.enhanced > 0.5
-    iou = np.mean([np.count_nonzero(a & b) / max(np.count_nonzero(a | b), 1) for a, b in zip(sil, labels, strict=True)])
+    iou = mask_iou(sil, labels).mean()
     fit_iou = np.median([c.quality.silhouette_iou for c in oc])
     lines += [
         "### A second target without networks",

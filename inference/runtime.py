@@ -292,10 +292,9 @@ class ModelSets:
     def default(self) -> Estimator:
         return self.sets[self.default_name]
 
-    def for_target(self, target: str | None) -> tuple[str, Estimator]:
-        """The set trained on ``target`` (its name and estimator), or the default set when none is."""
-        name = target if target in self.sets else self.default_name
-        return name, self.sets[name]
+    def for_target(self, target: str | None) -> Estimator:
+        """The set trained on ``target``, or the default set when none is (its card names which: ``trained_on``)."""
+        return self.sets.get(target or self.default_name, self.default)
 
     def describe(self) -> list[dict[str, Any]]:
         """Each set: the target it was trained on, whether it is the default, its folder and files."""

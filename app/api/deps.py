@@ -75,16 +75,6 @@ def get_current_operator(
 CurrentOperator = Annotated[Operator, Depends(get_current_operator)]
 
 
-def get_estimator(request: Request) -> Estimator:
-    est = request.app.state.estimator
-    if est is None:
-        raise HTTPException(status_code=503, detail="attitude models are not loaded")
-    return cast(Estimator, est)
-
-
-EstimatorDep = Annotated[Estimator, Depends(get_estimator)]
-
-
 def get_model_sets(request: Request) -> ModelSets:
     """The model sets loaded at start-up, one per target they were trained on (``inference.runtime.ModelSets``)."""
     return cast(ModelSets, request.app.state.model_sets)
@@ -95,7 +85,7 @@ ModelSetsDep = Annotated[Any, Depends(get_model_sets)]
 
 def models_for(model_sets: Any, checker: Any) -> Estimator:
     """The networks for the checker's target: its own model set, or the default set's."""
-    return cast(Estimator, model_sets.for_target(checker.model.name)[1])
+    return cast(Estimator, model_sets.for_target(checker.model.name))
 
 
 def get_checkers(request: Request) -> Checkers:

@@ -112,6 +112,13 @@ def label_mask(imager: Imager, surface_obs: Vec) -> NDArray[np.bool_]:
     return np.asarray(binary_closing(mask, iterations=1) | mask)
 
 
+def mask_iou(a: NDArray[np.bool_], b: NDArray[np.bool_]) -> Vec:
+    """Intersection over union of binary masks [..., H, W], one per leading index (0 where both are empty)."""
+    inter = np.count_nonzero(a & b, axis=(-2, -1))
+    union = np.count_nonzero(a | b, axis=(-2, -1))
+    return np.asarray(inter / np.maximum(union, 1), np.float64)
+
+
 @dataclass(frozen=True, slots=True)
 class Frame:
     """One simulated frame and its truth."""
@@ -336,7 +343,7 @@ def mirror_pair_iou(
     for z, y, x in rng.uniform(-max_angle_deg, max_angle_deg, (n, 3)):
         a = label_mask(imager, model.surface @ rotation_matrix(z, y, x).T)
         b = label_mask(imager, model.surface @ rotation_matrix(z, -y, -x).T)
-        ious.append(float(np.count_nonzero(a & b)) / max(float(np.count_nonzero(a | b)), 1.0))
+        ious.append(float(mask_iou(a, b)))
     return {
         "mean": round(float(np.mean(ious)), 4),
         "median": round(float(np.median(ious)), 4),

@@ -150,7 +150,7 @@ def test_scenes_page_through_plans_each_with_its_own_estimates(client, frame):
 
 
 def test_other_requests_are_served_while_the_models_run(client, frame, monkeypatch):
-    est = client.app.state.estimator
+    est = client.app.state.model_sets.default
     running, answered, seen = threading.Event(), threading.Event(), []
     real = est.estimate
 
