@@ -937,7 +937,10 @@ class PassPublic(Described):
     """how many frames the fusion used"""
     rejected: int
     """how many it did not use"""
-    stable: bool = Field(description="false when the frames show a body rate beyond their scatter")
+    stable: bool | None = Field(
+        description="true: three-axis stable over the pass; false: the frames show a body rate beyond their scatter; "
+        "null: undecided, fewer than 3 trusted frames agree (see stability)"
+    )
     rate_deg_s: list[float] = Field(description="the fitted body rate (deg/s, body axes)")
     rate_sigma_deg_s: list[float | None]
     """the fitted turning rate's standard error, deg/s (the turning model)"""

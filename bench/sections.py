@@ -15,7 +15,8 @@ def replace_section(title: str, lines: list[str], path: Path = Path("BENCHMARKS.
         path.write_text("\n".join([*old, *([""] if old and old[-1] else []), *lines, ""]))
         return
     end = next((k for k in range(start + 1, len(old)) if old[k].startswith("## ")), len(old))
-    path.write_text("\n".join([*old[:start], *lines, *old[end:]]).rstrip("\n") + "\n")
+    gap = [""] if end < len(old) and lines and lines[-1] else []  # a blank line before the next section
+    path.write_text("\n".join([*old[:start], *lines, *gap, *old[end:]]).rstrip("\n") + "\n")
 
 
 def kept_sections(titles: tuple[str, ...], path: Path = Path("BENCHMARKS.md")) -> list[str]:

@@ -40,8 +40,17 @@ to frame while the truth does not).
      lines of sight alone, then least squares on the whole rotations). The target is turning
      when that model beats the still one by a chi-square of over ``turning_chi2`` (3 degrees
      of freedom; each frame's term capped at ``reject_sigma`` squared, so outliers do not
-     decide) and its rate is over ``min_rate_deg_s`` and ``spin_sigma`` standard errors. The
-     answer is then the model's attitude at the middle of the frames' times and its rate.
+     decide) and its rate is over ``min_rate_deg_s`` and either over ``spin_sigma`` standard
+     errors or the gain is spread over the frames: over ``turning_chi2`` still once the
+     ``SPREAD_DROP`` frames that gain most are left out. The second arm is for a short
+     arc: over a minute, the frames see the line of sight's track in the body, its
+     position and its rate, which a body rate and an attitude can trade between (the rate
+     about some axis is then barely determined), yet no still attitude explains them,
+     least of all frames read reversed in cross-range. The
+     answer is then the model's attitude at the middle of the frames' times and its rate,
+     with uncertainties from the speed's profile (``widen_by_profile``) where the curvature
+     at the minimum understates them: on a short arc the chi-square barely rises along a
+     valley where the attitude at mid-pass moves by tens of degrees with the speed.
 """
 
 from __future__ import annotations
@@ -61,6 +70,8 @@ Z90 = 1.6448536269514722  # the two-sided 90 % normal quantile
 # error there, hardly change from frame to frame. Measured on 20 simulated passes (seeds
 # 40000-40019, not the benchmark's; bench/passes.py and BENCHMARKS.md "Pass fusion").
 SHARED_FRACTION = 0.1
+# The turning test without a significant rate: the gain must stand without the frames that give most of it.
+SPREAD_DROP = 2
 
 
 @dataclass(frozen=True)
@@ -268,12 +279,19 @@ def fuse(
         return still
     turn = fit_turning([frames[k] for k in pool], mean)
     cap = reject_sigma**2
-    still_chi2 = sum(min((still.residual_deg[k] / sigma[k]) ** 2, cap) for k in pool)
-    gain = still_chi2 - float(np.sum(np.minimum(turn.chi2_terms, cap)))
+    still_terms = np.array([min((still.residual_deg[k] / sigma[k]) ** 2, cap) for k in pool])
+    per_frame = still_terms - np.minimum(turn.chi2_terms, cap)  # each frame's part of the gain
+    gain = float(np.sum(per_frame))
+    spread_gain = gain - float(np.sum(np.sort(np.maximum(per_frame, 0.0))[-SPREAD_DROP:]))
     turn_speed = float(np.linalg.norm(turn.rate_deg_s))
-    turning = gain > turning_chi2 and turn_speed > min_rate_deg_s and turn_speed > spin_sigma * turn.speed_sigma_deg_s
+    turning = (
+        gain > turning_chi2
+        and turn_speed > min_rate_deg_s
+        and (turn_speed > spin_sigma * turn.speed_sigma_deg_s or spread_gain > turning_chi2)
+    )
     if not turning:
         return replace(still, turning_chi2=gain)
+    turn = widen_by_profile(turn, [frames[k] for k in pool])
     resid_t = dict(zip(pool, (float(r) for r in turn.residual_deg), strict=True))
     rejected_t = dict(untrusted)
     for k in pool:
@@ -309,6 +327,7 @@ class Turning:
     chi2_terms: Vec
     chosen: list[int]
     reference_s: float
+    scale: float = 1.0  # the fit's scatter beyond the frames' bounds (chi-square per degree of freedom, at least 1)
 
 
 def skew(w: Vec) -> Vec:
@@ -420,8 +439,10 @@ def fit_turning(frames: list[PassFrame], start: Vec, max_rate_deg_s: float = 1.2
         cov = np.full((6, 6), np.inf)
     scale = max(1.0, float(np.sum(np.minimum(terms, 16.0))) / max(len(frames) * 3 - 6, 1))
     cov = cov * scale
-    w_hat = p[3:] / max(float(np.linalg.norm(p[3:])), 1e-12)
+    speed = float(np.linalg.norm(p[3:]))
+    w_hat = p[3:] / max(speed, 1e-12)
     speed_sigma = math.degrees(math.sqrt(max(float(w_hat @ cov[3:, 3:] @ w_hat), 0.0)))
+    rate_sigma = np.degrees(np.sqrt(np.maximum(np.diag(cov[3:, 3:]), 0.0)))
     # Per Euler axis: the attitude's covariance (rotation vector, body) through the Euler map.
     e0 = np.array(euler_from_matrix(a_ref))
     jac = np.empty((3, 3))
@@ -430,18 +451,134 @@ def fit_turning(frames: list[PassFrame], start: Vec, max_rate_deg_s: float = 1.2
         dv[i] = 1e-6
         jac[:, i] = ((np.array(euler_from_matrix(a_ref @ so3_exp(dv))) - e0 + 180.0) % 360.0 - 180.0) / 1e-6
     cov_e = jac @ cov[:3, :3] @ jac.T
-    bound = tuple(float(Z90 * math.sqrt(max(c, 0.0))) for c in np.diag(cov_e))
+    bound = np.array([Z90 * math.sqrt(max(c, 0.0)) for c in np.diag(cov_e)])
     return Turning(
         rotation=a_ref,
         rate_deg_s=np.degrees(p[3:]),
-        rate_sigma_deg_s=np.degrees(np.sqrt(np.maximum(np.diag(cov[3:, 3:]), 0.0))),
+        rate_sigma_deg_s=rate_sigma,
         speed_sigma_deg_s=speed_sigma,
-        uncertainty_deg=bound,  # type: ignore[arg-type]
+        uncertainty_deg=tuple(float(b) for b in bound),  # type: ignore[arg-type]
         residual_deg=resid,
         chi2_terms=terms,
         chosen=pick,
         reference_s=reference,
+        scale=scale,
     )
+
+
+def widen_by_profile(turn: Turning, frames: list[PassFrame]) -> Turning:
+    """Return ``turn`` with its speed's and attitude's uncertainty taken from the speed's profile where that is wider.
+
+    The rate's standard error from the curvature at the minimum holds for a long arc; over a
+    short one (``speed_profile``) the chi-square stays low far from it. The speed's sigma
+    becomes the 90 % profile interval's half-width over 1.645 (each rate axis widened in
+    proportion), and every Euler bound covers the attitudes the profile reaches within it.
+    """
+    speed = float(np.linalg.norm(np.radians(turn.rate_deg_s)))
+    if speed < 1e-9:
+        return turn
+    los = np.array([f.los for f in frames], float)
+    los_rate = np.array([f.los_rate for f in frames], float)
+    tau = np.array([f.time_s for f in frames], float) - turn.reference_s
+    sigma = np.radians(np.array([max(f.bound_deg, 1e-3) / Z90 for f in frames]))
+    still = observation_in_lvlh(los, los_rate)
+    measured = [np.swapaxes(still[k], 0, 1)[None] @ f.candidates for k, f in enumerate(frames)]
+    prof = speed_profile(frames, measured, turn.chosen, turn.rotation, np.radians(turn.rate_deg_s), tau, sigma)
+    d_chi2 = np.array([c for _, c, _ in prof]) - float(np.sum(np.minimum(turn.chi2_terms, 16.0)))
+    limit = CHI2_90_1DOF * turn.scale  # the 90 % interval (scaled by the fit's own scatter)
+    half = len(PROFILE_FACTORS) // 2
+    centre = math.degrees(speed)
+    reach = [
+        _crossing(centre, np.degrees([q for q, _, _ in prof[side]]), d_chi2[side], limit)
+        for side in (slice(0, half), slice(half, None))
+    ]
+    profile_sigma = max(abs(r - centre) for r in reach) / Z90
+    speed_sigma, rate_sigma = turn.speed_sigma_deg_s, turn.rate_sigma_deg_s
+    if profile_sigma > speed_sigma:
+        extra = math.sqrt(profile_sigma**2 - speed_sigma**2)
+        rate_sigma = np.sqrt(rate_sigma**2 + (np.abs(turn.rate_deg_s) / centre * extra) ** 2)
+        speed_sigma = profile_sigma
+    e0 = np.array(euler_from_matrix(turn.rotation))
+    bound = np.array(turn.uncertainty_deg)
+    for (_, _, a), dc in zip(prof, d_chi2, strict=True):
+        if dc <= limit:
+            bound = np.maximum(bound, np.abs((np.array(euler_from_matrix(a)) - e0 + 180.0) % 360.0 - 180.0))
+    return replace(
+        turn,
+        speed_sigma_deg_s=speed_sigma,
+        rate_sigma_deg_s=rate_sigma,
+        uncertainty_deg=tuple(float(b) for b in bound),  # type: ignore[arg-type]
+    )
+
+
+CHI2_90_1DOF = 2.705543454095404  # the 90 % quantile of chi-square with one degree of freedom
+PROFILE_FACTORS = (
+    0.8,
+    0.6,
+    0.45,
+    0.3,
+    1.25,
+    1.6,
+    2.2,
+    3.0,
+)  # speeds (times the fitted one) the profile visits, outward
+
+
+def speed_profile(
+    frames: list[PassFrame],
+    measured: list[Vec],
+    pick: list[int],
+    a_ref: Vec,
+    w: Vec,
+    tau: Vec,
+    sigma: Vec,
+) -> list[tuple[float, float, Vec]]:
+    """The turning model refitted at other speeds: (speed rad/s, capped chi-square, attitude) for each factor.
+
+    At each speed the attitude and the rate's direction are fitted again (from the neighbouring
+    speed's answer, outward from the fitted one). Over a short arc the frames fix the line of
+    sight's track in the body to first order, and one combination of rate and attitude is left
+    free: the chi-square then barely rises along it, however sharp its curvature at the minimum.
+    """
+    from scipy.optimize import least_squares
+
+    los = np.array([f.los for f in frames], float)
+    los_rate = np.array([f.los_rate for f in frames], float)
+    speed = float(np.linalg.norm(w))
+    u = w / speed
+    e1 = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(u, e1)
+
+    def rate(q: Vec, s: float) -> Vec:
+        d = u + q[3] * e1 + q[4] * e2
+        return np.asarray(s * d / np.linalg.norm(d))
+
+    def residuals(q: Vec, s: float) -> Vec:
+        pred = turning_prediction(a_ref @ so3_exp(q[:3]), rate(q, s), tau, los, los_rate)
+        return np.concatenate([so3_log(measured[k][pick[k]] @ pred[k].T) / sigma[k] for k in range(len(frames))])
+
+    out = []
+    half = len(PROFILE_FACTORS) // 2
+    for side in (PROFILE_FACTORS[:half], PROFILE_FACTORS[half:]):
+        q = np.zeros(5)
+        for f in side:
+            sol = least_squares(residuals, q, args=(f * speed,), loss="soft_l1", f_scale=4.0)
+            q = sol.x
+            chi2 = float(np.sum(np.minimum((sol.fun.reshape(-1, 3) ** 2).sum(1), 16.0)))
+            out.append((f * speed, chi2, a_ref @ so3_exp(q[:3])))
+    return out
+
+
+def _crossing(centre: float, speeds: Vec, d_chi2: Vec, limit: float) -> float:
+    """How far out from ``centre`` (Delta chi-square 0) the profile stays within ``limit``: its outermost point
+    within it, interpolated linearly toward the next one out (the profile need not rise steadily)."""
+    s = np.concatenate([[centre], speeds])
+    c = np.concatenate([[0.0], np.maximum(d_chi2, 0.0)])
+    j = int(np.flatnonzero(c <= limit)[-1])
+    if j == len(s) - 1:
+        return float(s[j])
+    return float(s[j] + (limit - c[j]) / max(c[j + 1] - c[j], 1e-12) * (s[j + 1] - s[j]))
 
 
 def _rate(times: Vec, resid: Vec, weights: Vec) -> tuple[Vec, Vec]:

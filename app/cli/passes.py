@@ -326,6 +326,10 @@ def _print_pass(result: dict[str, Any], rec: dict[str, Any]) -> None:
         )
 
 
+def _verdict(stable: bool | None) -> str:
+    return "stable" if stable else "undecided (too few trusted frames)" if stable is None else "TURNING"
+
+
 def _plot_pass(result: dict[str, Any], rec: dict[str, Any], path: str) -> None:
     import matplotlib
 
@@ -370,7 +374,7 @@ def _plot_pass(result: dict[str, Any], rec: dict[str, Any], path: str) -> None:
     axes[-1].set_xlabel(f"seconds after {t0:%Y-%m-%d %H:%M:%S} UTC")
     fig.suptitle(
         f"pass attitude, body to LVLH: {result['used']} used, {result['rejected']} rejected; "
-        f"{'stable' if result['stable'] else 'TURNING'}",
+        f"{_verdict(result['stable'])}",
         fontsize=10,
     )
     fig.tight_layout()

@@ -471,7 +471,7 @@ def fuse_frames(
         "uncertainty_deg": [round(b, 4) for b in fused.uncertainty_deg],
         "used": len(fused.used),
         "rejected": len(fused.rejected),
-        "stable": fused.stable,
+        "stable": fused.stable if enough else None,  # undecided: too few trusted frames agree
         "rate_deg_s": [round(float(r), 5) for r in fused.rate_deg_s],
         "rate_sigma_deg_s": [round(float(r), 5) if math.isfinite(r) else None for r in fused.rate_sigma_deg_s],
         "turning_chi2": None if fused.turning_chi2 is None else round(fused.turning_chi2, 2),
