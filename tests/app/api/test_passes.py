@@ -63,7 +63,9 @@ def test_a_pass_is_fused_and_stored(client, plan):
     assert len(body["frames"]) == 4 and body["used"] + body["rejected"] == 4
     rot = np.array(body["attitude_lvlh"]["rotation_matrix"])
     np.testing.assert_allclose(rot @ rot.T, np.eye(3), atol=1e-9)
-    assert len(body["uncertainty_deg"]) == 3 and isinstance(body["stable"], bool) and body["stability"]
+    assert len(body["uncertainty_deg"]) == 3 and body["stability"]
+    # stable is a verdict only where enough trusted frames agree; otherwise it is null (undecided)
+    assert isinstance(body["stable"], bool) if body["trusted"] else body["stable"] is None
     for f in body["frames"]:
         assert f["branch"] in ("answer", "near-mirror") or f["branch"].startswith("alternative")
         assert f["used"] == (f["rejected_because"] is None)
