@@ -189,7 +189,8 @@ def fuse(
         if not f.trusted
     }
     pool = [k for k in range(len(frames)) if k not in untrusted]
-    if len(pool) < 2:  # too few trusted frames: fuse them all, and say so through their quality
+    fallback = len(pool) < 2
+    if fallback:  # too few trusted frames: fuse them all, and say so through their quality
         pool, untrusted = list(range(len(frames))), {}
     infos = (
         _informations(frames)
@@ -274,8 +275,9 @@ def fuse(
         stable=stable,
         residual_deg={k: angle_deg(mean, frames[k].candidates[chosen[k]]) for k in range(len(frames))},
     )
-    # ... and a turning model, where the frames carry their geometry.
-    if len(pool) < 4 or any(frames[k].los is None or frames[k].los_rate is None for k in pool):
+    # ... and a turning model, where the frames carry their geometry and enough of them are trusted (a turning
+    # fit to frames their own checks doubt says nothing, and costs seconds on a long pass).
+    if fallback or len(pool) < 4 or any(frames[k].los is None or frames[k].los_rate is None for k in pool):
         return still
     turn = fit_turning([frames[k] for k in pool], mean)
     cap = reject_sigma**2

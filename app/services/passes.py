@@ -280,7 +280,9 @@ def recheck_reversed(*, est: Any, checker: Any, frames: Vec, checks: list[Any]) 
         return euler_from_matrix(REVERSED @ rotation_matrix(*(float(a) for a in angles)))
 
     for j, k in enumerate(todo):
-        c = checker.check(mirrored[j], res.enhanced[j], res.angles_deg[j] if checker.networks else None)
+        c = checker.check(  # no library search, as for the pass's other frames
+            mirrored[j], res.enhanced[j], res.angles_deg[j] if checker.networks else None, search=False
+        )
         if not c.quality.trusted:
             continue
         q = c.quality
