@@ -247,7 +247,7 @@ def write(still: list[dict[str, Any]], spin: list[dict[str, Any]], thirty: dict[
         f"{100 * covered.mean(axis=0)[1]:.0f} / {100 * covered.mean(axis=0)[2]:.0f} % of passes (z / y / x).",
         f"- Frames used although their true attitude is outside 45 deg: {sum(r['trusted_outside'] for r in still)} "
         f"in all (their checks trusted them; each was within its limit of the others).",
-        f"- Still passes called turning: {sum(1 for r in still if not r['stable'])} of {len(still)}.",
+        f"- Still passes called turning: {sum(1 for r in still if r['stable'] is False)} of {len(still)}.",
         "",
         f"Spinning at {SPIN_DEG_S} deg/s about the body z axis, each sense on half the passes: "
         f"called turning on **{len(detected)} of {len(spin)}**, undecided (too few trusted frames agree) on "

@@ -383,15 +383,9 @@ def fit_turning(frames: list[PassFrame], start: Vec, max_rate_deg_s: float = 1.2
     """Fit a constant body rate to a pass's frames (each with ``los`` and ``los_rate``); see the module's text."""
     from scipy.optimize import least_squares
 
-    los = np.array([f.los for f in frames], float)
-    los_rate = np.array([f.los_rate for f in frames], float)
-    tau = np.array([f.time_s for f in frames], float)
-    reference = 0.5 * float(tau.min() + tau.max())
-    tau = tau - reference
-    sigma = np.radians(np.array([max(f.bound_deg, 1e-3) / Z90 for f in frames]))
-    still = observation_in_lvlh(los, los_rate)
-    # The frames' own answers as body-to-observation rotations (the still placement undone).
-    measured = [np.swapaxes(still[k], 0, 1)[None] @ f.candidates for k, f in enumerate(frames)]
+    times = np.array([f.time_s for f in frames], float)
+    reference = 0.5 * float(times.min() + times.max())
+    los, los_rate, tau, sigma, measured = _turning_inputs(frames, reference)
     # Seeds: a grid over w, each scored by the lines of sight alone (the body-frame line of
     # sight of frame k, X_k, is exp(-w tau) a^T los_k: Wahba's problem for a, per w).
     x_body = np.array([m[0][0] for m in measured])  # first row of R: the line of sight in body axes
@@ -426,7 +420,7 @@ def fit_turning(frames: list[PassFrame], start: Vec, max_rate_deg_s: float = 1.2
             if new_pick == pick:
                 break
             pick = new_pick
-        robust = float(np.sum(np.minimum((sol.fun.reshape(-1, 3) ** 2).sum(1), 16.0)))
+        robust = capped_chi2((sol.fun.reshape(-1, 3) ** 2).sum(1))
         if best is None or robust < best[0]:
             best = (robust, a0, p, pick, sol)
     assert best is not None
@@ -439,7 +433,7 @@ def fit_turning(frames: list[PassFrame], start: Vec, max_rate_deg_s: float = 1.2
         cov = np.linalg.inv(sol.jac.T @ sol.jac)
     except np.linalg.LinAlgError:
         cov = np.full((6, 6), np.inf)
-    scale = max(1.0, float(np.sum(np.minimum(terms, 16.0))) / max(len(frames) * 3 - 6, 1))
+    scale = max(1.0, capped_chi2(terms) / max(len(frames) * 3 - 6, 1))
     cov = cov * scale
     speed = float(np.linalg.norm(p[3:]))
     w_hat = p[3:] / max(speed, 1e-12)
@@ -479,20 +473,14 @@ def widen_by_profile(turn: Turning, frames: list[PassFrame]) -> Turning:
     speed = float(np.linalg.norm(np.radians(turn.rate_deg_s)))
     if speed < 1e-9:
         return turn
-    los = np.array([f.los for f in frames], float)
-    los_rate = np.array([f.los_rate for f in frames], float)
-    tau = np.array([f.time_s for f in frames], float) - turn.reference_s
-    sigma = np.radians(np.array([max(f.bound_deg, 1e-3) / Z90 for f in frames]))
-    still = observation_in_lvlh(los, los_rate)
-    measured = [np.swapaxes(still[k], 0, 1)[None] @ f.candidates for k, f in enumerate(frames)]
-    prof = speed_profile(frames, measured, turn.chosen, turn.rotation, np.radians(turn.rate_deg_s), tau, sigma)
-    d_chi2 = np.array([c for _, c, _ in prof]) - float(np.sum(np.minimum(turn.chi2_terms, 16.0)))
+    los, los_rate, tau, sigma, measured = _turning_inputs(frames, turn.reference_s)
+    sides = speed_profile(measured, turn.chosen, turn.rotation, np.radians(turn.rate_deg_s), tau, sigma, los, los_rate)
+    best = capped_chi2(turn.chi2_terms)
     limit = CHI2_90_1DOF * turn.scale  # the 90 % interval (scaled by the fit's own scatter)
-    half = len(PROFILE_FACTORS) // 2
     centre = math.degrees(speed)
     reach = [
-        _crossing(centre, np.degrees([q for q, _, _ in prof[side]]), d_chi2[side], limit)
-        for side in (slice(0, half), slice(half, None))
+        _crossing(centre, np.degrees([q for q, _, _ in side]), np.array([c - best for _, c, _ in side]), limit)
+        for side in sides
     ]
     profile_sigma = max(abs(r - centre) for r in reach) / Z90
     speed_sigma, rate_sigma = turn.speed_sigma_deg_s, turn.rate_sigma_deg_s
@@ -502,8 +490,8 @@ def widen_by_profile(turn: Turning, frames: list[PassFrame]) -> Turning:
         speed_sigma = profile_sigma
     e0 = np.array(euler_from_matrix(turn.rotation))
     bound = np.array(turn.uncertainty_deg)
-    for (_, _, a), dc in zip(prof, d_chi2, strict=True):
-        if dc <= limit:
+    for _, c, a in (point for side in sides for point in side):
+        if c - best <= limit:
             bound = np.maximum(bound, np.abs((np.array(euler_from_matrix(a)) - e0 + 180.0) % 360.0 - 180.0))
     return replace(
         turn,
@@ -514,28 +502,42 @@ def widen_by_profile(turn: Turning, frames: list[PassFrame]) -> Turning:
 
 
 CHI2_90_1DOF = 2.705543454095404  # the 90 % quantile of chi-square with one degree of freedom
-PROFILE_FACTORS = (
-    0.8,
-    0.6,
-    0.45,
-    0.3,
-    1.25,
-    1.6,
-    2.2,
-    3.0,
-)  # speeds (times the fitted one) the profile visits, outward
+# The speeds (times the fitted one) the profile visits, each side walked outward from the fitted speed.
+PROFILE_SLOWER = (0.8, 0.6, 0.45, 0.3)
+PROFILE_FASTER = (1.25, 1.6, 2.2, 3.0)
+TERM_CAP = 16.0  # a frame's chi-square term in the turning fit is capped here, so outliers do not decide
+
+
+def capped_chi2(terms: Vec) -> float:
+    """The sum of per-frame chi-square terms, each capped at ``TERM_CAP``."""
+    return float(np.sum(np.minimum(terms, TERM_CAP)))
+
+
+def _turning_inputs(frames: list[PassFrame], reference_s: float) -> tuple[Vec, Vec, Vec, Vec, list[Vec]]:
+    """What the turning fit reads from the frames: lines of sight and their rates (LVLH), times from
+    ``reference_s``, 1-sigma errors (rad), and each frame's candidates as body-to-observation rotations
+    (the still placement undone)."""
+    los = np.array([f.los for f in frames], float)
+    los_rate = np.array([f.los_rate for f in frames], float)
+    tau = np.array([f.time_s for f in frames], float) - reference_s
+    sigma = np.radians(np.array([max(f.bound_deg, 1e-3) / Z90 for f in frames]))
+    still = observation_in_lvlh(los, los_rate)
+    measured = [np.swapaxes(still[k], 0, 1)[None] @ f.candidates for k, f in enumerate(frames)]
+    return los, los_rate, tau, sigma, measured
 
 
 def speed_profile(
-    frames: list[PassFrame],
     measured: list[Vec],
     pick: list[int],
     a_ref: Vec,
     w: Vec,
     tau: Vec,
     sigma: Vec,
-) -> list[tuple[float, float, Vec]]:
-    """The turning model refitted at other speeds: (speed rad/s, capped chi-square, attitude) for each factor.
+    los: Vec,
+    los_rate: Vec,
+) -> list[list[tuple[float, float, Vec]]]:
+    """The turning model refitted at other speeds: for the slower side, then the faster, (speed rad/s, capped
+    chi-square, attitude) at each of its factors, outward (``_turning_inputs`` gives the arguments).
 
     At each speed the attitude and the rate's direction are fitted again (from the neighbouring
     speed's answer, outward from the fitted one). Over a short arc the frames fix the line of
@@ -544,8 +546,6 @@ def speed_profile(
     """
     from scipy.optimize import least_squares
 
-    los = np.array([f.los for f in frames], float)
-    los_rate = np.array([f.los_rate for f in frames], float)
     speed = float(np.linalg.norm(w))
     u = w / speed
     e1 = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
@@ -558,18 +558,17 @@ def speed_profile(
 
     def residuals(q: Vec, s: float) -> Vec:
         pred = turning_prediction(a_ref @ so3_exp(q[:3]), rate(q, s), tau, los, los_rate)
-        return np.concatenate([so3_log(measured[k][pick[k]] @ pred[k].T) / sigma[k] for k in range(len(frames))])
+        return np.concatenate([so3_log(measured[k][pick[k]] @ pred[k].T) / sigma[k] for k in range(len(measured))])
 
-    out = []
-    half = len(PROFILE_FACTORS) // 2
-    for side in (PROFILE_FACTORS[:half], PROFILE_FACTORS[half:]):
-        q = np.zeros(5)
-        for f in side:
+    sides = []
+    for factors in (PROFILE_SLOWER, PROFILE_FASTER):
+        q, side = np.zeros(5), []
+        for f in factors:
             sol = least_squares(residuals, q, args=(f * speed,), loss="soft_l1", f_scale=4.0)
             q = sol.x
-            chi2 = float(np.sum(np.minimum((sol.fun.reshape(-1, 3) ** 2).sum(1), 16.0)))
-            out.append((f * speed, chi2, a_ref @ so3_exp(q[:3])))
-    return out
+            side.append((f * speed, capped_chi2((sol.fun.reshape(-1, 3) ** 2).sum(1)), a_ref @ so3_exp(q[:3])))
+        sides.append(side)
+    return sides
 
 
 def _crossing(centre: float, speeds: Vec, d_chi2: Vec, limit: float) -> float:
