@@ -901,13 +901,19 @@ class PassFramePublic(Described):
     """the frame's checks and bounds"""
     alternatives: list[AlternativePublic]
     """other attitudes that fit the frame nearly as well"""
-    attitude_lvlh: AttitudePublic = Field(description="the branch the fusion took for this frame, in LVLH")
+    attitude_lvlh: AttitudePublic = Field(
+        description="the branch the fusion took for this frame, body to LVLH at the frame's time, placed as the "
+        "pass's answer sees it: for a turning target through the observation frame its rate turns"
+    )
     branch: str = Field(description="answer, near-mirror, or alternative N: which of the frame's candidates agreed")
     used: bool
     """whether the fusion used this frame"""
     rejected_because: str | None = None
     """why it was not used, in words; null when used"""
-    residual_deg: float = Field(description="rotation angle between this frame's branch and the fused attitude")
+    residual_deg: float = Field(
+        description="rotation angle between this frame's branch and the fused attitude (for a turning target, the "
+        "turning model's prediction for the frame)"
+    )
 
 
 class PassAttitudeJ2000(AttitudePublic):

@@ -105,6 +105,9 @@ class Fused:
     residual_deg: dict[int, float] = field(default_factory=dict)
     turning_chi2: float | None = None  # how much better the turning model fits than the still one
     reference_s: float | None = None  # a turning answer's time (s, the frames' clock); a still one holds throughout
+    chosen: list[int] = field(default_factory=list)  # each frame's candidate the answer took
+    placed: Vec = field(default_factory=lambda: np.zeros((0, 3, 3)))  # that candidate, body to LVLH, as the
+    # answer places it ([N, 3, 3]: for a turning answer through the model's observation frames, ``place_turning``)
 
 
 def so3_log(r: Vec) -> Vec:
@@ -274,6 +277,8 @@ def fuse(
         rate_sigma_deg_s=np.degrees(rate_sigma),
         stable=stable,
         residual_deg={k: angle_deg(mean, frames[k].candidates[chosen[k]]) for k in range(len(frames))},
+        chosen=chosen,
+        placed=np.array([frames[k].candidates[chosen[k]] for k in range(len(frames))]),
     )
     # ... and a turning model, where the frames carry their geometry and enough of them are trusted (a turning
     # fit to frames their own checks doubt says nothing, and costs seconds on a long pass).
@@ -300,6 +305,7 @@ def fuse(
         if resid_t[k] > limit[k]:
             rejected_t[k] = f"{resid_t[k]:.1f} deg from the turning model, over its limit of {limit[k]:.1f} deg"
     used_t = [k for k in range(len(frames)) if k not in rejected_t]
+    placed_t, chosen_t = place_turning(frames, turn.rotation, turn.rate_deg_s, turn.reference_s)
     return Fused(
         rotation=turn.rotation,
         euler_zyx_deg=tuple(float(a) for a in euler_from_matrix(turn.rotation)),  # type: ignore[arg-type]
@@ -313,6 +319,8 @@ def fuse(
         residual_deg={**still.residual_deg, **resid_t},
         turning_chi2=gain,
         reference_s=turn.reference_s,
+        chosen=chosen_t,
+        placed=placed_t,
     )
 
 
@@ -377,6 +385,30 @@ def turning_prediction(a_ref: Vec, w_body: Vec, tau: Vec, los: Vec, los_rate: Ve
     a = a_ref @ so3_exp(np.outer(tau, w_body))
     obs = observation_in_lvlh(los, los_rate, a @ w_body)
     return np.asarray(np.swapaxes(obs, -1, -2) @ a)
+
+
+def place_turning(frames: list[PassFrame], rotation: Vec, rate_deg_s: Vec, reference_s: float) -> tuple[Vec, list[int]]:
+    """Each frame's answer placed in LVLH as a turning answer sees it, and which candidate that is.
+
+    A frame's candidates come placed as if the body were still (``PassFrame.candidates``); a
+    turning body's image plane is turned by its rate (``observation_in_lvlh``), so each frame is
+    placed again through the model's observation frame at its time, and takes the candidate
+    nearest the model's attitude then (``rotation`` at ``reference_s``, turning at
+    ``rate_deg_s`` about body axes). Frames without a line of sight keep the still placement.
+    """
+    w = np.radians(np.asarray(rate_deg_s, float))
+    placed, chosen = [], []
+    for f in frames:
+        a = rotation @ so3_exp((f.time_s - reference_s) * w)
+        cands = f.candidates
+        if f.los is not None and f.los_rate is not None:
+            still = observation_in_lvlh(f.los[None], f.los_rate[None])[0]
+            turned = observation_in_lvlh(f.los[None], f.los_rate[None], (a @ w)[None])[0]
+            cands = turned @ still.T @ f.candidates
+        j = int(np.argmin([angle_deg(a, c) for c in cands]))
+        placed.append(cands[j])
+        chosen.append(j)
+    return np.array(placed), chosen
 
 
 def fit_turning(frames: list[PassFrame], start: Vec, max_rate_deg_s: float = 1.2, grid_deg_s: float = 0.12) -> Turning:

@@ -59,6 +59,44 @@ def read_card(model_dir: str | Path) -> dict[str, Any]:
     return card
 
 
+SELFCHECK_POOL = 16  # the self-check compares UNet++'s output averaged over 16 x 16 blocks
+
+
+def selfcheck_frames(size: int) -> np.ndarray:
+    """The self-check's input [1, 1, size, size]: seeded uniform noise, the same on every machine."""
+    return np.random.default_rng(0).random((1, 1, size, size), dtype=np.float32)
+
+
+def pooled(enhanced: np.ndarray) -> np.ndarray:
+    """UNet++'s output [N, 1, H, W] averaged over SELFCHECK_POOL x SELFCHECK_POOL blocks: [N, H/16, W/16]."""
+    n, _, h, w = enhanced.shape
+    p = SELFCHECK_POOL
+    return np.asarray(enhanced[:, 0].reshape(n, h // p, p, w // p, p).mean(axis=(2, 4)))
+
+
+def check_computes_here(selfcheck: dict[str, Any], unet_session: Any, model_dir: Path) -> None:
+    """Refuse a UNet++ that computes here otherwise than torch did at export (``gsa export`` records it).
+
+    Int8 kernels differ between CPUs: on an x86 CPU without VNNI onnxruntime adds pairs of
+    uint8 x int8 products in int16, which 8-bit weights saturate. Such a UNet++ loads and runs
+    and is wrong (silhouette IoU 0.90 instead of 0.99, Swin 18 deg instead of 2), so the
+    service checks the file against the float network's output on a seeded noise frame
+    before it answers anything. Measured on such a CPU: the 8-bit file is 0.28 off, the 7-bit
+    one (``inference.export.quantize_int8``) 0.027, the tolerance 0.1.
+    """
+    expected = np.array(selfcheck["unetpp_pooled"], np.float32)
+    x = selfcheck_frames(int(selfcheck["img_size"]))
+    got = pooled(unet_session.run(None, {"frame": x})[0])
+    off = float(np.abs(got - expected).max())
+    if got.shape != expected.shape or off > float(selfcheck["tolerance"]):
+        raise ModelFileError(
+            f"UNet++ in {model_dir} computes differently on this CPU than the float network did when it was "
+            f"exported (its output off by {off:.3f}, over {selfcheck['tolerance']}, on the card's check frame): "
+            "export it again with this version's gsa export (int8 with 7-bit weights) or without --int8",
+            field="model",
+        )
+
+
 def session_options(threads: int | None = None) -> Any:
     """The tuned ONNX Runtime options the service runs with (and the benchmarks measure).
 
@@ -136,6 +174,8 @@ class Estimator:
                 sessions[role] = ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
             except Exception as exc:  # onnxruntime raises its own exception types
                 raise ModelFileError(f"model file {path} cannot be loaded: {exc}", field="model") from None
+        if card.get("selfcheck"):
+            check_computes_here(card["selfcheck"], sessions["unetpp"], d)
         return cls(d, card, sessions, run_batch)
 
     @property

@@ -166,10 +166,16 @@ def cmd_simulate_pass(args: argparse.Namespace) -> int:
     (partial / "pass.json").write_text(json.dumps(record, indent=1))
     _contact_sheet(images, record, partial / "frames.png")
     partial.rename(out)
-    inside = sum(max(abs(a) for a in f["attitude_observation"]["euler_zyx_deg"]) <= 45.0 for f in record["frames"])
+    from inference.frames import euler_from_matrix, rotation_matrix
+
+    seen = [rotation_matrix(*f["attitude_observation"]["euler_zyx_deg"]) for f in record["frames"]]
+    inside = sum(max(abs(a) for a in euler_from_matrix(r)) <= 45.0 for r in seen)
+    # A target turning against the line of sight faster than it sweeps is read reversed in cross-range.
+    reversed_ = sum(max(abs(a) for a in euler_from_matrix(pass_svc.REVERSED @ r)) <= 45.0 for r in seen)
     print(
-        f"{len(meta)} frames in {out} ({inside} within the networks' 45 deg range); upload frames.npz with "
-        "normalised=true and each frame's observed_at from pass.json"
+        f"{len(meta)} frames in {out} ({inside} within the networks' 45 deg range"
+        + (f", {reversed_} more read reversed in cross-range" if reversed_ else "")
+        + "); upload frames.npz with normalised=true and each frame's observed_at from pass.json"
     )
     return 0
 
@@ -350,6 +356,17 @@ def _plot_pass(result: dict[str, Any], rec: dict[str, Any], path: str) -> None:
     used = np.array([f["used"] for f in result["frames"]])
     fused = np.array(result["attitude_lvlh"]["euler_zyx_deg"])
     ub = np.array(result["uncertainty_deg"])
+    model = None
+    if result["stable"] is False and result.get("attitude_at") is not None:
+        from inference.frames import euler_from_matrix, rotation_matrix
+        from inference.fusion import so3_exp
+
+        t_ref = (when(result["attitude_at"]) - t0).total_seconds()
+        dense = np.linspace(float(t.min()), float(t.max()), 200)
+        w = np.radians(np.array(result["rate_deg_s"], float))
+        a_ref = rotation_matrix(*fused)
+        model = np.array([euler_from_matrix(a_ref @ so3_exp((x - t_ref) * w)) for x in dense])
+        model = fused + (model - fused + 180.0) % 360.0 - 180.0  # continuous through +-180
     fig, axes = plt.subplots(3, 1, figsize=(8, 7.5), sharex=True)
     for i, (ax, name) in enumerate(zip(axes, ("z (yaw)", "y (pitch)", "x (roll)"), strict=True)):
         ax.errorbar(t[used], each[used, i], yerr=bounds[used, i], fmt="o", ms=4, capsize=2, label="frame (90 % bound)")
@@ -362,6 +379,9 @@ def _plot_pass(result: dict[str, Any], rec: dict[str, Any], path: str) -> None:
         if result["stable"]:
             ax.axhline(fused[i], color="tab:orange", label="fused")
             ax.axhspan(fused[i] - ub[i], fused[i] + ub[i], color="tab:orange", alpha=0.2)
+        elif model is not None:  # turning: the model's attitude over the pass, its bound at attitude_at
+            ax.plot(dense, model[:, i], color="tab:orange", label="turning model")
+            ax.errorbar([t_ref], [fused[i]], yerr=[ub[i]], fmt="D", color="tab:orange", capsize=3, ms=5)
         truth = [_truth_lvlh(rec, f["index"]) for f in result["frames"] if f["index"] < len(rec.get("frames", []))]
         if truth and truth[0] is not None and len(truth) == len(t):
             from inference.frames import euler_from_matrix

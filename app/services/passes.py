@@ -34,7 +34,7 @@ from app.services.estimation import (
     target_track,
 )
 from inference.frames import euler_from_matrix, rotation_matrix
-from inference.fusion import PassFrame, angle_deg, fuse
+from inference.fusion import PassFrame, fuse
 
 Vec = NDArray[np.float64]
 
@@ -447,15 +447,15 @@ def fuse_frames(
         lvlh_mid = frames_at(plan_request, t_mid)["lvlh"]
     j2000 = lvlh_mid @ fused.rotation
     frames_out = []
-    for k, (pf, c) in enumerate(zip(pass_frames, checks, strict=True)):
-        chosen = int(np.argmin([angle_deg(fused.rotation, r) for r in pf.candidates]))
+    for k, c in enumerate(checks):
+        chosen = fused.chosen[k]
         frames_out.append(
             {
                 "index": k,
                 "name": names[k],
                 "observed_at": observed_at[k],
                 **checked_json(c),
-                "attitude_lvlh": matrix_attitude_json(pf.candidates[chosen]),
+                "attitude_lvlh": matrix_attitude_json(fused.placed[k]),
                 "branch": ["answer", "near-mirror", *[f"alternative {j}" for j in range(len(c.alternatives))]][chosen],
                 "used": k in fused.used,
                 "rejected_because": fused.rejected.get(k),

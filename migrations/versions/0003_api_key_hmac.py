@@ -22,7 +22,9 @@ def upgrade() -> None:
 
 def downgrade() -> None:
     # Keys already rewritten as HMAC cannot go back to plain SHA-256: revoke them (their owners need new keys).
-    op.execute("UPDATE api_keys SET revoked_at = CURRENT_TIMESTAMP WHERE hash_scheme <> 'sha256' AND revoked_at IS NULL")
+    op.execute(
+        "UPDATE api_keys SET revoked_at = CURRENT_TIMESTAMP WHERE hash_scheme <> 'sha256' AND revoked_at IS NULL"
+    )
     op.drop_index("ix_api_keys_prefix", table_name="api_keys")
     with op.batch_alter_table("api_keys") as batch:
         batch.drop_column("hash_scheme")

@@ -157,6 +157,13 @@ def test_a_spinning_target_is_found_turning_with_its_rate(paper_windows, sense):
             @ pass_svc.spin_rotation(np.array([0.0, 0.0, 1.0]), sense * 0.5, np.array([-times[k]]))[0]
         )
         assert angle_deg(rotation_matrix(*out["attitude_lvlh"]["euler_zyx_deg"]), truth) < 1.0
+        # Each frame placed in LVLH as the turning answer sees it: its noisy answer, not the image plane's turn.
+        placed = [
+            angle_deg(rotation_matrix(*f["attitude_lvlh"]["euler_zyx_deg"]), meta[f["index"]]["body_to_lvlh"])
+            for f in out["frames"]
+            if f["used"]
+        ]
+        assert placed and max(placed) < 2.0, placed
     assert found >= 3
 
 

@@ -338,6 +338,10 @@ def test_int8_export_quantises_unet_and_keeps_the_angles(smoke_run, smoke_data, 
     assert {"QuantizeLinear", "DequantizeLinear"} <= ops
     assert sum(n.op_type == "QuantizeLinear" for n in graph.node) == u["int8_quantized_activations"] > 0
     assert any(i.data_type == onnx.TensorProto.INT8 for i in graph.initializer)
+    # 7-bit weights: a pair of uint8 x int8 products then fits int16 (255 x 64 x 2 = 32640), so no CPU saturates.
+    weights = [onnx.numpy_helper.to_array(i) for i in graph.initializer if i.data_type == onnx.TensorProto.INT8]
+    assert max(int(np.abs(w.astype(np.int32)).max()) for w in weights) <= 64
+    assert card["selfcheck"]["img_size"] == card["config"]["img_size"] and card["selfcheck"]["tolerance"] > 0
     float_card = export(out, tmp_path / "f32")
     assert u["bytes"] < 0.5 * float_card["files"]["unetpp"]["bytes"]
     # The service runs it, and its angles stay near the float models' on frames it did not calibrate on.
