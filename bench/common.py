@@ -40,12 +40,16 @@ def interleaved_medians(fns: dict[str, Callable[[], object]], repeat: int = 9) -
 
 
 def machine() -> str:
-    cpu = platform.processor() or "unknown CPU"
+    cpu, isa = platform.processor() or "unknown CPU", ""
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
             if line.startswith("model name"):
                 cpu = line.split(":", 1)[1].strip()
-                break
+            elif line.startswith("flags") and not isa:
+                # int8 kernels differ by it (inference/export.py: quantize_int8), so each figure names it
+                flags = set(line.split(":", 1)[1].split())
+                isa = " (AVX-512 VNNI)" if "avx512_vnni" in flags else " (AVX-VNNI)" if "avx_vnni" in flags else ""
+                isa = isa or (" (AVX2, no VNNI)" if "avx2" in flags else "")
     except OSError:
         pass
-    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, numpy {np.__version__}"
+    return f"{cpu}{isa}, {os.cpu_count()} cores, Python {platform.python_version()}, numpy {np.__version__}"
