@@ -359,8 +359,11 @@ def _plot(
     fig, ax = plt.subplots(1, 2, figsize=(10, 4.2))
     pts = ax[0].scatter(single, fused, c=sweep, cmap="viridis", label="UNet++'s silhouettes (the service)")
     fig.colorbar(pts, ax=ax[0], label="image-plane normal's sweep (deg)")
+    from matplotlib.ticker import NullFormatter
+
     ax[0].set_xscale("log")
     ax[0].set_yscale("log")
+    ax[0].xaxis.set_minor_formatter(NullFormatter())  # under a decade of range, minor labels overlap
     ok = np.isfinite(exact_single) & np.isfinite(exact_fused)
     ax[0].loglog(exact_single[ok], exact_fused[ok], "s", mfc="none", color="tab:green", label="exact silhouettes")
     every = np.concatenate([single, fused, exact_single[ok], exact_fused[ok]])

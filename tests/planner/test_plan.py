@@ -177,8 +177,9 @@ def test_planning_stops_when_asked():
         calls.append(time.perf_counter())
         return "over budget" if len(calls) >= 4 else None
 
-    t0 = time.perf_counter()
     with pytest.raises(PlanningStopped, match="over budget"):
         make_plan(Orbit("T", PAPER_TARGET), Orbit("O", PAPER_OBSERVER), PAPER_STATION, PlanOptions(), stop=stop)
     assert len(calls) == 4  # and nothing after the answer
-    assert calls[-1] - t0 < 1.0
+    # At once: no step runs between the answer and the stop (the whole first steps took 1.4 s on a slow VM;
+    # how long a step takes is the benchmarks' business, not this test's).
+    assert time.perf_counter() - calls[-1] < 0.2
