@@ -85,8 +85,7 @@ def one_pass(
     readable = [
         k
         for k, f in enumerate(meta)
-        if k in inside
-        or max(abs(a) for a in euler_from_matrix(pass_svc.REVERSED @ rotation_matrix(*f["attitude_deg"]))) <= 45.0
+        if k in inside or max(abs(a) for a in pass_svc.reversed_reading(f["attitude_deg"])) <= 45.0
     ]
     single = [
         angle_deg(rotation_matrix(*checks[k].angles_deg), rotation_matrix(*meta[k]["attitude_deg"])) for k in inside

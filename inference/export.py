@@ -129,9 +129,7 @@ def quantize_int8(src: Path, dst: Path, frames: np.ndarray) -> int:
 
 def parity(model: torch.nn.Module, path: Path, frames: np.ndarray) -> float:
     """Return the largest relative difference between ONNX Runtime and torch on ``frames`` [N, 1, H, W]."""
-    import onnxruntime as ort
-
-    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    sess = _session(path)
     with torch.no_grad():
         ref = model(torch.from_numpy(frames)).numpy()
     got = sess.run(None, {"frame": frames})[0]
@@ -292,12 +290,10 @@ def int8_unet(path: Path, swin: torch.nn.Module, unet: torch.nn.Module, frames: 
     Calibrates on the first half of ``frames`` [N, H, W] and checks on the second: Swin's
     angles from the int8 UNet++'s output against those from the float UNet++ (torch).
     """
-    import onnxruntime as ort
-
     x = frames[:, None].astype(np.float32)
     calib, check = x[: len(x) // 2], x[len(x) // 2 :]
     nodes = quantize_int8(path, path, calib)
-    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    sess = _session(path)
     enh8 = np.concatenate([sess.run(None, {"frame": check[k : k + 8]})[0] for k in range(0, len(check), 8)])
     with torch.no_grad():
         enh = torch.cat([unet(torch.from_numpy(check[k : k + 8])) for k in range(0, len(check), 8)])

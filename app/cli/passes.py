@@ -166,12 +166,10 @@ def cmd_simulate_pass(args: argparse.Namespace) -> int:
     (partial / "pass.json").write_text(json.dumps(record, indent=1))
     _contact_sheet(images, record, partial / "frames.png")
     partial.rename(out)
-    from inference.frames import euler_from_matrix, rotation_matrix
-
-    seen = [rotation_matrix(*f["attitude_observation"]["euler_zyx_deg"]) for f in record["frames"]]
-    inside = sum(max(abs(a) for a in euler_from_matrix(r)) <= 45.0 for r in seen)
+    seen = [f["attitude_observation"]["euler_zyx_deg"] for f in record["frames"]]
+    inside = sum(max(abs(a) for a in angles) <= 45.0 for angles in seen)
     # A target turning against the line of sight faster than it sweeps is read reversed in cross-range.
-    reversed_ = sum(max(abs(a) for a in euler_from_matrix(pass_svc.REVERSED @ r)) <= 45.0 for r in seen)
+    reversed_ = sum(max(abs(a) for a in pass_svc.reversed_reading(angles)) <= 45.0 for angles in seen)
     print(
         f"{len(meta)} frames in {out} ({inside} within the networks' 45 deg range"
         + (f", {reversed_} more read reversed in cross-range" if reversed_ else "")

@@ -255,6 +255,13 @@ REVERSED_NOTE = (
 )
 
 
+def reversed_reading(angles: Any) -> tuple[float, float, float]:
+    """The attitude (Euler z, y, x deg) of a frame read reversed in cross-range, from its mirrored reading's.
+
+    The same map takes a frame's true attitude to the one its mirrored frame shows: Rx(180) R (``REVERSED``)."""
+    return euler_from_matrix(REVERSED @ rotation_matrix(*(float(a) for a in angles)))
+
+
 def recheck_reversed(*, est: Any, checker: Any, frames: Vec, checks: list[Any]) -> list[Any]:
     """Give each untrusted frame a second reading, mirrored in cross-range; keep it where its checks trust it.
 
@@ -276,9 +283,6 @@ def recheck_reversed(*, est: Any, checker: Any, frames: Vec, checks: list[Any]) 
     res = est.estimate(mirrored)
     out = list(checks)
 
-    def back(angles: Any) -> tuple[float, float, float]:
-        return euler_from_matrix(REVERSED @ rotation_matrix(*(float(a) for a in angles)))
-
     for j, k in enumerate(todo):
         c = checker.check(  # no library search, as for the pass's other frames
             mirrored[j], res.enhanced[j], res.angles_deg[j] if checker.networks else None, search=False
@@ -287,12 +291,12 @@ def recheck_reversed(*, est: Any, checker: Any, frames: Vec, checks: list[Any]) 
             continue
         q = c.quality
         out[k] = Checked(
-            angles_deg=np.array(back(c.angles_deg)),
-            network_deg=None if c.network_deg is None else np.array(back(c.network_deg)),
+            angles_deg=np.array(reversed_reading(c.angles_deg)),
+            network_deg=None if c.network_deg is None else np.array(reversed_reading(c.network_deg)),
             refined=c.refined,
             quality=Quality(q.silhouette_iou, q.uncertainty_deg, True, [REVERSED_NOTE]),
             alternatives=[
-                Alternative(back(a.angles_deg), a.silhouette_iou, a.fit_gap, a.distance_deg, a.start)
+                Alternative(reversed_reading(a.angles_deg), a.silhouette_iou, a.fit_gap, a.distance_deg, a.start)
                 for a in c.alternatives
             ],
             features={**c.features, "reversed": 1.0},
