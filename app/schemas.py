@@ -935,6 +935,14 @@ class PassPublic(Described):
     attitude_j2000: PassAttitudeJ2000
     """the fused attitude in J2000/GCRS at the pass's middle"""
     uncertainty_deg: list[float] = Field(description="90 % bound on the fused LVLH Euler z, y, x (deg)")
+    alternative_lvlh: AttitudePublic | None = Field(
+        default=None,
+        description="another attitude (body to LVLH) that as many of the pass's frames agree with as with "
+        "attitude_lvlh: the near-mirror, where the image plane barely turns over the pass (a reflection through it "
+        "is then the same for every frame, so the pass's geometry cannot tell the two apart and the frames' own "
+        "answers chose; uncertainty_deg does not cover it). Null when the frames tell them apart, and for a "
+        "turning target",
+    )
     trusted: bool = Field(
         default=True,
         description="false when fewer than 3 trusted frames agree: the fused attitude rests on too little",

@@ -11,13 +11,19 @@ to frame while the truth does not).
 ``fuse``:
 
 1. **Branches.** Every candidate of every frame is scored by how many frames have some
-   candidate within ``agree_deg`` of it; the best-supported one seeds the mean.
+   candidate within ``agree_deg`` of it, and half as much again (``ANSWER_VOTE``) for each
+   frame whose own answer is within it; the best-supported one seeds the mean. Where the
+   image plane turns, a wrong branch agrees with few frames and the first count decides;
+   where it barely turns, the near-mirror (a reflection through that plane) agrees with
+   every frame as well as the truth does, and the frames' own choices decide.
 2. **Robust mean.** Each frame takes its candidate nearest the mean; the mean is the
    weighted chordal mean (the weighted sum of rotation matrices projected back onto SO(3)
    by SVD), each frame weighted by 1 / sigma^2 with sigma its 90 % bound over 1.645. Where
    the frames carry their geometry and per-axis bounds, the mean is then refined with each
-   frame's full information matrix (its per-axis bounds, through its own Euler axes and
-   observation frame, into LVLH): a frame counts most about the axes it sees best. A frame
+   frame's full information matrix (its bounds' covariance, through its own Euler axes and
+   observation frame, into LVLH): a frame counts most about the axes it sees best. The
+   covariance keeps how a frame's Euler axes trade against each other (a tilt the silhouette
+   barely shows lies along some mix of y and x); a frame without one counts its axes as independent. A frame
    further than ``max(reject_sigma * sigma_k, reject_floor_deg)`` from the mean is rejected
    (said why); repeat until nothing changes. Frames marked not ``trusted`` (the caller decides;
    the service lets in frames doubted only for a lookalike) are rejected first, unless fewer than two are left.
@@ -70,6 +76,10 @@ Z90 = 1.6448536269514722  # the two-sided 90 % normal quantile
 # error there, hardly change from frame to frame. Measured on 20 simulated passes (seeds
 # 40000-40019, not the benchmark's; bench/passes.py and BENCHMARKS.md "Pass fusion").
 SHARED_FRACTION = 0.1
+# A frame's vote for the branch its own answer is on, beside its vote for any branch one of its candidates is on:
+# where the image plane barely turns, a reflection through it is the same for every frame and both branches
+# agree with every frame; the frames' own choices (brightness, Swin) then decide.
+ANSWER_VOTE = 0.5
 # The turning test without a significant rate: the gain must stand without the frames that give most of it.
 SPREAD_DROP = 2
 
@@ -87,6 +97,9 @@ class PassFrame:
     trusted: bool = True
     why_not: str = ""  # why the frame's own checks did not trust it
     axis_bounds_deg: tuple[float, float, float] | None = None  # 90 % bounds on its own Euler z, y, x (obs frame)
+    # Their covariance (deg^2, diagonal = the bounds squared; inference.trust.bound_covariance), where the fit has
+    # one: how the frame's Euler axes trade against each other. Without it the axes count as independent.
+    axis_cov_deg2: Vec | None = None
 
 
 @dataclass(frozen=True)
@@ -108,6 +121,9 @@ class Fused:
     chosen: list[int] = field(default_factory=list)  # each frame's candidate the answer took
     placed: Vec = field(default_factory=lambda: np.zeros((0, 3, 3)))  # that candidate, body to LVLH, as the
     # answer places it ([N, 3, 3]: for a turning answer through the model's observation frames, ``place_turning``)
+    # Another attitude (body to LVLH) that as many frames agree with as with the answer, where there is one: the
+    # near-mirror of a pass whose image plane barely turns (``_rival_branch``); the frames' own answers chose.
+    rival: Vec | None = None
 
 
 def so3_log(r: Vec) -> Vec:
@@ -121,6 +137,20 @@ def so3_log(r: Vec) -> Vec:
         vals, vecs = np.linalg.eigh((r + r.T) / 2.0)
         return np.asarray(vecs[:, -1] * angle)
     return np.asarray(w * angle / (2.0 * math.sin(angle)))
+
+
+def so3_logs(r: Vec) -> Vec:
+    """Return the rotation vectors (rad) [N, 3] of rotation matrices [N, 3, 3]: ``so3_log`` over a stack."""
+    r = np.asarray(r, float)
+    cos = np.clip((np.trace(r, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
+    angle = np.arccos(cos)
+    w = np.stack([r[:, 2, 1] - r[:, 1, 2], r[:, 0, 2] - r[:, 2, 0], r[:, 1, 0] - r[:, 0, 1]], axis=1)
+    small = angle < 1e-9
+    factor = np.where(small, 0.5, angle / (2.0 * np.sin(np.where(small, 1.0, angle))))
+    out = w * factor[:, None]
+    for k in np.flatnonzero(math.pi - angle < 1e-6):  # near pi: the axis from the symmetric part, one by one
+        out[k] = so3_log(r[k])
+    return np.asarray(out)
 
 
 def angle_deg(a: Vec, b: Vec) -> float:
@@ -144,19 +174,75 @@ def euler_jacobian(r: Vec) -> Vec:
     return np.array([[0.0, -sz, cz * cy], [0.0, cz, sz * cy], [1.0, 0.0, -sy]])
 
 
+_REFLECT = np.diag([1.0, 1.0, -1.0])  # the body reflected in its own z, seen from the observation frame
+_FLIP_YX = np.diag([1.0, -1.0, -1.0])
+
+
 def _informations(frames: list[PassFrame]) -> list[list[Vec]]:
-    """Each frame's information matrix (LVLH, left perturbation, 1/rad^2) for each of its candidates."""
-    out = []
+    """Each frame's information matrix (LVLH, left perturbation, 1/rad^2) for each of its candidates.
+
+    A frame without per-axis bounds (a fit that bounds nothing) counts as equally unsure about
+    every axis, by its overall bound, as in the chordal mean: it is then rejected or weighs little,
+    and the other frames keep their own axes.
+    """
+    out: list[list[Vec]] = []
     for f in frames:
-        assert f.los is not None and f.los_rate is not None and f.axis_bounds_deg is not None
+        assert f.los is not None and f.los_rate is not None
+        if f.axis_bounds_deg is None:
+            iso = (Z90 / math.radians(max(f.bound_deg, 1e-3))) ** 2
+            out.append([iso * np.eye(3) for _ in f.candidates])
+            continue
         obs = observation_in_lvlh(f.los[None], f.los_rate[None])[0]
-        var = (np.radians(np.maximum(np.array(f.axis_bounds_deg, float), 1e-3)) / Z90) ** 2
+        if f.axis_cov_deg2 is not None:
+            cov = np.radians(1.0) ** 2 * np.asarray(f.axis_cov_deg2, float) / Z90**2
+        else:
+            cov = np.diag((np.radians(np.maximum(np.array(f.axis_bounds_deg, float), 1e-3)) / Z90) ** 2)
         mats = []
+        mirrored = obs @ _REFLECT @ obs.T @ f.candidates[0] @ _REFLECT
         for c in f.candidates:
+            # The near-mirror (z, -y, -x) of the answer: its Euler axes trade with the signs of y and x turned.
+            c_cov = _FLIP_YX @ cov @ _FLIP_YX if angle_deg(c, mirrored) < 1e-6 else cov
             j = obs @ euler_jacobian(obs.T @ c)
-            mats.append(np.linalg.inv(j @ np.diag(var) @ j.T))
+            mats.append(np.linalg.inv(j @ c_cov @ j.T))
         out.append(mats)
     return out
+
+
+RIVAL_DISTINCT_DEG = 3.0  # a rival branch lies at least this far from the answer (beyond the frames' agreement)
+
+
+def _rival_branch(
+    frames: list[PassFrame],
+    pool: list[int],
+    used: list[int],
+    sigma: Vec,
+    agreeing: list[tuple[Vec, int]],
+    mean: Vec,
+    agree_deg: float,
+) -> Vec | None:
+    """The attitude of another branch that as many frames agree with as with ``mean``, or None.
+
+    ``agreeing`` holds every candidate of the ``pool`` frames with how many of them agree with it.
+
+    Where a pass's image plane barely turns, the near-mirror (a reflection through that plane)
+    is nearly the same rotation for every frame, so every frame has a candidate on it as well as
+    on the truth: the pass's geometry cannot tell them apart, only the frames' own choices can.
+    The rival is the chordal mean of the used frames' candidates nearest the best-supported
+    candidate at least ``max(RIVAL_DISTINCT_DEG, 2 agree_deg)`` from the answer.
+    """
+    apart = max(RIVAL_DISTINCT_DEG, 2.0 * agree_deg)
+    own = sum(1 for j in pool if min(angle_deg(mean, d) for d in frames[j].candidates) <= agree_deg)
+    others = [(c, n) for c, n in agreeing if angle_deg(c, mean) >= apart]
+    if not others:
+        return None
+    c, n = max(others, key=lambda cn: cn[1])
+    if n < own:
+        return None
+    near = [(j, min(frames[j].candidates, key=lambda d: angle_deg(c, d))) for j in used]
+    near = [(j, d) for j, d in near if angle_deg(c, d) <= agree_deg]
+    if len(near) < 2:
+        return None
+    return chordal_mean(np.array([d for _, d in near]), np.array([1.0 / sigma[j] ** 2 for j, _ in near]))
 
 
 def information_mean(rotations: Vec, infos: Vec, start: Vec) -> Vec:
@@ -195,18 +281,19 @@ def fuse(
     fallback = len(pool) < 2
     if fallback:  # too few trusted frames: fuse them all, and say so through their quality
         pool, untrusted = list(range(len(frames))), {}
-    infos = (
-        _informations(frames)
-        if all(f.los is not None and f.los_rate is not None and f.axis_bounds_deg for f in frames)
-        else None
-    )
-    # 1. The best-supported candidate seeds the mean.
+    infos = _informations(frames) if all(f.los is not None and f.los_rate is not None for f in frames) else None
+    # 1. The best-supported candidate seeds the mean: frames with some candidate near it, and half as much
+    # again for each whose own answer is near it (the branch its brightness and Swin chose).
     best_support, seed = -1.0, frames[pool[0]].candidates[0]
+    agreeing: list[tuple[Vec, int]] = []  # every candidate, with how many frames agree with it
     for k in pool:
         for c in frames[k].candidates:
-            support = sum(
-                1.0 for j in pool if min(angle_deg(c, d) for d in frames[j].candidates) <= max(agree_deg, 0.0)
-            )
+            support, count = 0.0, 0
+            for i in pool:
+                near = [angle_deg(c, d) <= max(agree_deg, 0.0) for d in frames[i].candidates]
+                count += any(near)
+                support += float(any(near)) + ANSWER_VOTE * float(near[0])
+            agreeing.append((c, count))
             if support > best_support:
                 best_support, seed = support, c
     mean = seed
@@ -259,6 +346,7 @@ def fuse(
         bound = np.degrees(Z90 * np.sqrt(np.maximum(np.diag(cov_e), 0.0)))
     else:
         bound = np.sqrt(bound**2 + shared_fraction * float(np.median(sigma[used] * Z90)) ** 2)
+    rival = _rival_branch(frames, pool, used, sigma, agreeing, mean, agree_deg)
     # 4. Stability: a body rate from the residual rotations over time (drift) ...
     times = np.array([frames[k].time_s for k in used])
     resid = np.array([so3_log(mean.T @ r) for r in rots])  # body frame, rad
@@ -279,6 +367,7 @@ def fuse(
         residual_deg={k: angle_deg(mean, frames[k].candidates[chosen[k]]) for k in range(len(frames))},
         chosen=chosen,
         placed=np.array([frames[k].candidates[chosen[k]] for k in range(len(frames))]),
+        rival=rival,
     )
     # ... and a turning model, where the frames carry their geometry and enough of them are trusted (a turning
     # fit to frames their own checks doubt says nothing, and costs seconds on a long pass).
@@ -321,6 +410,7 @@ def fuse(
         reference_s=turn.reference_s,
         chosen=chosen_t,
         placed=placed_t,
+        rival=None,
     )
 
 
@@ -435,7 +525,8 @@ def fit_turning(frames: list[PassFrame], start: Vec, max_rate_deg_s: float = 1.2
 
     def residuals(p: Vec, a0: Vec, pick: list[int]) -> Vec:
         pred = turning_prediction(a0 @ so3_exp(p[:3]), p[3:], tau, los, los_rate)
-        return np.concatenate([so3_log(measured[k][pick[k]] @ pred[k].T) / sigma[k] for k in range(len(frames))])
+        picked = np.array([measured[k][pick[k]] for k in range(len(frames))])
+        return np.asarray((so3_logs(picked @ np.swapaxes(pred, -1, -2)) / sigma[:, None]).ravel())
 
     def nearest(a0: Vec, p: Vec) -> list[int]:
         pred = turning_prediction(a0 @ so3_exp(p[:3]), p[3:], tau, los, los_rate)

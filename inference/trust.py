@@ -121,6 +121,7 @@ class Checked:
     quality: Quality
     alternatives: list[Alternative]
     features: dict[str, float]  # what the checks read (for calibration and the record)
+    bound_cov_deg2: Vec | None = None  # the 90 % bounds' covariance (``bound_covariance``), where the fit has one
 
 
 def frame_median(frame: Vec) -> float:
@@ -133,15 +134,31 @@ def enhancer_doubt(enhanced: Vec) -> float:
     return float(np.mean((enhanced > 0.1) & (enhanced < 0.9))) / max(sil, 1e-4)
 
 
-def raw_uncertainty(hessian: Vec, soft_iou: float) -> Vec:
-    """Return sqrt(inv(H)_ii (1 - soft IoU)) per axis (deg); infinite where H is not positive definite."""
+def raw_covariance(hessian: Vec, soft_iou: float) -> Vec | None:
+    """Return inv(H) (1 - soft IoU) (deg^2, the fit's Euler axes); None where H is not positive definite."""
     try:
         if np.all(np.linalg.eigvalsh(hessian) > 0):
-            cov = np.linalg.inv(hessian)
-            return np.sqrt(np.maximum(np.diag(cov), 0.0) * max(1.0 - soft_iou, 1e-4))
+            return np.asarray(np.linalg.inv(hessian) * max(1.0 - soft_iou, 1e-4))
     except np.linalg.LinAlgError:
         pass
-    return np.full(3, np.inf)
+    return None
+
+
+def raw_uncertainty(hessian: Vec, soft_iou: float) -> Vec:
+    """Return sqrt(inv(H)_ii (1 - soft IoU)) per axis (deg); infinite where H is not positive definite."""
+    cov = raw_covariance(hessian, soft_iou)
+    return np.full(3, np.inf) if cov is None else np.sqrt(np.maximum(np.diag(cov), 0.0))
+
+
+def bound_covariance(cov_raw: Vec, scale: Vec, floor_deg: Vec) -> Vec:
+    """The 90 % bounds' covariance (deg^2): diag(floor^2) + S C S, S = diag(scale), C the raw covariance.
+
+    Its diagonal is the per-axis bounds squared (``floor^2 + (scale raw)^2``); the off-diagonal
+    keeps how the fit's Euler axes trade against each other (a tilt the silhouette barely shows
+    lies along some mix of y and x), which a pass's fusion uses (``inference.fusion``).
+    """
+    s = np.diag(np.asarray(scale, float))
+    return np.asarray(np.diag(np.asarray(floor_deg, float) ** 2) + s @ cov_raw @ s)
 
 
 class Checker:
@@ -186,6 +203,7 @@ class Checker:
         enh = np.asarray(enhanced, np.float64)
         features = {"median": frame_median(np.asarray(frame, np.float64)), "doubt": enhancer_doubt(enh)}
         fits = []
+        raw_cov = None
         if refine or net is None:
             if net is not None:
                 # The prior sits on Swin's answer for both: Swin saw the brightness, which tells the
@@ -198,6 +216,7 @@ class Checker:
             best = fits[0]
             angles = best.angles_deg
             hessian, soft, iou = curvature(self.renderer, enh, angles)
+            raw_cov = raw_covariance(hessian, soft)
             raw = raw_uncertainty(hessian, soft)
             finite = np.isfinite(raw)
             spread = np.asarray(cal.scale) * np.where(finite, raw, 0.0)
@@ -232,7 +251,10 @@ class Checker:
             features["moved_deg"] = float(geodesic_deg(angles, net)[0])
         reasons = self._reasons(features, angles, bound, alternatives, net is not None and refine)
         quality = Quality(round(iou, 4), tuple(round(float(b), 3) for b in bound), not reasons, reasons)  # type: ignore[arg-type]
-        return Checked(angles, net, bool(fits), quality, alternatives, features)
+        cov = None
+        if raw_cov is not None and np.all(np.isfinite(bound)):
+            cov = bound_covariance(raw_cov, np.asarray(cal.scale), np.asarray(cal.floor_deg))
+        return Checked(angles, net, bool(fits), quality, alternatives, features, cov)
 
     def _by_brightness(self, frame: NDArray[np.floating], enhanced: Vec, fits: list[Fit]) -> list[Fit]:
         """Where a distinct attitude's silhouette fits within ``BRIGHTNESS_MARGIN``, let the bright parts choose."""

@@ -311,6 +311,13 @@ def _print_pass(result: dict[str, Any], rec: dict[str, Any]) -> None:
         f"{'' if result.get('trusted', True) else '; NOT TRUSTED'}"
     )
     print(result["stability"])
+    alt = result.get("alternative_lvlh")
+    if alt:
+        az, ay, ax = alt["euler_zyx_deg"]
+        print(
+            f"as many frames agree with z {az:.2f} y {ay:.2f} x {ax:.2f} deg (the near-mirror: the image plane "
+            "barely turns over this pass); the frames' own answers chose the one above"
+        )
     errors = []
     for f in result["frames"]:
         truth = _truth_lvlh(rec, f["index"]) if f["index"] < len(rec.get("frames", [])) else None

@@ -439,6 +439,7 @@ def fuse_frames(
                 usable(c),
                 "; ".join(q.reasons),
                 tuple(q.uncertainty_deg) if len(finite) == 3 else None,
+                c.bound_cov_deg2 if len(finite) == 3 else None,
             )
         )
     fused = fuse(pass_frames)
@@ -475,6 +476,7 @@ def fuse_frames(
         "attitude_lvlh": matrix_attitude_json(fused.rotation),
         "attitude_j2000": {**matrix_attitude_json(j2000), "at": t_mid},
         "uncertainty_deg": [round(b, 4) for b in fused.uncertainty_deg],
+        "alternative_lvlh": None if fused.rival is None else matrix_attitude_json(fused.rival),
         "used": len(fused.used),
         "rejected": len(fused.rejected),
         "stable": fused.stable if enough else None,  # undecided: too few trusted frames agree

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from inference.fusion import PassFrame, angle_deg, chordal_mean, fuse, observation_attitude, so3_log
+from inference.fusion import PassFrame, angle_deg, chordal_mean, fuse, observation_attitude, so3_log, so3_logs
 
 M = np.diag([1.0, 1.0, -1.0])  # the near-mirror: M R M, a reflection through the frame's image plane
 
@@ -59,6 +59,14 @@ def test_chordal_mean_and_log_against_scipy():
     assert angle_deg(ours, ref) < 1e-6
     r = Rotation.from_rotvec([0.3, -0.2, 0.1])
     np.testing.assert_allclose(so3_log(r.as_matrix()), r.as_rotvec(), atol=1e-12)
+    # The stacked log, small angles, ordinary ones and one at pi included.
+    many = Rotation.from_rotvec(
+        np.vstack([1e-12 * rng.standard_normal((2, 3)), rng.uniform(-1.5, 1.5, (20, 3)), [[math.pi, 0.0, 0.0]]])
+    )
+    ref = many.as_rotvec()
+    got = so3_logs(many.as_matrix())
+    np.testing.assert_allclose(got[:-1], ref[:-1], atol=1e-9)
+    assert Rotation.from_rotvec(got[-1]).as_matrix() == pytest.approx(many[-1].as_matrix(), abs=1e-9)
 
 
 def test_fusion_beats_single_frames_and_resolves_every_mirror():
@@ -104,3 +112,88 @@ def test_one_frame_is_not_a_pass():
     _, frames, _ = _pass(rng, n=3)
     with pytest.raises(ValueError, match="at least two"):
         fuse(frames[:1])
+
+
+def _euler_to_rotvec_jacobian(o, e, h=1e-6):
+    """d(rotation vector in LVLH, left) / d(Euler z, y, x, rad) of o R(e), by finite differences through scipy."""
+    base = o @ Rotation.from_euler("ZYX", e).as_matrix()
+    cols = []
+    for i in range(3):
+        d = np.zeros(3)
+        d[i] = h
+        r = o @ Rotation.from_euler("ZYX", e + d).as_matrix()
+        cols.append(Rotation.from_matrix(r @ base.T).as_rotvec() / h)
+    return np.stack(cols, axis=1)
+
+
+TRIALS = 50
+
+
+def test_correlated_frame_errors_fuse_to_the_cramer_rao_bound():
+    """Frames whose Euler y and x errors trade (correlation -0.95, as a tilt the silhouette barely shows does)
+    fuse to the Cramer-Rao bound when they carry their covariance, and do over twice as badly as independent
+    axes; one frame that bounds nothing (a doubted fit) does not turn the covariances off for the rest."""
+    rng = np.random.default_rng(5)
+    sig = np.radians([0.1, 0.5, 0.5])
+    rho = -0.95
+    cov = np.diag(sig) @ np.array([[1.0, 0.0, 0.0], [0.0, 1.0, rho], [0.0, rho, 1.0]]) @ np.diag(sig)
+    chol = np.linalg.cholesky(cov)
+    bounds = tuple(1.645 * np.degrees(sig))
+    times, obs = _observation_frames(12)
+    sq = {"covariance": [], "independent": []}
+    crb = []
+    for _ in range(TRIALS):
+        truth = Rotation.from_euler("ZYX", rng.uniform(-40, 40, 3), degrees=True).as_matrix()
+        frames = {mode: [] for mode in sq}
+        info = np.zeros((3, 3))
+        for k, (t, o) in enumerate(zip(times, obs, strict=True)):
+            e0 = Rotation.from_matrix(observation_attitude(truth, o)).as_euler("ZYX")
+            j = _euler_to_rotvec_jacobian(o, e0)
+            info += np.linalg.inv(j @ cov @ j.T)
+            r = Rotation.from_euler("ZYX", e0 + chol @ rng.standard_normal(3)).as_matrix()
+            cands = np.array([o @ r, o @ M @ r @ M])
+            for mode, fs in frames.items():
+                c = 1.645**2 * np.degrees(1.0) ** 2 * cov if mode == "covariance" else None
+                fs.append(PassFrame(cands, max(bounds), float(t), f"f{k}", o[:, 0], o[:, 1], True, "", bounds, c))
+        off = truth @ Rotation.from_rotvec(np.radians([1.5, -1.0, 0.5])).as_matrix()
+        for fs in frames.values():  # a frame whose fit bounds nothing: no per-axis bounds, 10 deg overall
+            fs.append(
+                PassFrame(np.array([off, off]), 10.0, float(times[-1]) + 5.0, "unbounded", obs[-1][:, 0], obs[-1][:, 1])
+            )
+        crb.append(np.trace(np.linalg.inv(info)))
+        for mode, fs in frames.items():
+            sq[mode].append(np.sum(so3_log(fuse(fs).rotation @ truth.T) ** 2))
+    full, indep = np.mean(sq["covariance"]), np.mean(sq["independent"])
+    assert full <= 1.3 * np.mean(crb), (full, np.mean(crb))
+    assert indep >= 1.5 * full, (indep, full)
+
+
+def test_where_the_image_plane_does_not_turn_the_frames_answers_choose_and_the_mirror_is_reported():
+    """A line of sight sweeping about one fixed axis keeps one image plane, so the near-mirror (a reflection
+    through it) is the same rotation for every frame: both branches agree with every frame. The frames' own
+    answers then choose (here 11 of 16 are right, the first frame wrong), and the other branch is reported."""
+    rng = np.random.default_rng(31)
+    reflect = np.diag([1.0, 1.0, -1.0])  # the fixed image plane's reflection, in LVLH
+    times, obs = _observation_frames(16, tilt_deg=0.0)
+    for trial in range(12):
+        truth = Rotation.from_euler("ZYX", rng.uniform(-40, 40, 3), degrees=True).as_matrix()
+        frames = []
+        flipped = {0, *rng.choice(np.arange(1, 16), 4, replace=False)}
+        for k, (t, o) in enumerate(zip(times, obs, strict=True)):
+            r = (
+                observation_attitude(truth, o)
+                @ Rotation.from_rotvec(np.radians(0.3) * rng.standard_normal(3)).as_matrix()
+            )
+            cands = np.array([o @ r, o @ M @ r @ M])
+            if k in flipped:  # this frame's own answer is the near-mirror
+                cands = cands[::-1]
+            frames.append(PassFrame(cands, 0.5, float(t), f"f{k}", o[:, 0], o[:, 1]))
+        fused = fuse(frames)
+        assert angle_deg(fused.rotation, truth) < 1.0, trial
+        assert fused.rival is not None and angle_deg(fused.rival, reflect @ truth @ M) < 1.0, trial
+    # A turning image plane tells the branches apart: no rival.
+    for _ in range(6):
+        truth, frames, _ = _pass(rng, flips=0.3, outliers=0.0)
+        fused = fuse(frames)
+        assert angle_deg(fused.rotation, truth) < 1.0
+        assert fused.rival is None

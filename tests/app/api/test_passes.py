@@ -135,6 +135,7 @@ def test_a_simulated_pass_goes_in_as_it_is(client, plan):
     assert body["trusted"] or body["stable"] is None
     stored = client.get(f"/v1/passes/{body['id']}", headers=A).json()
     assert (stored["turning_chi2"], stored["stable"]) == (body["turning_chi2"], body["stable"])
+    assert "alternative_lvlh" in body and stored["alternative_lvlh"] == body["alternative_lvlh"]
 
 
 def test_an_unknown_form_field_is_refused_by_name(client, plan, settings):
