@@ -99,6 +99,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         settings.target_model,
         settings.target_scale,
         settings.default_target,
+        threads=settings.fit_threads,
     )
     unknown = [d for d in app.state.model_sets.describe() if d["target"] not in app.state.checkers.names]
     if unknown:

@@ -140,10 +140,7 @@ def _on_exact_labels(
     angles = np.array([f["attitude_deg"] for f in meta])
     _, labels = at_attitudes(angles, np.full(len(meta), np.nan), [0] * len(meta))
     res = est.estimate(images.astype(np.float32))
-    checks = [
-        checker.check(images[k], labels[k].astype(np.float64), res.angles_deg[k], search=False)
-        for k in range(len(meta))
-    ]
+    checks = checker.check_many(images, labels.astype(np.float64), res.angles_deg, search=False)
     result, _ = pass_svc.fuse_pass(
         est=est,
         checker=checker,

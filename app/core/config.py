@@ -52,6 +52,9 @@ class Settings(BaseSettings):
         default="", description="more model sets, comma-separated folders, each trained on another target"
     )
     ort_threads: int = Field(default=0, ge=0, le=256, description="0: all cores")
+    fit_threads: int = Field(
+        default=0, ge=0, le=256, description="frames of one batch or pass fitted at once; 0: one a core"
+    )
     ort_run_batch: int = Field(default=DEFAULT_RUN_BATCH, ge=1, le=256, description="frames per ONNX Runtime run")
     target_model: Path | None = None
     target_scale: float = Field(default=1.0, gt=0, le=1000.0)

@@ -60,10 +60,7 @@ def check_frames(
     t_prep = time.perf_counter() - t0
     res = est.estimate(frames)
     t1 = time.perf_counter()
-    checks = [
-        checker.check(frames[k], res.enhanced[k], res.angles_deg[k] if checker.networks else None, refine, search)
-        for k in range(len(uploads))
-    ]
+    checks = checker.check_many(frames, res.enhanced, res.angles_deg if checker.networks else None, refine, search)
     t_fit = time.perf_counter() - t1
     n = len(uploads)
     per_frame = {"preprocess": t_prep / n, **{k: v / n for k, v in res.timings_s.items()}, "fit": t_fit / n}

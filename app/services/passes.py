@@ -283,10 +283,10 @@ def recheck_reversed(*, est: Any, checker: Any, frames: Vec, checks: list[Any]) 
     res = est.estimate(mirrored)
     out = list(checks)
 
-    for j, k in enumerate(todo):
-        c = checker.check(  # no library search, as for the pass's other frames
-            mirrored[j], res.enhanced[j], res.angles_deg[j] if checker.networks else None, search=False
-        )
+    again = checker.check_many(  # no library search, as for the pass's other frames
+        mirrored, res.enhanced, res.angles_deg if checker.networks else None, search=False
+    )
+    for k, c in zip(todo, again, strict=True):
         if not c.quality.trusted:
             continue
         q = c.quality
