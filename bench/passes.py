@@ -1,7 +1,7 @@
 """Passes: one attitude from a pass's frames against the single frames of the same pass; spin detection; speed.
 
 Writes the "Pass fusion" section of BENCHMARKS.md and bench/passes.png.
-Run with `python -m bench.passes` (part of `make bench`; about 17 minutes on 2 cores).
+Run with `python -m bench.passes` (part of `make bench`; about 10 minutes on 2 cores).
 
 Passes: the paper's target over the paper's station (its Table 1), access windows of three
 days from the target's epoch, one drawn per pass among those culminating above 10 deg. Each
