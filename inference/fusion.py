@@ -291,8 +291,9 @@ def fuse(
             support, count = 0.0, 0
             for i in pool:
                 near = [angle_deg(c, d) <= max(agree_deg, 0.0) for d in frames[i].candidates]
-                count += any(near)
-                support += float(any(near)) + ANSWER_VOTE * float(near[0])
+                hit = any(near)
+                count += hit
+                support += float(hit) + ANSWER_VOTE * float(near[0])
             agreeing.append((c, count))
             if support > best_support:
                 best_support, seed = support, c

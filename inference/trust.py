@@ -144,9 +144,8 @@ def raw_covariance(hessian: Vec, soft_iou: float) -> Vec | None:
     return None
 
 
-def raw_uncertainty(hessian: Vec, soft_iou: float) -> Vec:
-    """Return sqrt(inv(H)_ii (1 - soft IoU)) per axis (deg); infinite where H is not positive definite."""
-    cov = raw_covariance(hessian, soft_iou)
+def raw_uncertainty(cov: Vec | None) -> Vec:
+    """Return sqrt(inv(H)_ii (1 - soft IoU)) per axis (deg) from ``raw_covariance``; infinite where it has none."""
     return np.full(3, np.inf) if cov is None else np.sqrt(np.maximum(np.diag(cov), 0.0))
 
 
@@ -250,7 +249,7 @@ class Checker:
             angles = best.angles_deg
             hessian, soft, iou = curvature(self.renderer, enh, angles)
             raw_cov = raw_covariance(hessian, soft)
-            raw = raw_uncertainty(hessian, soft)
+            raw = raw_uncertainty(raw_cov)
             finite = np.isfinite(raw)
             spread = np.asarray(cal.scale) * np.where(finite, raw, 0.0)
             bound = np.where(finite, np.sqrt(np.asarray(cal.floor_deg) ** 2 + spread**2), np.inf)

@@ -439,7 +439,7 @@ def fuse_frames(
                 usable(c),
                 "; ".join(q.reasons),
                 tuple(q.uncertainty_deg) if len(finite) == 3 else None,
-                c.bound_cov_deg2 if len(finite) == 3 else None,
+                c.bound_cov_deg2,  # None where the bounds are not all finite
             )
         )
     fused = fuse(pass_frames)
