@@ -914,6 +914,21 @@ class PassFramePublic(Described):
         description="rotation angle between this frame's branch and the fused attitude (for a turning target, the "
         "turning model's prediction for the frame)"
     )
+    sweep_deg_s: float | None = Field(
+        default=None,
+        description="the line of sight's rate relative to the body as the radar measured it (aperture_deg / "
+        "integration_s, deg/s); null when integration_s was not sent",
+    )
+    sweep_sigma_deg_s: float | None = Field(
+        default=None,
+        description="the 1-sigma error the fit gives sweep_deg_s (deg/s): 2 % of it, and more at a pass's ends, "
+        "where one frame integrates for minutes and the rate changes over it; null without integration_s",
+    )
+    sweep_model_deg_s: float | None = Field(
+        default=None,
+        description="that rate as the pass's answer predicts it: the line of sight's own rate in LVLH for a still "
+        "target, less the spin's part for a turning one",
+    )
 
 
 class PassAttitudeJ2000(AttitudePublic):

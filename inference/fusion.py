@@ -57,6 +57,18 @@ to frame while the truth does not).
      with uncertainties from the speed's profile (``widen_by_profile``) where the curvature
      at the minimum understates them: on a short arc the chi-square barely rises along a
      valley where the attitude at mid-pass moves by tens of degrees with the speed.
+
+     *Measured sweeps* (``PassFrame.sweep_rad_s``, where the caller sends each frame's
+     integration time): a radar forming a frame of a known sub-aperture angle over a known
+     time has measured how fast the line of sight turns relative to the body. For a still
+     target that is the line of sight's own rate; for a turning one it is |its LVLH rate less
+     (A w) x the line of sight| across the line of sight (``sweep_rates``), one more equation a
+     frame for the rate, from every frame of the pass, read or not. Both models are scored
+     on them too (each sweep's chi-square term capped as a frame's is), and they close the
+     short arc's valley: the rate the attitudes alone trade against the attitude is the one
+     the sweeps measure. Their errors: ``SWEEP_SIGMA`` of the rate (the aperture is known as
+     well as the cross-range cell), and at a pass's slow ends the gap between the rate over
+     a long integration and the rate at its middle (``sweep_sigmas``).
 """
 
 from __future__ import annotations
@@ -82,6 +94,9 @@ SHARED_FRACTION = 0.1
 ANSWER_VOTE = 0.5
 # The turning test without a significant rate: the gain must stand without the frames that give most of it.
 SPREAD_DROP = 2
+# A measured sweep rate's 1-sigma error, as a fraction of it: the aperture is known as well as the cross-range
+# cell is (a radar's cross-range scaling), the integration time exactly.
+SWEEP_SIGMA = 0.02
 
 
 @dataclass(frozen=True)
@@ -100,6 +115,12 @@ class PassFrame:
     # Their covariance (deg^2, diagonal = the bounds squared; inference.trust.bound_covariance), where the fit has
     # one: how the frame's Euler axes trade against each other. Without it the axes count as independent.
     axis_cov_deg2: Vec | None = None
+    # The line of sight's angular rate relative to the body as the radar measured it (rad/s): the sub-aperture's
+    # angle over its integration time (a cross-range cell follows it). A still target's is the line of sight's own
+    # rate in LVLH; a turning one's differs by the spin (``sweep_rates``). Read for every frame, trusted or not.
+    sweep_rad_s: float | None = None
+    # Its 1-sigma error (rad/s; ``sweep_sigmas``), where the caller knows it: at least SWEEP_SIGMA of the rate.
+    sweep_sigma_rad_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -266,6 +287,7 @@ def fuse(
     min_rate_deg_s: float = 0.02,
     turning_chi2: float = 30.0,
     shared_fraction: float | None = None,
+    sweep_sigma: float = SWEEP_SIGMA,
 ) -> Fused:
     """Fuse a pass's frames into one body-to-LVLH attitude (see the module's text)."""
     shared_fraction = SHARED_FRACTION if shared_fraction is None else shared_fraction
@@ -374,10 +396,14 @@ def fuse(
     # fit to frames their own checks doubt says nothing, and costs seconds on a long pass).
     if fallback or len(pool) < 4 or any(frames[k].los is None or frames[k].los_rate is None for k in pool):
         return still
-    turn = fit_turning([frames[k] for k in pool], mean)
+    turn = fit_turning([frames[k] for k in pool], mean, sweep_frames=frames, sweep_sigma=sweep_sigma)
     cap = reject_sigma**2
     still_terms = np.array([min((still.residual_deg[k] / sigma[k]) ** 2, cap) for k in pool])
     per_frame = still_terms - np.minimum(turn.chi2_terms, cap)  # each frame's part of the gain
+    sweeps = Sweeps.of(frames, turn.reference_s, sweep_sigma)
+    if sweeps is not None:  # and each sweep rate's: a still body's is the line of sight's own
+        still_sweeps = np.minimum(sweeps.residuals(mean, np.zeros(3)) ** 2, cap)
+        per_frame = np.concatenate([per_frame, still_sweeps - np.minimum(turn.sweep_terms, cap)])
     gain = float(np.sum(per_frame))
     spread_gain = gain - float(np.sum(np.sort(np.maximum(per_frame, 0.0))[-SPREAD_DROP:]))
     turn_speed = float(np.linalg.norm(turn.rate_deg_s))
@@ -388,7 +414,7 @@ def fuse(
     )
     if not turning:
         return replace(still, turning_chi2=gain)
-    turn = widen_by_profile(turn, [frames[k] for k in pool])
+    turn = widen_by_profile(turn, [frames[k] for k in pool], frames, sweep_sigma)
     resid_t = dict(zip(pool, (float(r) for r in turn.residual_deg), strict=True))
     rejected_t = dict(untrusted)
     for k in pool:
@@ -429,6 +455,60 @@ class Turning:
     chosen: list[int]
     reference_s: float
     scale: float = 1.0  # the fit's scatter beyond the frames' bounds (chi-square per degree of freedom, at least 1)
+    sweep_terms: Vec = field(default_factory=lambda: np.zeros(0))  # each measured sweep rate's chi-square term
+
+
+@dataclass(frozen=True)
+class Sweeps:
+    """The frames' measured sweep rates (``PassFrame.sweep_rad_s``) as the turning fit reads them."""
+
+    tau: Vec  # s from the fit's reference time
+    los: Vec  # [M, 3] LVLH
+    los_rate: Vec  # [M, 3] LVLH, 1/s
+    rate: Vec  # measured, rad/s
+    sigma: Vec  # 1-sigma, rad/s
+
+    @classmethod
+    def of(cls, frames: list[PassFrame], reference_s: float, sigma_fraction: float = SWEEP_SIGMA) -> Sweeps | None:
+        """The sweeps of those ``frames`` that carry one and their line of sight; None where none does."""
+        fs = [f for f in frames if f.sweep_rad_s is not None and f.los is not None and f.los_rate is not None]
+        if not fs:
+            return None
+        rate = np.array([f.sweep_rad_s for f in fs], float)
+        given = np.array([f.sweep_sigma_rad_s or 0.0 for f in fs], float)
+        return cls(
+            tau=np.array([f.time_s for f in fs], float) - reference_s,
+            los=np.array([f.los for f in fs], float),
+            los_rate=np.array([f.los_rate for f in fs], float),
+            rate=rate,
+            sigma=np.maximum(np.maximum(sigma_fraction * rate, given), 1e-9),
+        )
+
+    def residuals(self, a_ref: Vec, w_body: Vec) -> Vec:
+        """(predicted - measured) / sigma for a body that is ``a_ref`` at tau 0 and turns at ``w_body`` (rad/s)."""
+        return (sweep_rates(a_ref, w_body, self.tau, self.los, self.los_rate) - self.rate) / self.sigma
+
+
+def sweep_sigmas(rates: Vec, before: Vec, centre: Vec, after: Vec, fraction: float = SWEEP_SIGMA) -> Vec:
+    """1-sigma errors (rad/s) of measured sweep rates ``rates``, modelled by the rate at the frame's time.
+
+    A frame measures the mean rate over its integration, the model gives it at the frame's time;
+    they part by about a sixth of the rate's second difference over the integration
+    (``before``, ``centre``, ``after``: a still target's sweep rates half an integration
+    either side and at the time), which matters at a pass's ends, where the line of sight
+    crawls and one frame integrates for minutes. Added in quadrature to ``fraction``.
+    """
+    kappa = np.abs(before + after - 2.0 * centre) / (6.0 * np.maximum(centre, 1e-12))
+    return np.asarray(rates * np.sqrt(fraction**2 + kappa**2))
+
+
+def sweep_rates(a_ref: Vec, w_body: Vec, tau: Vec, los: Vec, los_rate: Vec) -> Vec:
+    """The line of sight's angular rate relative to the body (rad/s) at each tau: |its LVLH rate less spin x los|
+    across the line of sight, the body being ``a_ref`` at tau 0 and turning at ``w_body`` (body axes, rad/s)."""
+    spin = np.einsum("nij,j->ni", a_ref @ so3_exp(np.outer(tau, w_body)), w_body)
+    rel = los_rate - np.cross(spin, los)
+    rel = rel - np.sum(rel * los, axis=-1, keepdims=True) * los
+    return np.asarray(np.linalg.norm(rel, axis=-1))
 
 
 def skew(w: Vec) -> Vec:
@@ -445,14 +525,31 @@ def skew(w: Vec) -> Vec:
 
 
 def so3_exp(w: Vec) -> Vec:
-    """Return the rotations [..., 3, 3] of rotation vectors [..., 3] (rad), by Rodrigues' formula."""
-    theta = np.linalg.norm(w, axis=-1)[..., None, None]
-    k = skew(w)
+    """Return the rotations [..., 3, 3] of rotation vectors [..., 3] (rad), by Rodrigues' formula.
+
+    Written out element by element, I + a K + b (w w^T - theta^2 I): the turning fit calls it
+    tens of thousands of times a pass, mostly on a few dozen vectors.
+    """
+    w = np.asarray(w, float)
+    x, y, z = w[..., 0], w[..., 1], w[..., 2]
+    t2 = x * x + y * y + z * z
+    theta = np.sqrt(t2)
     small = theta < 1e-9
     safe = np.where(small, 1.0, theta)
     a = np.where(small, 1.0, np.sin(safe) / safe)
     b = np.where(small, 0.5, (1.0 - np.cos(safe)) / safe**2)
-    return np.eye(3) + a * k + b * (k @ k)
+    out = np.empty(w.shape[:-1] + (3, 3))
+    bxy, bxz, byz = b * x * y, b * x * z, b * y * z
+    out[..., 0, 0] = 1.0 + b * (x * x - t2)
+    out[..., 1, 1] = 1.0 + b * (y * y - t2)
+    out[..., 2, 2] = 1.0 + b * (z * z - t2)
+    out[..., 0, 1] = bxy - a * z
+    out[..., 1, 0] = bxy + a * z
+    out[..., 0, 2] = bxz + a * y
+    out[..., 2, 0] = bxz - a * y
+    out[..., 1, 2] = byz - a * x
+    out[..., 2, 1] = byz + a * x
+    return out
 
 
 def observation_in_lvlh(los: Vec, los_rate: Vec, spin_lvlh: Vec | None = None) -> Vec:
@@ -502,13 +599,24 @@ def place_turning(frames: list[PassFrame], rotation: Vec, rate_deg_s: Vec, refer
     return np.array(placed), chosen
 
 
-def fit_turning(frames: list[PassFrame], start: Vec, max_rate_deg_s: float = 1.2, grid_deg_s: float = 0.12) -> Turning:
-    """Fit a constant body rate to a pass's frames (each with ``los`` and ``los_rate``); see the module's text."""
+def fit_turning(
+    frames: list[PassFrame],
+    start: Vec,
+    max_rate_deg_s: float = 1.2,
+    grid_deg_s: float = 0.12,
+    sweep_frames: list[PassFrame] | None = None,
+    sweep_sigma: float = SWEEP_SIGMA,
+) -> Turning:
+    """Fit a constant body rate to a pass's frames (each with ``los`` and ``los_rate``); see the module's text.
+
+    ``sweep_frames`` (any of the pass's frames, read or not) add their measured sweep rates.
+    """
     from scipy.optimize import least_squares
 
     times = np.array([f.time_s for f in frames], float)
     reference = 0.5 * float(times.min() + times.max())
     los, los_rate, tau, sigma, measured = _turning_inputs(frames, reference)
+    sweeps = Sweeps.of(sweep_frames or [], reference, sweep_sigma)
     # Seeds: a grid over w, each scored by the lines of sight alone (the body-frame line of
     # sight of frame k, X_k, is exp(-w tau) a^T los_k: Wahba's problem for a, per w).
     x_body = np.array([m[0][0] for m in measured])  # first row of R: the line of sight in body axes
@@ -522,12 +630,25 @@ def fit_turning(frames: list[PassFrame], start: Vec, max_rate_deg_s: float = 1.2
     uu[:, :, 2] *= d[:, None]
     a_grid = uu @ vt
     cost = np.einsum("n,gni->g", wts, (los[None] - np.einsum("gij,gnj->gni", a_grid, u)) ** 2)
+    if sweeps is not None:  # and by the sweep rates each (a, w) predicts
+        spin = np.einsum("gmij,gj->gmi", a_grid[:, None] @ so3_exp(grid[:, None, :] * sweeps.tau[None, :, None]), grid)
+        rel = sweeps.los_rate[None] - np.cross(spin, sweeps.los[None])
+        rel = rel - np.sum(rel * sweeps.los[None], axis=-1, keepdims=True) * sweeps.los[None]
+        cost += np.sum(np.minimum(((np.linalg.norm(rel, axis=-1) - sweeps.rate) / sweeps.sigma) ** 2, TERM_CAP), 1)
     seeds = [(start, np.zeros(3))] + [(a_grid[i], grid[i]) for i in np.argsort(cost)[:6]]
 
     def residuals(p: Vec, a0: Vec, pick: list[int]) -> Vec:
         pred = turning_prediction(a0 @ so3_exp(p[:3]), p[3:], tau, los, los_rate)
         picked = np.array([measured[k][pick[k]] for k in range(len(frames))])
-        return np.asarray((so3_logs(picked @ np.swapaxes(pred, -1, -2)) / sigma[:, None]).ravel())
+        r = (so3_logs(picked @ np.swapaxes(pred, -1, -2)) / sigma[:, None]).ravel()
+        if sweeps is not None:
+            r = np.concatenate([r, sweeps.residuals(a0 @ so3_exp(p[:3]), p[3:])])
+        return np.asarray(r)
+
+    n_att = 3 * len(frames)
+
+    def robust_chi2(fun: Vec) -> float:  # capped per frame: a frame's three attitude terms, a sweep's one
+        return capped_chi2((fun[:n_att].reshape(-1, 3) ** 2).sum(1)) + capped_chi2(fun[n_att:] ** 2)
 
     def nearest(a0: Vec, p: Vec) -> list[int]:
         pred = turning_prediction(a0 @ so3_exp(p[:3]), p[3:], tau, los, los_rate)
@@ -538,13 +659,15 @@ def fit_turning(frames: list[PassFrame], start: Vec, max_rate_deg_s: float = 1.2
         p = np.concatenate([np.zeros(3), w0])
         pick = nearest(a0, p)
         for _ in range(3):
-            sol = least_squares(residuals, p, args=(a0, pick), loss="soft_l1", f_scale=4.0, x_scale=1.0)
+            sol = least_squares(
+                residuals, p, args=(a0, pick), loss="soft_l1", f_scale=4.0, x_scale=1.0, max_nfev=MAX_NFEV
+            )
             p = sol.x
             new_pick = nearest(a0, p)
             if new_pick == pick:
                 break
             pick = new_pick
-        robust = capped_chi2((sol.fun.reshape(-1, 3) ** 2).sum(1))
+        robust = robust_chi2(sol.fun)
         if best is None or robust < best[0]:
             best = (robust, a0, p, pick, sol)
     assert best is not None
@@ -553,11 +676,13 @@ def fit_turning(frames: list[PassFrame], start: Vec, max_rate_deg_s: float = 1.2
     pred = turning_prediction(a_ref, p[3:], tau, los, los_rate)
     resid = np.array([angle_deg(measured[k][pick[k]], pred[k]) for k in range(len(frames))])
     terms = (resid / np.degrees(sigma)) ** 2
+    sweep_terms = np.zeros(0) if sweeps is None else sweeps.residuals(a_ref, p[3:]) ** 2
     try:
         cov = np.linalg.inv(sol.jac.T @ sol.jac)
     except np.linalg.LinAlgError:
         cov = np.full((6, 6), np.inf)
-    scale = max(1.0, capped_chi2(terms) / max(len(frames) * 3 - 6, 1))
+    dof = len(frames) * 3 + len(sweep_terms) - 6
+    scale = max(1.0, (capped_chi2(terms) + capped_chi2(sweep_terms)) / max(dof, 1))
     cov = cov * scale
     speed = float(np.linalg.norm(p[3:]))
     w_hat = p[3:] / max(speed, 1e-12)
@@ -583,10 +708,16 @@ def fit_turning(frames: list[PassFrame], start: Vec, max_rate_deg_s: float = 1.2
         chosen=pick,
         reference_s=reference,
         scale=scale,
+        sweep_terms=sweep_terms,
     )
 
 
-def widen_by_profile(turn: Turning, frames: list[PassFrame]) -> Turning:
+def widen_by_profile(
+    turn: Turning,
+    frames: list[PassFrame],
+    sweep_frames: list[PassFrame] | None = None,
+    sweep_sigma: float = SWEEP_SIGMA,
+) -> Turning:
     """Return ``turn`` with its speed's and attitude's uncertainty taken from the speed's profile where that is wider.
 
     The rate's standard error from the curvature at the minimum holds for a long arc; over a
@@ -598,8 +729,11 @@ def widen_by_profile(turn: Turning, frames: list[PassFrame]) -> Turning:
     if speed < 1e-9:
         return turn
     los, los_rate, tau, sigma, measured = _turning_inputs(frames, turn.reference_s)
-    sides = speed_profile(measured, turn.chosen, turn.rotation, np.radians(turn.rate_deg_s), tau, sigma, los, los_rate)
-    best = capped_chi2(turn.chi2_terms)
+    sweeps = Sweeps.of(sweep_frames or [], turn.reference_s, sweep_sigma)
+    sides = speed_profile(
+        measured, turn.chosen, turn.rotation, np.radians(turn.rate_deg_s), tau, sigma, los, los_rate, sweeps
+    )
+    best = capped_chi2(turn.chi2_terms) + capped_chi2(turn.sweep_terms)
     limit = CHI2_90_1DOF * turn.scale  # the 90 % interval (scaled by the fit's own scatter)
     centre = math.degrees(speed)
     reach = [
@@ -629,6 +763,9 @@ CHI2_90_1DOF = 2.705543454095404  # the 90 % quantile of chi-square with one deg
 # The speeds (times the fitted one) the profile visits, each side walked outward from the fitted speed.
 PROFILE_SLOWER = (0.8, 0.6, 0.45, 0.3)
 PROFILE_FASTER = (1.25, 1.6, 2.2, 3.0)
+# Function evaluations a turning solve may take from one seed: from a good seed it converges in 7 to 30; one
+# that wanders takes up to 600 and ends elsewhere (measured on bench.passes' spinning passes).
+MAX_NFEV = 80
 TERM_CAP = 16.0  # a frame's chi-square term in the turning fit is capped here, so outliers do not decide
 
 
@@ -659,6 +796,7 @@ def speed_profile(
     sigma: Vec,
     los: Vec,
     los_rate: Vec,
+    sweeps: Sweeps | None = None,
 ) -> list[list[tuple[float, float, Vec]]]:
     """The turning model refitted at other speeds: for the slower side, then the faster, (speed rad/s, capped
     chi-square, attitude) at each of its factors, outward (``_turning_inputs`` gives the arguments).
@@ -680,9 +818,14 @@ def speed_profile(
         d = u + q[3] * e1 + q[4] * e2
         return np.asarray(s * d / np.linalg.norm(d))
 
+    n_att = 3 * len(measured)
+
     def residuals(q: Vec, s: float) -> Vec:
         pred = turning_prediction(a_ref @ so3_exp(q[:3]), rate(q, s), tau, los, los_rate)
-        return np.concatenate([so3_log(measured[k][pick[k]] @ pred[k].T) / sigma[k] for k in range(len(measured))])
+        r = [so3_log(measured[k][pick[k]] @ pred[k].T) / sigma[k] for k in range(len(measured))]
+        if sweeps is not None:
+            r.append(sweeps.residuals(a_ref @ so3_exp(q[:3]), rate(q, s)))
+        return np.concatenate(r)
 
     sides = []
     for factors in (PROFILE_SLOWER, PROFILE_FASTER):
@@ -690,7 +833,8 @@ def speed_profile(
         for f in factors:
             sol = least_squares(residuals, q, args=(f * speed,), loss="soft_l1", f_scale=4.0)
             q = sol.x
-            side.append((f * speed, capped_chi2((sol.fun.reshape(-1, 3) ** 2).sum(1)), a_ref @ so3_exp(q[:3])))
+            chi2 = capped_chi2((sol.fun[:n_att].reshape(-1, 3) ** 2).sum(1)) + capped_chi2(sol.fun[n_att:] ** 2)
+            side.append((f * speed, chi2, a_ref @ so3_exp(q[:3])))
         sides.append(side)
     return sides
 

@@ -242,6 +242,8 @@ def cmd_pass(args: argparse.Namespace) -> int:
         uploads = upload_svc.decode(data, "frames.npz")
         if len(uploads) != len(times):
             raise CliError(f"frames.npz holds {len(uploads)} frames and pass.json {len(times)} times")
+        integration, aperture = _integration(rec)
+        sweeps = pass_svc.sweeps_from(integration, aperture, len(times), checker.radar.aperture_deg)
         fused = pass_svc.fit_and_fuse(
             est=est,
             checker=checker,
@@ -250,6 +252,7 @@ def cmd_pass(args: argparse.Namespace) -> int:
             observed_at=times,
             normalised=True,
             names=[f"frame {k}" for k in range(len(times))],
+            sweeps=sweeps,
         )
         result = fused.result
     except InputError as exc:
@@ -267,6 +270,15 @@ def cmd_pass(args: argparse.Namespace) -> int:
     return 0
 
 
+def _integration(rec: dict[str, Any]) -> tuple[list[float] | None, float | None]:
+    """The pass record's integration times (every frame's, or None) and the aperture its frames integrate."""
+    times = [f.get("integration_s") for f in rec["frames"]]
+    if not times or any(t is None for t in times):
+        return None, None
+    aperture = (rec.get("options") or {}).get("aperture_deg")
+    return times, aperture
+
+
 def _pass_on_server(args: argparse.Namespace, data: bytes, rec: dict[str, Any]) -> int:
 
     if not args.plan_id:
@@ -276,6 +288,11 @@ def _pass_on_server(args: argparse.Namespace, data: bytes, rec: dict[str, Any]) 
         "normalised": "true",
         "observed_at": [f["observed_at"] for f in rec["frames"]],
     }
+    integration, aperture = _integration(rec)
+    if integration is not None:
+        form["integration_s"] = [str(t) for t in integration]
+        if aperture is not None:
+            form["aperture_deg"] = str(aperture)
     if args.target:
         form["target"] = args.target
     r = call_server(args, "POST", "/v1/passes", files={"files": ("frames.npz", data)}, data=form, timeout=300)

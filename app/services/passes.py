@@ -34,7 +34,7 @@ from app.services.estimation import (
     target_track,
 )
 from inference.frames import euler_from_matrix, rotation_matrix
-from inference.fusion import PassFrame, fuse
+from inference.fusion import PassFrame, fuse, sweep_rates, sweep_sigmas
 
 Vec = NDArray[np.float64]
 
@@ -325,11 +325,13 @@ def fit_and_fuse(
     normalised: bool,
     cells_m: tuple[float, float] | None = None,
     names: list[str] | None = None,
+    sweeps: list[tuple[float, float]] | None = None,
 ) -> FusedPass:
     """Fit every frame of a pass and fuse them: the one path of POST /v1/passes, ``gsa pass`` and the benchmark.
 
     The single-frame library search stays off (``search=False``): a pass's other frames stand in for
-    one that Swin misreads. ``names`` defaults to the uploads' names.
+    one that Swin misreads. ``names`` defaults to the uploads' names. ``sweeps``: each frame's
+    measured sweep rate and integration time (``sweeps_from``), or None.
     """
     t0 = time.perf_counter()
     frames, _, checks, per_frame = check_frames(
@@ -344,6 +346,7 @@ def fit_and_fuse(
         plan_request=plan_request,
         observed_at=observed_at,
         names=names if names is not None else [u.name for u in uploads],
+        sweeps=sweeps,
     )
     return FusedPass(result, checks, per_frame, t1 - t0, time.perf_counter() - t1)
 
@@ -357,19 +360,31 @@ def fuse_pass(
     plan_request: dict[str, Any],
     observed_at: list[datetime],
     names: list[str],
+    sweeps: list[tuple[float, float]] | None = None,
 ) -> tuple[dict[str, Any], list[Any]]:
     """Fuse a checked pass; where it is not a trusted still one, re-read its untrusted frames mirrored and fuse again.
 
     Returns the answer with the more trusted frames used, and the checks it rests on.
     """
     placed = frames_at_times(plan_request, observed_at)
-    first = fuse_frames(plan_request=plan_request, checks=checks, observed_at=observed_at, names=names, placed=placed)
+
+    def fused(cs: list[Any]) -> dict[str, Any]:
+        return fuse_frames(
+            plan_request=plan_request,
+            checks=cs,
+            observed_at=observed_at,
+            names=names,
+            placed=placed,
+            sweeps=sweeps,
+        )
+
+    first = fused(checks)
     if first["trusted"] and first["stable"]:
         return first, checks
     again = recheck_reversed(est=est, checker=checker, frames=frames, checks=checks)
     if again is checks:
         return first, checks
-    second = fuse_frames(plan_request=plan_request, checks=again, observed_at=observed_at, names=names, placed=placed)
+    second = fused(again)
 
     def trusted_used(result: dict[str, Any], cs: list[Any]) -> int:
         return sum(1 for f in result["frames"] if f["used"] and usable(cs[f["index"]]))
@@ -377,6 +392,66 @@ def fuse_pass(
     if trusted_used(second, again) > trusted_used(first, checks):
         return second, again
     return first, checks
+
+
+def sweeps_from(
+    integration_s: list[float] | None, aperture_deg: float | None, n_frames: int, default_aperture_deg: float | None
+) -> list[tuple[float, float]] | None:
+    """Each frame's measured sweep rate (rad/s; the angle its sub-aperture integrates over its integration time),
+    with that integration time (s).
+
+    A radar that forms every frame of ``aperture_deg`` (the angle the line of sight sweeps in the
+    target over the frame; its cross-range cell is lambda / (2 aperture)) over ``integration_s``
+    measured how fast the line of sight turns relative to the body. That is the line of sight's
+    own rate for a target still in LVLH, and differs from it by the spin for a turning one
+    (``inference.fusion.sweep_rates``). ``default_aperture_deg`` stands in for a missing
+    ``aperture_deg`` (None: there is none, and one must be sent). None without ``integration_s``.
+    """
+    if integration_s is None or len(integration_s) == 0:
+        if aperture_deg is not None:
+            raise InputError(["integration_s"], "aperture_deg needs integration_s: send each frame's integration time")
+        return None
+    if len(integration_s) != n_frames:
+        raise InputError(
+            ["integration_s"], f"{len(integration_s)} integration times for {n_frames} frames: send one per frame"
+        )
+    for k, t in enumerate(integration_s):
+        if not (isinstance(t, int | float) and math.isfinite(t) and 0.0 < t <= 3600.0):
+            raise InputError(["integration_s", k], f"frame {k}'s integration time must be in (0, 3600] s, not {t!r}")
+    aperture = default_aperture_deg if aperture_deg is None else aperture_deg
+    if aperture is None:
+        raise InputError(
+            ["aperture_deg"],
+            "the frames' cells are not the models': send aperture_deg, the angle each frame integrates "
+            "(lambda / (2 x cross-range cell), in deg)",
+        )
+    if not (math.isfinite(aperture) and 0.0 < aperture <= 30.0):
+        raise InputError(["aperture_deg"], f"aperture_deg must be in (0, 30] deg, not {aperture!r}")
+    return [(math.radians(aperture) / float(t), float(t)) for t in integration_s]
+
+
+def _around(
+    plan_request: dict[str, Any], observed_at: list[datetime], sweeps: list[tuple[float, float]]
+) -> tuple[list[dict[str, Vec]], list[dict[str, Vec]]]:
+    """Each frame's placement half an integration before and after its time (``frames_at_times``)."""
+    half = [timedelta(seconds=0.5 * t) for _, t in sweeps]
+    around = frames_at_times(plan_request, [t - h for t, h in zip(observed_at, half, strict=True)])
+    around += frames_at_times(plan_request, [t + h for t, h in zip(observed_at, half, strict=True)])
+    return around[: len(sweeps)], around[len(sweeps) :]
+
+
+def _model_sweeps(rotation: Vec, w_body: Vec, tau: Vec, placements: list[list[dict[str, Vec]]]) -> list[Vec]:
+    """A model's sweep rates (rad/s, ``sweep_rates``) at times ``tau``, for each list of the frames' placements."""
+    return [
+        sweep_rates(
+            rotation,
+            w_body,
+            tau,
+            np.array([p["los_lvlh"] for p in ps]),
+            np.array([p["los_rate_lvlh"] for p in ps]),
+        )
+        for ps in placements
+    ]
 
 
 def check_times(plan_result: dict[str, Any], observed_at: list[datetime]) -> None:
@@ -413,11 +488,18 @@ def fuse_frames(
     observed_at: list[datetime],
     names: list[str],
     placed: list[dict[str, Vec]] | None = None,
+    sweeps: list[tuple[float, float]] | None = None,
 ) -> dict[str, Any]:
     """Place each checked frame's answer and alternatives in LVLH (``frames_at_times``, unless ``placed`` gives
-    those axes already), fuse them, and describe the pass."""
+    those axes already), fuse them, and describe the pass. ``sweeps``: each frame's measured sweep rate (rad/s)
+    and integration time (``sweeps_from``), or None."""
     t0 = min(observed_at)
     placed = placed or frames_at_times(plan_request, observed_at)
+    sweep_sigma = None
+    if sweeps is not None:  # a still target's sweeps either side of each frame size each measured one's error
+        before, after = _around(plan_request, observed_at, sweeps)
+        r0, r1, r2 = _model_sweeps(np.eye(3), np.zeros(3), np.zeros(len(sweeps)), [before, placed, after])
+        sweep_sigma = sweep_sigmas(np.array([r for r, _ in sweeps]), r0, r1, r2)
     pass_frames = []
     for k, (c, axes) in enumerate(zip(checks, placed, strict=True)):
         t = observed_at[k]
@@ -440,6 +522,8 @@ def fuse_frames(
                 "; ".join(q.reasons),
                 tuple(q.uncertainty_deg) if len(finite) == 3 else None,
                 c.bound_cov_deg2,  # None where the bounds are not all finite
+                None if sweeps is None else sweeps[k][0],
+                None if sweep_sigma is None else float(sweep_sigma[k]),
             )
         )
     fused = fuse(pass_frames)
@@ -451,6 +535,11 @@ def fuse_frames(
         t_mid = t0 + timedelta(seconds=fused.reference_s)
         lvlh_mid = frames_at(plan_request, t_mid)["lvlh"]
     j2000 = lvlh_mid @ fused.rotation
+    # What the fused model says each frame measured: the sweep at the frame's time, which is the middle of its
+    # sub-aperture's angle, where the mean rate over the integration equals the rate to second order.
+    w_body = np.radians(fused.rate_deg_s) if fused.reference_s is not None else np.zeros(3)
+    tau = np.array([(t - t0).total_seconds() for t in observed_at]) - (fused.reference_s or 0.0)
+    (model_sweeps,) = _model_sweeps(fused.rotation, w_body, tau, [placed])
     frames_out = []
     for k, c in enumerate(checks):
         chosen = fused.chosen[k]
@@ -465,6 +554,9 @@ def fuse_frames(
                 "used": k in fused.used,
                 "rejected_because": fused.rejected.get(k),
                 "residual_deg": round(fused.residual_deg[k], 4),
+                "sweep_deg_s": None if sweeps is None else round(math.degrees(sweeps[k][0]), 5),
+                "sweep_sigma_deg_s": None if sweep_sigma is None else round(math.degrees(float(sweep_sigma[k])), 5),
+                "sweep_model_deg_s": round(math.degrees(float(model_sweeps[k])), 5),
             }
         )
     speed = float(np.linalg.norm(fused.rate_deg_s))

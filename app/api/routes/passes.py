@@ -29,6 +29,15 @@ from app.services import uploads as upload_svc
 router = APIRouter(prefix="/passes", tags=["passes"])
 
 OBSERVED_AT = "each frame's time (ISO 8601 UTC), one per frame in upload order (repeat the field); inside the plan's access windows"
+INTEGRATION_S = (
+    "each frame's integration time (s), one per frame in upload order (repeat the field; gsa simulate --pass writes "
+    "it): with aperture_deg, the line of sight's measured rate relative to the body, which tells a turning target's "
+    "rate far better than its frames' attitudes alone"
+)
+APERTURE_DEG = (
+    "the angle the line of sight sweeps in the target over each frame (deg; lambda / (2 x cross-range cell)); "
+    "default: the models' radar's, for frames at the models' cells"
+)
 
 
 def _fuse(
@@ -43,6 +52,8 @@ def _fuse(
     observed_at: list[Any],
     cells_m: tuple[float, float] | None,
     normalised: bool,
+    integration_s: list[float] | None = None,
+    aperture_deg: float | None = None,
 ) -> Pass:
     if len(uploads) < 2:
         raise InputError(["files"], f"a pass needs at least two frames; this upload holds {len(uploads)}")
@@ -56,6 +67,9 @@ def _fuse(
     if plan is None:
         raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
     pass_svc.check_times(plan.result, observed_at)
+    sweeps = pass_svc.sweeps_from(
+        integration_s, aperture_deg, len(uploads), checker.radar.aperture_deg if cells_m is None else None
+    )
     fused = pass_svc.fit_and_fuse(
         est=est,
         checker=checker,
@@ -64,6 +78,7 @@ def _fuse(
         observed_at=observed_at,
         normalised=normalised,
         cells_m=cells_m,
+        sweeps=sweeps,
     )
     result = {**fused.result, "target": checker.model.name, "timings_s": fused.timings_s}
     row = Pass(operator_id=operator_id, created_at=utcnow(), plan_id=plan_id, result=_jsonable(result))
@@ -104,6 +119,8 @@ async def create_pass(
     cross_range_cell_m: Annotated[
         float | None, Form(gt=0, le=100, description="the frames' cross-range cell (m)")
     ] = None,
+    integration_s: Annotated[list[float] | None, Form(description=INTEGRATION_S)] = None,
+    aperture_deg: Annotated[float | None, Form(gt=0, le=30, description=APERTURE_DEG)] = None,
 ) -> dict[str, Any]:
     """Fit every frame of a pass, place each in the plan target's LVLH frame at its time, and fuse them; stored."""
     cells_m = cells_from_form(range_cell_m, cross_range_cell_m)
@@ -122,6 +139,8 @@ async def create_pass(
         observed_at=observed_at,
         cells_m=cells_m,
         normalised=normalised,
+        integration_s=integration_s,
+        aperture_deg=aperture_deg,
     )
     return PassPublic.row_json(row)
 

@@ -38,11 +38,11 @@ def _times(plan, n=4):
     return [(rise + (end - rise) * (k + 1) / (n + 1)).isoformat() for k in range(n)]
 
 
-def _post(client, plan_id, times, data=None, headers=A):
+def _post(client, plan_id, times, data=None, headers=A, form=None):
     return client.post(
         "/v1/passes",
         files=[("files", ("pass.npz", data or _stack(len(times))))],
-        data={"plan_id": plan_id, "observed_at": times},
+        data={"plan_id": plan_id, "observed_at": times, **(form or {})},
         headers=headers,
     )
 
@@ -87,6 +87,11 @@ def test_a_pass_is_fused_and_stored(client, plan):
         ("time_outside_windows", "observed_at"),
         ("unknown_plan", "plan_id"),
         ("time_not_a_date", "observed_at"),
+        ("integration_count", "integration_s"),
+        ("integration_not_positive", "integration_s"),
+        ("aperture_without_integration", "integration_s"),
+        ("cells_without_aperture", "aperture_deg"),
+        ("aperture_too_wide", "aperture_deg"),
     ],
 )
 def test_bad_passes_are_422_and_store_nothing(client, settings, plan, case, field):
@@ -101,6 +106,17 @@ def test_bad_passes_are_422_and_store_nothing(client, settings, plan, case, fiel
         r = _post(client, plan["id"], [*times[:3], late])
     elif case == "unknown_plan":
         r = _post(client, "0" * 36, times)
+    elif case == "integration_count":
+        r = _post(client, plan["id"], times, form={"integration_s": ["10", "10", "10"]})
+    elif case == "integration_not_positive":
+        r = _post(client, plan["id"], times, form={"integration_s": ["10", "10", "-1", "10"]})
+    elif case == "aperture_without_integration":
+        r = _post(client, plan["id"], times, form={"aperture_deg": "5.1"})
+    elif case == "cells_without_aperture":  # the frames' own radar: its aperture is not the models'
+        cells = {"range_cell_m": "0.1", "cross_range_cell_m": "0.1"}
+        r = _post(client, plan["id"], times, form={"integration_s": ["10"] * 4, **cells})
+    elif case == "aperture_too_wide":
+        r = _post(client, plan["id"], times, form={"integration_s": ["10"] * 4, "aperture_deg": "40"})
     else:
         r = _post(client, plan["id"], [*times[:3], "tuesday"])
     assert r.status_code == 422, r.text
@@ -120,15 +136,29 @@ def test_a_simulated_pass_goes_in_as_it_is(client, plan):
     buf = io.BytesIO()
     np.savez(buf, image=images)
     times = [f["observed_at"].isoformat() for f in meta]
+    integration = [f["integration_s"] for f in meta]
     r = client.post(
         "/v1/passes",
         files=[("files", ("frames.npz", buf.getvalue()))],
-        data={"plan_id": plan["id"], "observed_at": times, "normalised": "true"},
+        data={
+            "plan_id": plan["id"],
+            "observed_at": times,
+            "normalised": "true",
+            "integration_s": [str(t) for t in integration],
+            "aperture_deg": str(opts.aperture_deg),
+        },
         headers=A,
     )
     assert r.status_code == 201, r.text
     body = r.json()
     assert len(body["frames"]) == len(meta) and body["attitude_j2000"]["at"]
+    # The measured sweep is the aperture over the integration time; a still target's is the line of sight's own
+    # rate, which the simulator found by sweeping the line of sight through the body numerically.
+    for f, t in zip(body["frames"], integration, strict=True):
+        assert f["sweep_deg_s"] == pytest.approx(opts.aperture_deg / t, rel=1e-4)
+        if body["stable"] is not False:
+            assert abs(f["sweep_model_deg_s"] - f["sweep_deg_s"]) < 3.0 * f["sweep_sigma_deg_s"]
+        assert 0.02 * f["sweep_deg_s"] <= f["sweep_sigma_deg_s"] + 1e-5  # rounded to 5 decimals
     # The smoke models' frames are not trusted: no turning model is fitted to them, and no verdict is given.
     trusted = sum(1 for f in body["frames"] if f["quality"]["trusted"])
     assert (body["turning_chi2"] is None) == (trusted < 4)
@@ -136,6 +166,7 @@ def test_a_simulated_pass_goes_in_as_it_is(client, plan):
     stored = client.get(f"/v1/passes/{body['id']}", headers=A).json()
     assert (stored["turning_chi2"], stored["stable"]) == (body["turning_chi2"], body["stable"])
     assert "alternative_lvlh" in body and stored["alternative_lvlh"] == body["alternative_lvlh"]
+    assert [f["sweep_deg_s"] for f in stored["frames"]] == [f["sweep_deg_s"] for f in body["frames"]]
 
 
 def test_an_unknown_form_field_is_refused_by_name(client, plan, settings):
