@@ -68,7 +68,8 @@ to frame while the truth does not).
      short arc's valley: the rate the attitudes alone trade against the attitude is the one
      the sweeps measure. Their errors: ``SWEEP_SIGMA`` of the rate (the aperture is known as
      well as the cross-range cell), and at a pass's slow ends the gap between the rate over
-     a long integration and the rate at its middle (``sweep_sigmas``).
+     a long integration and the rate at its middle (``sweep_sigmas``); measured in
+     design/measurements.md, "Measured sweeps in the turning fit".
 """
 
 from __future__ import annotations

@@ -345,7 +345,10 @@ def _print_pass(result: dict[str, Any], rec: dict[str, Any]) -> None:
         why = f["rejected_because"] or ""
         state = "used" if f["used"] else f"rejected: {why if len(why) <= 90 else why[:87] + '...'}"
         at = f["observed_at"] if isinstance(f["observed_at"], str) else f["observed_at"].isoformat()
-        print(f"  {at[11:19]} {f['branch']:<12} residual {f['residual_deg']:.2f} deg{err}; {state}")
+        sweep = ""
+        if f.get("sweep_deg_s") is not None:
+            sweep = f", sweep {f['sweep_deg_s']:.3f} deg/s (answer's {f['sweep_model_deg_s']:.3f})"
+        print(f"  {at[11:19]} {f['branch']:<12} residual {f['residual_deg']:.2f} deg{err}{sweep}; {state}")
     truth = _truth_lvlh(rec, 0) if rec.get("frames") else None
     if errors and truth is not None and result["stable"]:
         off = angle_deg(rotation_matrix(z, y, x), truth)

@@ -2,6 +2,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 from app.schemas import PAPER_EXAMPLE
 
 
@@ -121,7 +123,15 @@ def test_simulate_a_pass_then_fuse_it(tmp_path, smoke_models):
     assert fused.returncode == 0, fused.stderr
     assert "fused, body to LVLH" in fused.stdout and (tmp_path / "p.png").stat().st_size > 10_000
     as_json = _gsa("pass", str(tmp_path / "pass"), "--models", str(smoke_models), "--json", cwd=tmp_path)
-    assert len(json.loads(as_json.stdout)["frames"]) == 5
+    frames = json.loads(as_json.stdout)["frames"]
+    assert len(frames) == 5 and "sweep" in fused.stdout
+    # pass.json's integration times go in as the radar's measured sweeps: the aperture over each one's time
+    for f, r in zip(frames, rec["frames"], strict=True):
+        assert f["sweep_deg_s"] == pytest.approx(5.1 / 4 / r["integration_s"], rel=1e-3)
+    rec["frames"][2]["integration_s"] = -1.0
+    (tmp_path / "pass" / "pass.json").write_text(json.dumps(rec))
+    bad = _gsa("pass", str(tmp_path / "pass"), "--models", str(smoke_models), cwd=tmp_path)
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "integration_s" in bad.stderr, bad.stderr
 
 
 def test_bad_pass_requests_are_one_line_errors(tmp_path):
