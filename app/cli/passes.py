@@ -381,6 +381,7 @@ def _plot_pass(result: dict[str, Any], rec: dict[str, Any], path: str) -> None:
     used = np.array([f["used"] for f in result["frames"]])
     fused = np.array(result["attitude_lvlh"]["euler_zyx_deg"])
     ub = np.array(result["uncertainty_deg"])
+    alt = np.array(result["alternative_lvlh"]["euler_zyx_deg"]) if result.get("alternative_lvlh") else None
     model = None
     if result["stable"] is False and result.get("attitude_at") is not None:
         from inference.frames import euler_from_matrix, rotation_matrix
@@ -404,6 +405,12 @@ def _plot_pass(result: dict[str, Any], rec: dict[str, Any], path: str) -> None:
         if result["stable"]:
             ax.axhline(fused[i], color="tab:orange", label="fused")
             ax.axhspan(fused[i] - ub[i], fused[i] + ub[i], color="tab:orange", alpha=0.2)
+        if result["stable"] and alt is not None:  # the other branch as many frames agree with; off scale: its value
+            v = fused[i] + (alt[i] - fused[i] + 180.0) % 360.0 - 180.0
+            if lo <= v <= hi:
+                ax.axhline(v, color="tab:purple", ls=":", label="other branch (alternative_lvlh)")
+            else:
+                ax.text(0.01, 0.04, f"other branch: {alt[i]:.2f} deg (off scale)", transform=ax.transAxes, fontsize=8)
         elif model is not None:  # turning: the model's attitude over the pass, its bound at attitude_at
             ax.plot(dense, model[:, i], color="tab:orange", label="turning model")
             ax.errorbar([t_ref], [fused[i]], yerr=[ub[i]], fmt="D", color="tab:orange", capsize=3, ms=5)
