@@ -376,7 +376,11 @@ def _plot(
     ax[0].set_ylabel("fused pass: geodesic error in LVLH (deg)")
     ax[0].set_title(f"{len(fused)} still passes (the same frames fitted two ways)")
     ax[0].legend(fontsize=8)
-    ax[1].hist(rates, bins=12, color="tab:orange")
+    width = 0.05 * SPIN_DEG_S  # bins of 5 % of the true rate, from zero to past the largest estimate
+    top = max(2.0 * SPIN_DEG_S, max(rates, default=0.0) + width)
+    edges = np.concatenate([[0.0], np.arange(0.5 * width, top + width, width)])  # one bin centred on the truth
+    ax[1].hist(rates, bins=edges, color="tab:orange")
+    ax[1].set_xlim(0.0, top)
     ax[1].axvline(SPIN_DEG_S, color="k", ls="--", lw=1, label="true rate")
     ax[1].axvspan(0.8 * SPIN_DEG_S, 1.2 * SPIN_DEG_S, color="k", alpha=0.08, label="within 20 %")
     ax[1].set_xlabel("estimated body rate (deg/s)")
