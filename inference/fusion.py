@@ -505,8 +505,14 @@ def sweep_sigmas(rates: Vec, before: Vec, centre: Vec, after: Vec, fraction: flo
 
 def sweep_rates(a_ref: Vec, w_body: Vec, tau: Vec, los: Vec, los_rate: Vec) -> Vec:
     """The line of sight's angular rate relative to the body (rad/s) at each tau: |its LVLH rate less spin x los|
-    across the line of sight, the body being ``a_ref`` at tau 0 and turning at ``w_body`` (body axes, rad/s)."""
-    spin = np.einsum("nij,j->ni", a_ref @ so3_exp(np.outer(tau, w_body)), w_body)
+    across the line of sight, the body being ``a_ref`` at tau 0 and turning at ``w_body`` (body axes, rad/s).
+
+    ``a_ref`` [..., 3, 3] and ``w_body`` [..., 3] may carry leading axes (several models at once); the
+    answer is then [..., M] for the M taus, lines of sight [M, 3] and their rates [M, 3].
+    """
+    a_ref, w = np.asarray(a_ref, float), np.asarray(w_body, float)
+    rot = a_ref[..., None, :, :] @ so3_exp(np.asarray(tau, float)[:, None] * w[..., None, :])
+    spin = np.einsum("...mij,...j->...mi", rot, w)
     rel = los_rate - np.cross(spin, los)
     rel = rel - np.sum(rel * los, axis=-1, keepdims=True) * los
     return np.asarray(np.linalg.norm(rel, axis=-1))
@@ -632,10 +638,8 @@ def fit_turning(
     a_grid = uu @ vt
     cost = np.einsum("n,gni->g", wts, (los[None] - np.einsum("gij,gnj->gni", a_grid, u)) ** 2)
     if sweeps is not None:  # and by the sweep rates each (a, w) predicts
-        spin = np.einsum("gmij,gj->gmi", a_grid[:, None] @ so3_exp(grid[:, None, :] * sweeps.tau[None, :, None]), grid)
-        rel = sweeps.los_rate[None] - np.cross(spin, sweeps.los[None])
-        rel = rel - np.sum(rel * sweeps.los[None], axis=-1, keepdims=True) * sweeps.los[None]
-        cost += np.sum(np.minimum(((np.linalg.norm(rel, axis=-1) - sweeps.rate) / sweeps.sigma) ** 2, TERM_CAP), 1)
+        predicted = sweep_rates(a_grid, grid, sweeps.tau, sweeps.los, sweeps.los_rate)  # [grid, sweeps]
+        cost += np.sum(np.minimum(((predicted - sweeps.rate) / sweeps.sigma) ** 2, TERM_CAP), 1)
     seeds = [(start, np.zeros(3))] + [(a_grid[i], grid[i]) for i in np.argsort(cost)[:6]]
 
     def residuals(p: Vec, a0: Vec, pick: list[int]) -> Vec:

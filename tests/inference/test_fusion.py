@@ -197,3 +197,34 @@ def test_where_the_image_plane_does_not_turn_the_frames_answers_choose_and_the_m
         fused = fuse(frames)
         assert angle_deg(fused.rotation, truth) < 1.0
         assert fused.rival is None
+
+
+def test_sweep_rates_are_the_body_frame_line_of_sight_s_turning():
+    """sweep_rates against a finite difference: the line of sight carried into the turning body, b(t) = A(t)^T l(t),
+    turns at |db/dt|; several models at once give each one's rates (scipy's rotations build the reference)."""
+    from inference.fusion import sweep_rates
+
+    rng = np.random.default_rng(7)
+    n, h = 9, 1e-3
+    los = rng.normal(size=(n, 3))
+    los /= np.linalg.norm(los, axis=1, keepdims=True)
+    los_rate = rng.normal(size=(n, 3)) * 0.004
+    los_rate -= np.sum(los_rate * los, axis=1, keepdims=True) * los  # a unit vector's rate is across it
+    tau = rng.uniform(-200.0, 200.0, n)
+    models = [(Rotation.random(random_state=s).as_matrix(), rng.normal(size=3) * 0.01) for s in range(4)]
+
+    def body_los(a_ref, w, dt):
+        line = los + los_rate * dt
+        line /= np.linalg.norm(line, axis=1, keepdims=True)
+        a = a_ref @ Rotation.from_rotvec(np.outer(tau + dt, w)).as_matrix()
+        return np.einsum("nji,nj->ni", a, line)
+
+    for a_ref, w in models:
+        reference = np.linalg.norm(body_los(a_ref, w, h) - body_los(a_ref, w, -h), axis=1) / (2 * h)
+        assert sweep_rates(a_ref, w, tau, los, los_rate) == pytest.approx(reference, rel=1e-5)
+    batched = sweep_rates(np.array([m[0] for m in models]), np.array([m[1] for m in models]), tau, los, los_rate)
+    assert batched.shape == (4, n)
+    for row, (a_ref, w) in zip(batched, models, strict=True):
+        assert row == pytest.approx(sweep_rates(a_ref, w, tau, los, los_rate), rel=1e-12)
+    # A still body: the line of sight's own rate.
+    assert sweep_rates(models[0][0], np.zeros(3), tau, los, los_rate) == pytest.approx(np.linalg.norm(los_rate, axis=1))

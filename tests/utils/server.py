@@ -142,8 +142,13 @@ def run_load(
     frame_size: int = 64,
     seed: int = 0,
     stop: threading.Event | None = None,
+    frames: np.ndarray | None = None,
 ) -> LoadResult:
-    """Send ``clients`` x ``requests_each`` mixed requests concurrently; record latencies and acknowledged ids."""
+    """Send ``clients`` x ``requests_each`` mixed requests concurrently; record latencies and acknowledged ids.
+
+    The estimates upload noise frames of ``frame_size`` (the models' worst case: nothing fits, so every
+    frame is searched), or, with ``frames`` ([N, H, W], normalised), those frames in turn, as normalised.
+    """
     lat: dict[str, list[float]] = defaultdict(list)
     statuses: dict[str, dict[int, int]] = defaultdict(lambda: defaultdict(int))
     acked: dict[str, dict[str, list[str]]] = {k: {"plan": [], "estimate": []} for k in keys}
@@ -160,17 +165,26 @@ def run_load(
                 if stop is not None and stop.is_set():
                     return
                 op = rng.choices(ops, weights)[0]
-                frame = np.random.default_rng(seed * 100_000 + c * 1000 + k).random((frame_size, frame_size)) + 0.05
+                if frames is None:
+                    frame = np.random.default_rng(seed * 100_000 + c * 1000 + k).random((frame_size, frame_size)) + 0.05
+                    batch = [frame * (j + 1) for j in range(4)]
+                    form = {}
+                else:
+                    pick = (c * 1000 + k) % len(frames)
+                    frame = frames[pick]
+                    batch = [frames[(pick + j) % len(frames)] for j in range(4)]
+                    form = {"normalised": "true"}
                 t0 = time.perf_counter()
                 try:
                     if op == "post_plan":
                         r = http.post("/v1/plans", json=plan_body(c * 1000 + k))
                     elif op == "post_estimate":
-                        r = http.post("/v1/estimates", files={"file": (f"c{c}-{k}.npy", npy_bytes(frame))})
+                        r = http.post("/v1/estimates", files={"file": (f"c{c}-{k}.npy", npy_bytes(frame))}, data=form)
                     elif op == "post_batch":
                         r = http.post(
                             "/v1/estimates/batch",
-                            files=[("files", (f"c{c}-{k}-{j}.npy", npy_bytes(frame * (j + 1)))) for j in range(4)],
+                            files=[("files", (f"c{c}-{k}-{j}.npy", npy_bytes(b))) for j, b in enumerate(batch)],
+                            data=form,
                         )
                     elif op == "list_plans":
                         r = http.get("/v1/plans", params={"limit": 20})
