@@ -11,6 +11,8 @@ import tempfile
 from datetime import UTC, datetime
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.common import machine  # noqa: E402
@@ -24,10 +26,7 @@ N_FRAMES, FRAME_SEED = 48, 85_000  # fresh simulated frames, drawn like a data s
 CLIENTS, EACH = 16, 50
 
 
-FRAMES = None  # set by main: good_frames(N_FRAMES, FRAME_SEED)
-
-
-def one(backend: str, root: Path) -> dict:
+def one(backend: str, root: Path, frames: np.ndarray) -> dict:
     data = root / backend
     data.mkdir(parents=True)
     env = {
@@ -40,7 +39,7 @@ def one(backend: str, root: Path) -> dict:
     }
     srv = Server(env, workers=2, log_path=root / f"{backend}.log").start()
     try:
-        res = run_load(srv.url, KEYS, clients=CLIENTS, requests_each=EACH, frames=FRAMES)
+        res = run_load(srv.url, KEYS, clients=CLIENTS, requests_each=EACH, frames=frames)
         lost = dup = 0
         for key in KEYS:
             for kind in ("plan", "estimate"):
@@ -122,10 +121,9 @@ def soak(root: Path, plans: int = 500) -> list[str]:
 
 
 def main() -> None:
-    global FRAMES
     from inference.simulation.catalogue import good_frames
 
-    FRAMES = good_frames(N_FRAMES, FRAME_SEED)[0]
+    frames = good_frames(N_FRAMES, FRAME_SEED)[0]
     today = datetime.now(UTC).strftime("%Y-%m-%d")
     lines = [
         "## Load",
@@ -145,7 +143,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for backend in ("sqlite", "postgresql"):
             print(f"load: {backend} ...", flush=True)
-            r = one(backend, Path(tmp))
+            r = one(backend, Path(tmp), frames)
             res = r["res"]
             lines += [
                 f"### {backend}",

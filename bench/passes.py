@@ -79,7 +79,7 @@ def one_pass(
         plan_request=PAPER_EXAMPLE,
         observed_at=[f["observed_at"] for f in meta],
         normalised=True,
-        sweeps=[(math.radians(opts.aperture_deg) / f["integration_s"], f["integration_s"]) for f in meta],
+        sweeps=pass_svc.sweeps_from([f["integration_s"] for f in meta], opts.aperture_deg, len(meta), None),
     )
     result, checks, seconds = fused.result, fused.checks, fused.fit_s + fused.fuse_s
     inside = [k for k, f in enumerate(meta) if max(abs(a) for a in f["attitude_deg"]) <= 45.0]

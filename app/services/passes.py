@@ -367,6 +367,8 @@ def fuse_pass(
     Returns the answer with the more trusted frames used, and the checks it rests on.
     """
     placed = frames_at_times(plan_request, observed_at)
+    # Both fusions share the frames' placements and the sweeps' errors (the geometry, not the readings).
+    sigma = None if sweeps is None else sweep_errors(plan_request, observed_at, placed, sweeps)
 
     def fused(cs: list[Any]) -> dict[str, Any]:
         return fuse_frames(
@@ -376,6 +378,7 @@ def fuse_pass(
             names=names,
             placed=placed,
             sweeps=sweeps,
+            sweep_sigma=sigma,
         )
 
     first = fused(checks)
@@ -440,6 +443,19 @@ def _around(
     return around[: len(sweeps)], around[len(sweeps) :]
 
 
+def sweep_errors(
+    plan_request: dict[str, Any],
+    observed_at: list[datetime],
+    placed: list[dict[str, Vec]],
+    sweeps: list[tuple[float, float]],
+) -> Vec:
+    """Each measured sweep's 1-sigma error (rad/s, ``inference.fusion.sweep_sigmas``): a still target's sweeps
+    half an integration before, at and after each frame's time (``placed``: the frames' placements then)."""
+    before, after = _around(plan_request, observed_at, sweeps)
+    r0, r1, r2 = _model_sweeps(np.eye(3), np.zeros(3), np.zeros(len(sweeps)), [before, placed, after])
+    return sweep_sigmas(np.array([r for r, _ in sweeps]), r0, r1, r2)
+
+
 def _model_sweeps(rotation: Vec, w_body: Vec, tau: Vec, placements: list[list[dict[str, Vec]]]) -> list[Vec]:
     """A model's sweep rates (rad/s, ``sweep_rates``) at times ``tau``, for each list of the frames' placements."""
     return [
@@ -489,17 +505,16 @@ def fuse_frames(
     names: list[str],
     placed: list[dict[str, Vec]] | None = None,
     sweeps: list[tuple[float, float]] | None = None,
+    sweep_sigma: Vec | None = None,
 ) -> dict[str, Any]:
     """Place each checked frame's answer and alternatives in LVLH (``frames_at_times``, unless ``placed`` gives
     those axes already), fuse them, and describe the pass. ``sweeps``: each frame's measured sweep rate (rad/s)
-    and integration time (``sweeps_from``), or None."""
+    and integration time (``sweeps_from``), or None; ``sweep_sigma`` their errors (``sweep_errors``, computed
+    here unless given)."""
     t0 = min(observed_at)
     placed = placed or frames_at_times(plan_request, observed_at)
-    sweep_sigma = None
-    if sweeps is not None:  # a still target's sweeps either side of each frame size each measured one's error
-        before, after = _around(plan_request, observed_at, sweeps)
-        r0, r1, r2 = _model_sweeps(np.eye(3), np.zeros(3), np.zeros(len(sweeps)), [before, placed, after])
-        sweep_sigma = sweep_sigmas(np.array([r for r, _ in sweeps]), r0, r1, r2)
+    if sweeps is not None and sweep_sigma is None:
+        sweep_sigma = sweep_errors(plan_request, observed_at, placed, sweeps)
     pass_frames = []
     for k, (c, axes) in enumerate(zip(checks, placed, strict=True)):
         t = observed_at[k]
