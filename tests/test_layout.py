@@ -133,14 +133,14 @@ def test_no_route_module_holds_sql():
 
 
 def test_light_entry_points_leave_torch_and_the_simulator_out():
-    """`import app.main` and building gsa's parser (what `gsa --help` and `gsa serve` do) import no torch, and no
+    """`import app.main` and building gsa's parser (what `gsa --help` and `gsa serve` do) import no torch (nor numba), and no
     command module of gsa before its command runs."""
     code = (
         "import json, sys\n"
         "import app.main\n"
         "from app.cli import build_parser\n"
         "build_parser().format_help()\n"
-        "heavy = ('torch', 'app.cli.planning', 'app.cli.estimates', 'app.cli.passes', 'app.cli.service', 'inference.simulation.radar', 'inference.simulation.scene', 'inference.simulation.targets', 'inference.simulation.dataset', 'inference.training.train', 'scipy.ndimage')\n"
+        "heavy = ('torch', 'app.cli.planning', 'app.cli.estimates', 'app.cli.passes', 'app.cli.service', 'inference.simulation.radar', 'inference.simulation.scene', 'inference.simulation.targets', 'inference.simulation.dataset', 'inference.training.train', 'scipy.ndimage', 'numba')\n"
         "print(json.dumps([m for m in heavy if m in sys.modules]))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
