@@ -935,6 +935,15 @@ class PassAttitudeJ2000(AttitudePublic):
     at: datetime = Field(description="LVLH turns with the orbit: the J2000 attitude holds at this moment (mid-pass)")
 
 
+class PassCommonFit(Described):
+    frames: int
+    """the frames fitted together"""
+    moved_deg: float
+    """how far (deg) the common fit moved the frames' robust mean"""
+    silhouette_iou: float
+    """the frames' mean soft IoU with the fitted attitude's silhouette"""
+
+
 class PassPublic(Described):
     id: str
     """the pass's id"""
@@ -977,6 +986,13 @@ class PassPublic(Described):
         default=None,
         description="how much better (chi-square, 3 degrees of freedom) a constant-rate model fits the frames than a "
         "still attitude; the target is called turning over 30",
+    )
+    common_fit: PassCommonFit | None = Field(
+        default=None,
+        description="a still pass's attitude_lvlh is the robust mean of its frames' answers, then fitted to the used "
+        "frames' silhouettes all at once (their mean soft IoU, on a denser skin than a single frame's fit): how "
+        "many frames, and how far the fit moved the mean. Null for a turning or undecided pass, or with fewer "
+        "than 2 frames' silhouettes",
     )
     stability: str
     """the stability verdict in words: still in LVLH, or turning at a rate"""

@@ -150,6 +150,7 @@ def _on_exact_labels(
         plan_request=PAPER_EXAMPLE,
         observed_at=[f["observed_at"] for f in meta],
         names=[f"frame {k}" for k in range(len(meta))],
+        enhanced=labels.astype(np.float64),
     )
     single = [angle_deg(rotation_matrix(*checks[k].angles_deg), rotation_matrix(*angles[k])) for k in inside]
     fused = angle_deg(rotation_matrix(*result["attitude_lvlh"]["euler_zyx_deg"]), truth)

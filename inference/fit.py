@@ -40,7 +40,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from inference.frames import geodesic_deg, rotation_matrices
+from inference.frames import euler_from_matrix, geodesic_deg, rotation_matrices
 from inference.simulation.radar import Radar, projection_matrix
 from inference.simulation.targets import TargetModel, surface_normals
 
@@ -48,6 +48,7 @@ Vec = NDArray[np.float64]
 F32 = NDArray[np.float32]
 
 FINE_SPACING_PX = 0.9  # skin thinning for the fine renderer, in pixels
+COMMON_SPACING_PX = 0.6  # the denser skin of a still pass's common fit (``fit_common``)
 COARSE_FACTOR = 4
 SHARP_ZONE = 0.1  # half-width (pixels) of the linear hand-over between neighbouring pixels
 COUNT_SCALE = 0.35  # counts per pixel at which occupancy reaches 1 - 1/e
@@ -203,6 +204,7 @@ class Renderer:
 
     model: TargetModel
     radar: Radar
+    spacing_px: float = FINE_SPACING_PX  # the fine skin's thinning
     points: F32 = field(init=False)  # fine skin (N, 3), body frame
     coarse_points: Vec = field(init=False)
     coarse_normals: Vec = field(init=False)
@@ -219,7 +221,7 @@ class Renderer:
         surface = np.asarray(self.model.surface, float)
         normals = surface_normals(surface)
         areas = np.full(len(surface), skin_area(surface) / len(surface))
-        fine, _, _ = thin(surface, normals, areas, FINE_SPACING_PX * pixel)
+        fine, _, _ = thin(surface, normals, areas, self.spacing_px * pixel)
         set_(self, "points", fine.astype(np.float32))
         pts, nrm, ar = thin(surface, normals, areas, 0.75 * COARSE_FACTOR * pixel)
         set_(self, "coarse_points", pts)
@@ -243,8 +245,12 @@ class Renderer:
         Points that fall outside the window are counted on its border, so a hypothesis
         never gains by pushing parts of the target out of view.
         """
+        return self.occupancy_of(rotation_matrices(angles_deg), window)
+
+    def occupancy_of(self, rotations: Vec, window: Window | None = None) -> F32:
+        """``occupancy`` of attitudes given as rotation matrices [H, 3, 3] (body to observation frame)."""
         win = window or Window(0, 0, *self.shape)
-        m = (self.rows[None] @ rotation_matrices(angles_deg)).astype(np.float32)  # (H, 2, 3)
+        m = (self.rows[None] @ np.asarray(rotations, float).reshape(-1, 3, 3)).astype(np.float32)  # (H, 2, 3)
         offset = np.array([self.radar.n_range / 2 - win.r0, self.radar.n_azimuth / 2 - win.c0], np.float32)
         out = np.empty((len(m), win.h, win.w), np.float32)
         _occupancy_kernel(m, self.points, offset, np.float32(SHARP_ZONE), np.float32(-1.0 / COUNT_SCALE), out)
@@ -404,6 +410,71 @@ def fit(
                 break
     order = np.argsort(np.where(alive, best_cost, np.inf))
     return [Fit(best[k].copy(), float(best_iou[k]), float(best_cost[k]), names[k]) for k in order if alive[k]]
+
+
+COMMON_STEPS_DEG = (0.35, 0.12, 0.05)
+COMMON_MAX_ITER = (4, 3, 3)
+
+
+@dataclass(frozen=True)
+class CommonFit:
+    """A still pass's attitude fitted to all its frames at once: body to LVLH, the move from the start, the mean IoU."""
+
+    rotation: Vec
+    moved_deg: float
+    iou: float
+    frames: int
+
+
+def fit_common(renderer: Renderer, enhanced: list[Vec], observation_in_lvlh: list[Vec], rotation: Vec) -> CommonFit:
+    """Refine one attitude (body to LVLH, ``rotation``) against every frame's enhanced silhouette at once.
+
+    Frame k sees the body at ``observation_in_lvlh[k].T @ R``; the cost is the frames' mean of
+    1 - soft IoU, searched as ``fit`` searches one frame (the 10-point stencil and its quadratic)
+    over small turns of the body, R exp(d) with d in Euler z, y, x about the body, at steps of
+    0.35, 0.12 and 0.05 deg. A still pass's frames see one attitude from several sides: where
+    each frame's own fit is pulled off by its silhouette's edge pixels, the sum of their costs
+    is a smoother surface than any one of them, and its minimum is the attitude they share
+    (design/measurements.md, "A still pass fitted to all its frames at once").
+    """
+    targets = [np.clip(np.asarray(e, np.float32), 0.0, 1.0) for e in enhanced]
+    silhouettes = [t > 0.5 for t in targets]
+    totals = [float(t.sum(dtype=np.float64)) for t in targets]
+    obs = [np.asarray(o, float) for o in observation_in_lvlh]
+    start = np.asarray(rotation, float)
+
+    def cost(deltas: Vec) -> tuple[Vec, Vec]:
+        rots = start[None] @ rotation_matrices(deltas)  # body to LVLH
+        iou = np.zeros(len(deltas))
+        for o, target, sil, total in zip(obs, targets, silhouettes, totals, strict=True):
+            seen = o.T[None] @ rots  # body to this frame's observation axes
+            win = _window_for(renderer, sil, np.array([euler_from_matrix(seen[0])]))
+            iou += soft_iou(renderer.occupancy_of(seen, win), win.crop(target), total)
+        iou /= len(obs)
+        return 1.0 - iou, iou
+
+    best = np.zeros(3)
+    c0, i0 = cost(best[None])
+    best_cost, best_iou = float(c0[0]), float(i0[0])
+    for h, n_iter in zip(COMMON_STEPS_DEG, COMMON_MAX_ITER, strict=True):
+        for _ in range(n_iter):
+            c, iou = cost(best + h * STENCIL)
+            g, hess = quadratic(c)
+            moved = False
+            if np.all(np.linalg.eigvalsh(hess) > 1e-12):
+                d = np.clip(-np.linalg.solve(hess, g), -2.0, 2.0)
+                if np.all(np.isfinite(d)):
+                    cp, ip = cost((best + h * d)[None])
+                    if cp[0] < min(best_cost, float(c.min())):
+                        best, best_cost, best_iou, moved = best + h * d, float(cp[0]), float(ip[0]), True
+            i = int(np.argmin(c))
+            if not moved and c[i] < best_cost:
+                best, best_cost, best_iou, moved = best + h * STENCIL[i], float(c[i]), float(iou[i]), True
+            if not moved:
+                break
+    final = start @ rotation_matrices(best[None])[0]
+    moved_deg = float(geodesic_deg(np.zeros(3), best)[0])
+    return CommonFit(final, moved_deg, best_iou, len(obs))
 
 
 CURVATURE_STEP_DEG = 0.6  # the stencil that measures the answer's curvature: wide enough to see past pixel steps

@@ -40,6 +40,7 @@ from numpy.typing import NDArray
 from inference.errors import ModelFileError
 from inference.files import read_json, write_json
 from inference.fit import (
+    COMMON_SPACING_PX,
     Fit,
     FitOptions,
     Library,
@@ -181,6 +182,15 @@ class Checker:
         self.threads = threads  # frames ``check_many`` fits at once; 0: one a core
         self._library: Library | None = None
         self._library_lock = threading.Lock()
+        self._common: Renderer | None = None
+
+    @property
+    def common_renderer(self) -> Renderer:
+        """The denser skin a still pass's frames are fitted to together with (``fit_common``), built on first use."""
+        with self._library_lock:
+            if self._common is None:
+                self._common = Renderer(self.model, self.radar, COMMON_SPACING_PX)
+            return self._common
 
     @property
     def library(self) -> Library:

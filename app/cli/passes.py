@@ -328,6 +328,12 @@ def _print_pass(result: dict[str, Any], rec: dict[str, Any]) -> None:
         f"{'' if result.get('trusted', True) else '; NOT TRUSTED'}"
     )
     print(result["stability"])
+    common = result.get("common_fit")
+    if common:
+        print(
+            f"fitted to {common['frames']} frames' silhouettes at once (mean soft IoU {common['silhouette_iou']:.3f}): "
+            f"{common['moved_deg']:.3f} deg from their robust mean"
+        )
     alt = result.get("alternative_lvlh")
     if alt:
         az, ay, ax = alt["euler_zyx_deg"]

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from datetime import datetime, timedelta
 from typing import Any
 
@@ -334,7 +334,7 @@ def fit_and_fuse(
     measured sweep rate and integration time (``sweeps_from``), or None.
     """
     t0 = time.perf_counter()
-    frames, _, checks, per_frame = check_frames(
+    frames, res, checks, per_frame = check_frames(
         est=est, checker=checker, uploads=uploads, resample=False, normalised=normalised, cells_m=cells_m, search=False
     )
     t1 = time.perf_counter()
@@ -347,6 +347,7 @@ def fit_and_fuse(
         observed_at=observed_at,
         names=names if names is not None else [u.name for u in uploads],
         sweeps=sweeps,
+        enhanced=res.enhanced,
     )
     return FusedPass(result, checks, per_frame, t1 - t0, time.perf_counter() - t1)
 
@@ -361,10 +362,13 @@ def fuse_pass(
     observed_at: list[datetime],
     names: list[str],
     sweeps: list[tuple[float, float]] | None = None,
+    enhanced: Vec | None = None,
 ) -> tuple[dict[str, Any], list[Any]]:
     """Fuse a checked pass; where it is not a trusted still one, re-read its untrusted frames mirrored and fuse again.
 
-    Returns the answer with the more trusted frames used, and the checks it rests on.
+    Returns the answer with the more trusted frames used, and the checks it rests on. ``enhanced``: the
+    frames' silhouettes (UNet++'s), which a still answer is fitted to all at once (``fit_common``); a frame
+    re-read mirrored takes no part in that.
     """
     placed = frames_at_times(plan_request, observed_at)
     # Both fusions share the frames' placements and the sweeps' errors (the geometry, not the readings).
@@ -379,6 +383,10 @@ def fuse_pass(
             placed=placed,
             sweeps=sweeps,
             sweep_sigma=sigma,
+            silhouettes=None
+            if enhanced is None
+            else [e if c is o else None for e, c, o in zip(enhanced, cs, checks, strict=True)],
+            renderer=None if enhanced is None else checker.common_renderer,
         )
 
     first = fused(checks)
@@ -506,11 +514,14 @@ def fuse_frames(
     placed: list[dict[str, Vec]] | None = None,
     sweeps: list[tuple[float, float]] | None = None,
     sweep_sigma: Vec | None = None,
+    silhouettes: list[Vec | None] | None = None,
+    renderer: Any = None,
 ) -> dict[str, Any]:
     """Place each checked frame's answer and alternatives in LVLH (``frames_at_times``, unless ``placed`` gives
     those axes already), fuse them, and describe the pass. ``sweeps``: each frame's measured sweep rate (rad/s)
     and integration time (``sweeps_from``), or None; ``sweep_sigma`` their errors (``sweep_errors``, computed
-    here unless given)."""
+    here unless given). ``silhouettes`` (each frame's, or None) and ``renderer``: a still answer is then
+    fitted to the used frames' silhouettes all at once (``inference.fit.fit_common``)."""
     t0 = min(observed_at)
     placed = placed or frames_at_times(plan_request, observed_at)
     if sweeps is not None and sweep_sigma is None:
@@ -542,6 +553,27 @@ def fuse_frames(
             )
         )
     fused = fuse(pass_frames)
+    common = None
+    decided = sum(1 for k in fused.used if usable(checks[k])) >= MIN_TRUSTED_FRAMES
+    if silhouettes is not None and renderer is not None and fused.reference_s is None and fused.stable and decided:
+        together = [k for k in fused.used if silhouettes[k] is not None]
+        if len(together) >= 2:
+            from inference.fit import fit_common
+            from inference.fusion import angle_deg
+
+            common = fit_common(
+                renderer,
+                [np.asarray(silhouettes[k]) for k in together],
+                [placed[k]["lvlh"].T @ placed[k]["observation"] for k in together],
+                fused.rotation,
+            )
+            rot = common.rotation
+            fused = replace(
+                fused,
+                rotation=rot,
+                euler_zyx_deg=euler_from_matrix(rot),
+                residual_deg={k: angle_deg(rot, fused.placed[k]) for k in range(len(pass_frames))},
+            )
     if fused.reference_s is None:  # a still attitude holds all pass: given in J2000 at the frame nearest mid-pass
         span = [(t - t0).total_seconds() for t in observed_at]
         mid = int(np.argmin(np.abs(np.array(span) - 0.5 * (min(span) + max(span)))))
@@ -590,6 +622,13 @@ def fuse_frames(
         "rate_deg_s": [round(float(r), 5) for r in fused.rate_deg_s],
         "rate_sigma_deg_s": [round(float(r), 5) if math.isfinite(r) else None for r in fused.rate_sigma_deg_s],
         "turning_chi2": None if fused.turning_chi2 is None else round(fused.turning_chi2, 2),
+        "common_fit": None
+        if common is None
+        else {
+            "frames": common.frames,
+            "moved_deg": round(common.moved_deg, 4),
+            "silhouette_iou": round(common.iou, 4),
+        },
         "attitude_at": t_mid,
         "stability": (
             f"too few frames to tell: {trusted_used} trusted frames agree, and a pass needs {MIN_TRUSTED_FRAMES} "

@@ -291,3 +291,56 @@ def test_measured_sweeps_pin_the_rate_of_a_short_arc(paper_windows):
         misses += abs(rate[2] - spin) > 1.645 * out["rate_sigma_deg_s"][2]
     assert max(errors) < 0.05, errors
     assert misses <= 3, misses  # 90 % coverage: about 1.2 of 12 expected
+
+
+def test_a_still_pass_fitted_to_its_exact_silhouettes_at_once_lands_on_the_truth(paper_windows):
+    """A real pass's frames fitted alone to their exact labels from 1 deg off, then all together from their mean."""
+    from inference.runtime import DEFAULT_MODEL_DIR
+    from inference.simulation.catalogue import at_attitudes
+    from inference.trust import load_checkers
+
+    rng = np.random.default_rng(21)
+    windows = [w for w in paper_windows if w["max_elevation_deg"] > 10]
+    opts = pass_svc.PassOptions(seed=21, max_frames=12, within_deg=40.0)
+    meta = pass_svc.pass_geometry_frames(PAPER_EXAMPLE, windows[0], opts, rng)
+    angles = np.array([f["attitude_deg"] for f in meta])
+    _, labels = at_attitudes(angles, np.full(len(meta), np.nan), [0] * len(meta))
+    images = np.stack(pass_svc.render_pass(meta, opts, rng)[0]).astype(float)
+    checker = load_checkers(DEFAULT_MODEL_DIR).get("tiangong-like")  # the shipped calibration
+    starts = angles + rng.uniform(-1.0, 1.0, angles.shape)
+    checks = checker.check_many(images, labels.astype(float), starts, search=False)
+    out, _ = pass_svc.fuse_pass(
+        est=None,
+        checker=checker,
+        frames=images,
+        checks=checks,
+        plan_request=PAPER_EXAMPLE,
+        observed_at=[f["observed_at"] for f in meta],
+        names=[str(k) for k in range(len(meta))],
+        enhanced=labels.astype(float),
+    )
+    assert out["stable"] and out["trusted"], out["stability"]
+    common = out["common_fit"]
+    assert common is not None and common["frames"] == out["used"] >= 3
+    truth = meta[0]["body_to_lvlh"]
+    fused = angle_deg(rotation_matrix(*out["attitude_lvlh"]["euler_zyx_deg"]), truth)
+    single = np.median(
+        [angle_deg(rotation_matrix(*c.angles_deg), rotation_matrix(*a)) for c, a in zip(checks, angles, strict=True)]
+    )
+    assert fused < 0.1 and fused < single, (fused, single)
+    # Without the silhouettes the same frames give the robust mean alone, which the common fit moved from.
+    plain, _ = pass_svc.fuse_pass(
+        est=None,
+        checker=checker,
+        frames=images,
+        checks=checks,
+        plan_request=PAPER_EXAMPLE,
+        observed_at=[f["observed_at"] for f in meta],
+        names=[str(k) for k in range(len(meta))],
+    )
+    assert plain["common_fit"] is None
+    moved = angle_deg(
+        rotation_matrix(*plain["attitude_lvlh"]["euler_zyx_deg"]),
+        rotation_matrix(*out["attitude_lvlh"]["euler_zyx_deg"]),
+    )
+    assert moved == pytest.approx(common["moved_deg"], abs=2e-3)

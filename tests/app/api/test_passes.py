@@ -166,6 +166,9 @@ def test_a_simulated_pass_goes_in_as_it_is(client, plan):
     stored = client.get(f"/v1/passes/{body['id']}", headers=A).json()
     assert (stored["turning_chi2"], stored["stable"]) == (body["turning_chi2"], body["stable"])
     assert "alternative_lvlh" in body and stored["alternative_lvlh"] == body["alternative_lvlh"]
+    # A still, trusted pass is fitted to its frames' silhouettes at once; an undecided one is not.
+    assert body["common_fit"] is None or body["stable"] is True
+    assert stored["common_fit"] == body["common_fit"]
     assert [f["sweep_deg_s"] for f in stored["frames"]] == [f["sweep_deg_s"] for f in body["frames"]]
 
 
