@@ -202,7 +202,7 @@ def main() -> None:
         f"UNet++ and Swin: **{1000 * t['without']:.0f} ms**; UNet++, Swin, the fit and the checks: **{1000 * t['with']:.0f} ms** "
         f"(goal <= 150 ms), on a 0 dB frame of the default target. Median of 15 interleaved runs. A frame that fails the",
         "silhouette check also searches the",
-        "coarse library (about 0.5-1 s more), so bad frames cost more than good ones.",
+        "coarse library (its time a frame is the comsat-like search's above), so bad frames cost more than good ones.",
         "",
         f"![errors]({PLOT.name}) `{PLOT}`: geodesic errors of Swin alone and of the fitted answer on the SNR sets, and the",
         "robustness medians.",
