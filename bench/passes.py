@@ -227,10 +227,7 @@ def write(
     radar: Any,
     held: list[dict[str, Any]] | None = None,
 ) -> None:
-    fused = np.array([r["fused"] for r in still])
-    single = np.array([r["single_median"] for r in still])
-    ratio = fused / single
-    covered = np.array([r["covered"] for r in still])
+    fused, single, ratio, covered = _errors(still)
     wrong = int(np.sum(fused > 5.0))
     detected = [r for r in spin if r["stable"] is False]
     undecided = [r for r in spin if r["stable"] is None]
@@ -316,14 +313,18 @@ def write(
     _log("wrote BENCHMARKS.md and " + str(PLOT))
 
 
+def _errors(passes: list[dict[str, Any]]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Still passes' fused errors, single-frame medians, their ratios and whether each axis' bound covered the error."""
+    fused = np.array([r["fused"] for r in passes])
+    single = np.array([r["single_median"] for r in passes])
+    return fused, single, fused / single, np.array([r["covered"] for r in passes])
+
+
 def _held_out_line(held: list[dict[str, Any]]) -> list[str]:
     """The held-out passes' summary, a bullet of its own (none when there are none)."""
     if not held:
         return []
-    fused = np.array([r["fused"] for r in held])
-    single = np.array([r["single_median"] for r in held])
-    ratio = fused / single
-    covered = np.array([r["covered"] for r in held])
+    fused, single, ratio, covered = _errors(held)
     return [
         f"- Held out ({len(held)} further still passes from other seeds, which no setting of the fusion was chosen "
         f"on): median ratio **{np.median(ratio):.2f}**, {int(np.sum(ratio <= 1 / 3))} of {len(held)} within a third; "

@@ -127,6 +127,23 @@ def _splat(idx: NDArray[np.int64], stride: int, size: int, fu: F32, fv: F32, wei
 
 
 @numba.njit(cache=True, nogil=True)
+def _cross(src: F32, dst: F32, grow: bool) -> None:
+    """Grey dilation (``grow``) or erosion of ``src`` [h, w] with the 3 x 3 cross into ``dst``; outside is ignored."""
+    h, w = src.shape
+    for i in range(h):
+        for j in range(w):
+            e = src[i, j]
+            for n in (
+                src[i - 1, j] if i > 0 else e,
+                src[i + 1, j] if i < h - 1 else e,
+                src[i, j - 1] if j > 0 else e,
+                src[i, j + 1] if j < w - 1 else e,
+            ):
+                e = max(e, n) if grow else min(e, n)
+            dst[i, j] = e
+
+
+@numba.njit(cache=True, nogil=True)
 def _occupancy_kernel(m: F32, points: F32, offset: F32, zone: np.float32, rate: np.float32, out: F32) -> None:
     """Fill ``out`` [H, h, w] with the smooth labels: project, splat, ``1 - exp(rate * count)``, close.
 
@@ -151,6 +168,7 @@ def _occupancy_kernel(m: F32, points: F32, offset: F32, zone: np.float32, rate: 
     counts = np.zeros((h + 1, w + 1), np.float64)
     occ = np.empty((h, w), np.float32)
     grown = np.empty((h, w), np.float32)
+    shrunk = np.empty((h, w), np.float32)
     for k in range(n_h):
         counts[:] = 0.0
         a0, a1, a2 = m[k, 0, 0], m[k, 0, 1], m[k, 0, 2]
@@ -172,30 +190,11 @@ def _occupancy_kernel(m: F32, points: F32, offset: F32, zone: np.float32, rate: 
         for i in range(h):
             for j in range(w):
                 occ[i, j] = one - np.exp(np.float32(counts[i, j]) * rate)
-        for i in range(h):  # dilate with the cross, zero outside
+        _cross(occ, grown, True)  # dilate with the cross, zero outside
+        _cross(grown, shrunk, False)  # erode with the cross, one outside
+        for i in range(h):  # keep the original where larger
             for j in range(w):
-                g = occ[i, j]
-                if i > 0:
-                    g = max(g, occ[i - 1, j])
-                if i < h - 1:
-                    g = max(g, occ[i + 1, j])
-                if j > 0:
-                    g = max(g, occ[i, j - 1])
-                if j < w - 1:
-                    g = max(g, occ[i, j + 1])
-                grown[i, j] = g
-        for i in range(h):  # erode with the cross, one outside; keep the original where larger
-            for j in range(w):
-                e = grown[i, j]
-                if i > 0:
-                    e = min(e, grown[i - 1, j])
-                if i < h - 1:
-                    e = min(e, grown[i + 1, j])
-                if j > 0:
-                    e = min(e, grown[i, j - 1])
-                if j < w - 1:
-                    e = min(e, grown[i, j + 1])
-                out[k, i, j] = max(e, occ[i, j])
+                out[k, i, j] = max(shrunk[i, j], occ[i, j])
 
 
 @dataclass(frozen=True)
@@ -315,6 +314,15 @@ def quadratic(values: Vec) -> tuple[Vec, Vec]:
     return c[1:4], hess
 
 
+def quadratic_step(values: Vec) -> Vec | None:
+    """The stencil quadratic's minimum (unit step, clipped to 2 a axis), or None where it curves down or is singular."""
+    g, hess = quadratic(values)
+    if not np.all(np.linalg.eigvalsh(hess) > 1e-12):
+        return None
+    d = -np.linalg.solve(hess, g)
+    return np.clip(d, -2.0, 2.0) if np.all(np.isfinite(d)) else None
+
+
 @dataclass(frozen=True)
 class Fit:
     """One refined hypothesis: attitude (deg), soft IoU, cost (with the prior), and the start it began from."""
@@ -388,14 +396,9 @@ def fit(
             for j, k in enumerate(live):
                 if c[j, 0] < best_cost[k]:
                     best_cost[k], best_iou[k] = c[j, 0], iou[j, 0]
-                g, hk = quadratic(c[j])
-                d = None
-                if np.all(np.linalg.eigvalsh(hk) > 1e-12):
-                    d = -np.linalg.solve(hk, g)
+                d = quadratic_step(c[j])
                 i = int(np.argmin(c[j]))
-                if d is None or not np.all(np.isfinite(d)):
-                    d = STENCIL[i]
-                proposals[j] = best[k] + h * np.clip(d, -2.0, 2.0)
+                proposals[j] = best[k] + h * (STENCIL[i] if d is None else d)
                 if c[j, i] < best_cost[k]:  # a stencil point beat the centre: go there at least
                     moved[j] = True
                     best[k] = best[k] + h * STENCIL[i]
@@ -459,14 +462,12 @@ def fit_common(renderer: Renderer, enhanced: list[Vec], observation_in_lvlh: lis
     for h, n_iter in zip(COMMON_STEPS_DEG, COMMON_MAX_ITER, strict=True):
         for _ in range(n_iter):
             c, iou = cost(best + h * STENCIL)
-            g, hess = quadratic(c)
             moved = False
-            if np.all(np.linalg.eigvalsh(hess) > 1e-12):
-                d = np.clip(-np.linalg.solve(hess, g), -2.0, 2.0)
-                if np.all(np.isfinite(d)):
-                    cp, ip = cost((best + h * d)[None])
-                    if cp[0] < min(best_cost, float(c.min())):
-                        best, best_cost, best_iou, moved = best + h * d, float(cp[0]), float(ip[0]), True
+            d = quadratic_step(c)
+            if d is not None:
+                cp, ip = cost((best + h * d)[None])
+                if cp[0] < min(best_cost, float(c.min())):
+                    best, best_cost, best_iou, moved = best + h * d, float(cp[0]), float(ip[0]), True
             i = int(np.argmin(c))
             if not moved and c[i] < best_cost:
                 best, best_cost, best_iou, moved = best + h * STENCIL[i], float(c[i]), float(iou[i]), True

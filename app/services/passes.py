@@ -554,8 +554,9 @@ def fuse_frames(
         )
     fused = fuse(pass_frames)
     common = None
-    decided = sum(1 for k in fused.used if usable(checks[k])) >= MIN_TRUSTED_FRAMES
-    if silhouettes is not None and renderer is not None and fused.reference_s is None and fused.stable and decided:
+    trusted_used = sum(1 for k in fused.used if usable(checks[k]))  # the common fit keeps the frames used
+    enough = trusted_used >= MIN_TRUSTED_FRAMES
+    if silhouettes is not None and renderer is not None and fused.reference_s is None and fused.stable and enough:
         together = [k for k in fused.used if silhouettes[k] is not None]
         if len(together) >= 2:
             from inference.fit import fit_common
@@ -607,8 +608,6 @@ def fuse_frames(
             }
         )
     speed = float(np.linalg.norm(fused.rate_deg_s))
-    trusted_used = sum(1 for k in fused.used if usable(checks[k]))
-    enough = trusted_used >= MIN_TRUSTED_FRAMES
     return {
         "trusted": enough,
         "frames": frames_out,

@@ -309,16 +309,16 @@ def test_a_still_pass_fitted_to_its_exact_silhouettes_at_once_lands_on_the_truth
     checker = load_checkers(DEFAULT_MODEL_DIR).get("tiangong-like")  # the shipped calibration
     starts = angles + rng.uniform(-1.0, 1.0, angles.shape)
     checks = checker.check_many(images, labels.astype(float), starts, search=False)
-    out, _ = pass_svc.fuse_pass(
-        est=None,
-        checker=checker,
-        frames=images,
-        checks=checks,
-        plan_request=PAPER_EXAMPLE,
-        observed_at=[f["observed_at"] for f in meta],
-        names=[str(k) for k in range(len(meta))],
-        enhanced=labels.astype(float),
-    )
+    the_pass = {
+        "est": None,
+        "checker": checker,
+        "frames": images,
+        "checks": checks,
+        "plan_request": PAPER_EXAMPLE,
+        "observed_at": [f["observed_at"] for f in meta],
+        "names": [str(k) for k in range(len(meta))],
+    }
+    out, _ = pass_svc.fuse_pass(**the_pass, enhanced=labels.astype(float))
     assert out["stable"] and out["trusted"], out["stability"]
     common = out["common_fit"]
     assert common is not None and common["frames"] == out["used"] >= 3
@@ -329,15 +329,7 @@ def test_a_still_pass_fitted_to_its_exact_silhouettes_at_once_lands_on_the_truth
     )
     assert fused < 0.1 and fused < single, (fused, single)
     # Without the silhouettes the same frames give the robust mean alone, which the common fit moved from.
-    plain, _ = pass_svc.fuse_pass(
-        est=None,
-        checker=checker,
-        frames=images,
-        checks=checks,
-        plan_request=PAPER_EXAMPLE,
-        observed_at=[f["observed_at"] for f in meta],
-        names=[str(k) for k in range(len(meta))],
-    )
+    plain, _ = pass_svc.fuse_pass(**the_pass)
     assert plain["common_fit"] is None
     moved = angle_deg(
         rotation_matrix(*plain["attitude_lvlh"]["euler_zyx_deg"]),
