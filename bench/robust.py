@@ -181,8 +181,19 @@ def main(argv: list[str] | None = None) -> None:
 def _provenance(card: dict) -> str:
     """One line on how a model set was made, from its card."""
     ft = card.get("finetune")
+    tr = card.get("training") or {}
+    if not ft and (tr.get("unet_from") or tr.get("swin_from")):  # `gsa train` on from earlier weights
+        data, sched, hw = tr.get("data") or {}, tr.get("schedule") or {}, tr.get("hardware") or {}
+        unet_only = tr.get("mode") == "two-stage" and tr.get("unet_epochs") == sched.get("epochs")
+        return (
+            f"{card.get('name')} with {'UNet++ alone' if unet_only else 'both networks'} fine-tuned by `gsa train` "
+            f"({tr.get('mode')}) for {sched.get('epochs')} epochs on {data.get('train', '?')} frames (variety "
+            f"{data.get('variety') or 'none'}, lr {sched.get('lr')} x{sched.get('lr_decay')} per epoch, silhouette noise "
+            f"{tr.get('silhouette_noise') or 0}; {tr.get('train_seconds', 0) / 60:.0f} min on {hw.get('threads', '?')} "
+            f"threads{', bf16' if hw.get('bf16_autocast') else ''}), from the shipped weights"
+        )
     if not ft:
-        data = (card.get("training") or {}).get("data") or {}
+        data = tr.get("data") or {}
         return f"{card.get('name')}, trained on {data.get('frames', '?')} frames ({card.get('target') or 'the default target'})"
     data = ft.get("data") or {}
     minutes = (ft.get("cache_seconds", 0) + ft.get("train_seconds", 0)) / 60

@@ -234,6 +234,8 @@ def _export_into(
             k: training.get(k)
             for k in (
                 "mode",
+                "schedule",
+                "silhouette_noise",
                 "unet_epochs",
                 "unet_from",
                 "swin_from",

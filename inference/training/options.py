@@ -24,6 +24,9 @@ VAL_SEED = (
     20_000  # fine-tuning's fresh validation set: no training set (seed 0..) or SNR test set (10,000 + dB) uses it
 )
 
+# How a training step computes: ``auto`` is bf16 autocast wherever the hardware does bf16 natively.
+PRECISIONS = ("auto", "bf16", "float32")
+
 # The shape fields a run may override on its config (flag name -> config field).
 SHAPE_FLAGS = {
     "unet_filters": "unet_filters",
@@ -72,6 +75,11 @@ class TrainOptions:
     resume: bool = _opt(False, "go on from the run's checkpoint.pt")
     max_minutes: float | None = _opt(None, "stop after the epoch in which this much time has passed")
     compile_models: bool = _opt(False, "torch.compile on a GPU", "compile")
+    precision: str = _opt(
+        "auto",
+        "auto (bf16 autocast on a GPU, and on a CPU that computes bf16 natively: AVX-512 BF16 or AMX), bf16, or "
+        "float32",
+    )
     log_every: int = _opt(20, "a progress line every N steps (0: none)")
 
     def shape(self) -> dict[str, Any]:
@@ -91,6 +99,10 @@ class TrainOptions:
             raise InferenceError(f"lr {self.lr} must be positive", field="lr")
         check_schedule(self.lr_decay, self.ema)
         check_share(self.silhouette_noise)
+        if self.precision not in PRECISIONS:
+            raise InferenceError(
+                f"precision {self.precision!r} must be one of {', '.join(PRECISIONS)}", field="precision"
+            )
         if self.mode not in ("joint", "two-stage"):
             raise InferenceError(f"mode {self.mode!r} must be 'joint' or 'two-stage'", field="mode")
         if self.ema is not None and self.mode == "two-stage":
