@@ -55,6 +55,9 @@ class DatasetSpec:
     model_scale: float = 1.0
     variety: str | None = None  # a VARIETY_PRESETS name: each frame draws its own Scattering (None: the default)
     variety_overrides: tuple[tuple[str, Any], ...] = ()
+    # Under ``variety``, the share of frames drawn from the preset; the others are default frames, so a
+    # set can teach the varied looks without giving up the default one (1.0: every frame varied).
+    variety_share: float = 1.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.n, int) or self.n <= 0:
@@ -74,6 +77,13 @@ class DatasetSpec:
             raise DatasetError(f"max_angle_deg {self.max_angle_deg} is outside [0, 89]", field="max_angle_deg")
         if self.shard_size <= 0:
             raise DatasetError("shard_size must be positive", field="shard_size")
+        if not (isinstance(self.variety_share, (int, float)) and 0.0 < self.variety_share <= 1.0):
+            raise DatasetError(
+                f"variety_share {self.variety_share} must be in (0, 1]: the share of frames drawn from the preset",
+                field="variety_share",
+            )
+        if self.variety_share < 1.0 and self.variety is None:
+            raise DatasetError("variety_share needs a variety preset", field="variety_share")
         if self.variety is not None:
             draw_scattering(self.variety, np.random.default_rng(0), dict(self.variety_overrides))  # fails early
         if self.n_train is not None and not 0 <= self.n_train <= self.n:
@@ -97,6 +107,17 @@ def frame_truth(spec: DatasetSpec, index: int) -> tuple[tuple[float, float, floa
     return (angles[0], angles[1], angles[2]), snr, s
 
 
+def is_varied(spec: DatasetSpec, frame_seed: int) -> bool:
+    """Whether the frame of this seed draws its scattering from the spec's variety preset (``variety_share``).
+
+    The coin comes from a stream of its own, so with a share of 1 a set is what it was before the
+    share existed, and a varied frame's scattering is the same whatever the share.
+    """
+    if spec.variety is None:
+        return False
+    return spec.variety_share >= 1.0 or float(np.random.default_rng([frame_seed, 2]).uniform()) < spec.variety_share
+
+
 def build_model(spec: DatasetSpec, radar: Radar) -> TargetModel:
     model = tiangong_like() if spec.model_path is None else load_model(spec.model_path, spec.model_scale)
     check_fits(model, radar)
@@ -117,7 +138,7 @@ def render_frames(
     seeds = np.empty(n, np.int64)
     for k, index in enumerate(range(start, stop)):
         ang, snr, s = frame_truth(spec, index)
-        if spec.variety is None:
+        if spec.variety is None or not is_varied(spec, s):
             frame = simulate(model, imager, ang, snr, s)
         else:  # the variety draws from its own stream, so a frame's angles, SNR and seed stay the default set's
             sc = draw_scattering(spec.variety, np.random.default_rng([s, 1]), dict(spec.variety_overrides))
@@ -375,6 +396,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="NAME=VALUE",
         help="fix one scattering parameter under --variety, e.g. window=none or edge_gain=0 (repeatable)",
     )
+    p.add_argument(
+        "--variety-share",
+        type=float,
+        default=1.0,
+        metavar="P",
+        help="under --variety, the share of frames drawn from the preset; the rest are default frames (default 1)",
+    )
     p.add_argument("--out", help="new directory for the data set")
     p.add_argument("--preview", metavar="PNG", help="draw a few frames beside their labels instead")
 
@@ -400,6 +428,8 @@ def run(args: argparse.Namespace) -> int:
     n_train = default_train_frames(args.n) if args.split else args.n_train
     if args.variety_set and not args.variety:
         raise DatasetError("--variety-set needs --variety PRESET", field="variety")
+    if args.variety_share != 1.0 and not args.variety:
+        raise DatasetError("--variety-share needs --variety PRESET", field="variety_share")
     spec = DatasetSpec(
         args.n,
         args.seed,
@@ -412,6 +442,7 @@ def run(args: argparse.Namespace) -> int:
         args.model_scale,
         args.variety,
         tuple(parse_override(v) for v in args.variety_set),
+        args.variety_share,
     )
     radar = Radar(args.carrier_hz, args.bandwidth_hz, args.n_range, args.n_azimuth, args.aperture_deg)
     if args.preview:

@@ -350,10 +350,11 @@ def _epoch(
     run.swin.train()
     train_unet = opts.enhance and (opts.mode == "joint" or epoch < run.stage_split)
     train_swin = opts.mode == "joint" or epoch >= run.stage_split or not opts.enhance
+    amp = torch.autocast(device_type=dev.type, dtype=torch.bfloat16, enabled=run.bf16)
     if opts.enhance and opts.mode == "two-stage" and not train_unet and run.cache is None:
         rows = np.concatenate([run.train_idx, run.test_idx])
-        run.cache = enhance_all(run.unet, run.data["image"], dev, rows=rows)
-    amp = torch.autocast(device_type=dev.type, dtype=torch.bfloat16, enabled=run.bf16)
+        with amp:
+            run.cache = enhance_all(run.unet, run.data["image"], dev, rows=rows)
     sums = {"unet_loss": torch.zeros((), device=dev), "swin_loss": torch.zeros((), device=dev)}
     batches = _batches(run.train_idx, opts.batch_size, rng)
     t_epoch = time.perf_counter()

@@ -184,6 +184,28 @@ def test_variety_changes_the_scattering_but_not_the_truth(tmp_path):
     np.testing.assert_array_equal(varied["image"], again["image"])  # seeded
 
 
+def test_a_variety_share_mixes_default_and_varied_frames_frame_by_frame():
+    from inference.simulation.dataset import render_frames
+
+    radar = Radar(n_range=64, n_azimuth=64, bandwidth_hz=0.4e9, aperture_deg=5.1 / 4)
+    n = 12
+    plain = render_frames(DatasetSpec(n=n, seed=3), radar, 0, n)
+    varied = render_frames(DatasetSpec(n=n, seed=3, variety="robust"), radar, 0, n)
+    mixed = render_frames(DatasetSpec(n=n, seed=3, variety="robust", variety_share=0.5), radar, 0, n)
+    # Each mixed frame is, to the bit, either the default frame or the fully varied set's frame.
+    as_plain = [np.array_equal(mixed["image"][i], plain["image"][i]) for i in range(n)]
+    as_varied = [np.array_equal(mixed["image"][i], varied["image"][i]) for i in range(n)]
+    assert all(p != v for p, v in zip(as_plain, as_varied, strict=True))
+    assert 2 <= sum(as_varied) <= n - 2  # 4 of 12 here; a fair coin lands outside 2..10 once in 160 sets
+    np.testing.assert_array_equal(mixed["label"], plain["label"])
+    for bad, match in ((0.0, "must be in"), (1.5, "must be in")):
+        with pytest.raises(DatasetError, match=match) as e:
+            DatasetSpec(n=4, variety="robust", variety_share=bad)
+        assert e.value.field == "variety_share"
+    with pytest.raises(DatasetError, match="needs a variety preset"):
+        DatasetSpec(n=4, variety_share=0.5)
+
+
 def test_bad_variety_is_refused_before_any_work():
     from inference.errors import InferenceError
     from inference.simulation.dataset import DatasetSpec
