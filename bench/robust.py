@@ -92,7 +92,7 @@ def main(argv: list[str] | None = None) -> None:
         f"## {TITLE}",
         "",
         f"Machine: {machine()}. Date: {datetime.now(UTC).date().isoformat()}. Command: `python -m bench.robust"
-        + "".join(f" --models {m}" for m in args.models)
+        + (" --models " + " ".join(args.models) if args.models else "")
         + "` (see the module's text).",
         *[f"- {name}: {_provenance(est.card)}" for name, est in sets.items()],
         "",
@@ -185,12 +185,14 @@ def _provenance(card: dict) -> str:
     if not ft and (tr.get("unet_from") or tr.get("swin_from")):  # `gsa train` on from earlier weights
         data, sched, hw = tr.get("data") or {}, tr.get("schedule") or {}, tr.get("hardware") or {}
         unet_only = tr.get("mode") == "two-stage" and tr.get("unet_epochs") == sched.get("epochs")
+        share = f" on {data['variety_share']:g} of them" if (data.get("variety_share") or 1) < 1 else ""
+        start = f"the weights in {Path(tr.get('unet_from') or tr.get('swin_from')).parent.name}"
         return (
             f"{card.get('name')} with {'UNet++ alone' if unet_only else 'both networks'} fine-tuned by `gsa train` "
-            f"({tr.get('mode')}) for {sched.get('epochs')} epochs on {data.get('train', '?')} frames (variety "
-            f"{data.get('variety') or 'none'}, lr {sched.get('lr')} x{sched.get('lr_decay')} per epoch, silhouette noise "
+            f"({tr.get('mode')}) for {sched.get('epochs')} epoch(s) on {data.get('train', '?')} frames (variety "
+            f"{data.get('variety') or 'none'}{share}, lr {sched.get('lr')} x{sched.get('lr_decay')} per epoch, silhouette noise "
             f"{tr.get('silhouette_noise') or 0}; {tr.get('train_seconds', 0) / 60:.0f} min on {hw.get('threads', '?')} "
-            f"threads{', bf16' if hw.get('bf16_autocast') else ''}), from the shipped weights"
+            f"threads{', bf16' if hw.get('bf16_autocast') else ''}), from {start}"
         )
     if not ft:
         data = tr.get("data") or {}

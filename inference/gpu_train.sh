@@ -24,7 +24,9 @@
 # Issue 18's robust networks: GSA_GPU_VARIETY=robust simulates the training set with each frame's scattering
 # drawn from the robust preset (inference.simulation.scene.VARIETY_PRESETS; the SNR test sets stay default
 # frames), and GSA_GPU_RECIPE=robust trains compact on it with half of Swin's inputs perturbed silhouettes
-# (inference/training/augment.py). The varied simulator is slower: see BENCHMARKS.md, "ISAR simulation",
+# (inference/training/augment.py). GSA_GPU_VARIETY_SHARE=0.5 varies only half the frames and leaves the rest
+# default frames (a UNet++ fine-tuned on varied frames alone lost IoU on default ones: BENCHMARKS.md "Robust
+# networks"). The varied simulator is slower: see BENCHMARKS.md, "ISAR simulation",
 # and size GSA_GPU_N to what 16 cores simulate inside the first command.
 #
 # To continue the shipped compact weights instead of starting afresh, point GSA_GPU_FROM at their
@@ -44,7 +46,7 @@ OUT=${OUT:-$W/out}
 SECOND=${GSA_GPU_SECOND:-paper}
 RECIPE=${GSA_GPU_RECIPE:-shipped}
 VARIETY=()
-[ -n "${GSA_GPU_VARIETY:-}" ] && VARIETY=(--variety "$GSA_GPU_VARIETY")
+[ -n "${GSA_GPU_VARIETY:-}" ] && VARIETY=(--variety "$GSA_GPU_VARIETY" --variety-share "${GSA_GPU_VARIETY_SHARE:-1}")
 [ "${GSA_GPU_PAPER:-1}" = 0 ] && SECOND=none
 RUNS="compact paper noenhance twostage"
 export OMP_NUM_THREADS=1 PYTHONUNBUFFERED=1

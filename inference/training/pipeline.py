@@ -55,17 +55,20 @@ def prepare(
     radar: Any = None,
     workers: int | None = None,
     variety: str | None = None,
+    variety_share: float = 1.0,
 ) -> None:
     """Simulate the data set into ``WORK/data`` and Table 7's fresh SNR sets into ``WORK/snr-DB`` (each once).
 
     ``variety`` (a ``VARIETY_PRESETS`` name) varies the training set's scattering frame by frame;
     the SNR test sets stay default frames, so runs with and without it are scored alike.
+    ``variety_share`` varies only that share of the frames (``DatasetSpec.variety_share``).
     """
     data = work / "data"
     if not (data / "manifest.json").exists():
         shutil.rmtree(data, ignore_errors=True)
         n_train = default_train_frames(n) if n_train is None else n_train
-        generate(DatasetSpec(n=n, seed=seed, n_train=n_train, variety=variety), data, radar, workers=workers)
+        spec = DatasetSpec(n=n, seed=seed, n_train=n_train, variety=variety, variety_share=variety_share)
+        generate(spec, data, radar, workers=workers)
     for snr in SNR_DB if n_snr else ():
         d = work / f"snr-{snr:g}"
         if not (d / "manifest.json").exists():
@@ -159,6 +162,7 @@ def run(
     n_train: int | None = None,
     n_snr: int = 0,
     variety: str | None = None,
+    variety_share: float = 1.0,
     radar: Any = None,
     out: Path | None = None,
     evaluate: bool = True,
@@ -169,7 +173,7 @@ def run(
     data set (``n`` frames, ``n_train`` of them for training, ``n_snr`` per SNR test set) and
     always resumes, so calling it again continues a run the time limit cut off.
     """
-    prepare(work, n, n_train, n_snr, options.seed, radar, variety=variety)
+    prepare(work, n, n_train, n_snr, options.seed, radar, variety=variety, variety_share=variety_share)
     record = train(work / "data", work / name, replace(options, resume=True))
     if evaluate:
         evaluate_run(work, name)
@@ -202,6 +206,9 @@ def main(argv: list[str] | None = None) -> int:
         q.add_argument("--n-snr", type=int, default=0, help="frames per SNR in Table 7's fresh test sets")
         q.add_argument("--seed", type=int, default=0)
         q.add_argument("--variety", help="vary the training set's scattering frame by frame (a preset: robust)")
+        q.add_argument(
+            "--variety-share", type=float, default=1.0, help="vary only this share of the frames (default 1)"
+        )
     r.add_argument("--name", default="run", help="run folder inside WORK")
     r.add_argument("--out", help="where the float16 pieces go (default: none)")
     r.add_argument(
@@ -219,7 +226,15 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     try:
         if args.cmd == "prepare":
-            prepare(Path(args.work), args.n, args.n_train, args.n_snr, args.seed, variety=args.variety)
+            prepare(
+                Path(args.work),
+                args.n,
+                args.n_train,
+                args.n_snr,
+                args.seed,
+                variety=args.variety,
+                variety_share=args.variety_share,
+            )
             print(f"data sets ready in {args.work}")
         elif args.cmd == "run":
             opts = options_from_args(TrainOptions, args, base=recipe(args.recipe, max_minutes=8.0))
@@ -234,6 +249,7 @@ def main(argv: list[str] | None = None) -> int:
                 n_train=args.n_train,
                 n_snr=args.n_snr,
                 variety=args.variety,
+                variety_share=args.variety_share,
                 out=Path(args.out) if args.out else None,
             )
             print(json.dumps({k: v for k, v in m.items() if k in ("complete", "epochs")}))

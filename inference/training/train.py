@@ -489,6 +489,7 @@ def _record(run: _Run) -> dict[str, Any]:
             "target_model": run.manifest.get("model"),
             "max_angle_deg": (run.manifest.get("spec") or {}).get("max_angle_deg"),
             "variety": (run.manifest.get("spec") or {}).get("variety"),
+            "variety_share": (run.manifest.get("spec") or {}).get("variety_share", 1.0),
         },
         "hardware": {
             "device": str(dev),
