@@ -373,7 +373,7 @@ def _epoch(
                 swin_in = x
             if train_swin and opts.silhouette_noise and run.gen is not None:
                 swin_in = perturb_silhouettes(swin_in, opts.silhouette_noise, run.gen)
-            # A frozen Swin's loss is not worth its forward pass (two-stage's UNet++ epochs: about 15 % of a step).
+            # A frozen Swin's loss is not worth its forward pass (two-stage's UNet++ epochs).
             loss_s = angle_loss(run_s(swin_in).float(), a) if train_swin else torch.zeros((), device=dev)
         if train_swin:
             run.opt_s.zero_grad(set_to_none=True)
