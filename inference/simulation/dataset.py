@@ -83,7 +83,9 @@ class DatasetSpec:
                 field="variety_share",
             )
         if self.variety_share < 1.0 and self.variety is None:
-            raise DatasetError("variety_share needs a variety preset", field="variety_share")
+            raise DatasetError(
+                "variety_share needs a variety preset to draw from (--variety robust)", field="variety_share"
+            )
         if self.variety is not None:
             draw_scattering(self.variety, np.random.default_rng(0), dict(self.variety_overrides))  # fails early
         if self.n_train is not None and not 0 <= self.n_train <= self.n:
@@ -428,8 +430,6 @@ def run(args: argparse.Namespace) -> int:
     n_train = default_train_frames(args.n) if args.split else args.n_train
     if args.variety_set and not args.variety:
         raise DatasetError("--variety-set needs --variety PRESET", field="variety")
-    if args.variety_share != 1.0 and not args.variety:
-        raise DatasetError("--variety-share needs --variety PRESET", field="variety_share")
     spec = DatasetSpec(
         args.n,
         args.seed,

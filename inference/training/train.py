@@ -465,6 +465,7 @@ def _finish(run: _Run) -> dict[str, Any]:
 def _record(run: _Run) -> dict[str, Any]:
     """The training record (``training.json``), written after every epoch and at the end."""
     opts, dev = run.opts, run.dev
+    spec = run.manifest.get("spec") or {}
     return {
         "config": run.cfg.as_dict(),
         "schedule": opts.schedule(),
@@ -487,9 +488,9 @@ def _record(run: _Run) -> dict[str, Any]:
             "target": (run.manifest.get("model") or {}).get("name"),
             # The target as the data set describes it (size, mesh sha256, symmetries) and the angle range.
             "target_model": run.manifest.get("model"),
-            "max_angle_deg": (run.manifest.get("spec") or {}).get("max_angle_deg"),
-            "variety": (run.manifest.get("spec") or {}).get("variety"),
-            "variety_share": (run.manifest.get("spec") or {}).get("variety_share", 1.0),
+            "max_angle_deg": spec.get("max_angle_deg"),
+            "variety": spec.get("variety"),
+            "variety_share": spec.get("variety_share", 1.0),
         },
         "hardware": {
             "device": str(dev),
