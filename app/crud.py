@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
@@ -11,6 +11,9 @@ from sqlalchemy.orm import Session
 
 from app.core.security import HMAC_SCHEME, LEGACY_SCHEME, digests_equal, key_digest, key_prefix, new_api_key
 from app.db.models import ApiKey, Estimate, GroundStation, Operator, Pass, Plan, utcnow
+
+if TYPE_CHECKING:
+    from app.schemas import PassResult
 
 
 def get_or_create_operator(*, session: Session, name: str) -> Operator:
@@ -207,6 +210,14 @@ def blob_in_use(*, session: Session, digest: str) -> bool:
         .where((Estimate.original_sha256 == digest) | (Estimate.enhanced_sha256 == digest))
     )
     return bool(hit)
+
+
+def create_pass(*, session: Session, operator_id: str, plan_id: str, result: PassResult) -> Pass:
+    """Store a fused pass (its typed result with its format version) under the plan it belongs to."""
+    row = Pass(operator_id=operator_id, created_at=utcnow(), plan_id=plan_id, result=result.stored())
+    session.add(row)
+    session.commit()
+    return row
 
 
 def get_pass(*, session: Session, operator_id: str, pass_id: str) -> Pass | None:

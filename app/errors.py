@@ -11,7 +11,9 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from app.core.observability import current_request_id
+from inference.errors import InferenceError
 from planner.errors import PlannerError, PlanningStopped
+from scene.errors import SceneError
 
 
 class InputError(ValueError):
@@ -22,6 +24,25 @@ class InputError(ValueError):
         self.loc = loc
         self.message = message
         self.where = where
+
+
+# Every domain's bad-input error: each names its field, and each is a 422 (or one line on the command line).
+DOMAIN_ERRORS: tuple[type[ValueError], ...] = (InputError, SceneError, PlannerError, InferenceError)
+
+
+def input_error(exc: ValueError) -> tuple[list[str | int], str]:
+    """Return the field's path and the message of any domain error (``DOMAIN_ERRORS``): the one mapping.
+
+    A request's own ``InputError`` and the scene's ``SceneError`` carry their path; the planner's
+    and the estimator's errors name one field (the planner's default: ``request``).
+    """
+    if isinstance(exc, InputError | SceneError):
+        return list(exc.loc), exc.message
+    if isinstance(exc, PlannerError):
+        return [exc.field or "request"], str(exc)
+    if isinstance(exc, InferenceError):
+        return ([exc.field] if exc.field else []), str(exc)
+    return [], str(exc)
 
 
 def _body(loc: list[Any], msg: str) -> dict[str, Any]:
@@ -91,18 +112,18 @@ def _allowed_methods(app: FastAPI, request: Request) -> list[str]:
 
 
 def install_error_handlers(app: FastAPI) -> None:
-    @app.exception_handler(InputError)
-    async def _input_error(_request: Request, exc: InputError) -> JSONResponse:
-        return JSONResponse(status_code=422, content=_body([exc.where, *exc.loc], exc.message))
+    async def _domain_error(_request: Request, exc: Exception) -> JSONResponse:
+        assert isinstance(exc, ValueError)
+        loc, message = input_error(exc)
+        return JSONResponse(status_code=422, content=_body([getattr(exc, "where", "body"), *loc], message))
+
+    for kind in DOMAIN_ERRORS:
+        app.add_exception_handler(kind, _domain_error)
 
     @app.exception_handler(PlanningStopped)
     async def _planning_stopped(_request: Request, exc: PlanningStopped) -> JSONResponse:
         # Not the caller's input: the service's budget (GSA_PLAN_TIMEOUT_S). Retry later or plan less.
         return JSONResponse(status_code=503, content={"detail": str(exc), "request_id": current_request_id()})
-
-    @app.exception_handler(PlannerError)
-    async def _planner_error(_request: Request, exc: PlannerError) -> JSONResponse:
-        return JSONResponse(status_code=422, content=_body(["body", exc.field or "request"], str(exc)))
 
     @app.exception_handler(RequestValidationError)
     async def _validation_error(_request: Request, exc: RequestValidationError) -> JSONResponse:

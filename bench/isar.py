@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from inference.frames import rotation_matrix
+from inference.rotations import rotation_matrix
 from inference.simulation.dataset import DatasetSpec, generate, render_frames
 from inference.simulation.radar import Imager, Radar, polar_echo_direct, polar_format, projection_matrix
 from inference.simulation.scene import DEFAULT_SCATTERING, VARIANTS, simulate, visible

@@ -5,7 +5,7 @@ Run with `python -m bench.passes` (part of `make bench`; about 12 minutes on 2 c
 
 Passes: the paper's target over the paper's station (its Table 1), access windows of three
 days from the target's epoch, one drawn per pass among those culminating above 10 deg. Each
-is simulated as `gsa simulate --pass` does (app.services.passes: 5.1 deg sub-apertures side
+is simulated as `gsa simulate --pass` does (scene.simulation: 5.1 deg sub-apertures side
 by side along the line of sight's sweep in the body, SNR uniform in -3..15 dB per frame, the
 target still in LVLH at an attitude drawn so that the middle of the pass is seen within 40 deg
 on each axis) and fused as `POST /v1/passes` does: every frame of the pass goes in, the
@@ -35,16 +35,20 @@ from typing import Any
 
 import numpy as np
 
-from app.schemas import PAPER_EXAMPLE, AccessCreate
-from app.services import passes as pass_svc
-from app.services import uploads as upload_svc
-from app.services.planning import run_access
 from bench.common import machine
 from bench.sections import replace_section
-from inference.frames import euler_from_matrix, rotation_matrix
-from inference.fusion import Z90, angle_deg
+from inference.fusion import Z90
+from inference.rotations import angle_deg, euler_from_matrix, rotation_matrix, spin_rotations
 from inference.runtime import Estimator
 from inference.trust import load_checkers
+from planner.examples import PAPER_STATION, PAPER_TARGET
+from planner.orbits import Orbit
+from scene import Scene, Window
+from scene.fusion import fit_and_fuse, fuse_pass, pass_span, reversed_reading, sweeps_from
+from scene.geometry import access_windows
+from scene.simulation import PassOptions, SimulatedFrame, render_pass, simulate_pass
+
+TARGET = Orbit("Sat_Target", elements=PAPER_TARGET)  # the paper's scene, read as osculating elements
 
 TITLE = "Pass fusion"
 N_PASSES = 20
@@ -60,56 +64,58 @@ def _log(msg: str) -> None:
     print(f"bench.passes: {msg}", file=sys.stderr, flush=True)
 
 
-def _windows() -> list[dict[str, Any]]:
-    req = AccessCreate.model_validate(
-        {"target": PAPER_EXAMPLE["target"], "ground_station": PAPER_EXAMPLE["ground_station"], "duration_days": 3}
-    )
-    return [w for w in run_access(req)["access_windows"] if w["max_elevation_deg"] >= 10.0]
+def _windows() -> list[Window]:
+    start = PAPER_TARGET.epoch
+    return [
+        w
+        for w in access_windows(TARGET, PAPER_STATION, "osculating", start, 3 * 86400.0)
+        if w.max_elevation_deg >= 10.0
+    ]
 
 
-def one_pass(
-    est: Any, checker: Any, window: dict[str, Any], opts: pass_svc.PassOptions, exact: bool = False
-) -> dict[str, Any]:
+def _scene(start: datetime, end: datetime) -> Scene:
+    return Scene.over(TARGET, PAPER_STATION, "osculating", start, end)
+
+
+def _simulate(window: Window, opts: PassOptions, rng: np.random.Generator) -> list[SimulatedFrame]:
+    return simulate_pass(_scene(window.rise, window.set), opts, rng)
+
+
+def one_pass(est: Any, checker: Any, window: Window, opts: PassOptions, exact: bool = False) -> dict[str, Any]:
     """Simulate, estimate and fuse one pass; return what the tables need (``exact``: fused again on exact labels)."""
     rng = np.random.default_rng(opts.seed)
-    meta = pass_svc.pass_geometry_frames(PAPER_EXAMPLE, window, opts, rng)
-    images, _ = pass_svc.render_pass(meta, opts, rng)
-    uploads = [
-        upload_svc.Upload(f"frame {k}", "", im.shape, "float32", im.astype(np.float64)) for k, im in enumerate(images)
-    ]
-    fused = pass_svc.fit_and_fuse(
+    meta = _simulate(window, opts, rng)
+    images, _ = render_pass(meta, opts, rng)
+    observed_at = [f.observed_at for f in meta]
+    sweeps = sweeps_from([f.integration_s for f in meta], opts.aperture_deg, len(meta), None)
+    fused = fit_and_fuse(
         est=est,
         checker=checker,
-        uploads=uploads,
-        plan_request=PAPER_EXAMPLE,
-        observed_at=[f["observed_at"] for f in meta],
-        normalised=True,
-        sweeps=pass_svc.sweeps_from([f["integration_s"] for f in meta], opts.aperture_deg, len(meta), None),
+        frames=images.astype(np.float32),
+        scene=_scene(*pass_span(observed_at, sweeps)),
+        observed_at=observed_at,
+        names=[f"frame {k}" for k in range(len(meta))],
+        sweeps=sweeps,
     )
-    result, checks, seconds = fused.result, fused.checks, fused.fit_s + fused.fuse_s
-    inside = [k for k, f in enumerate(meta) if max(abs(a) for a in f["attitude_deg"]) <= 45.0]
+    result, checks, seconds = fused.attitude, fused.checks, fused.fit_s + fused.fuse_s
+    inside = [k for k, f in enumerate(meta) if max(abs(a) for a in f.attitude_deg) <= 45.0]
     readable = [
-        k
-        for k, f in enumerate(meta)
-        if k in inside or max(abs(a) for a in pass_svc.reversed_reading(f["attitude_deg"])) <= 45.0
+        k for k, f in enumerate(meta) if k in inside or max(abs(a) for a in reversed_reading(f.attitude_deg)) <= 45.0
     ]
-    single = [
-        angle_deg(rotation_matrix(*checks[k].angles_deg), rotation_matrix(*meta[k]["attitude_deg"])) for k in inside
-    ]
-    fused = rotation_matrix(*result["attitude_lvlh"]["euler_zyx_deg"])
-    t_ref = result["attitude_at"]
-    times = np.array([(f["observed_at"] - meta[0]["observed_at"]).total_seconds() for f in meta])
-    k_ref = int(np.argmin(np.abs(times - (t_ref - meta[0]["observed_at"]).total_seconds())))
-    truth = meta[k_ref]["body_to_lvlh"]  # a still target's is the same at every frame
-    dt = (t_ref - meta[k_ref]["observed_at"]).total_seconds()
+    single = [angle_deg(rotation_matrix(*checks[k].angles_deg), rotation_matrix(*meta[k].attitude_deg)) for k in inside]
+    t_ref = result.attitude_at
+    times = np.array([(f.observed_at - meta[0].observed_at).total_seconds() for f in meta])
+    k_ref = int(np.argmin(np.abs(times - (t_ref - meta[0].observed_at).total_seconds())))
+    truth = meta[k_ref].body_to_lvlh  # a still target's is the same at every frame
+    dt = (t_ref - meta[k_ref].observed_at).total_seconds()
     if opts.spin_deg_s:  # carry the truth from the nearest frame to the answer's moment
         axis = np.asarray(opts.spin_axis, float) / np.linalg.norm(opts.spin_axis)
-        truth = truth @ pass_svc.spin_rotation(axis, opts.spin_deg_s, np.array([dt]))[0]
+        truth = truth @ spin_rotations(axis, opts.spin_deg_s, np.array([dt]))[0]
     err_axes = np.abs(
-        (np.array(result["attitude_lvlh"]["euler_zyx_deg"]) - np.array(euler_from_matrix(truth)) + 180) % 360 - 180
+        (np.array(euler_from_matrix(result.attitude_lvlh)) - np.array(euler_from_matrix(truth)) + 180) % 360 - 180
     )
     exact_fused = exact_single = math.nan
-    normals = np.array([meta[k]["observation_in_lvlh"][:, 2] for k in inside]) if inside else np.eye(3)[:1]
+    normals = np.array([meta[k].observation_in_lvlh[:, 2] for k in inside]) if inside else np.eye(3)[:1]
     mean_normal = normals.mean(axis=0) / np.linalg.norm(normals.mean(axis=0))
     if exact:
         exact_fused, exact_single = _on_exact_labels(est, checker, images, meta, truth, inside)
@@ -122,43 +128,44 @@ def one_pass(
         "readable": len(readable),
         "exact_fused": exact_fused,
         "exact_single_median": exact_single,
-        "used": result["used"],
-        "trusted_outside": sum(1 for k, f in enumerate(result["frames"]) if f["used"] and k not in inside),
+        "used": result.used,
+        "trusted_outside": sum(1 for k, f in enumerate(result.frames) if f.used and k not in inside),
         "single_median": float(np.median(single)) if single else math.nan,
-        "fused": angle_deg(fused, truth),
-        "covered": err_axes <= np.array(result["uncertainty_deg"]),
-        "stable": result["stable"],
-        "alternative": result.get("alternative_lvlh") is not None,
-        "rate": float(np.linalg.norm(result["rate_deg_s"])),
+        "fused": angle_deg(result.attitude_lvlh, truth),
+        "covered": err_axes <= np.array(result.uncertainty_deg),
+        "stable": result.stable,
+        "alternative": result.alternative_lvlh is not None,
+        "rate": float(np.linalg.norm(result.rate_deg_s)),
         "rate_z_covered": bool(
-            abs(result["rate_deg_s"][2] - opts.spin_deg_s) <= Z90 * (result["rate_sigma_deg_s"][2] or 0.0)
+            abs(result.rate_deg_s[2] - opts.spin_deg_s) <= Z90 * np.nan_to_num(result.rate_sigma_deg_s[2])
         ),
         "seconds": seconds,
     }
 
 
 def _on_exact_labels(
-    est: Any, checker: Any, images: np.ndarray, meta: list[dict[str, Any]], truth: np.ndarray, inside: list[int]
+    est: Any, checker: Any, images: np.ndarray, meta: list[SimulatedFrame], truth: np.ndarray, inside: list[int]
 ) -> tuple[float, float]:
     """Fit every frame to its exact silhouette instead of UNet++'s, fuse; return the fused and single-frame errors."""
     from inference.simulation.catalogue import at_attitudes
 
-    angles = np.array([f["attitude_deg"] for f in meta])
+    angles = np.array([f.attitude_deg for f in meta])
     _, labels = at_attitudes(angles, np.full(len(meta), np.nan), [0] * len(meta))
     res = est.estimate(images.astype(np.float32))
     checks = checker.check_many(images, labels.astype(np.float64), res.angles_deg, search=False)
-    result, _ = pass_svc.fuse_pass(
+    observed_at = [f.observed_at for f in meta]
+    result, _ = fuse_pass(
         est=est,
         checker=checker,
         frames=images,
         checks=checks,
-        plan_request=PAPER_EXAMPLE,
-        observed_at=[f["observed_at"] for f in meta],
+        scene=_scene(min(observed_at), max(observed_at)),
+        observed_at=observed_at,
         names=[f"frame {k}" for k in range(len(meta))],
         enhanced=labels.astype(np.float64),
     )
     single = [angle_deg(rotation_matrix(*checks[k].angles_deg), rotation_matrix(*angles[k])) for k in inside]
-    fused = angle_deg(rotation_matrix(*result["attitude_lvlh"]["euler_zyx_deg"]), truth)
+    fused = angle_deg(result.attitude_lvlh, truth)
     return fused, float(np.median(single)) if single else math.nan
 
 
@@ -173,7 +180,7 @@ def main() -> int:
     for i in range(N_PASSES):
         rng = np.random.default_rng(2026_12 + i)
         w = windows[int(rng.integers(len(windows)))]
-        still.append(one_pass(est, checker, w, pass_svc.PassOptions(seed=10_000 + i), exact=True))
+        still.append(one_pass(est, checker, w, PassOptions(seed=10_000 + i), exact=True))
         r = still[-1]
         _log(
             f"still pass {i + 1}/{N_PASSES}: {r['frames']} frames ({r['inside']} in range, {r['used']} used), "
@@ -184,14 +191,14 @@ def main() -> int:
     for i in range(N_HELD_OUT):
         rng = np.random.default_rng(7777 + i)
         w = windows[int(rng.integers(len(windows)))]
-        held.append(one_pass(est, checker, w, pass_svc.PassOptions(seed=50_000 + i)))
+        held.append(one_pass(est, checker, w, PassOptions(seed=50_000 + i)))
         r = held[-1]
         _log(f"held-out pass {i + 1}/{N_HELD_OUT}: fused {r['fused']:.3f} deg, single median {r['single_median']:.3f}")
     for i in range(N_SPINNING):
         rng = np.random.default_rng(3026_12 + i)
         w = windows[int(rng.integers(len(windows)))]
         sense = -1.0 if i % 2 else 1.0  # both senses about body z, alternately
-        opts = pass_svc.PassOptions(seed=20_000 + i, spin_deg_s=sense * SPIN_DEG_S, max_frames=40)
+        opts = PassOptions(seed=20_000 + i, spin_deg_s=sense * SPIN_DEG_S, max_frames=40)
         try:
             spin.append({**one_pass(est, checker, w, opts), "sense": sense})
         except Exception as exc:  # a pass whose in-range frames are too few is itself a result
@@ -205,8 +212,8 @@ def main() -> int:
             f"rate {r['rate']:.3f} deg/s"
         )
     # Throughput: a 30-frame pass (sub-apertures 4 deg apart over the highest pass).
-    top = max(windows, key=lambda w: w["max_elevation_deg"])
-    thirty = one_pass(est, checker, top, pass_svc.PassOptions(seed=99, step_deg=4.0, max_frames=30))
+    top = max(windows, key=lambda w: w.max_elevation_deg)
+    thirty = one_pass(est, checker, top, PassOptions(seed=99, step_deg=4.0, max_frames=30))
     RESULTS.write_text(json.dumps({"still": still, "spin": spin, "thirty": thirty, "held": held}, default=_plain))
     write(still, spin, thirty, Radar(), held)
     geometry_figure(top)
@@ -336,16 +343,16 @@ def _held_out_line(held: list[dict[str, Any]]) -> list[str]:
     ]
 
 
-def geometry_figure(window: dict[str, Any], path: Path = GEOMETRY_PLOT) -> None:
+def geometry_figure(window: Window, path: Path = GEOMETRY_PLOT) -> None:
     """Draw how a pass's frames sit in the target's LVLH frame, and what each frame sees."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    opts = pass_svc.PassOptions(max_angle_deg=0.0)  # held so that the middle frame sees it at 0 / 0 / 0
-    meta = pass_svc.pass_geometry_frames(PAPER_EXAMPLE, window, opts, np.random.default_rng(0))
-    t = np.array([(f["observed_at"] - meta[0]["observed_at"]).total_seconds() for f in meta])
+    opts = PassOptions(max_angle_deg=0.0)  # held so that the middle frame sees it at 0 / 0 / 0
+    meta = _simulate(window, opts, np.random.default_rng(0))
+    t = np.array([(f.observed_at - meta[0].observed_at).total_seconds() for f in meta])
     fig = plt.figure(figsize=(11, 4.8))
     ax = fig.add_subplot(1, 2, 1, projection="3d")
     u, v = np.mgrid[0 : 2 * np.pi : 40j, 0 : np.pi : 20j]
@@ -353,10 +360,10 @@ def geometry_figure(window: dict[str, Any], path: Path = GEOMETRY_PLOT) -> None:
     for axis, name in zip(np.eye(3), ("x radial", "y along-track", "z normal"), strict=True):
         ax.quiver(0, 0, 0, *(1.25 * axis), color="k", lw=1.2, arrow_length_ratio=0.08)
         ax.text(*(1.35 * axis), name, fontsize=8)
-    los = np.array([f["observation_in_lvlh"][:, 0] for f in meta])
+    los = np.array([f.observation_in_lvlh[:, 0] for f in meta])
     sc = ax.scatter(*los.T, c=t, cmap="viridis", s=18, depthshade=False)
     for k in np.linspace(0, len(meta) - 1, 4).round().astype(int):
-        o = meta[k]["observation_in_lvlh"]
+        o = meta[k].observation_in_lvlh
         for j, colour in enumerate(("tab:red", "tab:green", "tab:blue")):
             ax.quiver(*o[:, 0], *(0.35 * o[:, j]), color=colour, lw=1, arrow_length_ratio=0.2)
     ax.set_title(
@@ -367,7 +374,7 @@ def geometry_figure(window: dict[str, Any], path: Path = GEOMETRY_PLOT) -> None:
     ax.set_axis_off()
     fig.colorbar(sc, ax=ax, shrink=0.6, label="seconds into the pass")
     ax2 = fig.add_subplot(1, 2, 2)
-    ang = np.degrees(np.unwrap(np.radians([f["attitude_deg"] for f in meta]), axis=0))
+    ang = np.degrees(np.unwrap(np.radians([f.attitude_deg for f in meta]), axis=0))
     for i, name in enumerate(("z", "y", "x")):
         ax2.plot(t, ang[:, i], "o-", ms=3, label=name)
     ax2.axhspan(-45, 45, color="k", alpha=0.06, label="the networks' range")
@@ -375,7 +382,7 @@ def geometry_figure(window: dict[str, Any], path: Path = GEOMETRY_PLOT) -> None:
     ax2.set_ylabel("attitude in the frame's observation frame (deg)")
     ax2.set_title(
         f"a target still in LVLH, seen at 0 / 0 / 0 mid-pass: {len(meta)} frames of 5.1 deg;\n"
-        f"pass culminating at {window['max_elevation_deg']:.0f} deg",
+        f"pass culminating at {window.max_elevation_deg:.0f} deg",
         fontsize=9,
     )
     ax2.grid(alpha=0.3)
@@ -438,7 +445,7 @@ if __name__ == "__main__":
 
         saved = json.loads(RESULTS.read_text())
         write(saved["still"], saved["spin"], saved["thirty"], Radar(), saved.get("held", []))
-        top = max(_windows(), key=lambda w: w["max_elevation_deg"])
+        top = max(_windows(), key=lambda w: w.max_elevation_deg)
         geometry_figure(top)
         sys.exit(0)
     sys.exit(main())

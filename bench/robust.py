@@ -32,7 +32,7 @@ from scipy.ndimage import binary_dilation, binary_erosion
 
 from bench.common import machine
 from bench.sections import replace_section
-from inference.frames import geodesic_deg
+from inference.rotations import geodesic_deg
 from inference.runtime import Estimator
 from inference.simulation.catalogue import simulated
 from inference.simulation.dataset import DatasetSpec

@@ -21,7 +21,7 @@ import numpy as np
 from bench.common import interleaved_medians, machine
 from bench.sections import replace_section
 from inference.evaluation.evaluate import SNR_DB, snr_spec
-from inference.frames import geodesic_deg
+from inference.rotations import geodesic_deg
 from inference.runtime import Estimator
 from inference.simulation.catalogue import FRESH_SEED, KINDS, bad_frames, good_frames, simulated
 from inference.simulation.dataset import DatasetSpec

@@ -40,7 +40,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from inference.frames import euler_from_matrix, geodesic_deg, rotation_matrices
+from inference.rotations import euler_from_matrix, geodesic_deg, rotation_matrices
 from inference.simulation.radar import Radar, projection_matrix
 from inference.simulation.targets import TargetModel, surface_normals
 

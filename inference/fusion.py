@@ -80,7 +80,17 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from inference.frames import euler_from_matrix
+from inference.rotations import (
+    MIRROR,
+    RX_180,
+    angle_deg,
+    chordal_mean,
+    euler_from_matrix,
+    euler_jacobian,
+    so3_exp,
+    so3_log,
+    so3_logs,
+)
 
 Vec = NDArray[np.float64]
 Z90 = 1.6448536269514722  # the two-sided 90 % normal quantile
@@ -148,58 +158,6 @@ class Fused:
     rival: Vec | None = None
 
 
-def so3_log(r: Vec) -> Vec:
-    """Return the rotation vector (rad) of a rotation matrix."""
-    cos = min(1.0, max(-1.0, (float(np.trace(r)) - 1.0) / 2.0))
-    angle = math.acos(cos)
-    w = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
-    if angle < 1e-9:
-        return w / 2.0
-    if math.pi - angle < 1e-6:  # near pi: the axis from the symmetric part
-        vals, vecs = np.linalg.eigh((r + r.T) / 2.0)
-        return np.asarray(vecs[:, -1] * angle)
-    return np.asarray(w * angle / (2.0 * math.sin(angle)))
-
-
-def so3_logs(r: Vec) -> Vec:
-    """Return the rotation vectors (rad) [N, 3] of rotation matrices [N, 3, 3]: ``so3_log`` over a stack."""
-    r = np.asarray(r, float)
-    cos = np.clip((np.trace(r, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
-    angle = np.arccos(cos)
-    w = np.stack([r[:, 2, 1] - r[:, 1, 2], r[:, 0, 2] - r[:, 2, 0], r[:, 1, 0] - r[:, 0, 1]], axis=1)
-    small = angle < 1e-9
-    factor = np.where(small, 0.5, angle / (2.0 * np.sin(np.where(small, 1.0, angle))))
-    out = w * factor[:, None]
-    for k in np.flatnonzero(math.pi - angle < 1e-6):  # near pi: the axis from the symmetric part, one by one
-        out[k] = so3_log(r[k])
-    return np.asarray(out)
-
-
-def angle_deg(a: Vec, b: Vec) -> float:
-    """Return the rotation angle (deg) between two rotation matrices."""
-    cos = min(1.0, max(-1.0, (float(np.sum(a * b)) - 1.0) / 2.0))
-    return math.degrees(math.acos(cos))
-
-
-def chordal_mean(rotations: Vec, weights: Vec) -> Vec:
-    """Return the weighted chordal L2 mean of rotation matrices [N, 3, 3] (SVD projection of their weighted sum)."""
-    m = np.einsum("n,nij->ij", weights, rotations)
-    u, _, vt = np.linalg.svd(m)
-    d = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
-    return np.asarray(u @ d @ vt)
-
-
-def euler_jacobian(r: Vec) -> Vec:
-    """Return J with d(rotation) = [J d(z, y, x)] r: the columns e_z, Rz e_y, Rz Ry e_x (rad, left perturbation)."""
-    z, y, _ = (math.radians(a) for a in euler_from_matrix(r))
-    cz, sz, cy, sy = math.cos(z), math.sin(z), math.cos(y), math.sin(y)
-    return np.array([[0.0, -sz, cz * cy], [0.0, cz, sz * cy], [1.0, 0.0, -sy]])
-
-
-_REFLECT = np.diag([1.0, 1.0, -1.0])  # the body reflected in its own z, seen from the observation frame
-_FLIP_YX = np.diag([1.0, -1.0, -1.0])
-
-
 def _informations(frames: list[PassFrame]) -> list[list[Vec]]:
     """Each frame's information matrix (LVLH, left perturbation, 1/rad^2) for each of its candidates.
 
@@ -220,10 +178,10 @@ def _informations(frames: list[PassFrame]) -> list[list[Vec]]:
         else:
             cov = np.diag((np.radians(np.maximum(np.array(f.axis_bounds_deg, float), 1e-3)) / Z90) ** 2)
         mats = []
-        mirrored = obs @ _REFLECT @ obs.T @ f.candidates[0] @ _REFLECT
+        mirrored = obs @ MIRROR @ obs.T @ f.candidates[0] @ MIRROR
         for c in f.candidates:
             # The near-mirror (z, -y, -x) of the answer: its Euler axes trade with the signs of y and x turned.
-            c_cov = _FLIP_YX @ cov @ _FLIP_YX if angle_deg(c, mirrored) < 1e-6 else cov
+            c_cov = RX_180 @ cov @ RX_180 if angle_deg(c, mirrored) < 1e-6 else cov
             j = obs @ euler_jacobian(obs.T @ c)
             mats.append(np.linalg.inv(j @ c_cov @ j.T))
         out.append(mats)
@@ -516,47 +474,6 @@ def sweep_rates(a_ref: Vec, w_body: Vec, tau: Vec, los: Vec, los_rate: Vec) -> V
     rel = los_rate - np.cross(spin, los)
     rel = rel - np.sum(rel * los, axis=-1, keepdims=True) * los
     return np.asarray(np.linalg.norm(rel, axis=-1))
-
-
-def skew(w: Vec) -> Vec:
-    """Return the cross-product matrices [..., 3, 3] of vectors [..., 3]."""
-    z = np.zeros(w.shape[:-1])
-    return np.stack(
-        [
-            np.stack([z, -w[..., 2], w[..., 1]], -1),
-            np.stack([w[..., 2], z, -w[..., 0]], -1),
-            np.stack([-w[..., 1], w[..., 0], z], -1),
-        ],
-        -2,
-    )
-
-
-def so3_exp(w: Vec) -> Vec:
-    """Return the rotations [..., 3, 3] of rotation vectors [..., 3] (rad), by Rodrigues' formula.
-
-    Written out element by element, I + a K + b (w w^T - theta^2 I): the turning fit calls it
-    tens of thousands of times a pass, mostly on a few dozen vectors.
-    """
-    w = np.asarray(w, float)
-    x, y, z = w[..., 0], w[..., 1], w[..., 2]
-    t2 = x * x + y * y + z * z
-    theta = np.sqrt(t2)
-    small = theta < 1e-9
-    safe = np.where(small, 1.0, theta)
-    a = np.where(small, 1.0, np.sin(safe) / safe)
-    b = np.where(small, 0.5, (1.0 - np.cos(safe)) / safe**2)
-    out = np.empty(w.shape[:-1] + (3, 3))
-    bxy, bxz, byz = b * x * y, b * x * z, b * y * z
-    out[..., 0, 0] = 1.0 + b * (x * x - t2)
-    out[..., 1, 1] = 1.0 + b * (y * y - t2)
-    out[..., 2, 2] = 1.0 + b * (z * z - t2)
-    out[..., 0, 1] = bxy - a * z
-    out[..., 1, 0] = bxy + a * z
-    out[..., 0, 2] = bxz + a * y
-    out[..., 2, 0] = bxz - a * y
-    out[..., 1, 2] = byz - a * x
-    out[..., 2, 1] = byz + a * x
-    return out
 
 
 def observation_in_lvlh(los: Vec, los_rate: Vec, spin_lvlh: Vec | None = None) -> Vec:

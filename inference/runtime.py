@@ -120,8 +120,8 @@ def session_options(threads: int | None = None) -> Any:
 
 
 @dataclass(frozen=True)
-class Estimate:
-    """Attitudes for a batch: Euler z, y, x (deg), enhanced frames, and seconds per stage."""
+class NetworkOutput:
+    """What the networks answer for a batch (not yet fitted or checked): Euler z, y, x (deg), enhanced frames, and seconds per stage."""
 
     angles_deg: NDArray[np.float32]
     enhanced: NDArray[np.float32]
@@ -134,7 +134,7 @@ class _Job:
 
     frames: NDArray[np.float32]
     done: bool = False
-    result: Estimate | None = None
+    result: NetworkOutput | None = None
     error: BaseException | None = None
 
 
@@ -206,7 +206,7 @@ class Estimator:
         """Run Swin on (enhanced) frames [N, H, W]; return Euler z, y, x in degrees [N, 3]."""
         return np.asarray(self._run("swin", frames) * self.angle_scale_deg, np.float32)
 
-    def estimate(self, frames: NDArray[np.float32]) -> Estimate:
+    def estimate(self, frames: NDArray[np.floating]) -> NetworkOutput:
         """Estimate attitudes of normalised frames [N, H, W] (``inference.frames.normalise_frame`` output).
 
         Thread-safe. Concurrent callers' frames share runs; each caller gets its own
@@ -250,14 +250,14 @@ class Estimator:
 
     def _run_jobs(self, jobs: list[_Job]) -> None:
         frames = np.concatenate([j.frames for j in jobs]) if len(jobs) > 1 else jobs[0].frames
-        res: Estimate | None = None
+        res: NetworkOutput | None = None
         error: BaseException | None = None
         try:
             t0 = time.perf_counter()
             enhanced = self.enhance(frames) if self.enhances else frames
             t1 = time.perf_counter()
             angles = self.attitude(enhanced)
-            res = Estimate(angles, enhanced, {"unetpp": t1 - t0, "swin": time.perf_counter() - t1})
+            res = NetworkOutput(angles, enhanced, {"unetpp": t1 - t0, "swin": time.perf_counter() - t1})
         except Exception as exc:  # every request in the run gets the error; the estimator stays usable
             error = exc
         with self._cv:
@@ -266,7 +266,7 @@ class Estimator:
                 n = len(j.frames)
                 if res is not None:
                     share = n / max(len(frames), 1)
-                    j.result = Estimate(
+                    j.result = NetworkOutput(
                         res.angles_deg[k : k + n],
                         res.enhanced[k : k + n],
                         {stage: t * share for stage, t in res.timings_s.items()},

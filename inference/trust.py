@@ -51,7 +51,7 @@ from inference.fit import (
     mirror,
     silhouette_iou,
 )
-from inference.frames import geodesic_deg
+from inference.rotations import geodesic_deg
 from inference.simulation.radar import Radar
 from inference.simulation.targets import TargetModel
 

@@ -40,9 +40,12 @@ def read_json(path: str) -> Any:
         raise CliError(f"{path} is not JSON: {exc.msg} at line {exc.lineno}") from None
 
 
-def input_line(exc: Any) -> str:
-    """One line for an ``app.errors.InputError``: the field's path, then what is wrong."""
-    return ".".join(str(x) for x in exc.loc) + ": " + exc.message
+def input_line(exc: ValueError) -> str:
+    """One line for any domain error (``app.errors.DOMAIN_ERRORS``): the field's path, then what is wrong."""
+    from app.errors import input_error
+
+    loc, message = input_error(exc)
+    return ".".join(str(x) for x in loc) + ": " + message if loc else message
 
 
 def validation_line(exc: ValidationError) -> str:

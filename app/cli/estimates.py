@@ -7,22 +7,26 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from app.cli.common import CliError, call_server, input_line, load_settings, local_models, print_listing, utc_text
+
+if TYPE_CHECKING:
+    from app.schemas import EstimateResult
 
 
 def cmd_estimates(args: argparse.Namespace) -> int:
     from urllib.parse import quote
+
+    from app.schemas import EstimatePublic
 
     if args.estimates_cmd == "show":
         body = call_server(args, "GET", f"/v1/estimates/{quote(args.id, safe='')}").json()
         if args.json:
             print(json.dumps(body, indent=2))
         else:
-            _print_checked(
-                body, prefix=f"estimate {body['id']} ({body['input_name']}, {utc_text(body['created_at'])}): "
-            )
+            e = EstimatePublic.model_validate(body)
+            _print_checked(e, prefix=f"estimate {e.id} ({e.input_name}, {utc_text(e.created_at.isoformat())}): ")
         return 0
 
     def row(e: dict[str, Any]) -> str:
@@ -40,31 +44,31 @@ def cmd_estimates(args: argparse.Namespace) -> int:
     )
 
 
-def _print_checked(body: dict[str, Any], prefix: str = "") -> None:
-    """Print an estimate's answer (the API's JSON shape): attitude, network answer, quality, alternatives."""
-    z, y, x = body["attitude"]["euler_zyx_deg"]
-    q = body["attitude"]["quaternion_wxyz"]
-    kind = "fitted" if body.get("refined") else "network"
+def _print_checked(body: EstimateResult, prefix: str = "") -> None:
+    """Print an estimate's answer (the service's or a local one, one typed shape): attitude, quality, alternatives."""
+    z, y, x = body.attitude.euler_zyx_deg
+    q = body.attitude.quaternion_wxyz
+    kind = "fitted" if body.refined else "network"
     print(
-        f"{prefix}z {z:.2f} y {y:.2f} x {x:.2f} deg ({kind}, observation frame, target {body.get('target')}); "
+        f"{prefix}z {z:.2f} y {y:.2f} x {x:.2f} deg ({kind}, observation frame, target {body.target}); "
         f"quaternion w x y z {', '.join(f'{v:.5f}' for v in q)}"
     )
-    net = body.get("attitude_network")
-    if net and body.get("refined"):
-        nz, ny, nx = net["euler_zyx_deg"]
+    net = body.attitude_network
+    if net and body.refined:
+        nz, ny, nx = net.euler_zyx_deg
         print(f"Swin alone: z {nz:.2f} y {ny:.2f} x {nx:.2f} deg")
-    qual = body.get("quality")
+    qual = body.quality
     if qual:
-        bounds = " / ".join("-" if b is None else f"{b:.2f}" for b in qual["uncertainty_deg"])
-        state = "trusted" if qual["trusted"] else "NOT TRUSTED"
-        print(f"{state}: silhouette IoU {qual['silhouette_iou']:.3f}, 90 % bound z / y / x {bounds} deg")
-        for r in qual["reasons"]:
+        bounds = " / ".join("-" if b is None else f"{b:.2f}" for b in qual.uncertainty_deg)
+        state = "trusted" if qual.trusted else "NOT TRUSTED"
+        print(f"{state}: silhouette IoU {qual.silhouette_iou:.3f}, 90 % bound z / y / x {bounds} deg")
+        for r in qual.reasons:
             print(f"  - {r}")
-    for alt in body.get("alternatives", []):
-        az, ay, ax = alt["euler_zyx_deg"]
+    for alt in body.alternatives:
+        az, ay, ax = alt.euler_zyx_deg
         print(
-            f"also fits: z {az:.2f} y {ay:.2f} x {ax:.2f} deg ({alt['distance_deg']:.0f} deg away, "
-            f"IoU {alt['silhouette_iou']:.3f}, fit {alt['fit_gap']:+.4f})"
+            f"also fits: z {az:.2f} y {ay:.2f} x {ax:.2f} deg ({alt.distance_deg:.0f} deg away, "
+            f"IoU {alt.silhouette_iou:.3f}, fit {alt.fit_gap:+.4f})"
         )
 
 
@@ -99,8 +103,8 @@ def _one_frame(args: argparse.Namespace, data: bytes) -> tuple[str, bytes, bool]
 def cmd_estimate(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from app.errors import InputError
-    from inference.errors import InferenceError
+    from app.errors import DOMAIN_ERRORS, input_error
+    from app.schemas import EstimatePublic, EstimateResult
 
     if (args.plan_id or args.observed_at) and not args.server:
         raise CliError("--plan-id and --observed-at need --server: plans are stored by the service")
@@ -133,10 +137,9 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         if cells:
             form.update({"range_cell_m": str(cells[0]), "cross_range_cell_m": str(cells[1])})
         r = call_server(args, "POST", "/v1/estimates", files={"file": (name, data)}, data=form, timeout=60)
-        body = r.json()
-        _print_checked(body, prefix=f"estimate {body['id']}: ")
+        answer = EstimatePublic.model_validate(r.json())
+        _print_checked(answer, prefix=f"estimate {answer.id}: ")
         return 0
-    from app.services import estimation as svc
     from app.services import uploads as upload_svc
 
     settings = load_settings()
@@ -153,11 +156,16 @@ def cmd_estimate(args: argparse.Namespace) -> int:
             frame, res.enhanced[0], res.angles_deg[0] if checker.networks else None, not args.no_refine
         )
         t_fit = time.perf_counter() - t0
-    except InputError as exc:
-        raise CliError(exc.message) from None
-    except InferenceError as exc:
-        raise CliError(str(exc)) from None
-    body = {**svc.checked_json(checked), "target": checker.model.name}
+    except DOMAIN_ERRORS as exc:
+        raise CliError(input_error(exc)[1]) from None
+    body = EstimateResult.from_checked(
+        checked,
+        target=checker.model.name,
+        model=est.identity,
+        timings_s={**res.timings_s, "fit": t_fit},
+        input_normalised=bool(args.normalised or file_normalised),
+        cells_m=cells,
+    )
     _print_checked(body)
     print(
         f"UNet++ {res.timings_s['unetpp'] * 1000:.0f} ms, Swin {res.timings_s['swin'] * 1000:.0f} ms, "

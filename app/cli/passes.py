@@ -8,7 +8,7 @@ import math
 import sys
 from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pydantic import ValidationError
 
@@ -21,6 +21,9 @@ from app.cli.common import (
     read_json,
     validation_line,
 )
+
+if TYPE_CHECKING:
+    from app.schemas import PassResult
 
 
 def add_pass_arguments(p: argparse.ArgumentParser) -> None:
@@ -104,10 +107,14 @@ def _plan_for_pass(request: Any) -> tuple[dict[str, Any], list[dict[str, Any]]]:
 def cmd_simulate_pass(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from app.errors import InputError
-    from app.services import passes as pass_svc
+    from app.errors import DOMAIN_ERRORS
+    from app.services.passes import pass_record
+    from app.services.scenes import scene_for, windows_of
     from inference.simulation.dataset import parse_snr
     from inference.simulation.radar import Radar
+    from scene import choose_window
+    from scene.fusion import reversed_reading
+    from scene.simulation import PassOptions, render_pass, simulate_pass
 
     if not args.out:
         raise CliError("give --out DIR for the pass's frames")
@@ -127,7 +134,7 @@ def cmd_simulate_pass(args: argparse.Namespace) -> int:
     try:
         radar = Radar(args.carrier_hz, args.bandwidth_hz, args.n_range, args.n_azimuth, args.aperture_deg)
         request, windows = _plan_for_pass(read_json(args.pass_request))
-        opts = pass_svc.PassOptions(
+        opts = PassOptions(
             window=args.window,
             aperture_deg=args.aperture_deg,
             step_deg=args.step_deg,
@@ -141,9 +148,10 @@ def cmd_simulate_pass(args: argparse.Namespace) -> int:
             within_deg=args.within_deg,
             seed=args.seed,
         )
-        index, window = pass_svc.choose_window(windows, opts.window)
+        index, chosen = choose_window(windows_of({"access_windows": windows}), opts.window)
+        window = windows[index]
         rng = np.random.default_rng(opts.seed)
-        meta = pass_svc.pass_geometry_frames(request, window, opts, rng)
+        meta = simulate_pass(scene_for(request, chosen.rise, chosen.set, field="window"), opts, rng)
         model = None
         if args.model:
             from inference.simulation.dataset import DatasetSpec, build_model
@@ -154,12 +162,10 @@ def cmd_simulate_pass(args: argparse.Namespace) -> int:
             f"{window['max_elevation_deg']:.1f} deg; rendering {len(meta)} frames",
             file=sys.stderr,
         )
-        images, snrs = pass_svc.render_pass(meta, opts, rng, radar, model)
-    except InputError as exc:
+        images, snrs = render_pass(meta, opts, rng, radar, model)
+    except DOMAIN_ERRORS as exc:
         raise CliError(input_line(exc)) from None
-    record = pass_svc.pass_record(
-        meta, snrs, opts, index, window, request, (radar.range_cell_m, radar.cross_range_cell_m)
-    )
+    record = pass_record(meta, snrs, opts, index, window, request, (radar.range_cell_m, radar.cross_range_cell_m))
     partial = out.with_name(out.name + ".partial")
     partial.mkdir(parents=True, exist_ok=False)
     np.savez_compressed(partial / "frames.npz", image=images.astype(np.float32))
@@ -169,7 +175,7 @@ def cmd_simulate_pass(args: argparse.Namespace) -> int:
     seen = [f["attitude_observation"]["euler_zyx_deg"] for f in record["frames"]]
     inside = sum(max(abs(a) for a in angles) <= 45.0 for angles in seen)
     # A target turning against the line of sight faster than it sweeps is read reversed in cross-range.
-    reversed_ = sum(max(abs(a) for a in pass_svc.reversed_reading(angles)) <= 45.0 for angles in seen)
+    reversed_ = sum(max(abs(a) for a in reversed_reading(angles)) <= 45.0 for angles in seen)
     print(
         f"{len(meta)} frames in {out} ({inside} within the networks' 45 deg range"
         + (f", {reversed_} more read reversed in cross-range" if reversed_ else "")
@@ -211,8 +217,8 @@ def _contact_sheet(images: Any, record: dict[str, Any], path: Path, most: int = 
 def cmd_pass(args: argparse.Namespace) -> int:
     """Fuse a simulated (or any) pass: each frame estimated and fitted, placed in LVLH, fused."""
 
-    from app.errors import InputError
-    from inference.errors import InferenceError
+    from app.errors import DOMAIN_ERRORS
+    from app.schemas import PassResult
 
     folder = Path(args.folder)
     rec = read_json(str(folder / "pass.json"))
@@ -228,8 +234,10 @@ def cmd_pass(args: argparse.Namespace) -> int:
         ) from None
     if args.server:
         return _pass_on_server(args, data, rec)
-    from app.services import passes as pass_svc
     from app.services import uploads as upload_svc
+    from app.services.estimation import prepare_frames
+    from app.services.scenes import scene_for
+    from scene.fusion import fit_and_fuse, pass_span, sweeps_from
 
     settings = load_settings()
     request = rec.get("plan_request")
@@ -243,24 +251,25 @@ def cmd_pass(args: argparse.Namespace) -> int:
         if len(uploads) != len(times):
             raise CliError(f"frames.npz holds {len(uploads)} frames and pass.json {len(times)} times")
         integration, aperture = _integration(rec)
-        sweeps = pass_svc.sweeps_from(integration, aperture, len(times), checker.radar.aperture_deg)
-        fused = pass_svc.fit_and_fuse(
+        sweeps = sweeps_from(integration, aperture, len(times), checker.radar.aperture_deg)
+        frames, prep_s = prepare_frames(
+            est=est, checker=checker, uploads=uploads, resample=False, normalised=True, cells_m=None
+        )
+        fused = fit_and_fuse(
             est=est,
             checker=checker,
-            uploads=uploads,
-            plan_request=request,
+            frames=frames,
+            scene=scene_for(request, *pass_span(times, sweeps)),
             observed_at=times,
-            normalised=True,
             names=[f"frame {k}" for k in range(len(times))],
             sweeps=sweeps,
+            preprocess_s=prep_s,
         )
-        result = fused.result
-    except InputError as exc:
+        result = PassResult.from_pass(fused.attitude, target=checker.model.name, timings_s=fused.timings_s)
+    except DOMAIN_ERRORS as exc:
         raise CliError(input_line(exc)) from None
-    except InferenceError as exc:
-        raise CliError(str(exc)) from None
     if args.json:
-        print(json.dumps(result, indent=1, default=str))
+        print(json.dumps(result.model_dump(mode="json"), indent=1))
     else:
         _print_pass(result, rec)
         print(f"{len(times)} frames: estimated and fitted in {fused.fit_s:.1f} s, fused in {fused.fuse_s:.1f} s")
@@ -295,68 +304,70 @@ def _pass_on_server(args: argparse.Namespace, data: bytes, rec: dict[str, Any]) 
             form["aperture_deg"] = str(aperture)
     if args.target:
         form["target"] = args.target
+    from app.schemas import PassPublic
+
     r = call_server(args, "POST", "/v1/passes", files={"files": ("frames.npz", data)}, data=form, timeout=300)
     body = r.json()
+    answer = PassPublic.model_validate(body)
     if args.json:
         print(json.dumps(body, indent=1))
     else:
-        print(f"pass {body['id']}:")
-        _print_pass(body, rec)
+        print(f"pass {answer.id}:")
+        _print_pass(answer, rec)
     if args.plot:
-        _plot_pass(body, rec, args.plot)
+        _plot_pass(answer, rec, args.plot)
     return 0
 
 
 def _truth_lvlh(rec: dict[str, Any], k: int) -> Any:
-    from inference.frames import rotation_matrix
+    from inference.rotations import rotation_matrix
 
     f = rec["frames"][k]
     return rotation_matrix(*f["attitude_lvlh"]["euler_zyx_deg"]) if "attitude_lvlh" in f else None
 
 
-def _print_pass(result: dict[str, Any], rec: dict[str, Any]) -> None:
+def _print_pass(result: PassResult, rec: dict[str, Any]) -> None:
     import numpy as np
 
-    from inference.frames import rotation_matrix
-    from inference.fusion import angle_deg
+    from inference.rotations import angle_deg, rotation_matrix
 
-    z, y, x = result["attitude_lvlh"]["euler_zyx_deg"]
-    bz, by, bx = result["uncertainty_deg"]
+    z, y, x = result.attitude_lvlh.euler_zyx_deg
+    bz, by, bx = result.uncertainty_deg
     print(
         f"fused, body to LVLH: z {z:.2f} y {y:.2f} x {x:.2f} deg (90 % bound {bz:.2f} / {by:.2f} / {bx:.2f}); "
-        f"{result['used']} frames used, {result['rejected']} rejected"
-        f"{'' if result.get('trusted', True) else '; NOT TRUSTED'}"
+        f"{result.used} frames used, {result.rejected} rejected"
+        f"{'' if result.trusted else '; NOT TRUSTED'}"
     )
-    print(result["stability"])
-    common = result.get("common_fit")
+    print(result.stability)
+    common = result.common_fit
     if common:
         print(
-            f"fitted to {common['frames']} frames' silhouettes at once (mean soft IoU {common['silhouette_iou']:.3f}): "
-            f"{common['moved_deg']:.3f} deg from their robust mean"
+            f"fitted to {common.frames} frames' silhouettes at once (mean soft IoU {common.silhouette_iou:.3f}): "
+            f"{common.moved_deg:.3f} deg from their robust mean"
         )
-    alt = result.get("alternative_lvlh")
+    alt = result.alternative_lvlh
     if alt:
-        az, ay, ax = alt["euler_zyx_deg"]
+        az, ay, ax = alt.euler_zyx_deg
         print(
             f"as many frames agree with z {az:.2f} y {ay:.2f} x {ax:.2f} deg (the near-mirror: the image plane "
             "barely turns over this pass); the frames' own answers chose the one above"
         )
     errors = []
-    for f in result["frames"]:
-        truth = _truth_lvlh(rec, f["index"]) if f["index"] < len(rec.get("frames", [])) else None
+    for f in result.frames:
+        truth = _truth_lvlh(rec, f.index) if f.index < len(rec.get("frames", [])) else None
         err = ""
         if truth is not None:
-            errors.append(angle_deg(rotation_matrix(*f["attitude_lvlh"]["euler_zyx_deg"]), truth))
+            errors.append(angle_deg(rotation_matrix(*f.attitude_lvlh.euler_zyx_deg), truth))
             err = f", {errors[-1]:.2f} deg from the truth"
-        why = f["rejected_because"] or ""
-        state = "used" if f["used"] else f"rejected: {why if len(why) <= 90 else why[:87] + '...'}"
-        at = f["observed_at"] if isinstance(f["observed_at"], str) else f["observed_at"].isoformat()
+        why = f.rejected_because or ""
+        state = "used" if f.used else f"rejected: {why if len(why) <= 90 else why[:87] + '...'}"
+        at = f.observed_at.isoformat()
         sweep = ""
-        if f.get("sweep_deg_s") is not None:
-            sweep = f", sweep {f['sweep_deg_s']:.3f} deg/s (answer's {f['sweep_model_deg_s']:.3f})"
-        print(f"  {at[11:19]} {f['branch']:<12} residual {f['residual_deg']:.2f} deg{err}{sweep}; {state}")
+        if f.sweep_deg_s is not None and f.sweep_model_deg_s is not None:
+            sweep = f", sweep {f.sweep_deg_s:.3f} deg/s (answer's {f.sweep_model_deg_s:.3f})"
+        print(f"  {at[11:19]} {f.branch:<12} residual {f.residual_deg:.2f} deg{err}{sweep}; {state}")
     truth = _truth_lvlh(rec, 0) if rec.get("frames") else None
-    if errors and truth is not None and result["stable"]:
+    if errors and truth is not None and result.stable:
         off = angle_deg(rotation_matrix(z, y, x), truth)
         print(
             f"against the simulated truth: fused {off:.3f} deg, single frames' median {float(np.median(errors)):.3f} deg"
@@ -367,35 +378,29 @@ def _verdict(stable: bool | None) -> str:
     return "stable" if stable else "undecided (too few trusted frames)" if stable is None else "TURNING"
 
 
-def _plot_pass(result: dict[str, Any], rec: dict[str, Any], path: str) -> None:
+def _plot_pass(result: PassResult, rec: dict[str, Any], path: str) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
 
-    def when(v: Any) -> datetime:
-        return v if isinstance(v, datetime) else datetime.fromisoformat(v)
-
-    times = [when(f["observed_at"]) for f in result["frames"]]
+    times = [f.observed_at for f in result.frames]
     t0 = min(times)
     t = np.array([(x - t0).total_seconds() for x in times])
-    each = np.array([f["attitude_lvlh"]["euler_zyx_deg"] for f in result["frames"]])
-    bounds = np.array(
-        [[b if b is not None else np.nan for b in f["quality"]["uncertainty_deg"]] for f in result["frames"]]
-    )
-    used = np.array([f["used"] for f in result["frames"]])
-    fused = np.array(result["attitude_lvlh"]["euler_zyx_deg"])
-    ub = np.array(result["uncertainty_deg"])
-    alt = np.array(result["alternative_lvlh"]["euler_zyx_deg"]) if result.get("alternative_lvlh") else None
+    each = np.array([f.attitude_lvlh.euler_zyx_deg for f in result.frames])
+    bounds = np.array([[b if b is not None else np.nan for b in f.quality.uncertainty_deg] for f in result.frames])
+    used = np.array([f.used for f in result.frames])
+    fused = np.array(result.attitude_lvlh.euler_zyx_deg)
+    ub = np.array(result.uncertainty_deg)
+    alt = np.array(result.alternative_lvlh.euler_zyx_deg) if result.alternative_lvlh else None
     model = None
-    if result["stable"] is False and result.get("attitude_at") is not None:
-        from inference.frames import euler_from_matrix, rotation_matrix
-        from inference.fusion import so3_exp
+    if result.stable is False and result.attitude_at is not None:
+        from inference.rotations import euler_from_matrix, rotation_matrix, so3_exp
 
-        t_ref = (when(result["attitude_at"]) - t0).total_seconds()
+        t_ref = (result.attitude_at - t0).total_seconds()
         dense = np.linspace(float(t.min()), float(t.max()), 200)
-        w = np.radians(np.array(result["rate_deg_s"], float))
+        w = np.radians(np.array(result.rate_deg_s, float))
         a_ref = rotation_matrix(*fused)
         model = np.array([euler_from_matrix(a_ref @ so3_exp((x - t_ref) * w)) for x in dense])
         model = fused + (model - fused + 180.0) % 360.0 - 180.0  # continuous through +-180
@@ -408,10 +413,10 @@ def _plot_pass(result: dict[str, Any], rec: dict[str, Any], path: str) -> None:
         if (~used).any():  # rejected frames far off are drawn at the edge, so the used ones keep their scale
             ax.plot(t[~used], np.clip(each[~used, i], lo, hi), "x", color="tab:red", ms=7, label="rejected (clipped)")
         ax.set_ylim(lo, hi)
-        if result["stable"]:
+        if result.stable:
             ax.axhline(fused[i], color="tab:orange", label="fused")
             ax.axhspan(fused[i] - ub[i], fused[i] + ub[i], color="tab:orange", alpha=0.2)
-        if result["stable"] and alt is not None:  # the other branch as many frames agree with; off scale: its value
+        if result.stable and alt is not None:  # the other branch as many frames agree with; off scale: its value
             v = fused[i] + (alt[i] - fused[i] + 180.0) % 360.0 - 180.0
             if lo <= v <= hi:
                 ax.axhline(v, color="tab:purple", ls=":", label="other branch (alternative_lvlh)")
@@ -420,9 +425,9 @@ def _plot_pass(result: dict[str, Any], rec: dict[str, Any], path: str) -> None:
         elif model is not None:  # turning: the model's attitude over the pass, its bound at attitude_at
             ax.plot(dense, model[:, i], color="tab:orange", label="turning model")
             ax.errorbar([t_ref], [fused[i]], yerr=[ub[i]], fmt="D", color="tab:orange", capsize=3, ms=5)
-        truth = [_truth_lvlh(rec, f["index"]) for f in result["frames"] if f["index"] < len(rec.get("frames", []))]
+        truth = [_truth_lvlh(rec, f.index) for f in result.frames if f.index < len(rec.get("frames", []))]
         if truth and truth[0] is not None and len(truth) == len(t):
-            from inference.frames import euler_from_matrix
+            from inference.rotations import euler_from_matrix
 
             tv = np.array([euler_from_matrix(r) for r in truth])
             ax.plot(t, tv[:, i], "k--", lw=1, label="truth")
@@ -431,8 +436,7 @@ def _plot_pass(result: dict[str, Any], rec: dict[str, Any], path: str) -> None:
     axes[0].legend(fontsize=8, ncol=4)
     axes[-1].set_xlabel(f"seconds after {t0:%Y-%m-%d %H:%M:%S} UTC")
     fig.suptitle(
-        f"pass attitude, body to LVLH: {result['used']} used, {result['rejected']} rejected; "
-        f"{_verdict(result['stable'])}",
+        f"pass attitude, body to LVLH: {result.used} used, {result.rejected} rejected; {_verdict(result.stable)}",
         fontsize=10,
     )
     fig.tight_layout()

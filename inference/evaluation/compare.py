@@ -35,7 +35,7 @@ def load_run(run_dir: str | Path) -> dict[str, Any]:
         raise InferenceError(f"{path} is not a gsa train record (no {', '.join(missing)})", field="runs")
     if not record["history"]:
         raise InferenceError(f"{path} has no finished epoch yet", field="runs")
-    return record  # type: ignore[no-any-return]
+    return record
 
 
 def describe(record: dict[str, Any]) -> str:

@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from inference.errors import InferenceError, module_main
 from inference.files import write_json
-from inference.frames import geodesic_deg
+from inference.rotations import geodesic_deg
 from inference.runtime import Estimator
 from inference.simulation.dataset import DatasetSpec, load_manifest, load_range, render_frames, split_ranges
 from inference.simulation.radar import Radar
@@ -81,7 +81,7 @@ def score(
 
 def summarise(pred: NDArray[np.floating], true: NDArray[np.floating]) -> dict[str, Any]:
     err = pred - true
-    geo = geodesic_deg(pred, true)
+    geo = geodesic_deg(np.asarray(pred, np.float64), np.asarray(true, np.float64))
     return {
         "n": int(len(true)),
         "mae_deg": np.abs(err).mean(axis=0).round(4).tolist(),

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from inference.errors import ModelFileError, RadarError
-from inference.frames import rotation_matrix
+from inference.rotations import rotation_matrix
 from inference.simulation.radar import (
     Imager,
     Radar,

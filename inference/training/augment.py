@@ -16,6 +16,8 @@ torch device, and draws only from the generator it is given.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import torch
 import torch.nn.functional as F
 
@@ -71,7 +73,13 @@ def perturb_silhouettes(x: torch.Tensor, share: float, gen: torch.Generator) -> 
         torch.full((n,), -1, device=x.device, dtype=torch.long),
     )
     out = x
-    for k, make in enumerate((_eroded, _dilated, lambda t: _part_missing(t, gen), lambda t: _edges_jittered(t, gen))):
+    makers: tuple[Callable[[torch.Tensor], torch.Tensor], ...] = (
+        _eroded,
+        _dilated,
+        lambda t: _part_missing(t, gen),
+        lambda t: _edges_jittered(t, gen),
+    )
+    for k, make in enumerate(makers):
         rows = torch.nonzero(pick == k)[:, 0]
         if len(rows):
             out = out.index_copy(0, rows, make(x[rows]))

@@ -221,7 +221,7 @@ def train(data_dir: str | Path, out_dir: str | Path, options: TrainOptions | Non
     for epoch in range(run.start_epoch, opts.epochs):
         t_epoch = time.perf_counter()
         losses = _epoch(run, epoch, rng, run_u, run_s)
-        record = {"epoch": epoch + 1, **losses, **_score(run), "seconds": time.perf_counter() - t_epoch}
+        record: dict[str, Any] = {"epoch": epoch + 1, **losses, **_score(run), "seconds": time.perf_counter() - t_epoch}
         run.history.append(record)
         mae, ema_mae = record["test_mae_deg"], record.get("ema_test_mae_deg")
         print(

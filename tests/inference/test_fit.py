@@ -5,7 +5,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from inference.fit import Renderer, fit, mirror, silhouette_iou
-from inference.frames import geodesic_deg, rotation_matrices, rotation_matrix
+from inference.rotations import geodesic_deg, rotation_matrices, rotation_matrix
 from inference.simulation.radar import Imager, Radar
 from inference.simulation.scene import label_mask
 from inference.simulation.targets import comsat_like, tiangong_like
@@ -136,7 +136,7 @@ def test_the_compiled_occupancy_matches_a_numpy_formulation(tiangong, window):
 def test_a_still_pass_fitted_to_all_its_frames_at_once_finds_the_attitude_they_share():
     """Five exact labels of one body attitude seen from five sides; the common fit starts 1 deg off and must return."""
     from inference.fit import COMMON_SPACING_PX, fit_common
-    from inference.frames import euler_from_matrix
+    from inference.rotations import euler_from_matrix
 
     rng = np.random.default_rng(7)
     truth = Rotation.from_euler("ZYX", [20.0, -10.0, 15.0], degrees=True).as_matrix()  # body to LVLH

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from inference.fusion import PassFrame, angle_deg, chordal_mean, fuse, observation_attitude, so3_log, so3_logs
+from inference.fusion import PassFrame, fuse, observation_attitude
+from inference.rotations import angle_deg, chordal_mean, so3_log, so3_logs
 
 M = np.diag([1.0, 1.0, -1.0])  # the near-mirror: M R M, a reflection through the frame's image plane
 

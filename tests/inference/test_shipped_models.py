@@ -17,8 +17,7 @@ import numpy as np
 import pytest
 
 from inference.errors import ModelFileError
-from inference.frames import rotation_matrix
-from inference.fusion import angle_deg
+from inference.rotations import angle_deg, rotation_matrix
 from inference.runtime import DEFAULT_MODEL_DIR, Estimator
 from inference.simulation.catalogue import at_attitudes
 

@@ -2,13 +2,7 @@
 
 from datetime import UTC, datetime
 
-from planner.elements import Elements
-from planner.propagation import Station
-
-PAPER_EPOCH = datetime(2022, 11, 27, 16, 0, tzinfo=UTC)
-PAPER_TARGET = Elements(PAPER_EPOCH, 700.0, 600.0, 43.0, 290.0, 100.0, 200.0)
-PAPER_OBSERVER = Elements(PAPER_EPOCH, 700.0, 350.0, 99.0, 10.0, 0.0, 316.5)
-PAPER_STATION = Station(31.1, 121.3, 0.0, 0.0)
+from planner.examples import PAPER_EPOCH, PAPER_OBSERVER, PAPER_STATION, PAPER_TARGET  # noqa: F401
 
 # ISS, the TLE of the sgp4 and skyfield documentation.
 ISS_L1 = "1 25544U 98067A   08264.51782528 -.00002182  00000-0 -11606-4 0  2927"

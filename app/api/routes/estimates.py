@@ -107,7 +107,7 @@ async def create_estimate(
     asked: EstimateFormDep,
     file: Annotated[UploadFile, File(description=FILE)],
     snr_db: Annotated[float | None, Form(ge=-100, le=200, description=SNR_DB)] = None,
-) -> dict[str, Any]:
+) -> EstimatePublic:
     """Estimate the attitude of one ISAR frame: Swin's answer, fitted to the target's projection and checked; stored."""
     checker = checker_for(checkers, asked.target)
     est = models_for(model_sets, checker)
@@ -129,7 +129,7 @@ async def create_estimate(
         asked=asked,
         snr_db=snr_db,
     )
-    return EstimatePublic.row_json(rows[0])
+    return EstimatePublic.from_row(rows[0])
 
 
 @router.post(
@@ -143,7 +143,7 @@ async def create_estimates_batch(
     checkers: CheckersDep,
     asked: EstimateFormDep,
     files: Annotated[list[UploadFile], File(description="several frames, or one .npz stack [N, H, W]; " + FILE)],
-) -> dict[str, Any]:
+) -> EstimatesPublic:
     """Estimate several frames as one batch through the models, each fitted and checked; one stored row each."""
     checker = checker_for(checkers, asked.target)
     est = models_for(model_sets, checker)
@@ -158,7 +158,7 @@ async def create_estimates_batch(
         uploads=uploads,
         asked=asked,
     )
-    return {"data": [EstimatePublic.row_json(r) for r in rows], "count": len(rows)}
+    return EstimatesPublic(data=[EstimatePublic.from_row(r) for r in rows], count=len(rows))
 
 
 @router.get("", response_model=EstimatesPublic)
@@ -169,7 +169,7 @@ def list_estimates(
     plan_id: Annotated[Text | None, Query(max_length=36)] = None,
     created_after: IsoDateTime | None = None,
     created_before: IsoDateTime | None = None,
-) -> dict[str, Any]:
+) -> EstimatesPublic:
     """List the caller's estimates, newest first, filtered by plan and creation time."""
     rows, total = crud.list_estimates(
         session=session,
@@ -180,7 +180,7 @@ def list_estimates(
         created_after=created_after,
         created_before=created_before,
     )
-    return {"data": [EstimatePublic.row_json(r) for r in rows], "count": total}
+    return EstimatesPublic(data=[EstimatePublic.from_row(r) for r in rows], count=total)
 
 
 def _owned(session: Any, operator_id: str, estimate_id: Annotated[Text, PathParam()]) -> Estimate:
@@ -197,9 +197,9 @@ def _owned(session: Any, operator_id: str, estimate_id: Annotated[Text, PathPara
 )
 def read_estimate(
     session: SessionDep, operator: CurrentOperator, estimate_id: Annotated[Text, PathParam()]
-) -> dict[str, Any]:
+) -> EstimatePublic:
     """Return one of the caller's estimates."""
-    return EstimatePublic.row_json(_owned(session, operator.id, estimate_id))
+    return EstimatePublic.from_row(_owned(session, operator.id, estimate_id))
 
 
 def _png(settings: Any, digest: str) -> Response:
@@ -240,12 +240,12 @@ def outline_png(
     """
     from inference.errors import ModelFileError
 
-    e = _owned(session, operator.id, estimate_id)
+    stored = EstimatePublic.from_row(_owned(session, operator.id, estimate_id))
     try:
-        checker = checkers.get(e.result.get("target") or checkers.default)
+        checker = checkers.get(stored.target or checkers.default)
     except ModelFileError:  # a target this service no longer has
         raise HTTPException(status_code=404, detail="the estimate's target is not served here") from None
-    angles = np.asarray(e.result["attitude"]["euler_zyx_deg"], float)[None]
+    angles = np.asarray(stored.attitude.euler_zyx_deg, float)[None]
     occupancy = checker.renderer.occupancy(angles)[0] > 0.5
     return Response(images.outline_png(occupancy), media_type="image/png")
 

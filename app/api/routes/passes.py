@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated
 
 from fastapi import APIRouter, File, Form, HTTPException, UploadFile
 from fastapi import Path as PathParam
@@ -20,11 +20,8 @@ from app.api.deps import (
     models_for,
     read_uploads,
 )
-from app.db.models import Pass, utcnow
-from app.errors import InputError
 from app.schemas import IsoDateTime, PassPublic, Text
 from app.services import passes as pass_svc
-from app.services import uploads as upload_svc
 
 router = APIRouter(prefix="/passes", tags=["passes"])
 
@@ -38,65 +35,6 @@ APERTURE_DEG = (
     "the angle the line of sight sweeps in the target over each frame (deg; lambda / (2 x cross-range cell)); "
     "default: the models' radar's, for frames at the models' cells"
 )
-
-
-def _fuse(
-    *,
-    session: Any,
-    operator_id: str,
-    settings: Any,
-    est: Any,
-    checker: Any,
-    uploads: list[upload_svc.Upload],
-    plan_id: str,
-    observed_at: list[Any],
-    cells_m: tuple[float, float] | None,
-    normalised: bool,
-    integration_s: list[float] | None = None,
-    aperture_deg: float | None = None,
-) -> Pass:
-    if len(uploads) < 2:
-        raise InputError(["files"], f"a pass needs at least two frames; this upload holds {len(uploads)}")
-    if len(uploads) > settings.max_batch_frames:
-        raise InputError(["files"], f"{len(uploads)} frames is over the batch limit of {settings.max_batch_frames}")
-    if len(observed_at) != len(uploads):
-        raise InputError(
-            ["observed_at"], f"{len(observed_at)} times for {len(uploads)} frames: send one time per frame"
-        )
-    plan = crud.get_plan(session=session, operator_id=operator_id, plan_id=plan_id)
-    if plan is None:
-        raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
-    pass_svc.check_times(plan.result, observed_at)
-    sweeps = pass_svc.sweeps_from(
-        integration_s, aperture_deg, len(uploads), checker.radar.aperture_deg if cells_m is None else None
-    )
-    fused = pass_svc.fit_and_fuse(
-        est=est,
-        checker=checker,
-        uploads=uploads,
-        plan_request=plan.request,
-        observed_at=observed_at,
-        normalised=normalised,
-        cells_m=cells_m,
-        sweeps=sweeps,
-    )
-    result = {**fused.result, "target": checker.model.name, "timings_s": fused.timings_s}
-    row = Pass(operator_id=operator_id, created_at=utcnow(), plan_id=plan_id, result=_jsonable(result))
-    session.add(row)
-    session.commit()
-    return row
-
-
-def _jsonable(value: Any) -> Any:
-    from datetime import datetime
-
-    if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, datetime):
-        return value.isoformat()
-    return value
 
 
 @router.post("", status_code=201, response_model=PassPublic, responses={413: {"description": "file too large"}})
@@ -121,14 +59,14 @@ async def create_pass(
     ] = None,
     integration_s: Annotated[list[float] | None, Form(description=INTEGRATION_S)] = None,
     aperture_deg: Annotated[float | None, Form(gt=0, le=30, description=APERTURE_DEG)] = None,
-) -> dict[str, Any]:
+) -> PassPublic:
     """Fit every frame of a pass, place each in the plan target's LVLH frame at its time, and fuse them; stored."""
     cells_m = cells_from_form(range_cell_m, cross_range_cell_m)
     checker = checker_for(checkers, target)
     est = models_for(model_sets, checker)
     uploads = await read_uploads(files, settings)
     row = await run_in_threadpool(
-        _fuse,
+        pass_svc.create_pass,
         session=session,
         operator_id=operator.id,
         settings=settings,
@@ -142,13 +80,13 @@ async def create_pass(
         integration_s=integration_s,
         aperture_deg=aperture_deg,
     )
-    return PassPublic.row_json(row)
+    return PassPublic.from_row(row)
 
 
 @router.get("/{pass_id}", response_model=PassPublic, responses={404: {"description": "no pass with this id is yours"}})
-def read_pass(session: SessionDep, operator: CurrentOperator, pass_id: Annotated[Text, PathParam()]) -> dict[str, Any]:
+def read_pass(session: SessionDep, operator: CurrentOperator, pass_id: Annotated[Text, PathParam()]) -> PassPublic:
     """Return one of the caller's passes."""
     row = crud.get_pass(session=session, operator_id=operator.id, pass_id=pass_id)
     if row is None:
         raise HTTPException(status_code=404, detail="Pass not found")
-    return PassPublic.row_json(row)
+    return PassPublic.from_row(row)

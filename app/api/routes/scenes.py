@@ -29,7 +29,7 @@ def list_scenes(
             "target_name": p.target_name,
             "t_access": as_utc(p.t_access),
             "miss_km": p.miss_km,
-            "estimates": [EstimatePublic.row_json(e) for e in by_plan[p.id]],
+            "estimates": [EstimatePublic.from_row(e) for e in by_plan[p.id]],
         }
         for p in plans
     ]

@@ -9,9 +9,12 @@ from sqlalchemy import create_engine, func, select
 
 from app.db.models import Pass
 from app.schemas import PAPER_EXAMPLE
+from app.services.scenes import scene_for, windows_of
 from inference.simulation.radar import Imager
 from inference.simulation.scene import simulate
 from inference.simulation.targets import tiangong_like
+from scene import choose_window
+from scene.simulation import PassOptions, render_pass, simulate_pass
 from tests.conftest import KEY_A, KEY_B
 from tests.utils.models import SMOKE_RADAR
 
@@ -126,17 +129,15 @@ def test_bad_passes_are_422_and_store_nothing(client, settings, plan, case, fiel
 
 def test_a_simulated_pass_goes_in_as_it_is(client, plan):
     """gsa simulate --pass's frames.npz and times, uploaded as they are (normalised), fuse over the stored plan."""
-    from app.services import passes as pass_svc
-
-    opts = pass_svc.PassOptions(aperture_deg=SMOKE_RADAR.aperture_deg, max_frames=6, seed=3)
+    opts = PassOptions(aperture_deg=SMOKE_RADAR.aperture_deg, max_frames=6, seed=3)
     rng = np.random.default_rng(3)
-    _, window = pass_svc.choose_window(plan["access_windows"], None)
-    meta = pass_svc.pass_geometry_frames(PAPER_EXAMPLE, window, opts, rng)
-    images, _ = pass_svc.render_pass(meta, opts, rng, SMOKE_RADAR)
+    _, window = choose_window(windows_of(plan), None)
+    meta = simulate_pass(scene_for(PAPER_EXAMPLE, window.rise, window.set), opts, rng)
+    images, _ = render_pass(meta, opts, rng, SMOKE_RADAR)
     buf = io.BytesIO()
     np.savez(buf, image=images)
-    times = [f["observed_at"].isoformat() for f in meta]
-    integration = [f["integration_s"] for f in meta]
+    times = [f.observed_at.isoformat() for f in meta]
+    integration = [f.integration_s for f in meta]
     r = client.post(
         "/v1/passes",
         files=[("files", ("frames.npz", buf.getvalue()))],
@@ -195,16 +196,16 @@ def test_gsa_pass_sends_a_simulated_pass_to_the_service(client, plan, tmp_path, 
     import httpx
 
     from app.cli import main
-    from app.services import passes as pass_svc
+    from app.services.passes import pass_record
 
-    opts = pass_svc.PassOptions(aperture_deg=SMOKE_RADAR.aperture_deg, max_frames=4, seed=5)
+    opts = PassOptions(aperture_deg=SMOKE_RADAR.aperture_deg, max_frames=4, seed=5)
     rng = np.random.default_rng(5)
-    _, window = pass_svc.choose_window(plan["access_windows"], None)
-    meta = pass_svc.pass_geometry_frames(PAPER_EXAMPLE, window, opts, rng)
-    images, snrs = pass_svc.render_pass(meta, opts, rng, SMOKE_RADAR)
+    index, window = choose_window(windows_of(plan), None)
+    meta = simulate_pass(scene_for(PAPER_EXAMPLE, window.rise, window.set), opts, rng)
+    images, snrs = render_pass(meta, opts, rng, SMOKE_RADAR)
     np.savez(tmp_path / "frames.npz", image=images.astype(np.float32))
     cells = (SMOKE_RADAR.range_cell_m, SMOKE_RADAR.cross_range_cell_m)
-    record = pass_svc.pass_record(meta, snrs, opts, 0, window, PAPER_EXAMPLE, cells)
+    record = pass_record(meta, snrs, opts, 0, plan["access_windows"][index], PAPER_EXAMPLE, cells)
     (tmp_path / "pass.json").write_text(json.dumps(record))
 
     def request(method, url, **kwargs):  # the service in-process, reached the way httpx reaches a real one

@@ -10,10 +10,10 @@ import torch
 
 from inference.errors import DatasetError, InferenceError, ModelFileError
 from inference.export import export
-from inference.frames import euler_to_quaternion
 from inference.networks.build import build_models, get_config
 from inference.networks.swin import SwinTransformer, window_partition, window_reverse
 from inference.networks.unetpp import UNetPlusPlus, relative_frobenius_loss
+from inference.rotations import euler_to_quaternion
 from inference.runtime import Estimator
 from inference.simulation.dataset import DatasetSpec, generate
 from inference.simulation.radar import Radar
@@ -506,7 +506,7 @@ def test_training_refuses_bad_data(smoke_data, tmp_path):
 
 
 def test_quaternion_matches_rotation_matrix():
-    from inference.frames import rotation_matrix
+    from inference.rotations import rotation_matrix
 
     z, y, x = 30.0, -20.0, 10.0
     w, qx, qy, qz = euler_to_quaternion(z, y, x)

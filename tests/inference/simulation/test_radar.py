@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from inference.errors import RadarError
-from inference.frames import rotation_matrix
+from inference.rotations import rotation_matrix
 from inference.simulation.radar import (
     C_M_S,
     Imager,

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from inference.errors import RadarError
-from inference.frames import normalise_frame, rotation_matrix
+from inference.frames import normalise_frame
+from inference.rotations import rotation_matrix
 from inference.simulation.radar import Imager, Radar, projection_matrix
 from inference.simulation.scene import simulate
 from inference.simulation.targets import FLAT, TargetModel, tiangong_like

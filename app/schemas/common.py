@@ -1,0 +1,95 @@
+"""What every schema shares: the base models, ISO time and text types, and the error bodies."""
+
+from __future__ import annotations
+
+import math
+import re
+from datetime import datetime
+from typing import TYPE_CHECKING, Annotated, Any, overload
+
+from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field
+
+from planner.propagation import as_utc
+
+if TYPE_CHECKING:
+    pass
+
+_ISO_DATE = re.compile(r"^\d{4}-\d{2}-\d{2}")
+
+
+def _iso_only(value: Any) -> Any:
+    """Take date-times as ISO 8601 text only: a bare number (``0``, ``1.7e9``) is refused, not read as Unix time."""
+    if isinstance(value, str) and not _ISO_DATE.match(value.strip()):
+        raise ValueError("give an ISO 8601 date-time such as 2022-11-28T11:28:29Z")
+    if isinstance(value, int | float):
+        raise ValueError("give an ISO 8601 date-time such as 2022-11-28T11:28:29Z, not a number")
+    return value
+
+
+@overload
+def utc_or_none(moment: datetime) -> datetime: ...
+@overload
+def utc_or_none(moment: None) -> None: ...
+def utc_or_none(moment: datetime | None) -> datetime | None:
+    """The same instant as aware UTC (planner.propagation.as_utc; naive is taken as UTC), or None.
+
+    SQLite hands back naive datetimes for UTC columns, and a filter given with another offset
+    (``+14:00``) must be the same instant in UTC before it is compared (SQLite compares the text).
+    """
+    return None if moment is None else as_utc(moment)
+
+
+def _as_utc_in_range(moment: datetime) -> datetime:
+    """The same instant in UTC; one that UTC cannot hold (0001-01-01T00:00+14:00) is a 422, not a crash."""
+    try:
+        return as_utc(moment)
+    except OverflowError:
+        raise ValueError("this date-time falls outside years 1-9999 once in UTC; give a real epoch") from None
+
+
+IsoDateTime = Annotated[datetime, BeforeValidator(_iso_only), AfterValidator(_as_utc_in_range)]
+
+CONTROL_CHARACTERS = re.compile(r"[\x00-\x1f\x7f]")
+
+
+def _no_control(value: str | None) -> str | None:
+    if value is not None and CONTROL_CHARACTERS.search(value):
+        raise ValueError("must not contain control characters (NUL, tab, newline, ...); remove them")
+    return value
+
+
+# An id, filter or name from a path, a query or a form: NUL and other control characters are
+# refused at the edge (PostgreSQL cannot store NUL in text, and no id or name holds one).
+Text = Annotated[str, AfterValidator(_no_control)]
+Name = Annotated[str, Field(min_length=1, max_length=200, pattern=r"^[^/\\\x00-\x1f]+$")]
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+
+def finite_or_null(x: float | None) -> float | None:
+    return None if x is None or not math.isfinite(x) else float(x)
+
+
+class Described(BaseModel):
+    """Every field's description is the docstring under it (or its Field's): one place for each field's words."""
+
+    model_config = ConfigDict(use_attribute_docstrings=True)
+
+
+class Strict(Described):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+class ErrorMessage(Described):
+    """An error that is not about one field: its reason and the request id to quote."""
+
+    detail: str
+    """what was wrong and what to do"""
+    request_id: str | None = None
+    """the X-Request-ID of the request, to find it in the server's log"""
+
+
+ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
+    400: {"model": ErrorMessage, "description": "the body could not be parsed"},
+    401: {"model": ErrorMessage, "description": "no API key, or an invalid or revoked one"},
+    413: {"model": ErrorMessage, "description": "the request or an uploaded file is over its size limit"},
+}

@@ -1,0 +1,249 @@
+"""An estimate: a frame's checked attitude, in its observation frame and, placed by a plan, in LVLH and J2000."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from datetime import datetime
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import Field
+
+from app.schemas.common import Described, utc_or_none
+from inference.rotations import euler_from_matrix, euler_to_quaternion, rotation_matrix
+
+if TYPE_CHECKING:
+    from app.db.models import Estimate
+    from inference.trust import Alternative, Checked, Quality
+
+
+ESTIMATE_FORMAT = 2  # the stored result's shape: 1 before "format" was written (no refined meant false), 2 now
+
+
+def _attitude_fields(angles_deg: Sequence[float] | NDArray[np.floating]) -> dict[str, Any]:
+    z, y, x = (float(a) for a in angles_deg)
+    return {
+        "euler_zyx_deg": [z, y, x],
+        "quaternion_wxyz": list(euler_to_quaternion(z, y, x)),
+        "rotation_matrix": rotation_matrix(z, y, x).round(12).tolist(),
+    }
+
+
+class AttitudePublic(Described):
+    euler_zyx_deg: list[float] = Field(description="Euler angles z, y, x (deg): R = Rz Ry Rx, body to frame")
+    quaternion_wxyz: list[float]
+    """the same rotation as a unit quaternion, scalar first (body to frame)"""
+    rotation_matrix: list[list[float]]
+    """the same rotation as a 3 x 3 matrix, rows the frame's axes in body coordinates (body to frame: v_frame = R v_body)"""
+
+    @classmethod
+    def from_euler(cls, angles_deg: Sequence[float] | NDArray[np.floating]) -> AttitudePublic:
+        """Return an attitude given as Euler z, y, x (deg)."""
+        return cls(**_attitude_fields(angles_deg))
+
+    @classmethod
+    def from_matrix(cls, r: NDArray[np.float64]) -> AttitudePublic:
+        """Return an attitude given as a rotation matrix, which it keeps as given (not rebuilt from its angles)."""
+        return cls(**{**_attitude_fields(euler_from_matrix(r)), "rotation_matrix": np.asarray(r).round(12).tolist()})
+
+
+class QualityPublic(Described):
+    silhouette_iou: float = Field(
+        description="IoU of the fitted projection (the label the simulator would draw) with UNet++'s silhouette; "
+        "fresh frames of the default target: 0.98-0.99"
+    )
+    uncertainty_deg: list[float | None] = Field(
+        description="90 % bound on the error of z, y, x (deg), calibrated on fresh frames (inference/models/shipped/"
+        "trust.json); null where the fit's curvature bounds nothing"
+    )
+    trusted: bool = Field(description="false when any check failed; reasons says which")
+    reasons: list[str] = Field(description="each failed check in words; empty when trusted")
+
+    @classmethod
+    def from_quality(cls, q: Quality) -> QualityPublic:
+        return cls(
+            silhouette_iou=q.silhouette_iou,
+            uncertainty_deg=[b if math.isfinite(b) else None for b in q.uncertainty_deg],
+            trusted=q.trusted,
+            reasons=list(q.reasons),
+        )
+
+
+class AlternativePublic(AttitudePublic):
+    silhouette_iou: float
+    """IoU of this attitude's projection with UNet++'s silhouette"""
+    fit_gap: float = Field(
+        description="how much lower its soft IoU is than the answer's; negative when it fits better but the answer "
+        "stays nearer Swin's estimate (Swin saw the brightness the silhouette lacks)"
+    )
+    distance_deg: float = Field(description="rotation angle between it and the answer")
+
+    @classmethod
+    def from_alternative(cls, a: Alternative) -> AlternativePublic:
+        return cls(
+            **_attitude_fields(a.angles_deg),
+            silhouette_iou=round(a.silhouette_iou, 4),
+            fit_gap=round(a.fit_gap, 5),
+            distance_deg=round(a.distance_deg, 2),
+        )
+
+
+class CheckedPublic(Described):
+    """A frame's checked answer: the fitted attitude, the networks' own, its quality and its lookalikes."""
+
+    attitude: AttitudePublic = Field(
+        description="in the ISAR observation frame: the fitted attitude (Swin's own when refine=false)"
+    )
+    attitude_network: AttitudePublic | None = Field(
+        None, description="Swin's own estimate, the fit's start (null for a target without trained networks)"
+    )
+    refined: bool = Field(True, description="whether the attitude was fitted to the target's projection")
+
+    @staticmethod
+    def fields_of(c: Checked) -> dict[str, Any]:
+        """The checked answer's fields, for any schema that carries them (an estimate, a pass's frame)."""
+        return {
+            "attitude": AttitudePublic.from_euler(c.angles_deg),
+            "attitude_network": None if c.network_deg is None else AttitudePublic.from_euler(c.network_deg),
+            "refined": c.refined,
+            "quality": QualityPublic.from_quality(c.quality),
+            "alternatives": [AlternativePublic.from_alternative(a) for a in c.alternatives],
+        }
+
+
+class EstimateResult(CheckedPublic):
+    """What an estimate answers and stores, beside its row's columns."""
+
+    target: str | None = Field(None, description="the target model the frame was fitted to")
+    quality: QualityPublic | None = Field(None, description="how sure the answer is (null on estimates made before it)")
+    alternatives: list[AlternativePublic] = Field(
+        default_factory=list, description="other attitudes that fit nearly as well, e.g. the near-mirror (z, -y, -x)"
+    )
+    attitude_lvlh: AttitudePublic | None = None
+    """the attitude in the target's LVLH frame (with plan_id and observed_at)"""
+    attitude_j2000: AttitudePublic | None = None
+    """the attitude in J2000/GCRS (with plan_id and observed_at)"""
+    model: dict[str, Any]
+    """the models that answered: their card's name and file hashes"""
+    timings_s: dict[str, float]
+    """where the time went, seconds (decoding, the networks, the fit)"""
+    input_normalised: bool = Field(
+        False, description="true when the frame was sent already normalised (normalised=true) and taken as sent"
+    )
+    cells_m: list[float] | None = None
+    """the frame's range and cross-range cells (m) as sent, or null: the models' own"""
+
+    @classmethod
+    def from_checked(
+        cls,
+        c: Checked,
+        *,
+        target: str,
+        model: dict[str, Any],
+        timings_s: dict[str, float],
+        input_normalised: bool,
+        cells_m: tuple[float, float] | None,
+        in_frames: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
+    ) -> EstimateResult:
+        """Return a checked frame as the estimate's result; ``in_frames``: its attitude as body to LVLH and J2000."""
+        return cls(
+            **CheckedPublic.fields_of(c),
+            target=target,
+            attitude_lvlh=None if in_frames is None else AttitudePublic.from_matrix(in_frames[0]),
+            attitude_j2000=None if in_frames is None else AttitudePublic.from_matrix(in_frames[1]),
+            model=model,
+            timings_s=timings_s,
+            input_normalised=input_normalised,
+            cells_m=None if cells_m is None else list(cells_m),
+        )
+
+    def stored(self) -> dict[str, Any]:
+        """The JSON the database keeps: this result with its format version."""
+        return {"format": ESTIMATE_FORMAT, **self.model_dump(mode="json")}
+
+    @staticmethod
+    def upgraded(stored: dict[str, Any]) -> dict[str, Any]:
+        """A stored result of any format as the current shape's fields (without ``format``)."""
+        out = dict(stored)
+        version = out.pop("format", 1)
+        if version == 1:
+            out.setdefault("refined", False)  # rows from before the fit was optional were never fitted
+        return out
+
+
+class _EstimateRow(Described):
+    id: str
+    """the estimate's id"""
+    created_at: datetime
+    """when it was stored (UTC)"""
+    plan_id: str | None
+    """the plan the frame belongs to, if one was given"""
+    observed_at: datetime | None
+    """when the frame was observed (UTC), if given"""
+    input_name: str
+    """the uploaded file's name (with the member and index for stacks)"""
+    input_sha256: str
+    """sha256 of the uploaded file"""
+    shape: list[int]
+    """the uploaded frame's shape [rows, columns]"""
+    dtype: str
+    """the uploaded array's type"""
+    snr_db: float | None
+    """the SNR the caller stated, dB, if any"""
+
+
+class EstimatePublic(EstimateResult, _EstimateRow):
+    links: dict[str, str]
+    """the estimate's own URL and its images' URLs"""
+
+    @classmethod
+    def from_row(cls, e: Estimate) -> EstimatePublic:
+        """Return a stored estimate row, of any stored format, as the answer."""
+        return cls.model_validate(
+            {
+                "id": e.id,
+                "created_at": utc_or_none(e.created_at),
+                "plan_id": e.plan_id,
+                "observed_at": utc_or_none(e.observed_at),
+                "input_name": e.input_name,
+                "input_sha256": e.input_sha256,
+                "shape": e.shape,
+                "dtype": e.dtype,
+                "snr_db": e.snr_db,
+                **EstimateResult.upgraded(e.result),
+                "links": {
+                    "self": f"/v1/estimates/{e.id}",
+                    "enhanced_png": f"/v1/estimates/{e.id}/enhanced.png",
+                    "original_png": f"/v1/estimates/{e.id}/original.png",
+                },
+            }
+        )
+
+
+class EstimatesPublic(Described):
+    data: list[EstimatePublic]
+    """the estimates of this page"""
+    count: int
+    """how many estimates match in all"""
+
+
+class ScenePublic(Described):
+    plan_id: str
+    """the plan"""
+    target_name: str
+    """its target's name"""
+    t_access: datetime | None
+    """its chosen t_access (UTC), or null"""
+    miss_km: float | None
+    """its chosen miss, km, or null"""
+    estimates: list[EstimatePublic]
+    """the estimates tied to the plan"""
+
+
+class ScenesPublic(Described):
+    data: list[ScenePublic]
+    """the scenes of this page, newest first"""
+    count: int
+    """how many plans the caller has"""

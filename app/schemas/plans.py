@@ -1,0 +1,425 @@
+"""A plan: its request (orbits, station, search) and its result (access windows, candidates, the burn)."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+from pydantic import ConfigDict, Field, model_validator
+
+from app.schemas.common import Described, Finite, IsoDateTime, Strict, finite_or_null, utc_or_none
+from app.schemas.orbits import OrbitIn
+from app.schemas.stations import GroundStationIn
+from planner.propagation import utc
+
+if TYPE_CHECKING:
+    from planner.access import AccessWindows
+    from planner.alignment import Candidate
+    from planner.plan import Feasibility, Plan
+
+
+class SearchIn(Strict):
+    """The search: span, element reading, the (dHa, dHp) box and the choice criterion."""
+
+    start: IsoDateTime | None = Field(default=None, description="default: the target's epoch")
+    duration_days: Finite = Field(default=10.0, gt=0.0, le=30.0)
+    """the span to search from start, days (at most 30)"""
+    reading: Literal["osculating", "mean"] = "osculating"
+    """osculating (the instantaneous orbit, numerical J2) or mean (J2 secular rates)"""
+    dha_min_km: Finite = Field(default=-50.0, ge=-500.0, le=500.0)
+    """the lowest apogee height change to try, km"""
+    dha_max_km: Finite = Field(default=50.0, ge=-500.0, le=500.0)
+    """the highest apogee height change, km"""
+    dhp_min_km: Finite = Field(default=-50.0, ge=-500.0, le=500.0)
+    """the lowest perigee height change, km"""
+    dhp_max_km: Finite = Field(default=50.0, ge=-500.0, le=500.0)
+    """the highest perigee height change, km"""
+    step_km: Finite = Field(default=0.1, ge=0.001, le=100.0)
+    """the (dHa, dHp) grid step, km"""
+    max_miss_km: Finite = Field(default=10.0, gt=0.0, le=1.0e5)
+    """a candidate's node-line miss may be at most this, km"""
+    revolutions_before: list[Literal[1, 2]] = Field(default=[1, 2], min_length=1, max_length=2)
+    """how many target revolutions before t_access the phasing burn may be"""
+    criterion: Literal["smallest_change", "least_dv"] = "least_dv"
+    """how the chosen candidate is picked: least_dv or smallest_change"""
+    max_imaging_range_km: Finite = Field(default=50.0, gt=0.0)
+    """the observer may be at most this far from the target at t_access, km"""
+    max_phase_angle_deg: Finite = Field(default=90.0, gt=0.0, le=180.0)
+    """the Sun-target-observer angle may be at most this, deg"""
+    standoff_km: Finite = Field(
+        default=5.0,
+        ge=0.5,
+        le=500.0,
+        description="the observer is aimed this far from the target at T_access (never at the target itself), "
+        "perpendicular to the relative velocity and toward the Sun where it can be",
+    )
+    min_separation_km: Finite = Field(
+        default=1.0,
+        ge=0.0,
+        le=100.0,
+        description="a plan whose closest approach over the arc is under this is marked infeasible (collision risk)",
+    )
+    max_tracking_rate_deg_s: Finite = Field(
+        default=10.0,
+        gt=0.0,
+        le=180.0,
+        description="the fastest line-of-sight rate the observer's optics can follow; faster fly-bys are infeasible",
+    )
+
+    @model_validator(mode="after")
+    def _ordered(self) -> SearchIn:
+        if self.dha_min_km > self.dha_max_km:
+            raise ValueError(f"dha_min_km ({self.dha_min_km}) is above dha_max_km ({self.dha_max_km})")
+        if self.dhp_min_km > self.dhp_max_km:
+            raise ValueError(f"dhp_min_km ({self.dhp_min_km}) is above dhp_max_km ({self.dhp_max_km})")
+        return self
+
+
+PAPER_EXAMPLE: dict[str, Any] = {
+    "target": {
+        "name": "Sat_Target",
+        "elements": {
+            "epoch": "2022-11-27T16:00:00Z",
+            "ha_km": 700,
+            "hp_km": 600,
+            "inclination_deg": 43,
+            "raan_deg": 290,
+            "arg_perigee_deg": 100,
+            "mean_anomaly_deg": 200,
+        },
+    },
+    "observer": {
+        "name": "Sat_Obs",
+        "elements": {
+            "epoch": "2022-11-27T16:00:00Z",
+            "ha_km": 700,
+            "hp_km": 350,
+            "inclination_deg": 99,
+            "raan_deg": 10,
+            "arg_perigee_deg": 0,
+            "mean_anomaly_deg": 316.5,
+        },
+    },
+    "ground_station": {"name": "GS", "latitude_deg": 31.1, "longitude_deg": 121.3, "altitude_m": 0},
+}
+
+
+class PlanCreate(Strict):
+    """What to plan: the paper's Table 1 is the example."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, json_schema_extra={"examples": [PAPER_EXAMPLE]})
+
+    target: OrbitIn
+    """the satellite to image"""
+    observer: OrbitIn
+    """the optical observer satellite that manoeuvres"""
+    ground_station: GroundStationIn = Field(
+        description="the radar site, or the name of one stored under /v1/stations (the plan keeps a copy)"
+    )
+    search: SearchIn = Field(default_factory=SearchIn)
+    """the search: span, box, ranking and encounter limits (defaults: the paper's)"""
+
+
+class AccessCreate(Strict):
+    """Access windows of one satellite to one station."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        allow_inf_nan=False,
+        json_schema_extra={
+            "examples": [{"target": PAPER_EXAMPLE["target"], "ground_station": PAPER_EXAMPLE["ground_station"]}]
+        },
+    )
+
+    target: OrbitIn
+    """the satellite"""
+    ground_station: GroundStationIn = Field(description="the radar site, or the name of one stored under /v1/stations")
+    start: IsoDateTime | None = None
+    """the start of the span (ISO 8601, UTC; default: the target's epoch)"""
+    duration_days: Finite = Field(default=7.0, gt=0.0, le=30.0)
+    """the span, days (at most 30)"""
+    reading: Literal["osculating", "mean"] = "osculating"
+    """osculating (numerical J2) or mean (J2 secular rates)"""
+
+
+# Responses
+class WindowPublic(Described):
+    rise: datetime
+    """when the target rises above the mask (UTC)"""
+    culmination: datetime
+    """its highest elevation (UTC)"""
+    set: datetime
+    """when it sets below the mask (UTC)"""
+    duration_s: float
+    """set - rise, s"""
+    max_elevation_deg: float
+    """the highest elevation, deg (refracted when the station asks for it)"""
+    rise_azimuth_deg: float
+    """azimuth at rise, deg from north through east"""
+    culmination_azimuth_deg: float
+    """azimuth at culmination, deg"""
+    set_azimuth_deg: float
+    """azimuth at set, deg"""
+    min_range_km: float
+    """the least slant range inside the window, km"""
+    rise_clipped: bool
+    """true when the pass was already in progress at the span's start (rise is the start)"""
+    set_clipped: bool
+    """true when it was still in progress at the span's end"""
+
+    @classmethod
+    def from_windows(cls, epoch: datetime, w: AccessWindows) -> list[WindowPublic]:
+        """Return the planner's windows (seconds after ``epoch``) as UTC records."""
+        return [
+            cls(
+                rise=utc(epoch, w.rise_s[k]),
+                culmination=utc(epoch, w.culmination_s[k]),
+                set=utc(epoch, w.set_s[k]),
+                duration_s=float(w.set_s[k] - w.rise_s[k]),
+                max_elevation_deg=float(w.max_elevation_deg[k]),
+                rise_azimuth_deg=float(w.rise_azimuth_deg[k]),
+                culmination_azimuth_deg=float(w.culmination_azimuth_deg[k]),
+                set_azimuth_deg=float(w.set_azimuth_deg[k]),
+                min_range_km=float(w.min_range_km[k]),
+                rise_clipped=bool(w.rise_clipped[k]),
+                set_clipped=bool(w.set_clipped[k]),
+            )
+            for k in range(len(w))
+        ]
+
+
+class FeasibilityPublic(Described):
+    sunlit: bool
+    """whether the target is in sunlight at t_access (an optical observer needs it)"""
+    feasible: bool
+    """whether every check passes"""
+    reasons: list[str]
+    """each failed check in words; empty when feasible"""
+    observer_range_km: float | None
+    """observer-target distance at t_access, km (the chosen candidate's, once planned)"""
+    phase_angle_deg: float | None
+    """Sun-target-observer angle at t_access, deg (the chosen candidate's)"""
+
+    @classmethod
+    def from_feasibility(cls, f: Feasibility) -> FeasibilityPublic:
+        return cls(
+            sunlit=f.sunlit,
+            feasible=f.feasible,
+            reasons=list(f.reasons),
+            observer_range_km=finite_or_null(f.observer_range_km),
+            phase_angle_deg=finite_or_null(f.phase_angle_deg),
+        )
+
+
+class CandidatePublic(Described):
+    pass_index: int
+    """which access window (0-based) this candidate belongs to"""
+    node: str
+    """the node line the alignment uses: +OC on the target's ascending side, -OC on its descending side"""
+    t_access: datetime
+    """the moment the target crosses the observer's orbital plane inside the pass (UTC)"""
+    delta_ha_km: float
+    """the observer's apogee height change this alignment needs, km"""
+    delta_hp_km: float
+    """the observer's perigee height change, km"""
+    miss_km: float
+    """distance of the target from the changed observer's orbital plane at t_access, km"""
+    change_km: float
+    """|dHa| + |dHp|, km: what smallest_change ranks by"""
+    t_access_range: list[datetime] | None
+    """the earliest and latest t_access the (dHa, dHp) box reaches in this pass, or null"""
+    family: list[list[float]] = Field(description="(dHa, dHp) km pairs aligning the node line at the same moment")
+    feasibility: FeasibilityPublic
+    """whether this candidate can be imaged: light, range, phase angle"""
+
+    @classmethod
+    def from_candidate(cls, epoch: datetime, c: Candidate, f: Feasibility) -> CandidatePublic:
+        return cls(
+            pass_index=c.pass_index,
+            node=c.node,
+            t_access=utc(epoch, c.t_access_s),
+            delta_ha_km=c.delta_ha_km,
+            delta_hp_km=c.delta_hp_km,
+            miss_km=c.miss_km,
+            change_km=c.change_km,
+            t_access_range=[utc(epoch, t) for t in c.t_access_range_s] if c.t_access_range_s else None,
+            family=[
+                [round(float(a), 4), round(float(p), 4)] for a, p in zip(c.family_dha_km, c.family_dhp_km, strict=True)
+            ],
+            feasibility=FeasibilityPublic.from_feasibility(f),
+        )
+
+
+class VerificationPublic(Described):
+    miss_km: float = Field(
+        description="numerically propagated (J2) distance of the observer from its aim point at T_access"
+    )
+    two_body_miss_km: float = Field(
+        description="distance from the target if the plain two-body Lambert burn were flown"
+    )
+    corrections: int
+    """differential corrections the shooting took to meet the aim point"""
+    relative_speed_km_s: float = Field(description="observer-target relative speed at T_access")
+    standoff_km: float = Field(description="distance of the aim point from the target")
+    separation_km: float = Field(description="propagated observer-target distance at T_access")
+    closest_approach_km: float = Field(
+        description="least observer-target distance from the burn to one orbit after T_access"
+    )
+    closest_approach_time: datetime
+    """when the closest approach is (UTC)"""
+    target_angular_rate_deg_s: float = Field(
+        description="the target's angular rate seen from the observer at T_access (what an optical tracker must follow)"
+    )
+
+    @classmethod
+    def from_plan(cls, plan: Plan) -> VerificationPublic:
+        ph, meet = plan.phasing, plan.encounter
+        assert ph is not None and meet is not None
+        return cls(
+            miss_km=ph.miss_km,
+            two_body_miss_km=ph.two_body_miss_km,
+            corrections=ph.corrections,
+            relative_speed_km_s=meet.relative_speed_km_s,
+            standoff_km=float(np.linalg.norm(ph.standoff_km_vec)),
+            separation_km=meet.separation_km,
+            closest_approach_km=meet.closest_approach_km,
+            closest_approach_time=utc(plan.epoch, meet.closest_approach_s),
+            target_angular_rate_deg_s=meet.target_angular_rate_deg_s,
+        )
+
+
+class PhasingPublic(Described):
+    t_burn: datetime
+    """the phasing burn's moment (UTC)"""
+    t_access: datetime
+    """the imaging moment the burn aims at (UTC)"""
+    revolutions_before: int
+    """how many target revolutions before t_access the burn is"""
+    lambert_revolutions: int
+    """complete revolutions of the Lambert arc"""
+    dv_m_s: list[float] = Field(description="impulse in GCRS, m/s")
+    dv_rtn_m_s: list[float] = Field(description="impulse in radial / along-track / cross-track, m/s")
+    dv_total_m_s: float
+    """the burn's size, m/s"""
+    verification: VerificationPublic
+    """the burn flown by the numerical J2 propagator, and the encounter it gives"""
+
+    @classmethod
+    def from_plan(cls, plan: Plan) -> PhasingPublic | None:
+        ph = plan.phasing
+        if ph is None:
+            return None
+        return cls(
+            t_burn=utc(plan.epoch, ph.t_burn_s),
+            t_access=utc(plan.epoch, ph.t_access_s),
+            revolutions_before=ph.revolutions_before,
+            lambert_revolutions=ph.lambert_revolutions,
+            dv_m_s=[float(x) * 1000.0 for x in ph.dv_km_s],
+            dv_rtn_m_s=[float(x) * 1000.0 for x in ph.dv_rtn_km_s],
+            dv_total_m_s=ph.dv_total_km_s * 1000.0,
+            verification=VerificationPublic.from_plan(plan),
+        )
+
+
+class PlanResult(Described):
+    epoch: datetime
+    """the start of the search span (UTC)"""
+    duration_days: float
+    """the span searched, days"""
+    reading: str
+    """how the elements were read: osculating or mean"""
+    access_windows: list[WindowPublic]
+    """every pass of the target over the station"""
+    candidates: list[CandidatePublic]
+    """the best alignment of each pass, ranked by miss"""
+    chosen: CandidatePublic | None
+    """the candidate planned (the best sunlit one by the criterion), or null"""
+    alignment_dv_m_s: float | None
+    """the height change's cost, m/s"""
+    phasing: PhasingPublic | None
+    """the burn that brings the observer to the target at t_access, or null"""
+    timings_s: dict[str, float]
+    """where the planning time went, seconds"""
+    notes: list[str]
+    """what the planner wants the operator to know, in words"""
+
+    @classmethod
+    def from_plan(cls, plan: Plan) -> PlanResult:
+        """Return the planner's ``Plan`` as the stored and returned result (times in UTC, speeds in m/s)."""
+        ep = plan.epoch
+        chosen = None
+        if plan.chosen is not None and plan.chosen_feasibility is not None:
+            chosen = CandidatePublic.from_candidate(ep, plan.chosen, plan.chosen_feasibility)
+        return cls(
+            epoch=ep,
+            duration_days=plan.duration_s / 86400.0,
+            reading=plan.reading,
+            access_windows=WindowPublic.from_windows(ep, plan.windows),
+            candidates=[
+                CandidatePublic.from_candidate(ep, c, f) for c, f in zip(plan.candidates, plan.feasibility, strict=True)
+            ],
+            chosen=chosen,
+            alignment_dv_m_s=None if plan.alignment_dv_km_s is None else plan.alignment_dv_km_s * 1000.0,
+            phasing=PhasingPublic.from_plan(plan),
+            timings_s={k: round(v, 4) for k, v in plan.timings_s.items()},
+            notes=plan.notes,
+        )
+
+
+class PlanPublic(PlanResult):
+    id: str
+    """the plan's id"""
+    created_at: datetime
+    """when it was stored (UTC)"""
+    target_name: str
+    """the target's name"""
+    observer_name: str
+    """the observer's name"""
+    station_name: str
+    """the station's name"""
+
+    @staticmethod
+    def row_json(plan: Any) -> dict[str, Any]:
+        """Return a stored plan row (app.db.models.Plan) as this schema's JSON-ready dict."""
+        return {
+            **plan.result,
+            "id": plan.id,
+            "created_at": utc_or_none(plan.created_at),
+            "target_name": plan.target_name,
+            "observer_name": plan.observer_name,
+            "station_name": plan.station_name,
+        }
+
+
+class PlanSummary(Described):
+    id: str
+    """the plan's id"""
+    created_at: datetime
+    """when it was stored (UTC)"""
+    target_name: str
+    """the target's name"""
+    observer_name: str
+    """the observer's name"""
+    station_name: str
+    """the station's name"""
+    t_access: datetime | None
+    """the chosen candidate's t_access (UTC), or null"""
+    miss_km: float | None
+    """the chosen candidate's miss, km, or null"""
+
+
+class PlansPublic(Described):
+    data: list[PlanSummary]
+    """the plans of this page, newest first"""
+    count: int
+    """how many plans match in all"""
+
+
+class AccessPublic(Described):
+    epoch: datetime
+    """the start of the span (UTC)"""
+    duration_days: float
+    """the span searched, days"""
+    access_windows: list[WindowPublic]
+    """every pass of the target over the station in the span, in time order"""

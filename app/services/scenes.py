@@ -1,0 +1,36 @@
+"""The one converter from a stored plan to a ``scene.Scene``: the request validated once, its orbit and station built."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Any
+
+from app.schemas import PlanCreate
+from app.services.planning import plan_options, to_orbit, to_station
+from scene import Scene, Window
+
+
+def plan_request(request: PlanCreate | dict[str, Any]) -> PlanCreate:
+    """A stored plan's request as the typed request (validated here, once per scene)."""
+    return request if isinstance(request, PlanCreate) else PlanCreate.model_validate(request)
+
+
+def scene_for(
+    request: PlanCreate | dict[str, Any], start: datetime, end: datetime, field: str = "observed_at"
+) -> Scene:
+    """Return the scene of a plan's target and station over ``[start, end]`` (one propagation).
+
+    ``field`` names what set the span, for the error where it lies too far from the target's epoch.
+    """
+    req = plan_request(request)
+    return Scene.over(
+        to_orbit(req.target, "target"), to_station(req.ground_station), plan_options(req).reading, start, end, field
+    )
+
+
+def windows_of(result: dict[str, Any]) -> list[Window]:
+    """A plan's (or access search's) access windows, as the scene takes them."""
+    return [
+        Window(datetime.fromisoformat(w["rise"]), datetime.fromisoformat(w["set"]), float(w["max_elevation_deg"]))
+        for w in result.get("access_windows", [])
+    ]

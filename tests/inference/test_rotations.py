@@ -1,0 +1,82 @@
+"""The rotation kit against scipy's Rotation, an independent implementation of the same group."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from inference.rotations import (
+    MIRROR,
+    RX_180,
+    angle_deg,
+    chordal_mean,
+    euler_from_matrix,
+    euler_to_quaternion,
+    geodesic_deg,
+    rotation_matrices,
+    rotation_matrix,
+    so3_exp,
+    so3_log,
+    so3_logs,
+    spin_rotations,
+)
+
+ANGLES = [(10.0, -20.0, 30.0), (-44.0, 44.0, 0.5), (170.0, -80.0, -179.0), (0.0, 0.0, 0.0)]
+one_microradian = 1e-6
+
+
+@pytest.mark.parametrize("zyx", ANGLES)
+def test_euler_matrix_and_quaternion_against_scipy(zyx):
+    """R = Rz(z) Ry(y) Rx(x) is scipy's intrinsic 'ZYX' sequence; the quaternion is scalar first."""
+    ref = Rotation.from_euler("ZYX", zyx, degrees=True)
+    np.testing.assert_allclose(rotation_matrix(*zyx), ref.as_matrix(), atol=1e-12)
+    np.testing.assert_allclose(rotation_matrices(np.array([zyx]))[0], ref.as_matrix(), atol=1e-12)
+    q = np.array(euler_to_quaternion(*zyx))
+    x, y, z, w = ref.as_quat()
+    assert abs(abs(float(q @ [w, x, y, z])) - 1.0) < 1e-12  # the same rotation, up to the quaternion's sign
+    assert euler_from_matrix(rotation_matrix(*zyx)) == pytest.approx(zyx, abs=1e-9)
+
+
+def test_exp_and_log_against_scipy_rotvec():
+    rng = np.random.default_rng(1)
+    w = rng.normal(size=(50, 3))
+    w *= (rng.uniform(0.0, math.pi - 1e-3, 50) / np.linalg.norm(w, axis=1))[:, None]
+    np.testing.assert_allclose(so3_exp(w), Rotation.from_rotvec(w).as_matrix(), atol=1e-12)
+    np.testing.assert_allclose(so3_logs(so3_exp(w)), w, atol=one_microradian)
+    np.testing.assert_allclose(so3_log(so3_exp(w[0])), w[0], atol=one_microradian)
+    near_pi = np.array([0.0, math.pi - 1e-8, 0.0])  # the axis from the symmetric part
+    assert angle_deg(so3_exp(so3_log(so3_exp(near_pi))), so3_exp(near_pi)) < 1e-4
+
+
+def test_spin_rotations_turn_about_their_axis():
+    axis = np.array([1.0, 2.0, 2.0]) / 3.0
+    r = spin_rotations(axis, 3.0, np.array([0.0, 10.0, -20.0]))
+    np.testing.assert_allclose(
+        r, Rotation.from_rotvec(np.outer([0.0, 30.0, -60.0], axis), degrees=True).as_matrix(), atol=1e-12
+    )
+
+
+def test_geodesic_and_angle_agree_with_scipy_magnitude():
+    a, b = Rotation.from_euler("ZYX", ANGLES[0], degrees=True), Rotation.from_euler("ZYX", ANGLES[1], degrees=True)
+    truth = math.degrees((a.inv() * b).magnitude())
+    assert angle_deg(a.as_matrix(), b.as_matrix()) == pytest.approx(truth, abs=1e-9)
+    assert geodesic_deg(np.array(ANGLES[0]), np.array(ANGLES[1]))[0] == pytest.approx(truth, abs=1e-9)
+
+
+def test_chordal_mean_of_one_rotation_and_of_a_symmetric_pair():
+    r = rotation_matrix(*ANGLES[0])
+    np.testing.assert_allclose(chordal_mean(np.array([r, r]), np.array([1.0, 2.0])), r, atol=1e-12)
+    pair = np.array([r @ rotation_matrix(0.0, 0.0, 5.0), r @ rotation_matrix(0.0, 0.0, -5.0)])
+    np.testing.assert_allclose(chordal_mean(pair, np.ones(2)), r, atol=1e-12)
+
+
+@pytest.mark.parametrize("zyx", ANGLES[:2])
+def test_the_two_symmetries(zyx):
+    """The near-mirror M R M is Euler (z, -y, -x); a frame read reversed is the body turned half about X."""
+    r = rotation_matrix(*zyx)
+    z, y, x = zyx
+    assert euler_from_matrix(MIRROR @ r @ MIRROR) == pytest.approx((z, -y, -x), abs=1e-9)
+    np.testing.assert_allclose(RX_180, Rotation.from_euler("x", 180, degrees=True).as_matrix(), atol=1e-15)
+    # the projection on the image plane (the frame's X and Y rows) is the same for R and M R M, up to z's sign
+    np.testing.assert_allclose((MIRROR @ r @ MIRROR)[:2, :2], r[:2, :2], atol=1e-12)
