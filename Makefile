@@ -47,8 +47,10 @@ fuzz: $(STAMP)
 load: $(STAMP)
 	$(BIN)/python -m bench.load
 
+# The house rules CI holds before the tests: lint, format and types (mypy strict on app, planner, inference, scene).
 lint: $(STAMP)
-	$(BIN)/ruff check app planner inference tests bench migrations
+	$(BIN)/ruff check app planner inference scene tests bench migrations
+	$(BIN)/ruff format --check app planner inference scene tests bench migrations
 	$(BIN)/mypy
 
 clean:

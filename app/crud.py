@@ -13,7 +13,7 @@ from app.core.security import HMAC_SCHEME, LEGACY_SCHEME, digests_equal, key_dig
 from app.db.models import ApiKey, Estimate, GroundStation, Operator, Pass, Plan, utcnow
 
 if TYPE_CHECKING:
-    from app.schemas import PassResult
+    from app.schemas import PassResult, PlanCreate, PlanResult
 
 
 def get_or_create_operator(*, session: Session, name: str) -> Operator:
@@ -89,18 +89,19 @@ def count_api_keys(*, session: Session) -> int:
     return int(session.scalar(select(func.count()).select_from(ApiKey)) or 0)
 
 
-def create_plan(*, session: Session, operator_id: str, request: dict[str, Any], result: dict[str, Any]) -> Plan:
-    chosen = result.get("chosen") or {}
-    t_access = datetime.fromisoformat(chosen["t_access"]) if chosen.get("t_access") else None
+def create_plan(*, session: Session, operator_id: str, request: PlanCreate, result: PlanResult) -> Plan:
+    """Store a plan: its request as validated (a stored station's copy in it) and its typed result."""
+    assert not isinstance(request.ground_station, str)  # the service resolves a station's name before planning
+    chosen = result.chosen
     plan = Plan(
         operator_id=operator_id,
-        target_name=request["target"]["name"],
-        observer_name=request["observer"]["name"],
-        station_name=request["ground_station"]["name"],
-        t_access=t_access,
-        miss_km=chosen.get("miss_km"),
-        request=request,
-        result=result,
+        target_name=request.target.name,
+        observer_name=request.observer.name,
+        station_name=request.ground_station.name,
+        t_access=None if chosen is None else chosen.t_access,
+        miss_km=None if chosen is None else chosen.miss_km,
+        request=request.model_dump(mode="json"),
+        result=result.stored(),
     )
     session.add(plan)
     session.commit()

@@ -12,23 +12,16 @@ from __future__ import annotations
 import json
 import sys
 import tempfile
-from functools import cache
 from pathlib import Path
 from typing import Any
 
-HERE = Path(__file__).resolve().parent / "response_examples"
+from app.api.examples import HERE, load
+
 REPO = HERE.parents[1]
 NAMES = ("plan", "access", "estimate", "station")
 KEY = "docs-example-key"
 # What changes from run to run and is not compared: ids, times of creation, timings, links with ids.
 VOLATILE = ("id", "created_at", "timings_s", "links", "request_id")
-
-
-@cache
-def load(name: str) -> dict[str, Any]:
-    """A stored example (empty when it has not been generated)."""
-    path = HERE / f"{name}.json"
-    return json.loads(path.read_text()) if path.is_file() else {}
 
 
 def _trim(body: dict[str, Any]) -> dict[str, Any]:
@@ -82,6 +75,9 @@ def comparable(body: Any) -> Any:
     if isinstance(body, list):
         return [comparable(v) for v in body]
     return body
+
+
+__all__ = ["HERE", "comparable", "generate", "load", "main"]
 
 
 def main() -> int:

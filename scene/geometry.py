@@ -39,12 +39,16 @@ class Window:
     max_elevation_deg: float
 
 
-def access_windows(target: Orbit, station: Station, reading: Reading, start: datetime, duration_s: float) -> list[Window]:
+def access_windows(
+    target: Orbit, station: Station, reading: Reading, start: datetime, duration_s: float
+) -> list[Window]:
     """Return the target's access windows to the station over ``duration_s`` from ``start`` (``planner.access``)."""
     epoch = as_utc(start)
     frames = earth_frames(epoch, 0.0, duration_s)
     w = _access_windows(trajectory(target, epoch, frames, 0.0, duration_s, reading), station, frames, 0.0, duration_s)
-    return [Window(utc(epoch, w.rise_s[k]), utc(epoch, w.set_s[k]), float(w.max_elevation_deg[k])) for k in range(len(w))]
+    return [
+        Window(utc(epoch, w.rise_s[k]), utc(epoch, w.set_s[k]), float(w.max_elevation_deg[k])) for k in range(len(w))
+    ]
 
 
 def choose_window(windows: Sequence[Window], index: int | None) -> tuple[int, Window]:

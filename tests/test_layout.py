@@ -48,7 +48,7 @@ def _closure(module: str) -> set[str]:
             continue
         for name, _ in _imports(path, top_level_only=(m != module)):
             outside.add(name)
-            if name.split(".")[0] in ("app", "planner", "inference"):
+            if name.split(".")[0] in ("app", "planner", "inference", "scene"):
                 todo.append(name)
     return outside | seen
 
@@ -89,8 +89,17 @@ def test_the_runtime_imports_no_torch(module):
     assert not any(m.split(".")[0] == "torch" for m in _closure(module)), module
 
 
-@pytest.mark.parametrize("package,forbidden", [("planner", ("app", "inference")), ("inference", ("app", "planner"))])
-def test_planner_and_inference_never_import_app_or_each_other(package, forbidden):
+@pytest.mark.parametrize(
+    "package,forbidden",
+    [
+        ("planner", ("app", "inference", "scene")),
+        ("inference", ("app", "planner", "scene")),
+        ("scene", ("app", "fastapi", "starlette", "pydantic", "sqlalchemy", "alembic")),
+    ],
+)
+def test_the_halves_meet_only_in_the_scene_and_the_app(package, forbidden):
+    """planner and inference never import each other, the scene or the app; the scene (which joins them) imports
+    no app and no web or database library."""
     bad = [
         (str(p.relative_to(ROOT)), name)
         for p in _package_files(package)
@@ -100,12 +109,89 @@ def test_planner_and_inference_never_import_app_or_each_other(package, forbidden
     assert not bad, bad
 
 
+@pytest.mark.parametrize("folder", ["app/cli", "bench"])
+def test_the_command_line_and_the_benchmarks_reach_the_numerics_through_the_scene(folder):
+    """The pass and estimate geometry, simulation and fusion are the scene's: the CLI and bench never take them
+    from the web layer's services (the CLI's client commands may still call the service functions it shares)."""
+    numerics = ("app.services.passes", "app.services.estimation")
+    allowed = {("app.services.passes", "pass_record"), ("app.services.estimation", "prepare_frames")}
+    bad = [
+        (str(p.relative_to(ROOT)), module, name)
+        for p in sorted((ROOT / folder).glob("*.py"))
+        for module, names in _imports(p)
+        if module in numerics
+        for name in names
+        if (module, name) not in allowed
+    ]
+    assert not bad, bad
+
+
+def test_the_pass_benchmark_needs_no_app():
+    """bench/passes.py benchmarks numerical methods: the scene, the planner and inference, never the web layer."""
+    assert not [m for m, _ in _imports(ROOT / "bench" / "passes.py") if m.split(".")[0] == "app"]
+
+
+def _route_functions(method: str) -> list[tuple[str, ast.AsyncFunctionDef | ast.FunctionDef]]:
+    """Every route handler for ``method`` (decorated ``@router.<method>(...)``), with its file's name."""
+    out = []
+    for p in sorted((ROOT / "app" / "api" / "routes").glob("*.py")):
+        for node in ast.parse(p.read_text()).body:
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                for d in node.decorator_list:
+                    f = d.func if isinstance(d, ast.Call) else d
+                    if isinstance(f, ast.Attribute) and f.attr == method:
+                        out.append((p.name, node))
+    return out
+
+
+def test_no_route_writes_the_database_itself():
+    """Routes validate, call a service and answer: no ``session.add``, ``add_all``, ``commit`` in a route module."""
+    bad = []
+    for p in sorted((ROOT / "app" / "api" / "routes").glob("*.py")):
+        for node in ast.walk(ast.parse(p.read_text())):
+            if isinstance(node, ast.Attribute) and node.attr in ("add", "add_all", "commit", "flush", "delete"):
+                if isinstance(node.value, ast.Name) and node.value.id == "session":
+                    bad.append((p.name, node.lineno, node.attr))
+    assert not bad, bad
+
+
+def _service_names(path: Path) -> tuple[set[str], set[str]]:
+    """The names a route module binds to ``app.services`` and ``app.crud``: modules (``svc``, ``crud``), functions."""
+    services = {m.rsplit(".", 1)[-1] for m in _modules("app/services")}
+    modules, functions = set(), set()
+    for node in ast.parse(path.read_text()).body:
+        if isinstance(node, ast.ImportFrom) and node.module:
+            for a in node.names:
+                bound = a.asname or a.name
+                if node.module in ("app", "app.services") and a.name in ("crud", *services):
+                    modules.add(bound)
+                elif node.module.startswith("app.services.") or node.module == "app.crud":
+                    functions.add(bound)
+    return modules, functions
+
+
+def test_every_post_route_calls_one_service():
+    """A POST handler hands its work to one function of ``app.services`` or ``app.crud``, named once."""
+    handlers = _route_functions("post")
+    assert len(handlers) >= 6  # plans, access, estimates (one and a batch), passes, stations
+    for name, fn in handlers:
+        modules, functions = _service_names(ROOT / "app" / "api" / "routes" / name)
+        refs = [
+            ast.unparse(n)
+            for stmt in fn.body
+            for n in ast.walk(stmt)
+            if (isinstance(n, ast.Attribute) and isinstance(n.value, ast.Name) and n.value.id in modules)
+            or (isinstance(n, ast.Name) and n.id in functions)
+        ]
+        assert len(refs) == 1, (name, fn.name, refs)
+
+
 def test_app_imports_no_private_name_of_another_package():
     bad = [
         (str(p.relative_to(ROOT)), module, name)
         for p in _package_files("app")
         for module, names in _imports(p)
-        if module.split(".")[0] in ("planner", "inference")
+        if module.split(".")[0] in ("planner", "inference", "scene")
         for name in names
         if name.startswith("_")
     ]

@@ -125,13 +125,13 @@ def print_listing(
     return 0
 
 
-def utc_text(iso: str | None) -> str:
-    """An ISO 8601 instant as the CLI writes every time: UTC to the millisecond with a ``Z``."""
-    if not iso:
+def utc_text(moment: str | datetime | None) -> str:
+    """An instant (ISO 8601 text or a datetime) as the CLI writes every time: UTC to the millisecond with a ``Z``."""
+    if not moment:
         return "-"
     from datetime import UTC
 
-    t = datetime.fromisoformat(iso.replace("Z", "+00:00"))
+    t = moment if isinstance(moment, datetime) else datetime.fromisoformat(moment.replace("Z", "+00:00"))
     t = t.replace(tzinfo=UTC) if t.tzinfo is None else t.astimezone(UTC)
     return t.strftime("%Y-%m-%dT%H:%M:%S.") + f"{t.microsecond // 1000:03d}Z"
 

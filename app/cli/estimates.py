@@ -26,7 +26,7 @@ def cmd_estimates(args: argparse.Namespace) -> int:
             print(json.dumps(body, indent=2))
         else:
             e = EstimatePublic.model_validate(body)
-            _print_checked(e, prefix=f"estimate {e.id} ({e.input_name}, {utc_text(e.created_at.isoformat())}): ")
+            _print_checked(e, prefix=f"estimate {e.id} ({e.input_name}, {utc_text(e.created_at)}): ")
         return 0
 
     def row(e: dict[str, Any]) -> str:

@@ -96,7 +96,7 @@ def _plan_for_pass(request: Any) -> tuple[dict[str, Any], list[dict[str, Any]]]:
             duration_days=req.search.duration_days,
             reading=req.search.reading,
         )
-        windows = run_access(acc)["access_windows"]
+        windows = run_access(acc).model_dump(mode="json")["access_windows"]
     except ValidationError as exc:
         raise CliError(validation_line(exc)) from None
     except InputError as exc:

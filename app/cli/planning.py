@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pydantic import ValidationError
 
@@ -22,20 +22,26 @@ from app.cli.common import (
     validation_line,
 )
 
+if TYPE_CHECKING:
+    from app.schemas import PlanResult
+
 
 def cmd_plans(args: argparse.Namespace) -> int:
     from urllib.parse import quote
+
+    from app.schemas import PlanPublic
 
     if args.plans_cmd == "show":
         body = call_server(args, "GET", f"/v1/plans/{quote(args.id, safe='')}").json()
         if args.json:
             print(json.dumps(body, indent=2))
         else:
+            plan = PlanPublic.model_validate(body)
             print(
-                f"plan {body['id']}: {body['target_name']} / {body['observer_name']} / {body['station_name']}, "
-                f"created {utc_text(body['created_at'])}"
+                f"plan {plan.id}: {plan.target_name} / {plan.observer_name} / {plan.station_name}, "
+                f"created {utc_text(plan.created_at)}"
             )
-            print(format_plan(body))
+            print(format_plan(plan))
         return 0
 
     def row(p: dict[str, Any]) -> str:
@@ -84,7 +90,7 @@ def cmd_stations(args: argparse.Namespace) -> int:
 
 def cmd_plan(args: argparse.Namespace) -> int:
     from app.errors import InputError
-    from app.schemas import PlanCreate
+    from app.schemas import PlanCreate, PlanPublic
     from app.services.planning import run_plan
 
     if args.export and Path(args.export).exists() and any(Path(args.export).iterdir()):
@@ -98,7 +104,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
         if args.export or args.plot:
             raise CliError("--export and --plot plan locally; with --server, GET /v1/plans/ID/export/... instead")
         body = call_server(args, "POST", "/v1/plans", json=read_json(source), timeout=600).json()
-        print(json.dumps(body, indent=2) if args.json else f"plan {body['id']} stored\n" + format_plan(body))
+        if args.json:
+            print(json.dumps(body, indent=2))
+        else:
+            answer = PlanPublic.model_validate(body)
+            print(f"plan {answer.id} stored\n" + format_plan(answer))
         return 0
     try:
         req = PlanCreate.model_validate(read_json(source))
@@ -109,11 +119,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
         raise CliError(input_line(exc)) from None
     assert not isinstance(req.ground_station, str)  # run_plan refuses a station name: only the server resolves one
     if args.json:
-        print(json.dumps(result, indent=2))
+        print(json.dumps(result.model_dump(mode="json"), indent=2))
     else:
         print(format_plan(result))
     if args.export:
-        _export_plan(plan, result, req, Path(args.export))
+        _export_plan(plan, result.model_dump(mode="json"), req, Path(args.export))
     if args.plot:
         from planner.plot import plot_plan
 
@@ -160,7 +170,8 @@ def cmd_access(args: argparse.Namespace) -> int:
         raise CliError(validation_line(exc)) from None
     except InputError as exc:
         raise CliError(input_line(exc)) from None
-    print(json.dumps(result, indent=2) if args.json else format_windows(result["access_windows"]))
+    body = result.model_dump(mode="json")
+    print(json.dumps(body, indent=2) if args.json else format_windows(body["access_windows"]))
     return 0
 
 
@@ -177,55 +188,53 @@ def format_windows(windows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def format_plan(r: dict[str, Any]) -> str:
+def format_plan(r: PlanResult) -> str:
     """Return a plan as a readable report: every time in UTC with Z, every number with its unit."""
-    out = [f"epoch {utc_text(r['epoch'])}, {r['duration_days']:g} days, elements read as {r['reading']}"]
-    out.append(f"\n{len(r['access_windows'])} access windows")
-    out.append(format_windows(r["access_windows"][:10]))
-    if len(r["access_windows"]) > 10:
-        out.append(f"... and {len(r['access_windows']) - 10} more")
-    out.append(f"\n{len(r['candidates'])} candidates (best of each pass, ranked by miss); * marks the chosen one")
+    out = [f"epoch {utc_text(r.epoch)}, {r.duration_days:g} days, elements read as {r.reading}"]
+    out.append(f"\n{len(r.access_windows)} access windows")
+    out.append(format_windows([w.model_dump(mode="json") for w in r.access_windows[:10]]))
+    if len(r.access_windows) > 10:
+        out.append(f"... and {len(r.access_windows) - 10} more")
+    out.append(f"\n{len(r.candidates)} candidates (best of each pass, ranked by miss); * marks the chosen one")
     out.append(
         f"{'#':>4} {'T_access (UTC)':<25} {'dHa (km)':>9} {'dHp (km)':>9} {'miss (km)':>10} {'node':>5} {'sunlit':>7}"
     )
-    chosen_at = (r.get("chosen") or {}).get("t_access")
-    shown = [(k, c) for k, c in enumerate(r["candidates"]) if k < 15 or c["t_access"] == chosen_at]
+    chosen_at = None if r.chosen is None else r.chosen.t_access
+    shown = [(k, c) for k, c in enumerate(r.candidates) if k < 15 or c.t_access == chosen_at]
     for n, (k, c) in enumerate(shown):
         if n and k != shown[n - 1][0] + 1:
             out.append("   ...")
-        mark = "*" if c["t_access"] == chosen_at else " "
+        mark = "*" if c.t_access == chosen_at else " "
         out.append(
-            f"{mark}{k:3d} {utc_text(c['t_access']):<25} {c['delta_ha_km']:9.1f} {c['delta_hp_km']:9.1f} "
-            f"{c['miss_km']:10.3f} {c['node']:>5} {('yes' if c['feasibility']['sunlit'] else 'no'):>7}"
+            f"{mark}{k:3d} {utc_text(c.t_access):<25} {c.delta_ha_km:9.1f} {c.delta_hp_km:9.1f} "
+            f"{c.miss_km:10.3f} {c.node:>5} {('yes' if c.feasibility.sunlit else 'no'):>7}"
         )
-    ch = r.get("chosen")
+    ch = r.chosen
     if ch:
         out.append(
-            f"\nchosen: T_access {utc_text(ch['t_access'])}, dHa {ch['delta_ha_km']:.1f} km, dHp {ch['delta_hp_km']:.1f} km"
+            f"\nchosen: T_access {utc_text(ch.t_access)}, dHa {ch.delta_ha_km:.1f} km, dHp {ch.delta_hp_km:.1f} km"
         )
-        out.append(f"  node-line miss with the changed observer's own propagation: {ch['miss_km']:.3f} km")
-        out.append(f"  height change costs {r['alignment_dv_m_s']:.1f} m/s")
-    ph = r.get("phasing")
+        out.append(f"  node-line miss with the changed observer's own propagation: {ch.miss_km:.3f} km")
+        out.append(f"  height change costs {r.alignment_dv_m_s:.1f} m/s")
+    ph = r.phasing
     if ph:
-        v = ph["verification"]
+        v = ph.verification
         out.append(
-            f"phasing: burn {utc_text(ph['t_burn'])} ({ph['revolutions_before']} rev before), "
-            f"dv {ph['dv_total_m_s']:.1f} m/s, RTN [{', '.join(f'{x:.1f}' for x in ph['dv_rtn_m_s'])}] m/s"
+            f"phasing: burn {utc_text(ph.t_burn)} ({ph.revolutions_before} rev before), "
+            f"dv {ph.dv_total_m_s:.1f} m/s, RTN [{', '.join(f'{x:.1f}' for x in ph.dv_rtn_m_s)}] m/s"
         )
         out.append(
-            f"verification (numerical J2): {v['miss_km'] * 1000:.1f} m from the aim point at T_access "
-            f"(two-body Lambert alone: {v['two_body_miss_km']:.1f} km), relative speed {v['relative_speed_km_s']:.2f} km/s"
+            f"verification (numerical J2): {v.miss_km * 1000:.1f} m from the aim point at T_access "
+            f"(two-body Lambert alone: {v.two_body_miss_km:.1f} km), relative speed {v.relative_speed_km_s:.2f} km/s"
         )
         out.append(
-            f"encounter: stand-off {v['standoff_km']:.2f} km, separation {v['separation_km']:.3f} km at T_access, "
-            f"closest approach {v['closest_approach_km']:.3f} km at {utc_text(v['closest_approach_time'])}, "
-            f"target angular rate {v['target_angular_rate_deg_s']:.2f} deg/s"
+            f"encounter: stand-off {v.standoff_km:.2f} km, separation {v.separation_km:.3f} km at T_access, "
+            f"closest approach {v.closest_approach_km:.3f} km at {utc_text(v.closest_approach_time)}, "
+            f"target angular rate {v.target_angular_rate_deg_s:.2f} deg/s"
         )
     if ch:
-        f = ch["feasibility"]
-        out.append(
-            f"feasible: {'yes' if f['feasible'] else 'no'}" + (f" ({'; '.join(f['reasons'])})" if f["reasons"] else "")
-        )
-    for note in r["notes"]:
+        f = ch.feasibility
+        out.append(f"feasible: {'yes' if f.feasible else 'no'}" + (f" ({'; '.join(f.reasons)})" if f.reasons else ""))
+    for note in r.notes:
         out.append(f"note: {note}")
     return "\n".join(out)

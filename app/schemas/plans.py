@@ -14,6 +14,7 @@ from app.schemas.stations import GroundStationIn
 from planner.propagation import utc
 
 if TYPE_CHECKING:
+    from app.db.models import Plan as PlanRow
     from planner.access import AccessWindows
     from planner.alignment import Candidate
     from planner.plan import Feasibility, Plan
@@ -322,6 +323,9 @@ class PhasingPublic(Described):
         )
 
 
+PLAN_FORMAT = 2  # the stored result's shape: 1 before "format" was written, 2 since (the same fields)
+
+
 class PlanResult(Described):
     epoch: datetime
     """the start of the search span (UTC)"""
@@ -366,6 +370,18 @@ class PlanResult(Described):
             notes=plan.notes,
         )
 
+    def stored(self) -> dict[str, Any]:
+        """The JSON the database keeps: this result with its format version."""
+        return {"format": PLAN_FORMAT, **self.model_dump(mode="json")}
+
+    @staticmethod
+    def upgraded(stored: dict[str, Any]) -> dict[str, Any]:
+        """A stored result of any format as the current shape's fields (without ``format``): format 1 (no
+        ``format`` key) holds the same fields."""
+        out = dict(stored)
+        out.pop("format", 1)
+        return out
+
 
 class PlanPublic(PlanResult):
     id: str
@@ -379,17 +395,19 @@ class PlanPublic(PlanResult):
     station_name: str
     """the station's name"""
 
-    @staticmethod
-    def row_json(plan: Any) -> dict[str, Any]:
-        """Return a stored plan row (app.db.models.Plan) as this schema's JSON-ready dict."""
-        return {
-            **plan.result,
-            "id": plan.id,
-            "created_at": utc_or_none(plan.created_at),
-            "target_name": plan.target_name,
-            "observer_name": plan.observer_name,
-            "station_name": plan.station_name,
-        }
+    @classmethod
+    def from_row(cls, plan: PlanRow) -> PlanPublic:
+        """Return a stored plan row, of any stored format, as the answer."""
+        return cls.model_validate(
+            {
+                **PlanResult.upgraded(plan.result),
+                "id": plan.id,
+                "created_at": utc_or_none(plan.created_at),
+                "target_name": plan.target_name,
+                "observer_name": plan.observer_name,
+                "station_name": plan.station_name,
+            }
+        )
 
 
 class PlanSummary(Described):

@@ -12,6 +12,8 @@ from planner.access import validate_mask
 from planner.errors import PlannerError
 
 if TYPE_CHECKING:
+    from app.db.models import GroundStation
+
     pass
 
 
@@ -108,10 +110,10 @@ class StationPublic(StationIn):
     created_at: datetime
     """when it was stored (UTC)"""
 
-    @staticmethod
-    def row_json(row: Any) -> dict[str, Any]:
-        """Return a stored station row (app.db.models.GroundStation) as this schema's JSON-ready dict."""
-        return {**row.station, "created_at": utc_or_none(row.created_at)}
+    @classmethod
+    def from_row(cls, row: GroundStation) -> StationPublic:
+        """Return a stored station row as the answer."""
+        return cls.model_validate({**row.station, "created_at": utc_or_none(row.created_at)})
 
 
 class StationsPublic(Described):

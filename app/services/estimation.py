@@ -23,7 +23,7 @@ from app.schemas import CONTROL_CHARACTERS
 from app.schemas.estimates import EstimateResult
 from app.services import images
 from app.services.scenes import scene_for
-from app.services.uploads import Upload, prepare
+from app.services.uploads import Upload, decode, prepare
 from inference.rotations import rotation_matrix
 from scene.reading import Readings, read_frames
 
@@ -159,3 +159,31 @@ def estimate_and_store(
     for blob in blobs:  # a concurrent delete of an estimate with the same image may have removed it meanwhile
         images.store_blob(settings.data_dir, blob)
     return stored
+
+
+def estimate_file(
+    *,
+    session: Session,
+    operator_id: str,
+    settings: Settings,
+    est: Estimator,
+    checker: Checker,
+    data: bytes,
+    filename: str,
+    asked: EstimateRequest,
+    snr_db: float | None = None,
+) -> Estimate:
+    """Decode one uploaded frame (a stack is refused: the batch route takes it), estimate it and store it."""
+    uploads = decode(data, filename, allow_stack=False, max_side=settings.max_image_side)
+    if len(uploads) != 1:
+        raise InputError(["file"], f"the file holds {len(uploads)} frames; send stacks to /v1/estimates/batch")
+    return estimate_and_store(
+        session=session,
+        operator_id=operator_id,
+        settings=settings,
+        est=est,
+        checker=checker,
+        uploads=uploads,
+        asked=asked,
+        snr_db=snr_db,
+    )[0]

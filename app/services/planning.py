@@ -7,6 +7,11 @@ from dataclasses import replace
 from datetime import UTC, datetime, timedelta
 from typing import Any, TypeVar
 
+from sqlalchemy.orm import Session
+
+from app import crud
+from app.core.config import Settings
+from app.db.models import Plan as PlanRow
 from app.errors import InputError
 from app.schemas import (
     ORBIT_SOURCES,
@@ -148,11 +153,6 @@ def plan_options(req: PlanCreate) -> PlanOptions:
         raise InputError(["search", exc.field or "search"], str(exc)) from None
 
 
-def plan_json(plan: Plan) -> dict[str, Any]:
-    """Return the plan as a JSON-ready dict (the stored and returned result): ``PlanResult.from_plan``, dumped."""
-    return PlanResult.from_plan(plan).model_dump(mode="json")
-
-
 def check_epoch_gap(
     orbit: Orbit, orbit_in: OrbitIn, where: str, start: datetime, duration_s: float, limit_days: float
 ) -> None:
@@ -180,8 +180,8 @@ def run_plan(
     max_epoch_gap_days: float | None = None,
     max_tle_age_days: float | None = None,
     stop: StopCheck | None = None,
-) -> tuple[Plan, dict[str, Any]]:
-    """Validate a plan request against the planner, run it, and return the plan and its JSON."""
+) -> tuple[Plan, PlanResult]:
+    """Validate a plan request against the planner, run it, and return the plan and its result."""
     _osculating_states(((req.target, "target"), (req.observer, "observer")), req.search.reading, ["search", "reading"])
     target = to_orbit(req.target, "target")
     observer = to_orbit(req.observer, "observer")
@@ -205,10 +205,39 @@ def run_plan(
     except PlannerError as exc:
         side = exc.field if exc.field in ("target", "observer") else None
         raise InputError([side] if side else ["search", exc.field or "search"], str(exc)) from None
-    return plan, plan_json(plan)
+    return plan, PlanResult.from_plan(plan)
 
 
-def run_access(req: AccessCreate, max_epoch_gap_days: float | None = None) -> dict[str, Any]:
+def plan_and_store(
+    *,
+    session: Session,
+    operator_id: str,
+    plan_in: PlanCreate,
+    settings: Settings,
+    stop: StopCheck | None = None,
+) -> PlanRow:
+    """Plan a request within the service's limits (``run_plan``) and store it with its result.
+
+    A station given by name is the caller's stored one; the plan keeps a copy of it.
+    """
+    plan_in = with_stored_station(plan_in, stored_station_lookup(session, operator_id))
+    _, result = run_plan(
+        plan_in,
+        max_grid_points=settings.max_grid_points,
+        max_epoch_gap_days=settings.max_epoch_gap_days,
+        max_tle_age_days=settings.max_tle_age_days,
+        stop=stop,
+    )
+    return crud.create_plan(session=session, operator_id=operator_id, request=plan_in, result=result)
+
+
+def access_for(*, session: Session, operator_id: str, access_in: AccessCreate, settings: Settings) -> AccessPublic:
+    """Access windows over the caller's station (given, or stored by name), within the service's limits."""
+    access_in = with_stored_station(access_in, stored_station_lookup(session, operator_id))
+    return run_access(access_in, max_epoch_gap_days=settings.max_epoch_gap_days)
+
+
+def run_access(req: AccessCreate, max_epoch_gap_days: float | None = None) -> AccessPublic:
     """Compute access windows alone."""
     _osculating_states(((req.target, "target"),), req.reading, ["reading"])
     target = to_orbit(req.target, "target")
@@ -225,7 +254,7 @@ def run_access(req: AccessCreate, max_epoch_gap_days: float | None = None) -> di
         raise InputError([exc.field or "request"], str(exc)) from None
     return AccessPublic(
         epoch=epoch, duration_days=req.duration_days, access_windows=WindowPublic.from_windows(epoch, w)
-    ).model_dump(mode="json")
+    )
 
 
 ACCESS_CSV_COLUMNS = (

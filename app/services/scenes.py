@@ -5,7 +5,7 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Any
 
-from app.schemas import PlanCreate
+from app.schemas import AccessPublic, PlanCreate, PlanResult
 from app.services.planning import plan_options, to_orbit, to_station
 from scene import Scene, Window
 
@@ -28,8 +28,10 @@ def scene_for(
     )
 
 
-def windows_of(result: dict[str, Any]) -> list[Window]:
-    """A plan's (or access search's) access windows, as the scene takes them."""
+def windows_of(result: dict[str, Any] | AccessPublic | PlanResult) -> list[Window]:
+    """A plan's (or an access search's) access windows, stored or typed, as the scene takes them."""
+    if isinstance(result, AccessPublic | PlanResult):
+        return [Window(w.rise, w.set, w.max_elevation_deg) for w in result.access_windows]
     return [
         Window(datetime.fromisoformat(w["rise"]), datetime.fromisoformat(w["set"]), float(w["max_elevation_deg"]))
         for w in result.get("access_windows", [])

@@ -2,7 +2,7 @@
 
 Each kind is a way an operator's upload can go wrong while still looking like an ISAR
 frame to the networks. ``bad_frames(kind, n, seed)`` returns the normalised frames the
-models would see (what ``app.services.estimation.prepare`` makes of the upload), so the
+models would see (what ``app.services.uploads.prepare`` makes of the upload), so the
 flag rate of every kind can be measured (``bench/trust.py``, ``tests/inference/test_trust.py``):
 
 * ``other-satellite``: frames of ``comsat_like``, a box-wing satellite, not the target;

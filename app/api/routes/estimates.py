@@ -12,7 +12,7 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse, Response
 
 from app import crud
-from app import openapi_examples as examples
+from app.api import examples
 from app.api.deps import (
     CheckersDep,
     CurrentOperator,
@@ -28,11 +28,9 @@ from app.api.deps import (
     read_uploads,
 )
 from app.db.models import Estimate
-from app.errors import InputError
 from app.schemas import EstimatePublic, EstimatesPublic, IsoDateTime, Text
 from app.services import estimation as svc
 from app.services import images
-from app.services import uploads as upload_svc
 
 router = APIRouter(prefix="/estimates", tags=["estimates"])
 
@@ -113,23 +111,19 @@ async def create_estimate(
     est = models_for(model_sets, checker)
     data = await read_upload(file, settings.max_upload_bytes)
     # Decoding, the models and the database run in a worker thread, so the event loop keeps serving meanwhile.
-    uploads = await run_in_threadpool(
-        upload_svc.decode, data, file.filename or "upload", allow_stack=False, max_side=settings.max_image_side
-    )
-    if len(uploads) != 1:
-        raise InputError(["file"], f"the file holds {len(uploads)} frames; send stacks to /v1/estimates/batch")
-    rows = await run_in_threadpool(
-        svc.estimate_and_store,
+    row = await run_in_threadpool(
+        svc.estimate_file,
         session=session,
         operator_id=operator.id,
         settings=settings,
         est=est,
         checker=checker,
-        uploads=uploads,
+        data=data,
+        filename=file.filename or "upload",
         asked=asked,
         snr_db=snr_db,
     )
-    return EstimatePublic.from_row(rows[0])
+    return EstimatePublic.from_row(row)
 
 
 @router.post(

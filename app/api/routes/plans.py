@@ -11,11 +11,11 @@ from fastapi import APIRouter, Body, HTTPException, Path, Query, Request, Respon
 from fastapi.concurrency import run_in_threadpool
 
 from app import crud
-from app import openapi_examples as examples
+from app.api import examples
 from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep, as_utc, check_span
 from app.core.observability import resident_mb
 from app.schemas import PAPER_EXAMPLE, IsoDateTime, PlanCreate, PlanPublic, PlansPublic, PlanSummary, Text
-from app.services.planning import access_csv, run_plan, stored_station_lookup, with_stored_station
+from app.services.planning import access_csv, plan_and_store, run_plan
 from planner.plan import StopCheck
 
 router = APIRouter(prefix="/plans", tags=["plans"])
@@ -61,7 +61,7 @@ async def create_plan(
     operator: CurrentOperator,
     settings: SettingsDep,
     plan_in: Annotated[PlanCreate, Body(openapi_examples={"paper_table_1": {"value": PAPER_EXAMPLE}})],
-) -> dict[str, Any]:
+) -> PlanPublic:
     """Plan a GSA scene: access windows, ranked node alignments, the phasing burn and its verification.
 
     Planning runs in a worker thread under a time budget (``GSA_PLAN_TIMEOUT_S``) and a memory
@@ -69,7 +69,6 @@ async def create_plan(
     plans) and stops when the caller disconnects; in each case nothing is stored.
     """
     check_span(plan_in.search.duration_days, settings, ["search", "duration_days"])
-    plan_in = with_stored_station(plan_in, stored_station_lookup(session, operator.id))
     gone = threading.Event()
     stop = _budget(settings, gone)
 
@@ -81,21 +80,12 @@ async def create_plan(
 
     watcher = asyncio.create_task(watch())
     try:
-        _, result = await run_in_threadpool(
-            run_plan,
-            plan_in,
-            max_grid_points=settings.max_grid_points,
-            max_epoch_gap_days=settings.max_epoch_gap_days,
-            max_tle_age_days=settings.max_tle_age_days,
-            stop=stop,
+        plan = await run_in_threadpool(
+            plan_and_store, session=session, operator_id=operator.id, plan_in=plan_in, settings=settings, stop=stop
         )
     finally:
         watcher.cancel()
-    stored = plan_in.model_dump(mode="json")
-    plan = await run_in_threadpool(
-        crud.create_plan, session=session, operator_id=operator.id, request=stored, result=result
-    )
-    return PlanPublic.row_json(plan)
+    return PlanPublic.from_row(plan)
 
 
 @router.get("", response_model=PlansPublic)
@@ -137,12 +127,12 @@ def list_plans(
     response_model=PlanPublic,
     responses={**NOT_FOUND, 200: {"content": {"application/json": {"example": examples.load("plan")}}}},
 )
-def read_plan(session: SessionDep, operator: CurrentOperator, plan_id: Annotated[Text, Path()]) -> dict[str, Any]:
+def read_plan(session: SessionDep, operator: CurrentOperator, plan_id: Annotated[Text, Path()]) -> PlanPublic:
     """Return one of the caller's plans."""
     plan = crud.get_plan(session=session, operator_id=operator.id, plan_id=plan_id)
     if plan is None:
         raise HTTPException(status_code=404, detail="Plan not found")
-    return PlanPublic.row_json(plan)
+    return PlanPublic.from_row(plan)
 
 
 @router.get(

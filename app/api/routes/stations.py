@@ -7,7 +7,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, HTTPException, Path, Response
 
 from app import crud
-from app import openapi_examples as examples
+from app.api import examples
 from app.api.deps import CurrentOperator, PageDep, SessionDep
 from app.schemas import StationCreate, StationPublic, StationsPublic, Text
 
@@ -26,7 +26,7 @@ StationPath = Annotated[Text, Path(min_length=1, max_length=200, description="th
         409: {"description": "the caller already has a station of this name; nothing changed"},
     },
 )
-def create_station(session: SessionDep, operator: CurrentOperator, station_in: StationCreate) -> dict[str, Any]:
+def create_station(session: SessionDep, operator: CurrentOperator, station_in: StationCreate) -> StationPublic:
     """Store a station under its name; plans then give ``"ground_station": "NAME"`` instead of its coordinates.
 
     A plan keeps a copy of the station it was planned for, so deleting or replacing a station
@@ -39,7 +39,7 @@ def create_station(session: SessionDep, operator: CurrentOperator, station_in: S
             detail=f"a station named {station_in.name!r} is already stored: DELETE /v1/stations/{station_in.name} "
             "first, or choose another name",
         )
-    return StationPublic.row_json(row)
+    return StationPublic.from_row(row)
 
 
 @router.get("", response_model=StationsPublic)
@@ -47,19 +47,19 @@ def list_stations(
     session: SessionDep,
     operator: CurrentOperator,
     page: PageDep,
-) -> dict[str, Any]:
+) -> StationsPublic:
     """List the caller's stations by name."""
     rows, total = crud.list_stations(session=session, operator_id=operator.id, limit=page.limit, offset=page.offset)
-    return {"data": [StationPublic.row_json(r) for r in rows], "count": total}
+    return StationsPublic(data=[StationPublic.from_row(r) for r in rows], count=total)
 
 
 @router.get("/{name}", response_model=StationPublic, responses=NOT_FOUND)
-def get_station(session: SessionDep, operator: CurrentOperator, name: StationPath) -> dict[str, Any]:
+def get_station(session: SessionDep, operator: CurrentOperator, name: StationPath) -> StationPublic:
     """One of the caller's stations."""
     row = crud.get_station(session=session, operator_id=operator.id, name=name)
     if row is None:
         raise HTTPException(status_code=404, detail="Station not found")
-    return StationPublic.row_json(row)
+    return StationPublic.from_row(row)
 
 
 @router.delete("/{name}", status_code=204, responses=NOT_FOUND)

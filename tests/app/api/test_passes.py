@@ -217,3 +217,85 @@ def test_gsa_pass_sends_a_simulated_pass_to_the_service(client, plan, tmp_path, 
     out = capsys.readouterr().out
     assert rc == 0, out
     assert out.startswith("pass ") and "fused, body to LVLH" in out
+
+
+def test_a_pass_is_placed_from_one_scene(client, plan, monkeypatch):
+    """One validation of the stored plan and one propagation of its target place a whole pass: every frame, the
+    sweeps' neighbours half an integration away, and both fusions (before: up to five and four)."""
+    import scene.geometry
+    from app.schemas import PlanCreate
+
+    counts = {"validations": 0, "propagations": 0}
+    validate, propagate = PlanCreate.model_validate.__func__, scene.geometry.trajectory
+
+    def counting_validate(cls, *args, **kwargs):
+        counts["validations"] += 1
+        return validate(cls, *args, **kwargs)
+
+    def counting_trajectory(*args, **kwargs):
+        counts["propagations"] += 1
+        return propagate(*args, **kwargs)
+
+    monkeypatch.setattr(PlanCreate, "model_validate", classmethod(counting_validate))
+    monkeypatch.setattr(scene.geometry, "trajectory", counting_trajectory)
+    times = _times(plan, 4)
+    r = _post(client, plan["id"], times, form={"integration_s": ["20"] * 4, "aperture_deg": "2"})
+    assert r.status_code == 201, r.text
+    assert counts == {"validations": 1, "propagations": 1}
+    # A batch of frames tied to the plan at one moment: placed once for all of them.
+    counts.update(validations=0, propagations=0)
+    r = client.post(
+        "/v1/estimates/batch",
+        files=[("files", ("b.npz", _stack(3)))],
+        data={"plan_id": plan["id"], "observed_at": times[0]},
+        headers=A,
+    )
+    assert r.status_code == 201, r.text
+    assert counts == {"validations": 1, "propagations": 1}
+    assert all(e["attitude_lvlh"] is not None for e in r.json()["data"])
+
+
+def test_rows_stored_in_the_first_format_read_as_they_did(client, settings, plan):
+    """Rows written before results carried a format version (times with +00:00, no ``format``, an estimate without
+    ``refined``) are answered through the same models as new ones."""
+    from sqlalchemy import update
+    from sqlalchemy.orm import Session
+
+    from app.db.models import Estimate
+    from app.db.models import Plan as PlanRow
+
+    times = _times(plan)
+    fresh = _post(client, plan["id"], times).json()
+    frame = io.BytesIO()
+    np.save(frame, np.load(io.BytesIO(_stack(1)))["frames"][0])
+    est = client.post("/v1/estimates", files={"file": ("f.npy", frame.getvalue())}, headers=A).json()
+
+    def first_format(value):
+        if isinstance(value, dict):
+            return {k: first_format(v) for k, v in value.items() if k != "format"}
+        if isinstance(value, list):
+            return [first_format(v) for v in value]
+        if isinstance(value, str) and value.endswith("Z") and value[4:5] == "-" and value[10:11] == "T":
+            return datetime.fromisoformat(value.replace("Z", "+00:00")).isoformat()
+        return value
+
+    engine = create_engine(settings.database_url)
+    with Session(engine) as session:
+        row = session.get(Pass, fresh["id"])
+        old = first_format(row.result)
+        assert "format" not in old and old["frames"][0]["observed_at"].endswith("+00:00")
+        session.execute(update(Pass).where(Pass.id == fresh["id"]).values(result=old))
+        e = session.get(Estimate, est["id"])
+        old_estimate = {k: v for k, v in first_format(e.result).items() if k not in ("refined", "cells_m")}
+        session.execute(update(Estimate).where(Estimate.id == est["id"]).values(result=old_estimate))
+        p = session.get(PlanRow, plan["id"])
+        session.execute(update(PlanRow).where(PlanRow.id == plan["id"]).values(result=first_format(p.result)))
+        session.commit()
+    engine.dispose()
+    again = client.get(f"/v1/passes/{fresh['id']}", headers=A)
+    assert again.status_code == 200 and again.json() == fresh
+    old_est = client.get(f"/v1/estimates/{est['id']}", headers=A).json()
+    assert old_est["refined"] is False  # the first format's rows were never fitted
+    assert {k: v for k, v in old_est.items() if k != "refined"} == {k: v for k, v in est.items() if k != "refined"}
+    got = client.get(f"/v1/plans/{plan['id']}", headers=A).json()
+    assert got["access_windows"] == plan["access_windows"] and got["chosen"] == plan["chosen"]
