@@ -248,7 +248,12 @@ def fuse(
     shared_fraction: float | None = None,
     sweep_sigma: float = SWEEP_SIGMA,
 ) -> Fused:
-    """Fuse a pass's frames into one body-to-LVLH attitude (see the module's text)."""
+    """Fuse a pass's frames into one body-to-LVLH attitude (see the module's text).
+
+    The steps: the best-supported candidate seeds a robust mean (``_seed``, ``_robust_mean``); its
+    per-axis bounds (``_bounds``); a body rate from the residuals tells stable from drifting, and a
+    turning model replaces the still answer where it explains the frames far better (``_turning``).
+    """
     shared_fraction = SHARED_FRACTION if shared_fraction is None else shared_fraction
     if len(frames) < 2:
         raise ValueError("a pass needs at least two frames to fuse")
@@ -263,71 +268,14 @@ def fuse(
     if fallback:  # too few trusted frames: fuse them all, and say so through their quality
         pool, untrusted = list(range(len(frames))), {}
     infos = _informations(frames) if all(f.los is not None and f.los_rate is not None for f in frames) else None
-    # 1. The best-supported candidate seeds the mean: frames with some candidate near it, and half as much
-    # again for each whose own answer is near it (the branch its brightness and Swin chose).
-    best_support, seed = -1.0, frames[pool[0]].candidates[0]
-    agreeing: list[tuple[Vec, int]] = []  # every candidate, with how many frames agree with it
-    for k in pool:
-        for c in frames[k].candidates:
-            support, count = 0.0, 0
-            for i in pool:
-                near = [angle_deg(c, d) <= max(agree_deg, 0.0) for d in frames[i].candidates]
-                hit = any(near)
-                count += hit
-                support += float(hit) + ANSWER_VOTE * float(near[0])
-            agreeing.append((c, count))
-            if support > best_support:
-                best_support, seed = support, c
-    mean = seed
-    rejected: dict[int, str] = dict(untrusted)
-    chosen = [0] * len(frames)
+    seed, agreeing = _seed(frames, pool, agree_deg)
     limit = np.maximum(reject_sigma * sigma, reject_floor_deg)
-    for _ in range(20):
-        chosen = [int(np.argmin([angle_deg(mean, c) for c in f.candidates])) for f in frames]
-        dist = np.array([angle_deg(mean, f.candidates[j]) for f, j in zip(frames, chosen, strict=True)])
-        new_rejected = {
-            k: f"{dist[k]:.1f} deg from the pass's mean, over its limit of {limit[k]:.1f} deg"
-            for k in pool
-            if dist[k] > limit[k]
-        }
-        used = [k for k in pool if k not in new_rejected]
-        if len(used) < 2:
-            used = [pool[j] for j in np.argsort(dist[pool])[:2]]
-            new_rejected = {k: v for k, v in new_rejected.items() if k not in used}
-        new_rejected.update(untrusted)
-        rots = np.array([frames[k].candidates[chosen[k]] for k in used])
-        new_mean = chordal_mean(rots, 1.0 / sigma[used] ** 2)
-        if infos is not None:
-            new_mean = information_mean(rots, np.array([infos[k][chosen[k]] for k in used]), new_mean)
-        done = new_rejected == rejected and angle_deg(new_mean, mean) < 1e-6
-        mean, rejected = new_mean, new_rejected
-        if done:
-            break
+    mean, rejected, chosen = _robust_mean(frames, pool, untrusted, seed, sigma, limit, infos)
     used = [k for k in range(len(frames)) if k not in rejected]
     rots = np.array([frames[k].candidates[chosen[k]] for k in used])
     w = 1.0 / sigma[used] ** 2
-    # 3. Per-axis bound on the fused Euler angles.
     euler = np.array(euler_from_matrix(mean))
-    each = np.array([euler_from_matrix(r) for r in rots])
-    dev = (each - euler + 180.0) % 360.0 - 180.0
-    n = len(used)
-    spread = np.sqrt(np.sum(w[:, None] * dev**2, axis=0) / np.sum(w)) if n > 1 else np.zeros(3)
-    n_eff = float(np.sum(w) ** 2 / np.sum(w**2))
-    t = _t90(max(n - 1, 1))
-    statistical = t * spread / math.sqrt(max(n_eff, 1.0))
-    floor = Z90 / math.sqrt(float(np.sum(w)))
-    bound = np.maximum(statistical, floor)
-    if infos is not None:  # the information's own bound, scaled up by the scatter beyond it
-        h = np.sum([infos[k][chosen[k]] for k in used], axis=0)
-        eps = [so3_log(frames[k].candidates[chosen[k]] @ mean.T) for k in used]
-        chi2 = float(sum(e @ infos[k][chosen[k]] @ e for e, k in zip(eps, used, strict=True)))
-        scale = math.sqrt(max(1.0, chi2 / max(3 * n - 3, 1)))
-        j = np.linalg.inv(euler_jacobian(mean))
-        single = np.mean([j @ np.linalg.inv(infos[k][chosen[k]]) @ j.T for k in used], axis=0)
-        cov_e = j @ np.linalg.inv(h) @ j.T * scale**2 + shared_fraction * single
-        bound = np.degrees(Z90 * np.sqrt(np.maximum(np.diag(cov_e), 0.0)))
-    else:
-        bound = np.sqrt(bound**2 + shared_fraction * float(np.median(sigma[used] * Z90)) ** 2)
+    bound = _bounds(frames, used, chosen, mean, sigma, infos, shared_fraction)
     rival = _rival_branch(frames, pool, used, sigma, agreeing, mean, agree_deg)
     # 4. Stability: a body rate from the residual rotations over time (drift) ...
     times = np.array([frames[k].time_s for k in used])
@@ -355,6 +303,132 @@ def fuse(
     # fit to frames their own checks doubt says nothing, and costs seconds on a long pass).
     if fallback or len(pool) < 4 or any(frames[k].los is None or frames[k].los_rate is None for k in pool):
         return still
+    return _turning(
+        frames,
+        pool,
+        untrusted,
+        still,
+        sigma,
+        limit,
+        reject_sigma,
+        spin_sigma,
+        min_rate_deg_s,
+        turning_chi2,
+        sweep_sigma,
+    )
+
+
+def _seed(frames: list[PassFrame], pool: list[int], agree_deg: float) -> tuple[Vec, list[tuple[Vec, int]]]:
+    """1. The best-supported candidate, which seeds the mean: frames with some candidate near it, and half as much
+    again for each whose own answer is near it (the branch its brightness and Swin chose). Returns it and every
+    candidate with how many frames agree with it."""
+    best_support, seed = -1.0, frames[pool[0]].candidates[0]
+    agreeing: list[tuple[Vec, int]] = []
+    for k in pool:
+        for c in frames[k].candidates:
+            support, count = 0.0, 0
+            for i in pool:
+                near = [angle_deg(c, d) <= max(agree_deg, 0.0) for d in frames[i].candidates]
+                hit = any(near)
+                count += hit
+                support += float(hit) + ANSWER_VOTE * float(near[0])
+            agreeing.append((c, count))
+            if support > best_support:
+                best_support, seed = support, c
+    return seed, agreeing
+
+
+def _robust_mean(
+    frames: list[PassFrame],
+    pool: list[int],
+    untrusted: dict[int, str],
+    seed: Vec,
+    sigma: Vec,
+    limit: Vec,
+    infos: list[list[Vec]] | None,
+) -> tuple[Vec, dict[int, str], list[int]]:
+    """2. From the seed, each frame's nearest candidate, the frames beyond their limit rejected, the weighted mean
+    again, until nothing changes. Returns the mean, the rejected frames with why, and each frame's candidate."""
+    mean = seed
+    rejected: dict[int, str] = dict(untrusted)
+    chosen = [0] * len(frames)
+    for _ in range(20):
+        chosen = [int(np.argmin([angle_deg(mean, c) for c in f.candidates])) for f in frames]
+        dist = np.array([angle_deg(mean, f.candidates[j]) for f, j in zip(frames, chosen, strict=True)])
+        new_rejected = {
+            k: f"{dist[k]:.1f} deg from the pass's mean, over its limit of {limit[k]:.1f} deg"
+            for k in pool
+            if dist[k] > limit[k]
+        }
+        used = [k for k in pool if k not in new_rejected]
+        if len(used) < 2:
+            used = [pool[j] for j in np.argsort(dist[pool])[:2]]
+            new_rejected = {k: v for k, v in new_rejected.items() if k not in used}
+        new_rejected.update(untrusted)
+        rots = np.array([frames[k].candidates[chosen[k]] for k in used])
+        new_mean = chordal_mean(rots, 1.0 / sigma[used] ** 2)
+        if infos is not None:
+            new_mean = information_mean(rots, np.array([infos[k][chosen[k]] for k in used]), new_mean)
+        done = new_rejected == rejected and angle_deg(new_mean, mean) < 1e-6
+        mean, rejected = new_mean, new_rejected
+        if done:
+            break
+    return mean, rejected, chosen
+
+
+def _bounds(
+    frames: list[PassFrame],
+    used: list[int],
+    chosen: list[int],
+    mean: Vec,
+    sigma: Vec,
+    infos: list[list[Vec]] | None,
+    shared_fraction: float,
+) -> Vec:
+    """3. The 90 % bound on each fused Euler angle (deg): the frames' information, scaled up by the scatter beyond
+    it, where they carry their geometry; else their weighted scatter (Student's t); with the share of a single
+    frame's error the frames have in common either way."""
+    rots = np.array([frames[k].candidates[chosen[k]] for k in used])
+    w = 1.0 / sigma[used] ** 2
+    euler = np.array(euler_from_matrix(mean))
+    each = np.array([euler_from_matrix(r) for r in rots])
+    dev = (each - euler + 180.0) % 360.0 - 180.0
+    n = len(used)
+    spread = np.sqrt(np.sum(w[:, None] * dev**2, axis=0) / np.sum(w)) if n > 1 else np.zeros(3)
+    n_eff = float(np.sum(w) ** 2 / np.sum(w**2))
+    t = _t90(max(n - 1, 1))
+    statistical = t * spread / math.sqrt(max(n_eff, 1.0))
+    floor = Z90 / math.sqrt(float(np.sum(w)))
+    bound = np.maximum(statistical, floor)
+    if infos is not None:  # the information's own bound, scaled up by the scatter beyond it
+        h = np.sum([infos[k][chosen[k]] for k in used], axis=0)
+        eps = [so3_log(frames[k].candidates[chosen[k]] @ mean.T) for k in used]
+        chi2 = float(sum(e @ infos[k][chosen[k]] @ e for e, k in zip(eps, used, strict=True)))
+        scale = math.sqrt(max(1.0, chi2 / max(3 * n - 3, 1)))
+        j = np.linalg.inv(euler_jacobian(mean))
+        single = np.mean([j @ np.linalg.inv(infos[k][chosen[k]]) @ j.T for k in used], axis=0)
+        cov_e = j @ np.linalg.inv(h) @ j.T * scale**2 + shared_fraction * single
+        return np.asarray(np.degrees(Z90 * np.sqrt(np.maximum(np.diag(cov_e), 0.0))))
+    return np.asarray(np.sqrt(bound**2 + shared_fraction * float(np.median(sigma[used] * Z90)) ** 2))
+
+
+def _turning(
+    frames: list[PassFrame],
+    pool: list[int],
+    untrusted: dict[int, str],
+    still: Fused,
+    sigma: Vec,
+    limit: Vec,
+    reject_sigma: float,
+    spin_sigma: float,
+    min_rate_deg_s: float,
+    turning_chi2: float,
+    sweep_sigma: float,
+) -> Fused:
+    """5. The turning model fitted to the trusted frames (and every frame's sweep), kept where it explains them
+    better than the still answer by over ``turning_chi2`` at a rate it resolves; else the still answer, with that
+    gain."""
+    mean = still.rotation
     turn = fit_turning([frames[k] for k in pool], mean, sweep_frames=frames, sweep_sigma=sweep_sigma)
     cap = reject_sigma**2
     still_terms = np.array([min((still.residual_deg[k] / sigma[k]) ** 2, cap) for k in pool])

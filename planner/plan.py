@@ -294,33 +294,11 @@ def make_plan(
             cache[key] = elements_trajectory(obs_el.with_heights(*key), epoch, 0.0, t_end, obs_reading, pole)
         return cache[key]
 
-    refined = []
-    for cand in candidates:
-        check("the refinement of the candidates")
-        refined.append(_refined(cand, tgt, changed_observer(cand), windows))
-    candidates = refined
-    candidates.sort(key=lambda c: (round(c.miss_km, 3), c.change_km, c.t_access_s))
-    far = [c for c in candidates if c.miss_km > opts.max_miss_km]
-    if far:
-        notes.append(
-            f"{len(far)} candidate(s) left out: refined against the changed observer's propagation, "
-            f"they miss by more than max_miss_km {opts.max_miss_km} km"
-        )
-        candidates = [c for c in candidates if c.miss_km <= opts.max_miss_km]
+    candidates = _refine_all(candidates, tgt, changed_observer, windows, opts.max_miss_km, check, notes)
     timings["refinement"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
-    lit = np.zeros(0, bool)
-    sun = np.zeros((3, 0))
-    if candidates:
-        t_acc = np.array([c.t_access_s for c in candidates])
-        sun = sun_position_km(epoch, t_acc)
-        r_acc, _ = tgt.state(t_acc)
-        lit = sunlit(r_acc, sun)
-    feas = [
-        Feasibility(bool(lit[k]), math.nan, math.nan, bool(lit[k]), () if lit[k] else ("target in Earth's shadow",))
-        for k in range(len(candidates))
-    ]
+    lit, feas = _illumination(candidates, tgt, epoch)
     chosen_index = None
     chosen = None
     phasing = None
@@ -329,15 +307,14 @@ def make_plan(
     chosen_feas = None
     obs_chosen: Trajectory | None = None
     meet_chosen: Encounter | None = None
-    order = [k for k in range(len(candidates)) if lit[k]] + [k for k in range(len(candidates)) if not lit[k]]
+    order = _order(
+        candidates,
+        lit,
+        opts,
+        lambda k: _phasing_cost_km_s(candidates[k], changed_observer(candidates[k]), tgt, opts, model, pole),
+    )
     if candidates and not lit.any():
         notes.append("no candidate has the target sunlit at T_access; the best unlit one is planned")
-    if opts.criterion == "least_dv" and candidates:
-        pool = [k for k in order if lit[k]] or order
-        costs = {
-            k: _phasing_cost_km_s(candidates[k], changed_observer(candidates[k]), tgt, opts, model, pole) for k in pool
-        }
-        order = sorted(pool, key=lambda k: costs[k]) + [k for k in order if k not in costs]
     for k in order:
         check("the phasing")
         cand = candidates[k]
@@ -366,23 +343,7 @@ def make_plan(
         # The line of sight from the target to the observer at T_access: the stand-off vector.
         los = ph.r_observer_km - r_t[:, 0]
         phase_deg = float(phase_angle_deg(r_t[:, 0], sun_k[:, 0], los))
-        reasons = list(feas[k].reasons)
-        if meet.closest_approach_km < opts.min_separation_km:
-            reasons.append(
-                f"closest approach {meet.closest_approach_km:.2f} km is under min_separation_km "
-                f"{opts.min_separation_km} km: a collision risk"
-            )
-        if meet.separation_km > opts.max_imaging_range_km:
-            reasons.append(
-                f"observer is {meet.separation_km:.1f} km away at T_access, over {opts.max_imaging_range_km} km"
-            )
-        if phase_deg > opts.max_phase_angle_deg:
-            reasons.append(f"Sun phase angle {phase_deg:.1f} deg is over {opts.max_phase_angle_deg} deg")
-        if meet.target_angular_rate_deg_s > opts.max_tracking_rate_deg_s:
-            reasons.append(
-                f"the target crosses the observer's sky at {meet.target_angular_rate_deg_s:.1f} deg/s, over the "
-                f"{opts.max_tracking_rate_deg_s} deg/s a tracker follows (a larger standoff_km lowers it)"
-            )
+        reasons = [*feas[k].reasons, *_encounter_reasons(meet, phase_deg, opts)]
         chosen_feas = Feasibility(feas[k].sunlit, meet.separation_km, phase_deg, not reasons, tuple(reasons))
         feas[k] = chosen_feas
         break
@@ -413,6 +374,80 @@ def make_plan(
         station=station,
         encounter=meet_chosen,
     )
+
+
+def _refine_all(
+    candidates: list[Candidate],
+    tgt: Trajectory,
+    changed_observer: Callable[[Candidate], Trajectory],
+    windows: AccessWindows,
+    max_miss_km: float,
+    check: Callable[[str], None],
+    notes: list[str],
+) -> list[Candidate]:
+    """Refine every candidate against its changed observer's own propagation; rank them by miss, then by the size
+    of the change; leave out (with a note) those that then miss by more than ``max_miss_km``."""
+    refined = []
+    for cand in candidates:
+        check("the refinement of the candidates")
+        refined.append(_refined(cand, tgt, changed_observer(cand), windows))
+    refined.sort(key=lambda c: (round(c.miss_km, 3), c.change_km, c.t_access_s))
+    far = [c for c in refined if c.miss_km > max_miss_km]
+    if far:
+        notes.append(
+            f"{len(far)} candidate(s) left out: refined against the changed observer's propagation, "
+            f"they miss by more than max_miss_km {max_miss_km} km"
+        )
+    return [c for c in refined if c.miss_km <= max_miss_km]
+
+
+def _illumination(
+    candidates: list[Candidate], tgt: Trajectory, epoch: datetime
+) -> tuple[NDArray[np.bool_], list[Feasibility]]:
+    """Whether the target is sunlit at each candidate's T_access, and each candidate's feasibility so far."""
+    lit = np.zeros(0, bool)
+    if candidates:
+        t_acc = np.array([c.t_access_s for c in candidates])
+        r_acc, _ = tgt.state(t_acc)
+        lit = sunlit(r_acc, sun_position_km(epoch, t_acc))
+    feas = [
+        Feasibility(bool(lit[k]), math.nan, math.nan, bool(lit[k]), () if lit[k] else ("target in Earth's shadow",))
+        for k in range(len(candidates))
+    ]
+    return lit, feas
+
+
+def _order(
+    candidates: list[Candidate], lit: NDArray[np.bool_], opts: PlanOptions, cost_km_s: Callable[[int], float]
+) -> list[int]:
+    """The order in which candidates are phased: sunlit ones first, by rank (``smallest_change``) or by their
+    two-body Delta-v (``least_dv``, over the sunlit ones, or all when none is)."""
+    order = [k for k in range(len(candidates)) if lit[k]] + [k for k in range(len(candidates)) if not lit[k]]
+    if opts.criterion == "least_dv" and candidates:
+        pool = [k for k in order if lit[k]] or order
+        costs = {k: cost_km_s(k) for k in pool}
+        order = sorted(pool, key=lambda k: costs[k]) + [k for k in order if k not in costs]
+    return order
+
+
+def _encounter_reasons(meet: Encounter, phase_deg: float, opts: PlanOptions) -> list[str]:
+    """Why an encounter cannot be imaged, in words: collision risk, range, Sun phase, tracking rate."""
+    reasons = []
+    if meet.closest_approach_km < opts.min_separation_km:
+        reasons.append(
+            f"closest approach {meet.closest_approach_km:.2f} km is under min_separation_km "
+            f"{opts.min_separation_km} km: a collision risk"
+        )
+    if meet.separation_km > opts.max_imaging_range_km:
+        reasons.append(f"observer is {meet.separation_km:.1f} km away at T_access, over {opts.max_imaging_range_km} km")
+    if phase_deg > opts.max_phase_angle_deg:
+        reasons.append(f"Sun phase angle {phase_deg:.1f} deg is over {opts.max_phase_angle_deg} deg")
+    if meet.target_angular_rate_deg_s > opts.max_tracking_rate_deg_s:
+        reasons.append(
+            f"the target crosses the observer's sky at {meet.target_angular_rate_deg_s:.1f} deg/s, over the "
+            f"{opts.max_tracking_rate_deg_s} deg/s a tracker follows (a larger standoff_km lowers it)"
+        )
+    return reasons
 
 
 def _refined(cand: Candidate, tgt: Trajectory, obs: Trajectory, windows: AccessWindows) -> Candidate:

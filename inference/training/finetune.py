@@ -239,7 +239,72 @@ def finetune(
     }
     cache_seconds = time.perf_counter() - t_start
 
-    # Train the tail on the cached features; score each epoch (and the averaged weights) on the validation set.
+    modules, best, history, start_state, start_mae = _train_tail(swin, feats, angles, opts)
+
+    # Keep the weights with the lowest validation error; score the test split once, before and after.
+    test_before = score_on(modules, swin, start_state, feats["test"], angles["test"], train_stages)
+    test_after = score_on(modules, swin, best["state"], feats["test"], angles["test"], train_stages)
+    modules.load_state_dict(best["state"])
+    record = {
+        "from_run": str(run_dir),
+        "data": {
+            "dir": str(data_dir),
+            "content_sha256": manifest["content_sha256"],
+            "variety": manifest["spec"].get("variety"),
+        },
+        "enhancer": None if est is None else {"dir": str(enhancer), "unetpp_sha256": identity["enhancer"]},
+        "train_stages": train_stages,
+        "trained_parameters": sum(p.numel() for p in modules.parameters()),
+        "epochs": epochs,
+        "lr": lr,
+        "lr_decay": lr_decay,
+        "batch_size": batch_size,
+        "silhouette_noise": opts.silhouette_noise,
+        "ema": ema,
+        "seed": seed,
+        "train_frames": int(len(train_idx)),
+        "validation": {"spec": asdict(val_spec), "n": n_val},
+        "chosen": {k: best[k] for k in ("epoch", "weights", "val_mae_deg")},
+        "start_val_mae_deg": start_mae,
+        "test_mae_deg_before": test_before,
+        "test_mae_deg_after": test_after,
+        "history": history,
+        "hardware": {
+            "device": "cpu",
+            "name": platform.processor() or platform.machine(),
+            "torch": torch.__version__,
+            "threads": torch.get_num_threads(),
+        },
+        "cache_seconds": round(cache_seconds, 1),
+        "train_seconds": round(sum(h["seconds"] for h in history), 1),
+    }
+    save_checkpoint(
+        {"state_dict": swin.state_dict(), "config": cfg, "enhance": enhance, "finetune": True}, out / "swin.pt"
+    )
+    shutil.copy(Path(run_dir) / "unetpp.pt", out / "unetpp.pt")
+    base_path = Path(run_dir) / "training.json"
+    training = json.loads(base_path.read_text()) if base_path.is_file() else {"config": cfg}
+    if "finetune" in training:  # a second round keeps the first round's record inside its own
+        record["previous_round"] = training["finetune"]
+    training["finetune"] = record
+    write_json(out / "training.json", training)
+    plot_finetune(record, out / "finetune.png")
+    return record
+
+
+def _train_tail(
+    swin: SwinTransformer,
+    feats: dict[str, NDArray[np.float16]],
+    angles: dict[str, NDArray[np.float32]],
+    opts: FinetuneOptions,
+) -> tuple[torch.nn.ModuleList, dict[str, Any], list[dict[str, Any]], dict[str, Any], list[float]]:
+    """Train Swin's tail on the cached features; score each epoch (and the averaged weights) on the validation set.
+
+    Returns the tail's modules, the best weights seen (``epoch``, ``weights``, ``val_mae_deg``, ``state``), the
+    epochs' records, and the starting weights with their validation error.
+    """
+    seed, train_stages, epochs, batch_size, ema = opts.seed, opts.train_stages, opts.epochs, opts.batch_size, opts.ema
+    lr, lr_decay = opts.lr, opts.lr_decay
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     modules = swin.tail_modules(train_stages)
@@ -305,55 +370,7 @@ def finetune(
             flush=True,
         )
 
-    # Keep the weights with the lowest validation error; score the test split once, before and after.
-    test_before = score_on(modules, swin, start_state, feats["test"], angles["test"], train_stages)
-    test_after = score_on(modules, swin, best["state"], feats["test"], angles["test"], train_stages)
-    modules.load_state_dict(best["state"])
-    record = {
-        "from_run": str(run_dir),
-        "data": {
-            "dir": str(data_dir),
-            "content_sha256": manifest["content_sha256"],
-            "variety": manifest["spec"].get("variety"),
-        },
-        "enhancer": None if est is None else {"dir": str(enhancer), "unetpp_sha256": identity["enhancer"]},
-        "train_stages": train_stages,
-        "trained_parameters": sum(p.numel() for p in modules.parameters()),
-        "epochs": epochs,
-        "lr": lr,
-        "lr_decay": lr_decay,
-        "batch_size": batch_size,
-        "silhouette_noise": opts.silhouette_noise,
-        "ema": ema,
-        "seed": seed,
-        "train_frames": int(len(train_idx)),
-        "validation": {"spec": asdict(val_spec), "n": n_val},
-        "chosen": {k: best[k] for k in ("epoch", "weights", "val_mae_deg")},
-        "start_val_mae_deg": start_mae,
-        "test_mae_deg_before": test_before,
-        "test_mae_deg_after": test_after,
-        "history": history,
-        "hardware": {
-            "device": "cpu",
-            "name": platform.processor() or platform.machine(),
-            "torch": torch.__version__,
-            "threads": torch.get_num_threads(),
-        },
-        "cache_seconds": round(cache_seconds, 1),
-        "train_seconds": round(sum(h["seconds"] for h in history), 1),
-    }
-    save_checkpoint(
-        {"state_dict": swin.state_dict(), "config": cfg, "enhance": enhance, "finetune": True}, out / "swin.pt"
-    )
-    shutil.copy(Path(run_dir) / "unetpp.pt", out / "unetpp.pt")
-    base_path = Path(run_dir) / "training.json"
-    training = json.loads(base_path.read_text()) if base_path.is_file() else {"config": cfg}
-    if "finetune" in training:  # a second round keeps the first round's record inside its own
-        record["previous_round"] = training["finetune"]
-    training["finetune"] = record
-    write_json(out / "training.json", training)
-    plot_finetune(record, out / "finetune.png")
-    return record
+    return modules, best, history, start_state, start_mae
 
 
 def _span(rows: NDArray[np.int64]) -> tuple[int, int]:

@@ -80,3 +80,18 @@ def test_the_two_symmetries(zyx):
     np.testing.assert_allclose(RX_180, Rotation.from_euler("x", 180, degrees=True).as_matrix(), atol=1e-15)
     # the projection on the image plane (the frame's X and Y rows) is the same for R and M R M, up to z's sign
     np.testing.assert_allclose((MIRROR @ r @ MIRROR)[:2, :2], r[:2, :2], atol=1e-12)
+
+
+def test_quaternion_matches_rotation_matrix():
+    from inference.rotations import rotation_matrix
+
+    z, y, x = 30.0, -20.0, 10.0
+    w, qx, qy, qz = euler_to_quaternion(z, y, x)
+    r = np.array(
+        [
+            [1 - 2 * (qy**2 + qz**2), 2 * (qx * qy - w * qz), 2 * (qx * qz + w * qy)],
+            [2 * (qx * qy + w * qz), 1 - 2 * (qx**2 + qz**2), 2 * (qy * qz - w * qx)],
+            [2 * (qx * qz - w * qy), 2 * (qy * qz + w * qx), 1 - 2 * (qx**2 + qy**2)],
+        ]
+    )
+    np.testing.assert_allclose(r, rotation_matrix(z, y, x), atol=1e-12)

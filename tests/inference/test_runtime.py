@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from inference.errors import ModelFileError
+from inference.export import export
 from inference.runtime import Estimator
 
 CARD = {"config": {"img_size": 8}, "angle_scale_deg": 45.0, "files": {}}
@@ -108,3 +110,17 @@ def test_sessions_do_not_spin_wait():
     # Two sessions share 2 cores; a spinning pool steals them from the other network (BENCHMARKS.md).
     assert opts.get_session_config_entry("session.intra_op.allow_spinning") == "0"
     assert opts.intra_op_num_threads == 2 and opts.inter_op_num_threads == 1
+
+
+def test_runtime_refuses_bad_model_files(smoke_run, tmp_path):
+    out, _ = smoke_run
+    export(out, tmp_path / "m")
+    path = tmp_path / "m" / "swin.onnx"
+    path.write_bytes(path.read_bytes()[:-100])
+    with pytest.raises(ModelFileError, match="swin.onnx does not match"):
+        Estimator.load(tmp_path / "m")
+    path.unlink()
+    with pytest.raises(ModelFileError, match="swin.onnx is missing"):
+        Estimator.load(tmp_path / "m")
+    with pytest.raises(ModelFileError, match="model_card.json is missing"):
+        Estimator.load(tmp_path / "nothing")

@@ -9,9 +9,8 @@ import pytest
 
 from inference.errors import DatasetError
 from inference.simulation.dataset import DatasetSpec, frame_truth, generate, load_arrays, load_manifest, parse_snr
-from inference.simulation.radar import Radar
+from tests.utils.models import SMOKE_RADAR as SMALL  # 24 m x 29 m at 64 x 64
 
-SMALL = Radar(n_range=64, n_azimuth=64, bandwidth_hz=0.4e9, aperture_deg=5.1 / 4)  # 24 m x 29 m at 64 x 64
 SMALL_ARGS = ("--n-range", "64", "--n-azimuth", "64", "--bandwidth-hz", "0.4e9", "--aperture-deg", "1.275")  # SMALL
 
 
@@ -172,9 +171,8 @@ def test_one_split_rule_for_training_export_and_evaluation():
 
 def test_variety_changes_the_scattering_but_not_the_truth(tmp_path):
     from inference.simulation.dataset import DatasetSpec, render_frames
-    from inference.simulation.radar import Radar
 
-    radar = Radar(n_range=64, n_azimuth=64, bandwidth_hz=0.4e9, aperture_deg=5.1 / 4)
+    radar = SMALL
     plain = render_frames(DatasetSpec(n=4, seed=3), radar, 0, 4)
     varied = render_frames(DatasetSpec(n=4, seed=3, variety="robust"), radar, 0, 4)
     np.testing.assert_array_equal(plain["angles_deg"], varied["angles_deg"])
@@ -187,7 +185,7 @@ def test_variety_changes_the_scattering_but_not_the_truth(tmp_path):
 def test_a_variety_share_mixes_default_and_varied_frames_frame_by_frame():
     from inference.simulation.dataset import render_frames
 
-    radar = Radar(n_range=64, n_azimuth=64, bandwidth_hz=0.4e9, aperture_deg=5.1 / 4)
+    radar = SMALL
     n = 12
     plain = render_frames(DatasetSpec(n=n, seed=3), radar, 0, n)
     varied = render_frames(DatasetSpec(n=n, seed=3, variety="robust"), radar, 0, n)

@@ -11,13 +11,11 @@ from inference.errors import InferenceError, ModelFileError
 from inference.export import export
 from inference.networks.build import build_models, get_config
 from inference.simulation.dataset import DatasetSpec, generate, load_manifest, render_frames
-from inference.simulation.radar import Radar
 from inference.training.checkpoints import load_trained
 from inference.training.finetune import finetune, validation_spec
 from inference.training.options import FinetuneOptions, recipe
 from inference.training.train import train
-
-SMALL = Radar(n_range=64, n_azimuth=64, bandwidth_hz=0.4e9, aperture_deg=5.1 / 4)
+from tests.utils.models import SMOKE_RADAR as SMALL  # 24 m x 29 m at 64 x 64
 
 
 @pytest.fixture(scope="module")
