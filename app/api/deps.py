@@ -19,7 +19,7 @@ from app.schemas import CONTROL_CHARACTERS, utc_or_none
 from inference.runtime import Estimator, ModelSets
 
 if TYPE_CHECKING:  # the fit's module imports the simulator's geometry: kept out of `gsa --help`
-    from inference.trust import Checkers
+    from inference.trust import Checker, Checkers
 
 api_key_header = APIKeyHeader(name="X-API-Key", auto_error=False, description="an operator's API key")
 
@@ -80,12 +80,12 @@ def get_model_sets(request: Request) -> ModelSets:
     return cast(ModelSets, request.app.state.model_sets)
 
 
-ModelSetsDep = Annotated[Any, Depends(get_model_sets)]
+ModelSetsDep = Annotated[ModelSets, Depends(get_model_sets)]
 
 
-def models_for(model_sets: Any, checker: Any) -> Estimator:
+def models_for(model_sets: ModelSets, checker: Checker) -> Estimator:
     """The networks for the checker's target: its own model set, or the default set's."""
-    return cast(Estimator, model_sets.for_target(checker.model.name))
+    return model_sets.for_target(checker.model.name)
 
 
 def get_checkers(request: Request) -> Checkers:
@@ -93,6 +93,8 @@ def get_checkers(request: Request) -> Checkers:
     return cast("Checkers", request.app.state.checkers)
 
 
+# Any at run time: FastAPI reads this annotation when the app is built, and inference.trust loads numba's compiled
+# renderer, which `gsa --help` and `import app.main` must not pay for (tests/test_layout.py).
 CheckersDep = Annotated[Any, Depends(get_checkers)]
 
 

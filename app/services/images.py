@@ -8,12 +8,15 @@ import struct
 import threading
 import zlib
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from app.core.security import private_dir, write_private
+
+if TYPE_CHECKING:
+    from sqlalchemy.orm import Session
 
 
 def png_bytes(frame: NDArray[np.floating]) -> bytes:
@@ -52,7 +55,7 @@ def store_blob(data_dir: Path, data: bytes) -> str:
     return digest
 
 
-def sweep_blobs(*, session: Any, data_dir: Path, grace_s: float = 0.0) -> int:
+def sweep_blobs(*, session: Session, data_dir: Path, grace_s: float = 0.0) -> int:
     """Remove image files (and half-written ``.tmp`` files) that no estimate refers to; return how many.
 
     Only files older than ``grace_s`` go, so a host sharing the folder can finish a write in flight.

@@ -177,7 +177,7 @@ def list_estimates(
     return EstimatesPublic(data=[EstimatePublic.from_row(r) for r in rows], count=total)
 
 
-def _owned(session: Any, operator_id: str, estimate_id: Annotated[Text, PathParam()]) -> Estimate:
+def _owned(session: SessionDep, operator_id: str, estimate_id: Annotated[Text, PathParam()]) -> Estimate:
     e = crud.get_estimate(session=session, operator_id=operator_id, estimate_id=estimate_id)
     if e is None:
         raise HTTPException(status_code=404, detail="Estimate not found")
@@ -196,7 +196,7 @@ def read_estimate(
     return EstimatePublic.from_row(_owned(session, operator.id, estimate_id))
 
 
-def _png(settings: Any, digest: str) -> Response:
+def _png(settings: SettingsDep, digest: str) -> Response:
     path = images.blob_path(Path(settings.data_dir), digest)
     if not path.is_file():
         raise HTTPException(status_code=404, detail="Image not found")

@@ -23,7 +23,7 @@ router = APIRouter(prefix="/plans", tags=["plans"])
 NOT_FOUND: dict[int | str, dict[str, Any]] = {404: {"description": "no plan with this id belongs to the caller"}}
 
 
-def _budget(settings: Any, gone: threading.Event | None = None) -> StopCheck:
+def _budget(settings: SettingsDep, gone: threading.Event | None = None) -> StopCheck:
     """A plan's stop check: the caller gone, or over its time (GSA_PLAN_TIMEOUT_S) or memory (GSA_PLAN_MEMORY_MB) budget.
 
     Creating a plan and recomputing one for an export are the same work, under the same budget.
@@ -167,7 +167,7 @@ EXPORT_TYPES = {
 }
 
 
-def _export(kind: str, plan_id: str, session: Any, operator: Any, settings: Any) -> Response:
+def _export(kind: str, plan_id: str, session: SessionDep, operator: CurrentOperator, settings: SettingsDep) -> Response:
     from app.services import exports
 
     row = crud.get_plan(session=session, operator_id=operator.id, plan_id=plan_id)
