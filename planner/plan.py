@@ -23,6 +23,7 @@ from planner.elements import Elements, height_change_dv_km_s
 from planner.errors import PlannerError, PlanningStopped, SearchRangeError
 from planner.illumination import phase_angle_deg, sun_position_km, sunlit
 from planner.manoeuvre import Encounter, Phasing, encounter, phase
+from planner.optics import ObserverOptics, StandoffWindow, standoff_window, sun_angle_deg
 from planner.orbits import Orbit, Reading, earth_frames, elements_trajectory, osculating_elements, trajectory
 from planner.propagation import (
     EarthFrames,
@@ -38,6 +39,7 @@ from planner.search import bisect_roots
 
 Vec = NDArray[np.float64]
 STANDOFF_RANGE_KM = (0.5, 500.0)  # under 0.5 km the fly-by is a collision risk; over 500 km, no imaging
+STANDOFF_ITERATIONS = 4  # a chosen stand-off settles within 0.5 % in two rounds for fast fly-bys, three for slow ones
 Criterion = Literal["smallest_change", "least_dv"]
 
 
@@ -58,11 +60,11 @@ class PlanOptions:
     max_miss_km: float = 10.0
     revolutions_before: tuple[int, ...] = (1, 2)
     criterion: Criterion = "least_dv"
-    max_imaging_range_km: float = 50.0
-    max_phase_angle_deg: float = 90.0
-    standoff_km: float = 5.0
+    # What the observer images with: its diffraction range, tracking rate, Sun exclusion and largest phase angle.
+    optics: ObserverOptics = field(default_factory=ObserverOptics)
+    max_imaging_range_km: float | None = None  # a range cap below the optics' own (None: the optics' range)
+    standoff_km: float | None = None  # None: chosen within the optics' stand-off window (``standoff_window``)
     min_separation_km: float = 1.0
-    max_tracking_rate_deg_s: float = 10.0
     max_tle_age_days: float = 30.0
 
     def __post_init__(self) -> None:
@@ -76,29 +78,29 @@ class PlanOptions:
             raise PlannerError(f"reading {self.reading!r} must be 'osculating' or 'mean'", field="reading")
         if not all(k in (1, 2) for k in self.revolutions_before) or not self.revolutions_before:
             raise PlannerError("revolutions_before must be a non-empty subset of (1, 2)", field="revolutions_before")
-        for name in ("access_step_s", "sample_s", "max_miss_km", "max_imaging_range_km", "max_phase_angle_deg"):
+        for name in ("access_step_s", "sample_s", "max_miss_km"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise SearchRangeError(f"{name} {value} must be a positive number", field=name)
-        if not (math.isfinite(self.standoff_km) and STANDOFF_RANGE_KM[0] <= self.standoff_km <= STANDOFF_RANGE_KM[1]):
+        cap = self.max_imaging_range_km
+        if cap is not None and not (math.isfinite(cap) and cap > 0):
             raise SearchRangeError(
-                f"standoff_km {self.standoff_km} is outside [{STANDOFF_RANGE_KM[0]}, {STANDOFF_RANGE_KM[1]}] km",
-                field="standoff_km",
+                f"max_imaging_range_km {cap} must be a positive number", field="max_imaging_range_km"
+            )
+        d = self.standoff_km
+        if d is not None and not (math.isfinite(d) and STANDOFF_RANGE_KM[0] <= d <= STANDOFF_RANGE_KM[1]):
+            raise SearchRangeError(
+                f"standoff_km {d} is outside [{STANDOFF_RANGE_KM[0]}, {STANDOFF_RANGE_KM[1]}] km", field="standoff_km"
             )
         if not (math.isfinite(self.min_separation_km) and 0.0 <= self.min_separation_km <= 100.0):
             raise SearchRangeError(
                 f"min_separation_km {self.min_separation_km} is outside [0, 100] km", field="min_separation_km"
             )
-        if self.min_separation_km > self.standoff_km:
+        if d is not None and self.min_separation_km > d:
             raise SearchRangeError(
-                f"min_separation_km {self.min_separation_km} is above standoff_km {self.standoff_km}: "
+                f"min_separation_km {self.min_separation_km} is above standoff_km {d}: "
                 "every plan would be refused; lower it or raise standoff_km",
                 field="min_separation_km",
-            )
-        if not (math.isfinite(self.max_tracking_rate_deg_s) and 0.0 < self.max_tracking_rate_deg_s <= 180.0):
-            raise SearchRangeError(
-                f"max_tracking_rate_deg_s {self.max_tracking_rate_deg_s} is outside (0, 180] deg/s",
-                field="max_tracking_rate_deg_s",
             )
         if self.access_step_s > 300.0:
             raise SearchRangeError("access_step_s above 300 s can miss short passes", field="access_step_s")
@@ -119,6 +121,7 @@ class Feasibility:
     phase_angle_deg: float
     feasible: bool
     reasons: tuple[str, ...]
+    sun_angle_deg: float = math.nan  # the boresight's angle from the Sun, seen from the observer
 
 
 @dataclass(frozen=True, slots=True)
@@ -322,16 +325,7 @@ def make_plan(
         t_access = cand.t_access_s
         sun_k = sun_position_km(epoch, t_access)
         try:
-            ph = phase(
-                obs_new,
-                tgt,
-                t_access,
-                opts.revolutions_before,
-                t_earliest_burn_s=max(0.0, t_ref),
-                pole=pole,
-                standoff_km=opts.standoff_km,
-                sun_km=sun_k[:, 0],
-            )
+            ph, window = _phase_at_standoff(obs_new, tgt, t_access, max(0.0, t_ref), pole, sun_k[:, 0], opts)
         except PlannerError as exc:
             notes.append(f"candidate {k} skipped: {exc}")
             continue
@@ -343,8 +337,9 @@ def make_plan(
         # The line of sight from the target to the observer at T_access: the stand-off vector.
         los = ph.r_observer_km - r_t[:, 0]
         phase_deg = float(phase_angle_deg(r_t[:, 0], sun_k[:, 0], los))
-        reasons = [*feas[k].reasons, *_encounter_reasons(meet, phase_deg, opts)]
-        chosen_feas = Feasibility(feas[k].sunlit, meet.separation_km, phase_deg, not reasons, tuple(reasons))
+        sun_deg = sun_angle_deg(ph.r_observer_km, r_t[:, 0], sun_k[:, 0])
+        reasons = [*feas[k].reasons, *_encounter_reasons(meet, phase_deg, sun_deg, opts, window)]
+        chosen_feas = Feasibility(feas[k].sunlit, meet.separation_km, phase_deg, not reasons, tuple(reasons), sun_deg)
         feas[k] = chosen_feas
         break
     timings["phasing"] = time.perf_counter() - clock
@@ -430,22 +425,85 @@ def _order(
     return order
 
 
-def _encounter_reasons(meet: Encounter, phase_deg: float, opts: PlanOptions) -> list[str]:
-    """Why an encounter cannot be imaged, in words: collision risk, range, Sun phase, tracking rate."""
-    reasons = []
+def _phase_at_standoff(
+    observer: Trajectory,
+    tgt: Trajectory,
+    t_access_s: float,
+    t_earliest_burn_s: float,
+    pole: Pole,
+    sun_km: Vec,
+    opts: PlanOptions,
+) -> tuple[Phasing, StandoffWindow | None]:
+    """Phase the observer to a stand-off beside the target at T_access: the one asked for, or one chosen.
+
+    A chosen stand-off lies within the optics' window for the fly-by's relative speed (``standoff_window``):
+    a first phasing to the middle of the optics' range measures the speed, the next aims at the window's
+    choice, and so on until the choice moves by under 0.5 % (a fast fly-by's speed is the planes' crossing
+    and barely moves; a slow, co-orbital one's bends with the aim). Returns the window too (None for a
+    stand-off given).
+    """
+
+    def to(standoff_km: float) -> Phasing:
+        return phase(
+            observer,
+            tgt,
+            t_access_s,
+            opts.revolutions_before,
+            t_earliest_burn_s=t_earliest_burn_s,
+            pole=pole,
+            standoff_km=standoff_km,
+            sun_km=sun_km,
+        )
+
+    if opts.standoff_km is not None:
+        return to(opts.standoff_km), None
+    d = min(STANDOFF_RANGE_KM[1], 0.5 * _range_limit_km(opts))
+    ph = to(d)
+    for _ in range(STANDOFF_ITERATIONS):  # a slow, curved fly-by's speed moves with the aim: a few rounds
+        window = standoff_window(float(np.linalg.norm(ph.v_relative_km_s)), opts.optics, opts.min_separation_km)
+        d_new = min(max(window.choose_km(), STANDOFF_RANGE_KM[0]), STANDOFF_RANGE_KM[1])
+        if abs(d_new - d) <= 0.005 * d:
+            break
+        d, ph = d_new, to(d_new)
+    return ph, window
+
+
+def _range_limit_km(opts: PlanOptions) -> float:
+    """The farthest the observer may image from: the optics' diffraction range, or a lower cap asked for."""
+    cap = opts.max_imaging_range_km
+    return opts.optics.max_range_km if cap is None else min(cap, opts.optics.max_range_km)
+
+
+def _encounter_reasons(
+    meet: Encounter, phase_deg: float, sun_deg: float, opts: PlanOptions, window: StandoffWindow | None
+) -> list[str]:
+    """Why an encounter cannot be imaged, in words and numbers: no stand-off both tracks and resolves the fly-by,
+    a collision risk, range, Sun phase, Sun exclusion, tracking rate."""
+    optics = opts.optics
+    reasons = list(window.reasons) if window is not None else []
     if meet.closest_approach_km < opts.min_separation_km:
         reasons.append(
             f"closest approach {meet.closest_approach_km:.2f} km is under min_separation_km "
             f"{opts.min_separation_km} km: a collision risk"
         )
-    if meet.separation_km > opts.max_imaging_range_km:
-        reasons.append(f"observer is {meet.separation_km:.1f} km away at T_access, over {opts.max_imaging_range_km} km")
-    if phase_deg > opts.max_phase_angle_deg:
-        reasons.append(f"Sun phase angle {phase_deg:.1f} deg is over {opts.max_phase_angle_deg} deg")
-    if meet.target_angular_rate_deg_s > opts.max_tracking_rate_deg_s:
+    limit = _range_limit_km(opts)
+    if meet.separation_km > limit and not (window is not None and window.reasons):
+        what = (
+            f"the optics resolve {optics.gsd_m:g} m only within {limit:.1f} km"
+            if opts.max_imaging_range_km is None or opts.max_imaging_range_km >= optics.max_range_km
+            else f"over max_imaging_range_km {opts.max_imaging_range_km:g} km"
+        )
+        reasons.append(f"observer is {meet.separation_km:.1f} km away at T_access; {what}")
+    if phase_deg > optics.max_phase_angle_deg:
+        reasons.append(f"Sun phase angle {phase_deg:.1f} deg is over {optics.max_phase_angle_deg:g} deg")
+    if sun_deg < optics.sun_exclusion_deg:
+        reasons.append(
+            f"the boresight is {sun_deg:.1f} deg from the Sun, inside the {optics.sun_exclusion_deg:g} deg exclusion"
+        )
+    if meet.target_angular_rate_deg_s > optics.max_rate_deg_s and not (window is not None and window.reasons):
         reasons.append(
             f"the target crosses the observer's sky at {meet.target_angular_rate_deg_s:.1f} deg/s, over the "
-            f"{opts.max_tracking_rate_deg_s} deg/s a tracker follows (a larger standoff_km lowers it)"
+            f"{optics.max_rate_deg_s:g} deg/s a tracker follows (a larger standoff_km lowers it)"
         )
     return reasons
 

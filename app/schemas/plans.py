@@ -44,16 +44,19 @@ class SearchIn(Strict):
     """how many target revolutions before t_access the phasing burn may be"""
     criterion: Literal["smallest_change", "least_dv"] = "least_dv"
     """how the chosen candidate is picked: least_dv or smallest_change"""
-    max_imaging_range_km: Finite = Field(default=50.0, gt=0.0)
-    """the observer may be at most this far from the target at t_access, km"""
-    max_phase_angle_deg: Finite = Field(default=90.0, gt=0.0, le=180.0)
-    """the Sun-target-observer angle may be at most this, deg"""
-    standoff_km: Finite = Field(
-        default=5.0,
+    max_imaging_range_km: Finite | None = Field(default=None, gt=0.0)
+    """a range cap below the optics' own, km (default: observer_optics' diffraction range, gsd x aperture /
+    (1.22 wavelength))"""
+    max_phase_angle_deg: Finite | None = Field(default=None, gt=0.0, le=180.0)
+    """replaced by observer_optics.max_phase_angle_deg, and still read when given here: the largest Sun phase angle"""
+    standoff_km: Finite | None = Field(
+        default=None,
         ge=0.5,
         le=500.0,
         description="the observer is aimed this far from the target at T_access (never at the target itself), "
-        "perpendicular to the relative velocity and toward the Sun where it can be",
+        "perpendicular to the relative velocity and toward the Sun where it can be; default: chosen, the least "
+        "range at which the optics track the fly-by (5 % beyond relative speed / max_rate_deg_s), within the range "
+        "they resolve observer_optics.gsd_m at",
     )
     min_separation_km: Finite = Field(
         default=1.0,
@@ -61,11 +64,12 @@ class SearchIn(Strict):
         le=100.0,
         description="a plan whose closest approach over the arc is under this is marked infeasible (collision risk)",
     )
-    max_tracking_rate_deg_s: Finite = Field(
-        default=10.0,
+    max_tracking_rate_deg_s: Finite | None = Field(
+        default=None,
         gt=0.0,
         le=180.0,
-        description="the fastest line-of-sight rate the observer's optics can follow; faster fly-bys are infeasible",
+        description="replaced by observer_optics.max_rate_deg_s, and still read when given here: the fastest "
+        "line-of-sight rate the observer's pointing follows",
     )
 
     @model_validator(mode="after")
@@ -106,6 +110,27 @@ PAPER_EXAMPLE: dict[str, Any] = {
 }
 
 
+class ObserverOpticsIn(Strict):
+    """The observer's telescope and pointing: the range it resolves at, the rate it tracks, the Sun it avoids.
+
+    Defaults (``planner.optics.ObserverOptics``, where each is sourced): a 0.3 m aperture at 550 nm,
+    0.25 m ground sample distance, 10 deg/s tracking, 30 deg Sun exclusion, 90 deg largest phase angle.
+    """
+
+    aperture_m: Finite = 0.3
+    """the telescope's aperture diameter, m (0.01-10)"""
+    wavelength_nm: Finite = 550.0
+    """the imaging wavelength, nm (100-20000)"""
+    gsd_m: Finite = 0.25
+    """the ground sample distance the attitude work needs, m: with the aperture, it sets the largest range"""
+    max_rate_deg_s: Finite = 10.0
+    """the fastest line-of-sight rate the pointing follows, deg/s"""
+    sun_exclusion_deg: Finite = 30.0
+    """the boresight's least angle from the Sun, deg"""
+    max_phase_angle_deg: Finite = 90.0
+    """the largest Sun-target-observer angle that still shows the target's lit side, deg"""
+
+
 class PlanCreate(Strict):
     """What to plan: the paper's Table 1 is the example."""
 
@@ -120,6 +145,8 @@ class PlanCreate(Strict):
     )
     search: SearchIn = Field(default_factory=SearchIn)
     """the search: span, box, ranking and encounter limits (defaults: the paper's)"""
+    observer_optics: ObserverOpticsIn = Field(default_factory=lambda: ObserverOpticsIn())
+    """what the observer images with (defaults: a 0.3 m telescope at 550 nm resolving 0.25 m, within 111.8 km)"""
 
 
 class AccessCreate(Strict):
@@ -201,6 +228,8 @@ class FeasibilityPublic(Described):
     """observer-target distance at t_access, km (the chosen candidate's, once planned)"""
     phase_angle_deg: float | None
     """Sun-target-observer angle at t_access, deg (the chosen candidate's)"""
+    sun_angle_deg: float | None = None
+    """the observer's boresight's angle from the Sun at t_access, deg (the chosen candidate's)"""
 
     @classmethod
     def from_feasibility(cls, f: Feasibility) -> FeasibilityPublic:
@@ -210,6 +239,7 @@ class FeasibilityPublic(Described):
             reasons=list(f.reasons),
             observer_range_km=finite_or_null(f.observer_range_km),
             phase_angle_deg=finite_or_null(f.phase_angle_deg),
+            sun_angle_deg=finite_or_null(f.sun_angle_deg),
         )
 
 

@@ -28,6 +28,7 @@ from planner.alignment import HeightBox
 from planner.ccsds import elements_from_opm, omm_fields_from_kvn
 from planner.elements import Elements
 from planner.errors import PlannerError, PlanningStopped
+from planner.optics import ObserverOptics
 from planner.orbits import Orbit, earth_frames, trajectory
 from planner.plan import Plan, PlanOptions, StopCheck, make_plan
 from planner.propagation import Station, as_utc
@@ -131,8 +132,25 @@ def with_stored_station(req: R, lookup: Callable[[str], dict[str, Any] | None]) 
     return req.model_copy(update={"ground_station": StationIn.model_validate(stored)})
 
 
+def observer_optics(req: PlanCreate) -> ObserverOptics:
+    """The request's optics, with the search's older fields (max_tracking_rate_deg_s, max_phase_angle_deg) read
+    where given; out of physical range: a 422 naming the field where it was given."""
+    s, o = req.search, req.observer_optics
+    values = o.model_dump()
+    where: dict[str, list[str | int]] = {name: ["observer_optics", name] for name in values}
+    for old, new in (("max_tracking_rate_deg_s", "max_rate_deg_s"), ("max_phase_angle_deg", "max_phase_angle_deg")):
+        if getattr(s, old) is not None:
+            values[new] = getattr(s, old)
+            where[new] = ["search", old]
+    try:
+        return ObserverOptics(**values)
+    except PlannerError as exc:
+        raise InputError(where.get(exc.field or "", ["observer_optics"]), str(exc)) from None
+
+
 def plan_options(req: PlanCreate) -> PlanOptions:
     s = req.search
+    optics = observer_optics(req)
     try:
         box = HeightBox(s.dha_min_km, s.dha_max_km, s.dhp_min_km, s.dhp_max_km, s.step_km)
         return PlanOptions(
@@ -143,11 +161,10 @@ def plan_options(req: PlanCreate) -> PlanOptions:
             max_miss_km=s.max_miss_km,
             revolutions_before=tuple(sorted(set(s.revolutions_before))),
             criterion=s.criterion,
+            optics=optics,
             max_imaging_range_km=s.max_imaging_range_km,
-            max_phase_angle_deg=s.max_phase_angle_deg,
             standoff_km=s.standoff_km,
             min_separation_km=s.min_separation_km,
-            max_tracking_rate_deg_s=s.max_tracking_rate_deg_s,
         )
     except PlannerError as exc:
         raise InputError(["search", exc.field or "search"], str(exc)) from None

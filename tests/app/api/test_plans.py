@@ -1,4 +1,5 @@
 import copy
+import math
 
 import pytest
 from sqlalchemy import create_engine, func, select, text
@@ -98,6 +99,12 @@ BAD = [
     (_with(["target", "tle"], [ISS_L1, ISS_L2[:-1] + "0"]), "tle"),
     (_with(["observer", "elements"], None), "observer"),
     (_with(["target", "name"], "a/b"), "name"),
+    (_with(["observer_optics"], {"aperture_m": 0}), "aperture_m"),
+    (_with(["observer_optics"], {"wavelength_nm": 50}), "wavelength_nm"),
+    (_with(["observer_optics"], {"gsd_m": -0.25}), "gsd_m"),
+    (_with(["observer_optics"], {"max_rate_deg_s": 0}), "max_rate_deg_s"),
+    (_with(["observer_optics"], {"sun_exclusion_deg": 180}), "sun_exclusion_deg"),
+    (_with(["observer_optics"], {"focal_length_m": 2}), "focal_length_m"),
 ]
 
 
@@ -111,6 +118,34 @@ def test_bad_input_is_422_naming_the_field_and_stores_nothing(client, settings, 
     assert r.status_code == 422, r.text
     assert field in r.text
     assert _count(settings) == before
+
+
+def test_optics_out_of_range_are_named_where_they_were_given(client):
+    """An optics field is a 422 at observer_optics.<field>; the search's older twin at its own place."""
+    r = client.post("/v1/plans", json=_with(["observer_optics"], {"aperture_m": 0}), headers=A)
+    assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "observer_optics", "aperture_m"]
+    old = _with(["search"], {"max_phase_angle_deg": 181})
+    r = client.post("/v1/plans", json=old, headers=A)
+    assert r.status_code == 422 and "max_phase_angle_deg" in str(r.json()["detail"][0]["loc"])
+
+
+def test_the_standoff_is_chosen_from_the_optics(client):
+    """By default the observer is aimed where the optics both track the fly-by (relative speed / rate) and resolve
+    the ground sample distance (g D / 1.22 lambda): a 0.6 m aperture allows it, a 0.1 m one does not, and says
+    why with numbers; the search's older max_tracking_rate_deg_s is still read."""
+    body = _with(["search"], {"duration_days": 8})
+    big = client.post("/v1/plans", json={**body, "observer_optics": {"aperture_m": 0.6}}, headers=A).json()
+    v = big["phasing"]["verification"]
+    assert v["target_angular_rate_deg_s"] < 10.0 and v["separation_km"] < 223.6
+    assert v["standoff_km"] == pytest.approx(v["relative_speed_km_s"] / math.radians(10.0) * 1.05, rel=0.01)
+    small = client.post("/v1/plans", json={**body, "observer_optics": {"aperture_m": 0.1}}, headers=A).json()
+    reasons = small["chosen"]["feasibility"]["reasons"]
+    assert any(r.startswith("10 deg/s needs >= ") and "only within 37.3 km" in r for r in reasons), reasons
+    older = client.post(
+        "/v1/plans", json=_with(["search"], {"duration_days": 8, "max_tracking_rate_deg_s": 20}), headers=A
+    ).json()
+    w = older["phasing"]["verification"]
+    assert w["standoff_km"] == pytest.approx(w["relative_speed_km_s"] / math.radians(20.0) * 1.05, rel=0.01)
 
 
 def test_bad_checksum_message_says_which_line(client):
