@@ -195,19 +195,26 @@ def format_plan(r: PlanResult) -> str:
     out.append(format_windows([w.model_dump(mode="json") for w in r.access_windows[:10]]))
     if len(r.access_windows) > 10:
         out.append(f"... and {len(r.access_windows) - 10} more")
-    out.append(f"\n{len(r.candidates)} candidates (best of each pass, ranked by miss); * marks the chosen one")
     out.append(
-        f"{'#':>4} {'T_access (UTC)':<25} {'dHa (km)':>9} {'dHp (km)':>9} {'miss (km)':>10} {'node':>5} {'sunlit':>7}"
+        f"\n{len(r.candidates)} candidates (best of each pass, ranked by miss; every one shown); * marks the chosen one"
+    )
+    out.append(
+        f"{'#':>4} {'T_access (UTC)':<25} {'dHa (km)':>9} {'dHp (km)':>9} {'miss (km)':>10} {'node':>5} "
+        f"{'dv (m/s)':>9} {'stand-off (km)':>14} {'rate (deg/s)':>12} {'sunlit':>7}  feasible"
     )
     chosen_at = None if r.chosen is None else r.chosen.t_access
-    shown = [(k, c) for k, c in enumerate(r.candidates) if k < 15 or c.t_access == chosen_at]
-    for n, (k, c) in enumerate(shown):
-        if n and k != shown[n - 1][0] + 1:
-            out.append("   ...")
+
+    def fixed(v: float | None, width: int, digits: int) -> str:
+        return f"{'-':>{width}}" if v is None else f"{v:{width}.{digits}f}"
+
+    for k, c in enumerate(r.candidates):
+        f = c.feasibility
         mark = "*" if c.t_access == chosen_at else " "
+        verdict = "yes" if f.feasible else "no: " + "; ".join(f.reasons)
         out.append(
             f"{mark}{k:3d} {utc_text(c.t_access):<25} {c.delta_ha_km:9.1f} {c.delta_hp_km:9.1f} "
-            f"{c.miss_km:10.3f} {c.node:>5} {('yes' if c.feasibility.sunlit else 'no'):>7}"
+            f"{c.miss_km:10.3f} {c.node:>5} {fixed(c.dv_total_m_s, 9, 1)} {fixed(c.standoff_km, 14, 1)} "
+            f"{fixed(f.target_angular_rate_deg_s, 12, 2)} {('yes' if f.sunlit else 'no'):>7}  {verdict}"
         )
     ch = r.chosen
     if ch:

@@ -173,13 +173,24 @@ async function planPage(id) {
   const scene = ch ? `<div class="grid">
       <div class="card"><b>Chosen scene</b><br>T_access ${utc(ch.t_access)}<br>height change dHa ${num(ch.delta_ha_km, 1)} km,
         dHp ${num(ch.delta_hp_km, 1)} km<br>node-line miss ${num(ch.miss_km, 3)} km (${esc(ch.node)})<br>
-        target ${f.sunlit ? "sunlit" : "in Earth's shadow"}</div>
+        target ${f.sunlit ? "sunlit" : "in Earth's shadow"}${ch.standoff_km == null ? "" : `<br>observer aimed
+        ${num(ch.standoff_km, 1)} km beside it`}</div>
       ${ph ? `<div class="card"><b>Phasing burn</b><br>${utc(ph.t_burn)} (${ph.revolutions_before} rev before)<br>
         dv ${num(ph.dv_total_m_s, 1)} m/s, RTN [${ph.dv_rtn_m_s.map((v) => num(v, 1)).join(", ")}] m/s<br>
         verified (numerical J2): ${num(ph.verification.miss_km * 1000, 1)} m from the aim point<br>
         closest approach ${num(ph.verification.closest_approach_km, 3)} km; the target crosses the observer's sky at
         ${num(ph.verification.target_angular_rate_deg_s, 2)} deg/s</div>` : ""}
     </div>` : "";
+  const candidates = p.candidates.map((c, k) => {
+    const cf = c.feasibility;
+    const isChosen = ch && c.t_access === ch.t_access;
+    return `<tr${isChosen ? ' class="chosen"' : ""}><td class="num">${k}</td><td>${utc(c.t_access)}</td>
+      <td class="num">${num(c.delta_ha_km, 1)}</td><td class="num">${num(c.delta_hp_km, 1)}</td>
+      <td class="num">${num(c.miss_km, 3)}</td><td class="num">${c.dv_total_m_s == null ? "-" : num(c.dv_total_m_s, 1)}</td>
+      <td class="num">${c.standoff_km == null ? "-" : num(c.standoff_km, 1)}</td>
+      <td class="num">${cf.target_angular_rate_deg_s == null ? "-" : num(cf.target_angular_rate_deg_s, 2)}</td>
+      <td>${cf.sunlit ? "yes" : "no"}</td><td>${cf.feasible ? "yes" : `no: ${esc(cf.reasons.join("; "))}`}</td></tr>`;
+  }).join("");
   const exportsList = ["opm", "oem", "czml", "geojson", "access.csv", "pointing.csv"]
     .map((k) => `<a href="#" data-export="${k}">${k}</a>`).join(" · ");
   view.innerHTML = `<h1>Plan ${esc(p.target_name)} / ${esc(p.observer_name)} / ${esc(p.station_name)}</h1>
@@ -189,6 +200,11 @@ async function planPage(id) {
     <table id="windows"><thead><tr><th class="num">#</th><th>rise (UTC)</th><th>culmination (UTC)</th><th>set (UTC)</th>
     <th class="num">max el (deg)</th><th class="num">min range (km)</th><th class="num">duration (s)</th></tr></thead>
     <tbody>${windows}</tbody></table>
+    <h2>Candidates (${p.candidates.length}, every one; the chosen one highlighted)</h2>
+    <table id="candidates"><thead><tr><th class="num">#</th><th>T_access (UTC)</th><th class="num">dHa (km)</th>
+    <th class="num">dHp (km)</th><th class="num">miss (km)</th><th class="num">dv (m/s)</th><th class="num">stand-off (km)</th>
+    <th class="num">rate (deg/s)</th><th>sunlit</th><th>feasible</th></tr></thead><tbody>${candidates ||
+      '<tr><td colspan="10" class="muted">No pass has an alignment inside the box.</td></tr>'}</tbody></table>
     <h2>Exports</h2><p>${exportsList}</p>`;
   view.querySelectorAll("[data-export]").forEach((a) => a.addEventListener("click", async (ev) => {
     ev.preventDefault();

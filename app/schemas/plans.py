@@ -43,7 +43,10 @@ class SearchIn(Strict):
     revolutions_before: list[Literal[1, 2]] = Field(default=[1, 2], min_length=1, max_length=2)
     """how many target revolutions before t_access the phasing burn may be"""
     criterion: Literal["smallest_change", "least_dv"] = "least_dv"
-    """how the chosen candidate is picked: least_dv or smallest_change"""
+    """how the chosen candidate is picked among those that pass every check (then the sunlit ones, then the rest):
+    least_dv, the cheapest, or smallest_change, the best-ranked"""
+    max_dv_m_s: Finite | None = Field(default=None, ge=0.0, le=20000.0)
+    """a candidate dearer than this (height change plus phasing), m/s, is infeasible (default: no cap)"""
     max_imaging_range_km: Finite | None = Field(default=None, gt=0.0)
     """a range cap below the optics' own, km (default: observer_optics' diffraction range, gsd x aperture /
     (1.22 wavelength))"""
@@ -221,15 +224,20 @@ class FeasibilityPublic(Described):
     sunlit: bool
     """whether the target is in sunlight at t_access (an optical observer needs it)"""
     feasible: bool
-    """whether every check passes"""
+    """whether every check passes (every candidate screened by its own two-body phasing; the chosen one verified
+    with the J2-corrected burn and its whole arc)"""
     reasons: list[str]
-    """each failed check in words; empty when feasible"""
+    """each failed check in words and numbers; empty when feasible"""
     observer_range_km: float | None
-    """observer-target distance at t_access, km (the chosen candidate's, once planned)"""
+    """observer-target distance at t_access, km: the candidate's stand-off"""
     phase_angle_deg: float | None
-    """Sun-target-observer angle at t_access, deg (the chosen candidate's)"""
+    """Sun-target-observer angle at t_access, deg"""
     sun_angle_deg: float | None = None
-    """the observer's boresight's angle from the Sun at t_access, deg (the chosen candidate's)"""
+    """the observer's boresight's angle from the Sun at t_access, deg"""
+    relative_speed_km_s: float | None = None
+    """the fly-by's relative speed at t_access, km/s"""
+    target_angular_rate_deg_s: float | None = None
+    """how fast the target crosses the observer's sky at t_access, deg/s (what the pointing must follow)"""
 
     @classmethod
     def from_feasibility(cls, f: Feasibility) -> FeasibilityPublic:
@@ -240,6 +248,8 @@ class FeasibilityPublic(Described):
             observer_range_km=finite_or_null(f.observer_range_km),
             phase_angle_deg=finite_or_null(f.phase_angle_deg),
             sun_angle_deg=finite_or_null(f.sun_angle_deg),
+            relative_speed_km_s=finite_or_null(f.relative_speed_km_s),
+            target_angular_rate_deg_s=finite_or_null(f.target_angular_rate_deg_s),
         )
 
 
@@ -261,12 +271,20 @@ class CandidatePublic(Described):
     t_access_range: list[datetime] | None
     """the earliest and latest t_access the (dHa, dHp) box reaches in this pass, or null"""
     family: list[list[float]] = Field(description="(dHa, dHp) km pairs aligning the node line at the same moment")
+    dv_total_m_s: float | None = None
+    """what this candidate costs: the height change plus its own phasing burn (two-body Lambert to its own
+    stand-off; the chosen one's J2-corrected), m/s; null where no burn reaches it"""
+    standoff_km: float | None = None
+    """where the observer is aimed beside the target at t_access, km (chosen from the optics, or as asked)"""
     feasibility: FeasibilityPublic
-    """whether this candidate can be imaged: light, range, phase angle"""
+    """whether this candidate can be imaged: light, range, rate, Sun, phase angle, cost"""
 
     @classmethod
     def from_candidate(cls, epoch: datetime, c: Candidate, f: Feasibility) -> CandidatePublic:
+        dv = finite_or_null(f.dv_total_km_s)
         return cls(
+            dv_total_m_s=None if dv is None else dv * 1000.0,
+            standoff_km=finite_or_null(f.standoff_km),
             pass_index=c.pass_index,
             node=c.node,
             t_access=utc(epoch, c.t_access_s),

@@ -165,6 +165,7 @@ def plan_options(req: PlanCreate) -> PlanOptions:
             max_imaging_range_km=s.max_imaging_range_km,
             standoff_km=s.standoff_km,
             min_separation_km=s.min_separation_km,
+            max_dv_m_s=s.max_dv_m_s,
         )
     except PlannerError as exc:
         raise InputError(["search", exc.field or "search"], str(exc)) from None

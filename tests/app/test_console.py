@@ -94,6 +94,8 @@ def test_console_pages_in_chromium(served, tmp_path):
                 'class="coast" d="M',
                 "Not feasible",
                 "Phasing burn",
+                'id="candidates"',
+                "stand-off (km)",
             ],
         ),
         "estimates": (f"{console}/estimates", [est["id"][:8]]),
