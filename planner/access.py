@@ -12,7 +12,7 @@ elevation pass (tests/planner/test_access.py checks both against a 1-s skyfield 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -53,6 +53,12 @@ class AccessWindows:
     min_range_km: Vec
     rise_clipped: NDArray[np.bool_]
     set_clipped: NDArray[np.bool_]
+    # How fast the radar must turn to follow the pass (deg/s): the azimuth's rate at the culmination, where a pass
+    # turns it fastest, and the elevation's largest rate within 3 minutes of it; ``keyhole`` where the azimuth rate
+    # is over the station's ``max_azimuth_rate_deg_s`` (the radar loses the target near the zenith).
+    max_azimuth_rate_deg_s: Vec = field(default_factory=lambda: np.empty(0))
+    max_elevation_rate_deg_s: Vec = field(default_factory=lambda: np.empty(0))
+    keyhole: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
 
     def __len__(self) -> int:
         return int(self.rise_s.size)
@@ -74,6 +80,11 @@ def validate_station(station: Station) -> None:
     for name, value, lo, hi in checks:
         if not (math.isfinite(value) and lo <= value <= hi):
             raise StationError(f"{name} {value} is outside [{lo}, {hi}]", field=name)
+    rate = station.max_azimuth_rate_deg_s
+    if not (math.isfinite(rate) and 0.0 < rate <= 360.0):
+        raise StationError(
+            f"max_azimuth_rate_deg_s {rate} must be over 0 and at most 360", field="max_azimuth_rate_deg_s"
+        )
     if station.max_range_km is not None and not (math.isfinite(station.max_range_km) and station.max_range_km > 0):
         raise StationError(f"max_range_km {station.max_range_km} must be positive", field="max_range_km")
     validate_mask(station.mask)
@@ -313,6 +324,7 @@ def _describe(
     t_all = np.concatenate([w.start, culm, w.end])
     r, _ = traj.state(t_all)
     angles = look_angles(r, t_all, station, frames)
+    az_rate, el_rate = _peak_rates(traj, station, frames, w.start, culm, w.end)
     return AccessWindows(
         rise_s=w.start,
         culmination_s=culm,
@@ -324,4 +336,34 @@ def _describe(
         min_range_km=nearest,
         rise_clipped=np.asarray(w.start_clipped, bool),
         set_clipped=np.asarray(w.end_clipped, bool),
+        max_azimuth_rate_deg_s=az_rate,
+        max_elevation_rate_deg_s=el_rate,
+        keyhole=az_rate > station.max_azimuth_rate_deg_s,
     )
+
+
+RATE_HALF_SPAN_S = 180.0  # the elevation's rate is sought this far either side of the culmination, every second
+RATE_DT_S = 0.05  # the central difference's half step
+
+
+def pointing_rates(traj: Trajectory, station: Station, frames: EarthFrames, t_s: Vec) -> tuple[Vec, Vec]:
+    """Return the azimuth and elevation rates (deg/s) the radar turns at, at ``t_s``: central differences over
+    0.1 s of the look angles (the azimuth's wrapped through north)."""
+    t = np.asarray(t_s, float)
+    ahead = look_angles(traj.state(t + RATE_DT_S)[0], t + RATE_DT_S, station, frames)
+    behind = look_angles(traj.state(t - RATE_DT_S)[0], t - RATE_DT_S, station, frames)
+    d_az = (ahead.azimuth_deg - behind.azimuth_deg + 180.0) % 360.0 - 180.0
+    return d_az / (2 * RATE_DT_S), (ahead.elevation_deg - behind.elevation_deg) / (2 * RATE_DT_S)
+
+
+def _peak_rates(
+    traj: Trajectory, station: Station, frames: EarthFrames, start: Vec, culm: Vec, end: Vec
+) -> tuple[Vec, Vec]:
+    """Each window's azimuth rate at its culmination and largest elevation rate near it (deg/s, magnitudes)."""
+    offsets = np.arange(-RATE_HALF_SPAN_S, RATE_HALF_SPAN_S + 0.5, 1.0)
+    lo = start + RATE_DT_S  # the differences stay inside the window (a window clipped at the span's end included)
+    hi = np.maximum(end - RATE_DT_S, lo)
+    grid = np.clip(culm[:, None] + offsets, lo[:, None], hi[:, None])
+    az, el = pointing_rates(traj, station, frames, np.concatenate([np.clip(culm, lo, hi), grid.ravel()]))
+    n = culm.size
+    return np.abs(az[:n]), np.abs(el[n:]).reshape(n, -1).max(axis=1)

@@ -322,7 +322,9 @@ def make_plan(
     meet_chosen: Encounter | None = None
     for k, cand in enumerate(candidates):  # every candidate's own cost, stand-off and imaging geometry
         check("the screening of the candidates")
-        feas[k] = screen(cand, changed_observer(cand), tgt, feas[k], epoch, opts, model, pole)
+        screened = screen(cand, changed_observer(cand), tgt, feas[k], epoch, opts, model, pole)
+        radar = _radar_reasons(cand, windows, station)
+        feas[k] = replace(screened, feasible=screened.feasible and not radar, reasons=(*screened.reasons, *radar))
     order = _order(feas, opts)
     if candidates and not lit.any():
         notes.append("no candidate has the target sunlit at T_access; the best unlit one is planned")
@@ -353,6 +355,7 @@ def make_plan(
             *(["target in Earth's shadow"] if not feas[k].sunlit else []),
             *_encounter_reasons(meet, phase_deg, sun_deg, opts, window),
             *_dv_reasons(dv_total, opts),
+            *_radar_reasons(cand, windows, station),
         ]
         chosen_feas = Feasibility(
             feas[k].sunlit,
@@ -509,6 +512,17 @@ def screen(
     straight = Encounter(d, speed, rate, closest, t, None)
     reasons = (*shadow, *_encounter_reasons(straight, phase_deg, sun_deg, opts, window), *_dv_reasons(dv, opts))
     return Feasibility(lit.sunlit, d, phase_deg, not reasons, reasons, sun_deg, dv, d, speed, rate)
+
+
+def _radar_reasons(cand: Candidate, windows: AccessWindows, station: Station) -> list[str]:
+    """A candidate in a pass the radar cannot follow (a keyhole: its azimuth rate near the zenith), in words."""
+    k = cand.pass_index
+    if not windows.keyhole.size or not windows.keyhole[k]:
+        return []
+    return [
+        f"the radar must turn {windows.max_azimuth_rate_deg_s[k]:.1f} deg/s in azimuth at this pass's culmination, "
+        f"over its {station.max_azimuth_rate_deg_s:g} deg/s (a keyhole)"
+    ]
 
 
 def _dv_reasons(dv_total_km_s: float, opts: PlanOptions) -> list[str]:

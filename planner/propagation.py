@@ -278,6 +278,9 @@ class Station:
     max_range_km: float | None = None
     mask: tuple[tuple[float, float], ...] = ()
     refraction: bool = False
+    # The fastest the antenna turns in azimuth (deg/s): a pass that needs more near the zenith is a keyhole.
+    # 10 deg/s is a conservative rate for a large tracking antenna; give the site's own.
+    max_azimuth_rate_deg_s: float = 10.0
 
     def itrs_km(self) -> Vec:
         """Return the site's ITRS position, shape (3,)."""

@@ -198,6 +198,13 @@ class WindowPublic(Described):
     """true when the pass was already in progress at the span's start (rise is the start)"""
     set_clipped: bool
     """true when it was still in progress at the span's end"""
+    max_azimuth_rate_deg_s: float | None = None
+    """how fast the radar must turn in azimuth to follow the pass, at its culmination (its fastest), deg/s"""
+    max_elevation_rate_deg_s: float | None = None
+    """the largest elevation rate within 3 minutes of the culmination, deg/s"""
+    keyhole: bool = False
+    """true when max_azimuth_rate_deg_s is over the station's max_azimuth_rate_deg_s: the radar loses the target
+    near the zenith"""
 
     @classmethod
     def from_windows(cls, epoch: datetime, w: AccessWindows) -> list[WindowPublic]:
@@ -215,6 +222,9 @@ class WindowPublic(Described):
                 min_range_km=float(w.min_range_km[k]),
                 rise_clipped=bool(w.rise_clipped[k]),
                 set_clipped=bool(w.set_clipped[k]),
+                max_azimuth_rate_deg_s=float(w.max_azimuth_rate_deg_s[k]),
+                max_elevation_rate_deg_s=float(w.max_elevation_rate_deg_s[k]),
+                keyhole=bool(w.keyhole[k]),
             )
             for k in range(len(w))
         ]

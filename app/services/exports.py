@@ -303,12 +303,22 @@ def czml(arc: Arc, plan_id: str, names: dict[str, str], station: dict[str, Any],
     return json.dumps(packets, indent=1)
 
 
-POINTING_COLUMNS = ("access", "time_utc", "azimuth_deg", "elevation_deg", "range_km", "range_rate_km_s")
+POINTING_COLUMNS = (
+    "access",
+    "time_utc",
+    "azimuth_deg",
+    "elevation_deg",
+    "range_km",
+    "range_rate_km_s",
+    "azimuth_rate_deg_s",
+    "elevation_rate_deg_s",
+)
 
 
 def pointing_csv(plan: Plan, windows: list[dict[str, Any]]) -> str:
-    """The radar's pointing over each pass, 1-s steps: azimuth (from north, through east), elevation, range and its rate."""
-    from planner.access import look_angles
+    """The radar's pointing over each pass, 1-s steps: azimuth (from north, through east), elevation, range and its
+    rate, and the azimuth's and elevation's rates the antenna turns at."""
+    from planner.access import look_angles, pointing_rates
 
     assert plan.target_trajectory is not None and plan.frames is not None and plan.station is not None
     buf = io.StringIO()
@@ -329,10 +339,11 @@ def pointing_csv(plan: Plan, windows: list[dict[str, Any]]) -> str:
             look_angles(rp, t + dt, plan.station, plan.frames).range_km
             - look_angles(rm, t - dt, plan.station, plan.frames).range_km
         ) / (2 * dt)
+        az_rate, el_rate = pointing_rates(plan.target_trajectory, plan.station, plan.frames, t)
         for j in range(t.size):
             buf.write(
                 f"{k},{z_time(utc(epoch, t[j]))},{look.azimuth_deg[j]:.4f},{look.elevation_deg[j]:.4f},"
-                f"{look.range_km[j]:.3f},{rate[j]:.5f}\n"
+                f"{look.range_km[j]:.3f},{rate[j]:.5f},{az_rate[j]:.4f},{el_rate[j]:.4f}\n"
             )
     return buf.getvalue()
 

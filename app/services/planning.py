@@ -101,6 +101,7 @@ def to_station(st: StationIn | str) -> Station:
         max_range_km=st.max_range_km,
         mask=tuple((float(a), float(e)) for a, e in st.mask or ()),
         refraction=st.refraction,
+        max_azimuth_rate_deg_s=st.max_azimuth_rate_deg_s,
     )
 
 

@@ -273,3 +273,38 @@ def test_range_limit_cuts_windows_inside_a_pass(scans, station, limit_km):
         # The least range over the window, not the range at culmination.
         assert w.min_range_km[k] <= ref.rng[inside].min() + 1e-6
         assert w.min_range_km[k] >= ref.rng[inside].min() - 50.0
+
+
+def test_pointing_rates_against_skyfields_altaz(iss):
+    """The radar's azimuth and elevation rates against a central difference (0.02 s) of skyfield's own altaz, at a
+    spread of moments of the highest pass; the window's azimuth rate is its culmination's, the largest a dense
+    scan of skyfield's azimuth finds, and a station limit under it marks the pass a keyhole."""
+    from dataclasses import replace
+
+    from planner.access import pointing_rates
+
+    sat_traj, frames, w = iss
+    k = int(np.argmax(w.max_elevation_deg))
+    sat = EarthSatellite(ISS_L1, ISS_L2, ts=timescale())
+    site = wgs84.latlon(STATION.latitude_deg, STATION.longitude_deg, STATION.altitude_m)
+
+    def sky_rates(t_s):
+        alt_a, az_a, _ = (sat - site).at(skyfield_times(ISS_EPOCH, t_s + 0.01)).altaz()
+        alt_b, az_b, _ = (sat - site).at(skyfield_times(ISS_EPOCH, t_s - 0.01)).altaz()
+        d_az = (az_a.degrees - az_b.degrees + 180.0) % 360.0 - 180.0
+        return d_az / 0.02, (alt_a.degrees - alt_b.degrees) / 0.02
+
+    t = np.linspace(w.rise_s[k] + 5.0, w.set_s[k] - 5.0, 9)
+    az, el = pointing_rates(sat_traj, STATION, frames, t)
+    sky_az, sky_el = sky_rates(t)
+    np.testing.assert_allclose(az, sky_az, atol=2e-3)  # deg/s
+    np.testing.assert_allclose(el, sky_el, atol=2e-3)
+    dense = np.arange(w.rise_s[k], w.set_s[k], 0.5)
+    peak = float(np.abs(sky_rates(dense)[0]).max())
+    assert w.max_azimuth_rate_deg_s[k] == pytest.approx(peak, rel=0.01)
+    assert w.max_elevation_rate_deg_s[k] <= float(np.abs(sky_rates(dense)[1]).max()) + 1e-3
+    assert not w.keyhole[k]
+    slow = replace(STATION, max_azimuth_rate_deg_s=0.5 * float(w.max_azimuth_rate_deg_s[k]))
+    assert access_windows(sat_traj, slow, frames, 0.0, SPAN_S).keyhole[k]
+    with pytest.raises(StationError, match="max_azimuth_rate_deg_s"):
+        access_windows(sat_traj, replace(STATION, max_azimuth_rate_deg_s=0.0), frames, 0.0, SPAN_S)

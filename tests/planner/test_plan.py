@@ -250,3 +250,17 @@ def test_a_dv_cap_below_the_cheapest_scene_leaves_none_feasible_and_says_why():
     assert not any(f.feasible for f in plan.feasibility)
     assert any(r.endswith("over max_dv_m_s 100") for r in plan.chosen_feasibility.reasons)
     assert any("passes every check" in n for n in plan.notes)
+
+
+def test_a_radar_too_slow_for_its_passes_makes_their_candidates_infeasible():
+    """A station whose antenna turns at most 0.3 deg/s in azimuth: each candidate in a pass that needs more at its
+    culmination is refused, with the two rates."""
+    from dataclasses import replace
+
+    slow = replace(PAPER_STATION, max_azimuth_rate_deg_s=0.3)
+    plan = make_plan(Orbit("T", PAPER_TARGET), Orbit("O", PAPER_OBSERVER), slow, PlanOptions(duration_s=5 * 86400.0))
+    keyholes = [k for k, c in enumerate(plan.candidates) if plan.windows.keyhole[c.pass_index]]
+    assert 0 < len(keyholes) < len(plan.candidates)  # these alignments fall on low passes: 0.28-0.46 deg/s
+    for k in keyholes:
+        f = plan.feasibility[k]
+        assert not f.feasible and any(r.endswith("over its 0.3 deg/s (a keyhole)") for r in f.reasons)
