@@ -98,12 +98,18 @@ def phase(
     pole: Pole | None = None,
     standoff_km: float = 0.0,
     sun_km: Vec | None = None,
+    standoff_rounds: int = 2,
+    propagate: bool = True,
 ) -> Phasing:
     """Plan the phasing burn for the cheapest of ``revolutions_before`` and verify it numerically.
 
     The verification integrates two-body + J2 about ``pole`` (the Earth's axis of date;
     GCRS z if None) from the burn to ``t_access_s``. The aim point lies ``standoff_km``
-    from the target (``standoff_direction``, toward the Sun at ``sun_km`` where it can).
+    from the target (``standoff_direction``, toward the Sun at ``sun_km`` where it can);
+    its side follows the relative velocity, which follows the aim, so it is set
+    ``standoff_rounds`` times. ``propagate`` off gives the plain two-body Lambert burn
+    without any integration (its relative velocity is Lambert's arrival velocity's, within
+    about a percent of the integrated one's; misses NaN): a screening's cheap first look.
 
     Raises PlannerError if every option would burn before ``t_earliest_burn_s``.
     """
@@ -129,13 +135,34 @@ def phase(
     _, k, t_burn, r1, v1, v_dep, m, low = min(options, key=lambda o: o[0])
     tof = t_access_s - t_burn
     h = np.cross(r1, v1)
+    if not propagate:
+        v_arrive = lambert(r1, r2, tof, m, low, prograde_normal=h).v2_km_s
+        side = standoff_direction(r2, v_arrive - v2_target, sun_km) if standoff_km > 0.0 else np.zeros(3)
+        dv = v_dep - v1
+        return Phasing(
+            t_burn_s=t_burn,
+            t_access_s=t_access_s,
+            revolutions_before=k,
+            lambert_revolutions=m,
+            low_path=low,
+            dv_km_s=dv,
+            dv_rtn_km_s=rtn_matrix(r1, v1) @ dv,
+            dv_total_km_s=float(np.linalg.norm(dv)),
+            two_body_miss_km=math.nan,
+            miss_km=math.nan,
+            corrections=0,
+            r_observer_km=r2 + standoff_km * side,
+            v_relative_km_s=v_arrive - v2_target,
+            v_departure_km_s=v_dep,
+            standoff_km_vec=standoff_km * side,
+        )
     r_end, v_end = propagate_j2(r1, v_dep, t_burn, t_access_s, pole)
     two_body_miss = float(np.linalg.norm(r_end - r2))
     offset = np.zeros(3)
     aim = r2.copy()
     corrections = 0
     # The stand-off side depends on the relative velocity, which depends on the aim: twice is enough.
-    for _ in range(2 if standoff_km > 0.0 else 1):
+    for _ in range(standoff_rounds if standoff_km > 0.0 else 1):
         if standoff_km > 0.0:
             offset = standoff_km * standoff_direction(r2, v_end - v2_target, sun_km)
         goal = r2 + offset

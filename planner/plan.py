@@ -469,34 +469,37 @@ def screen(
     (range the stand-off, rate v_perp / d, phase and Sun angles from the aim point). ``lit``: its illumination
     (``_illumination``). The chosen candidate is verified afterwards in full.
 
-    The cost is a Lambert burn corrected once for J2 (``SCREEN_CORRECTIONS``): the plain two-body burn's cost
-    is off by up to 2.4x on the paper's month (684 against 1623 m/s), one correction by under 0.5 %.
+    The relative speed comes from a plain Lambert burn, not integrated (``phase(propagate=False)``); the cost
+    from a burn corrected once for J2 (``SCREEN_CORRECTIONS``), its side set once: the plain two-body burn's
+    cost is off by up to 2.4x on the paper's month (684 against 1623 m/s), one correction by under 0.5 %.
     """
     t = cand.t_access_s
     sun = sun_position_km(epoch, t)[:, 0]
     shadow = () if lit.sunlit else ("target in Earth's shadow",)
 
-    def burn(standoff_km: float, corrections: int) -> Phasing:
+    def burn(standoff_km: float, propagate: bool = True) -> Phasing:
         return phase(
             observer,
             tgt,
             t,
             opts.revolutions_before,
             max(0.0, model.t_ref_s),
-            max_corrections=corrections,
+            max_corrections=SCREEN_CORRECTIONS,
             pole=pole,
             standoff_km=standoff_km,
             sun_km=sun,
+            standoff_rounds=1,
+            propagate=propagate,
         )
 
     try:
         window = None
         if opts.standoff_km is not None:
-            ph = burn(opts.standoff_km, SCREEN_CORRECTIONS)
+            ph = burn(opts.standoff_km)
         else:  # the relative speed from a plain Lambert burn (within a percent), the cost from a corrected one
-            first = burn(min(STANDOFF_RANGE_KM[1], 0.5 * _range_limit_km(opts)), 0)
+            first = burn(min(STANDOFF_RANGE_KM[1], 0.5 * _range_limit_km(opts)), propagate=False)
             window = standoff_window(float(np.linalg.norm(first.v_relative_km_s)), opts.optics, opts.min_separation_km)
-            ph = burn(min(max(window.choose_km(), STANDOFF_RANGE_KM[0]), STANDOFF_RANGE_KM[1]), SCREEN_CORRECTIONS)
+            ph = burn(min(max(window.choose_km(), STANDOFF_RANGE_KM[0]), STANDOFF_RANGE_KM[1]))
     except PlannerError as exc:
         return replace(lit, feasible=False, reasons=(*shadow, f"no phasing burn: {exc}"))
     r_t = tgt.state(t)[0][:, 0]

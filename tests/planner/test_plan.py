@@ -264,3 +264,19 @@ def test_a_radar_too_slow_for_its_passes_makes_their_candidates_infeasible():
     for k in keyholes:
         f = plan.feasibility[k]
         assert not f.feasible and any(r.endswith("over its 0.3 deg/s (a keyhole)") for r in f.reasons)
+
+
+def test_a_plain_lambert_burn_gives_the_relative_speed_the_integrated_one_does(plan):
+    """The screening reads the fly-by's relative speed off Lambert's arrival velocity, with no integration: within
+    2 % of the J2-integrated burn's (the stand-off it chooses moves by as much; the cost it takes from a corrected
+    burn)."""
+    from planner.manoeuvre import phase
+    from planner.orbits import elements_trajectory
+
+    changed = PAPER_OBSERVER.with_heights(plan.chosen.delta_ha_km, plan.chosen.delta_hp_km)
+    obs = elements_trajectory(changed, PAPER_EPOCH, 0.0, plan.duration_s + 86400.0, "osculating")
+    quick = phase(obs, plan.target_trajectory, plan.chosen.t_access_s, propagate=False, standoff_km=80.0)
+    assert np.isnan(quick.miss_km) and quick.corrections == 0
+    assert np.linalg.norm(quick.standoff_km_vec) == pytest.approx(80.0)
+    full = np.linalg.norm(plan.phasing.v_relative_km_s)
+    assert np.linalg.norm(quick.v_relative_km_s) == pytest.approx(full, rel=0.02)
