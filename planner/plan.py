@@ -500,13 +500,16 @@ def screen(
             first = burn(min(STANDOFF_RANGE_KM[1], 0.5 * _range_limit_km(opts)), propagate=False)
             window = standoff_window(float(np.linalg.norm(first.v_relative_km_s)), opts.optics, opts.min_separation_km)
             ph = burn(min(max(window.choose_km(), STANDOFF_RANGE_KM[0]), STANDOFF_RANGE_KM[1]))
+            if window.feasible and _rate_deg_s(ph) > opts.optics.max_rate_deg_s:  # the quick speed was a little low
+                window = standoff_window(float(np.linalg.norm(ph.v_relative_km_s)), opts.optics, opts.min_separation_km)
+                ph = burn(min(max(window.choose_km(), STANDOFF_RANGE_KM[0]), STANDOFF_RANGE_KM[1]))
     except PlannerError as exc:
         return replace(lit, feasible=False, reasons=(*shadow, f"no phasing burn: {exc}"))
     r_t = tgt.state(t)[0][:, 0]
     rho = np.asarray(ph.standoff_km_vec, float)
     v_rel = np.asarray(ph.v_relative_km_s, float)
     d = float(np.linalg.norm(rho))
-    rate = math.degrees(float(np.linalg.norm(np.cross(rho, v_rel))) / d**2)
+    rate = _rate_deg_s(ph)
     phase_deg = float(phase_angle_deg(r_t, sun, rho))
     sun_deg = sun_angle_deg(r_t + rho, r_t, sun)
     dv = ph.dv_total_km_s + float(height_change_dv_km_s(model.a_km, model.e, cand.delta_ha_km, cand.delta_hp_km))
@@ -526,6 +529,13 @@ def _radar_reasons(cand: Candidate, windows: AccessWindows, station: Station) ->
         f"the radar must turn {windows.max_azimuth_rate_deg_s[k]:.1f} deg/s in azimuth at this pass's culmination, "
         f"over its {station.max_azimuth_rate_deg_s:g} deg/s (a keyhole)"
     ]
+
+
+def _rate_deg_s(ph: Phasing) -> float:
+    """How fast the target crosses the observer's sky at T_access past the burn's aim point, deg/s (|rho x v| / rho^2)."""
+    rho = np.asarray(ph.standoff_km_vec, float)
+    d2 = float(rho @ rho)
+    return math.degrees(float(np.linalg.norm(np.cross(rho, ph.v_relative_km_s))) / d2) if d2 > 0.0 else math.inf
 
 
 def _dv_reasons(dv_total_km_s: float, opts: PlanOptions) -> list[str]:

@@ -189,7 +189,7 @@ async function planPage(id) {
       <td class="num">${num(c.miss_km, 3)}</td><td class="num">${c.dv_total_m_s == null ? "-" : num(c.dv_total_m_s, 1)}</td>
       <td class="num">${c.standoff_km == null ? "-" : num(c.standoff_km, 1)}</td>
       <td class="num">${cf.target_angular_rate_deg_s == null ? "-" : num(cf.target_angular_rate_deg_s, 2)}</td>
-      <td>${cf.sunlit ? "yes" : "no"}</td><td>${cf.feasible ? "yes" : `no: ${esc(cf.reasons.join("; "))}`}</td></tr>`;
+      <td>${cf.sunlit ? "yes" : "no"}</td><td class="reasons">${cf.feasible ? "yes" : `no: ${esc(cf.reasons.join("; "))}`}</td></tr>`;
   }).join("");
   const exportsList = ["opm", "oem", "czml", "geojson", "access.csv", "pointing.csv"]
     .map((k) => `<a href="#" data-export="${k}">${k}</a>`).join(" · ");
