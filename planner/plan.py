@@ -39,7 +39,8 @@ from planner.search import bisect_roots
 
 Vec = NDArray[np.float64]
 STANDOFF_RANGE_KM = (0.5, 500.0)  # under 0.5 km the fly-by is a collision risk; over 500 km, no imaging
-SCREEN_CORRECTIONS = 1  # J2 corrections of each candidate's screening burn (one: its cost within 0.5 %)
+# J2 corrections of each candidate's screening burn (design/measurements.md, "Screening every candidate's burn")
+SCREEN_CORRECTIONS = 1
 STANDOFF_ITERATIONS = 4  # a chosen stand-off settles within 0.5 % in two rounds for fast fly-bys, three for slow ones
 Criterion = Literal["smallest_change", "least_dv"]
 
@@ -470,8 +471,8 @@ def screen(
     (``_illumination``). The chosen candidate is verified afterwards in full.
 
     The relative speed comes from a plain Lambert burn, not integrated (``phase(propagate=False)``); the cost
-    from a burn corrected once for J2 (``SCREEN_CORRECTIONS``), its side set once: the plain two-body burn's
-    cost is off by up to 2.4x on the paper's month (684 against 1623 m/s), one correction by under 0.5 %.
+    from a burn corrected once for J2 (``SCREEN_CORRECTIONS``), its side set once: the plain burn's cost is far
+    off, one correction's close (design/measurements.md, "Screening every candidate's burn").
     """
     t = cand.t_access_s
     sun = sun_position_km(epoch, t)[:, 0]
