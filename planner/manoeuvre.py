@@ -135,44 +135,31 @@ def phase(
     _, k, t_burn, r1, v1, v_dep, m, low = min(options, key=lambda o: o[0])
     tof = t_access_s - t_burn
     h = np.cross(r1, v1)
-    if not propagate:
-        v_arrive = lambert(r1, r2, tof, m, low, prograde_normal=h).v2_km_s
-        side = standoff_direction(r2, v_arrive - v2_target, sun_km) if standoff_km > 0.0 else np.zeros(3)
-        dv = v_dep - v1
-        return Phasing(
-            t_burn_s=t_burn,
-            t_access_s=t_access_s,
-            revolutions_before=k,
-            lambert_revolutions=m,
-            low_path=low,
-            dv_km_s=dv,
-            dv_rtn_km_s=rtn_matrix(r1, v1) @ dv,
-            dv_total_km_s=float(np.linalg.norm(dv)),
-            two_body_miss_km=math.nan,
-            miss_km=math.nan,
-            corrections=0,
-            r_observer_km=r2 + standoff_km * side,
-            v_relative_km_s=v_arrive - v2_target,
-            v_departure_km_s=v_dep,
-            standoff_km_vec=standoff_km * side,
-        )
-    r_end, v_end = propagate_j2(r1, v_dep, t_burn, t_access_s, pole)
-    two_body_miss = float(np.linalg.norm(r_end - r2))
-    offset = np.zeros(3)
-    aim = r2.copy()
     corrections = 0
-    # The stand-off side depends on the relative velocity, which depends on the aim: twice is enough.
-    for _ in range(standoff_rounds if standoff_km > 0.0 else 1):
-        if standoff_km > 0.0:
-            offset = standoff_km * standoff_direction(r2, v_end - v2_target, sun_km)
-        goal = r2 + offset
-        n = 0
-        while np.linalg.norm(r_end - goal) > tol_km and n < max_corrections:
-            aim = aim + (goal - r_end)
-            v_dep = lambert(r1, aim, tof, m, low, prograde_normal=h).v1_km_s
-            r_end, v_end = propagate_j2(r1, v_dep, t_burn, t_access_s, pole)
-            n += 1
-        corrections += n
+    if propagate:
+        r_end, v_end = propagate_j2(r1, v_dep, t_burn, t_access_s, pole)
+        two_body_miss = float(np.linalg.norm(r_end - r2))
+        offset = np.zeros(3)
+        aim = r2.copy()
+        # The stand-off side depends on the relative velocity, which depends on the aim: twice is enough.
+        for _ in range(standoff_rounds if standoff_km > 0.0 else 1):
+            if standoff_km > 0.0:
+                offset = standoff_km * standoff_direction(r2, v_end - v2_target, sun_km)
+            goal = r2 + offset
+            n = 0
+            while np.linalg.norm(r_end - goal) > tol_km and n < max_corrections:
+                aim = aim + (goal - r_end)
+                v_dep = lambert(r1, aim, tof, m, low, prograde_normal=h).v1_km_s
+                r_end, v_end = propagate_j2(r1, v_dep, t_burn, t_access_s, pole)
+                n += 1
+            corrections += n
+        miss = float(np.linalg.norm(r_end - (r2 + offset)))
+    else:  # the plain Lambert burn: its arrival velocity, no integration, no miss measured
+        v_end = lambert(r1, r2, tof, m, low, prograde_normal=h).v2_km_s
+        side = standoff_direction(r2, v_end - v2_target, sun_km) if standoff_km > 0.0 else np.zeros(3)
+        offset = standoff_km * side
+        r_end = r2 + offset
+        two_body_miss = miss = math.nan
     dv = v_dep - v1
     return Phasing(
         t_burn_s=t_burn,
@@ -184,7 +171,7 @@ def phase(
         dv_rtn_km_s=rtn_matrix(r1, v1) @ dv,
         dv_total_km_s=float(np.linalg.norm(dv)),
         two_body_miss_km=two_body_miss,
-        miss_km=float(np.linalg.norm(r_end - (r2 + offset))),
+        miss_km=miss,
         corrections=corrections,
         r_observer_km=r_end,
         v_relative_km_s=v_end - v2_target,

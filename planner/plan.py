@@ -42,6 +42,7 @@ STANDOFF_RANGE_KM = (0.5, 500.0)  # under 0.5 km the fly-by is a collision risk;
 # J2 corrections of each candidate's screening burn (design/measurements.md, "Screening every candidate's burn")
 SCREEN_CORRECTIONS = 1
 STANDOFF_ITERATIONS = 4  # a chosen stand-off settles within 0.5 % in two rounds for fast fly-bys, three for slow ones
+SHADOW = "target in Earth's shadow"  # the reason an optical observer cannot image an unlit target
 Criterion = Literal["smallest_change", "least_dv"]
 
 
@@ -353,7 +354,7 @@ def make_plan(
         sun_deg = sun_angle_deg(ph.r_observer_km, r_t[:, 0], sun_k[:, 0])
         dv_total = ph.dv_total_km_s + alignment_dv
         reasons = [
-            *(["target in Earth's shadow"] if not feas[k].sunlit else []),
+            *(() if feas[k].sunlit else (SHADOW,)),
             *_encounter_reasons(meet, phase_deg, sun_deg, opts, window),
             *_dv_reasons(dv_total, opts),
             *_radar_reasons(cand, windows, station),
@@ -436,7 +437,7 @@ def _illumination(
         r_acc, _ = tgt.state(t_acc)
         lit = sunlit(r_acc, sun_position_km(epoch, t_acc))
     feas = [
-        Feasibility(bool(lit[k]), math.nan, math.nan, bool(lit[k]), () if lit[k] else ("target in Earth's shadow",))
+        Feasibility(bool(lit[k]), math.nan, math.nan, bool(lit[k]), () if lit[k] else (SHADOW,))
         for k in range(len(candidates))
     ]
     return lit, feas
@@ -476,7 +477,7 @@ def screen(
     """
     t = cand.t_access_s
     sun = sun_position_km(epoch, t)[:, 0]
-    shadow = () if lit.sunlit else ("target in Earth's shadow",)
+    shadow = () if lit.sunlit else (SHADOW,)
 
     def burn(standoff_km: float, propagate: bool = True) -> Phasing:
         return phase(
@@ -498,12 +499,12 @@ def screen(
         if opts.standoff_km is not None:
             ph = burn(opts.standoff_km)
         else:  # the relative speed from a plain Lambert burn (within a percent), the cost from a corrected one
-            first = burn(min(STANDOFF_RANGE_KM[1], 0.5 * _range_limit_km(opts)), propagate=False)
+            first = burn(_first_standoff_km(opts), propagate=False)
             window = standoff_window(float(np.linalg.norm(first.v_relative_km_s)), opts.optics, opts.min_separation_km)
-            ph = burn(min(max(window.choose_km(), STANDOFF_RANGE_KM[0]), STANDOFF_RANGE_KM[1]))
+            ph = burn(_aim_km(window))
             if window.feasible and _rate_deg_s(ph) > opts.optics.max_rate_deg_s:  # the quick speed was a little low
                 window = standoff_window(float(np.linalg.norm(ph.v_relative_km_s)), opts.optics, opts.min_separation_km)
-                ph = burn(min(max(window.choose_km(), STANDOFF_RANGE_KM[0]), STANDOFF_RANGE_KM[1]))
+                ph = burn(_aim_km(window))
     except PlannerError as exc:
         return replace(lit, feasible=False, reasons=(*shadow, f"no phasing burn: {exc}"))
     r_t = tgt.state(t)[0][:, 0]
@@ -578,15 +579,25 @@ def _phase_at_standoff(
 
     if opts.standoff_km is not None:
         return to(opts.standoff_km), None
-    d = min(STANDOFF_RANGE_KM[1], 0.5 * _range_limit_km(opts))
+    d = _first_standoff_km(opts)
     ph = to(d)
     for _ in range(STANDOFF_ITERATIONS):  # a slow, curved fly-by's speed moves with the aim: a few rounds
         window = standoff_window(float(np.linalg.norm(ph.v_relative_km_s)), opts.optics, opts.min_separation_km)
-        d_new = min(max(window.choose_km(), STANDOFF_RANGE_KM[0]), STANDOFF_RANGE_KM[1])
+        d_new = _aim_km(window)
         if abs(d_new - d) <= 0.005 * d:
             break
         d, ph = d_new, to(d_new)
     return ph, window
+
+
+def _first_standoff_km(opts: PlanOptions) -> float:
+    """The stand-off a first burn aims at to measure the fly-by's speed: the middle of the range the optics allow."""
+    return min(STANDOFF_RANGE_KM[1], 0.5 * _range_limit_km(opts))
+
+
+def _aim_km(window: StandoffWindow) -> float:
+    """The window's choice of stand-off, within the stand-offs a plan may aim at."""
+    return min(max(window.choose_km(), STANDOFF_RANGE_KM[0]), STANDOFF_RANGE_KM[1])
 
 
 def _range_limit_km(opts: PlanOptions) -> float:
