@@ -75,6 +75,29 @@ class Described(BaseModel):
     model_config = ConfigDict(use_attribute_docstrings=True)
 
 
+STORED_FORMAT = 2  # a stored result's shape: 1 before rows wrote "format" (read by each result's _from_format), 2 since
+
+
+class StoredResult(Described):
+    """A result the database keeps as JSON with its format version, and reads back whatever row's format."""
+
+    def stored(self) -> dict[str, Any]:
+        """The JSON the database keeps: this result with its format version."""
+        return {"format": STORED_FORMAT, **self.model_dump(mode="json")}
+
+    @classmethod
+    def upgraded(cls, stored: dict[str, Any]) -> dict[str, Any]:
+        """A stored result of any format as the current shape's fields (without ``format``)."""
+        out = dict(stored)
+        cls._from_format(out.pop("format", 1), out)
+        return out
+
+    @classmethod
+    def _from_format(cls, version: int, fields: dict[str, Any]) -> None:
+        """Bring a stored result of an older ``version`` to the current fields, in place (format 1 of plans and
+        passes holds the same fields, their times with +00:00 instead of Z: nothing to do)."""
+
+
 class Strict(Described):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 

@@ -11,15 +11,12 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field
 
-from app.schemas.common import Described, utc_or_none
+from app.schemas.common import Described, StoredResult, utc_or_none
 from inference.rotations import euler_from_matrix, euler_to_quaternion, rotation_matrix
 
 if TYPE_CHECKING:
     from app.db.models import Estimate
     from inference.trust import Alternative, Checked, Quality
-
-
-ESTIMATE_FORMAT = 2  # the stored result's shape: 1 before "format" was written (no refined meant false), 2 now
 
 
 def _attitude_fields(angles_deg: Sequence[float] | NDArray[np.floating]) -> dict[str, Any]:
@@ -113,7 +110,7 @@ class CheckedPublic(Described):
         }
 
 
-class EstimateResult(CheckedPublic):
+class EstimateResult(CheckedPublic, StoredResult):
     """What an estimate answers and stores, beside its row's columns."""
 
     target: str | None = Field(None, description="the target model the frame was fitted to")
@@ -159,18 +156,10 @@ class EstimateResult(CheckedPublic):
             cells_m=None if cells_m is None else list(cells_m),
         )
 
-    def stored(self) -> dict[str, Any]:
-        """The JSON the database keeps: this result with its format version."""
-        return {"format": ESTIMATE_FORMAT, **self.model_dump(mode="json")}
-
-    @staticmethod
-    def upgraded(stored: dict[str, Any]) -> dict[str, Any]:
-        """A stored result of any format as the current shape's fields (without ``format``)."""
-        out = dict(stored)
-        version = out.pop("format", 1)
+    @classmethod
+    def _from_format(cls, version: int, fields: dict[str, Any]) -> None:
         if version == 1:
-            out.setdefault("refined", False)  # rows from before the fit was optional were never fitted
-        return out
+            fields.setdefault("refined", False)  # rows from before the fit was optional were never fitted
 
 
 class _EstimateRow(Described):

@@ -4,19 +4,17 @@ from __future__ import annotations
 
 import math
 from datetime import datetime
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from pydantic import Field
 
-from app.schemas.common import Described, utc_or_none
+from app.schemas.common import Described, StoredResult, utc_or_none
 from app.schemas.estimates import AlternativePublic, AttitudePublic, CheckedPublic, QualityPublic
 
 if TYPE_CHECKING:
     from app.db.models import Pass
     from inference.fit import CommonFit
     from scene.fusion import FusedFrame, PassAttitude
-
-PASS_FORMAT = 2  # the stored result's shape: 1 before "format" was written, 2 since
 
 
 class PassFramePublic(Described):
@@ -104,7 +102,7 @@ class PassCommonFit(Described):
         return cls(frames=c.frames, moved_deg=round(c.moved_deg, 4), silhouette_iou=round(c.iou, 4))
 
 
-class PassResult(Described):
+class PassResult(StoredResult):
     """What a pass answers and stores, beside its row's columns."""
 
     target: str
@@ -182,18 +180,6 @@ class PassResult(Described):
             attitude_at=p.attitude_at,
             timings_s=timings_s,
         )
-
-    def stored(self) -> dict[str, Any]:
-        """The JSON the database keeps: this result with its format version."""
-        return {"format": PASS_FORMAT, **self.model_dump(mode="json")}
-
-    @staticmethod
-    def upgraded(stored: dict[str, Any]) -> dict[str, Any]:
-        """A stored result of any format as the current shape's fields (without ``format``): format 1 (no
-        ``format`` key) holds the same fields, its times with +00:00 instead of Z."""
-        out = dict(stored)
-        out.pop("format", 1)
-        return out
 
 
 class _PassRow(Described):

@@ -8,9 +8,10 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from pydantic import ConfigDict, Field, model_validator
 
-from app.schemas.common import Described, Finite, IsoDateTime, Strict, finite_or_null, utc_or_none
+from app.schemas.common import Described, Finite, IsoDateTime, StoredResult, Strict, finite_or_null, utc_or_none
 from app.schemas.orbits import OrbitIn
 from app.schemas.stations import GroundStationIn
+from planner.optics import ObserverOptics
 from planner.propagation import utc
 
 if TYPE_CHECKING:
@@ -113,6 +114,9 @@ PAPER_EXAMPLE: dict[str, Any] = {
 }
 
 
+_OPTICS = ObserverOptics()  # the defaults are the planner's, written once there with their sources
+
+
 class ObserverOpticsIn(Strict):
     """The observer's telescope and pointing: the range it resolves at, the rate it tracks, the Sun it avoids.
 
@@ -120,17 +124,17 @@ class ObserverOpticsIn(Strict):
     0.25 m ground sample distance, 10 deg/s tracking, 30 deg Sun exclusion, 90 deg largest phase angle.
     """
 
-    aperture_m: Finite = 0.3
+    aperture_m: Finite = _OPTICS.aperture_m
     """the telescope's aperture diameter, m (0.01-10)"""
-    wavelength_nm: Finite = 550.0
+    wavelength_nm: Finite = _OPTICS.wavelength_nm
     """the imaging wavelength, nm (100-20000)"""
-    gsd_m: Finite = 0.25
+    gsd_m: Finite = _OPTICS.gsd_m
     """the ground sample distance the attitude work needs, m: with the aperture, it sets the largest range"""
-    max_rate_deg_s: Finite = 10.0
+    max_rate_deg_s: Finite = _OPTICS.max_rate_deg_s
     """the fastest line-of-sight rate the pointing follows, deg/s"""
-    sun_exclusion_deg: Finite = 30.0
+    sun_exclusion_deg: Finite = _OPTICS.sun_exclusion_deg
     """the boresight's least angle from the Sun, deg"""
-    max_phase_angle_deg: Finite = 90.0
+    max_phase_angle_deg: Finite = _OPTICS.max_phase_angle_deg
     """the largest Sun-target-observer angle that still shows the target's lit side, deg"""
 
 
@@ -381,10 +385,7 @@ class PhasingPublic(Described):
         )
 
 
-PLAN_FORMAT = 2  # the stored result's shape: 1 before "format" was written, 2 since (the same fields)
-
-
-class PlanResult(Described):
+class PlanResult(StoredResult):
     epoch: datetime
     """the start of the search span (UTC)"""
     duration_days: float
@@ -427,18 +428,6 @@ class PlanResult(Described):
             timings_s={k: round(v, 4) for k, v in plan.timings_s.items()},
             notes=plan.notes,
         )
-
-    def stored(self) -> dict[str, Any]:
-        """The JSON the database keeps: this result with its format version."""
-        return {"format": PLAN_FORMAT, **self.model_dump(mode="json")}
-
-    @staticmethod
-    def upgraded(stored: dict[str, Any]) -> dict[str, Any]:
-        """A stored result of any format as the current shape's fields (without ``format``): format 1 (no
-        ``format`` key) holds the same fields."""
-        out = dict(stored)
-        out.pop("format", 1)
-        return out
 
 
 class PlanPublic(PlanResult):
