@@ -18,11 +18,11 @@ from numpy.typing import NDArray
 
 from planner.access import MAX_SPAN_S, AccessWindows, access_windows, validate_station
 from planner.alignment import Candidate, HeightBox, ObserverPlaneModel, align_nodes
-from planner.constants import MIN_PERIGEE_HEIGHT_KM, MU_EARTH_KM3_S2
-from planner.elements import Elements, height_change_dv_km_s
+from planner.constants import MIN_PERIGEE_HEIGHT_KM, MU_EARTH_KM3_S2, R_EARTH_KM
+from planner.elements import Elements, height_change_dv_km_s, state_to_elements
 from planner.errors import PlannerError, PlanningStopped, SearchRangeError
 from planner.illumination import phase_angle_deg, sun_position_km, sunlit
-from planner.manoeuvre import Encounter, Phasing, encounter, phase
+from planner.manoeuvre import Encounter, Phasing, encounter, phase, rtn_matrix
 from planner.optics import ObserverOptics, StandoffWindow, standoff_window, sun_angle_deg
 from planner.orbits import Orbit, Reading, earth_frames, elements_trajectory, osculating_elements, trajectory
 from planner.propagation import (
@@ -134,6 +134,15 @@ class Feasibility:
     standoff_km: float = math.nan
     relative_speed_km_s: float = math.nan
     target_angular_rate_deg_s: float = math.nan
+    # The unit vector from the target to the observer at T_access in the target's radial / along-track / normal
+    # frame: the imaging geometry, the side of the target the observer sees (None where not phased).
+    line_of_sight_rtn: tuple[float, float, float] | None = None
+
+
+def line_of_sight_rtn(r_target_km: Vec, v_target_km_s: Vec, rho_km: Vec) -> tuple[float, float, float]:
+    """The unit vector along ``rho_km`` (target to observer, GCRS) in the target's radial / along-track / normal axes."""
+    u = rtn_matrix(r_target_km, v_target_km_s) @ (rho_km / np.linalg.norm(rho_km))
+    return float(u[0]), float(u[1]), float(u[2])
 
 
 @dataclass(frozen=True, slots=True)
@@ -225,6 +234,10 @@ def check_box_reachable(elements: Elements, box: HeightBox) -> None:
 
 
 StopCheck = Callable[[], str | None]
+# The observer after a height change (dHa, dHp), and the first moment (s) a phasing burn may come after it.
+ChangedObserver = Callable[[float, float], tuple[Trajectory, float]]
+# The order in which the screened candidates are phased (the first that phases is chosen).
+CandidateOrder = Callable[[list[Candidate], list[Feasibility]], list[int]]
 
 
 def make_plan(
@@ -233,6 +246,11 @@ def make_plan(
     station: Station,
     options: PlanOptions | None = None,
     stop: StopCheck | None = None,
+    *,
+    changed: ChangedObserver | None = None,
+    order: CandidateOrder | None = None,
+    pole: Pole | None = None,
+    target_trajectory: Trajectory | None = None,
 ) -> Plan:
     """Plan a GSA scene: access windows, ranked alignments, the phasing burn and its verification.
 
@@ -248,6 +266,12 @@ def make_plan(
     ``stop`` is asked between steps (and between candidates): when it returns a reason,
     planning stops at once with PlanningStopped. No step runs long: the span is at most
     30 days and the service bounds the epoch's distance from it, so the bound is about a second.
+
+    A campaign plans its scenes through three hooks: ``changed`` gives the observer after a height change
+    (default: the elements changed at their epoch, a phasing burn any time after it), ``order`` the order in
+    which the screened candidates are phased (default ``rank_candidates``), ``pole`` the pole J2 acts about (default:
+    the pole of date fitted over this plan's span), ``target_trajectory`` the target's motion in this plan's
+    seconds (default: from ``target`` by ``reading``). With ``changed``, the unchanged observer is ``changed(0, 0)``.
     """
     opts = options or PlanOptions()
 
@@ -275,12 +299,16 @@ def make_plan(
     t_first = min(0.0, seconds_between(epoch, obs_el.epoch), seconds_between(epoch, target.epoch))
     obs_period_s = 2 * math.pi * math.sqrt(obs_el.a_km**3 / MU_EARTH_KM3_S2)
     t_end = t1 + min(obs_period_s, 86400.0) + 600.0
-    pole = pole_of_date(epoch, t_first, t_end)
-    tgt = trajectory(target, epoch, frames, 0.0, t_end, opts.reading, pole)
+    if pole is None:
+        pole = pole_of_date(epoch, t_first, t_end)
+    tgt = target_trajectory or trajectory(target, epoch, frames, 0.0, t_end, opts.reading, pole)
     tle_obs = observer.tle is not None
     # A TLE observer's elements are an osculating state: only the numerical propagation reads them right.
     obs_reading: Reading = "osculating" if tle_obs else opts.reading
-    obs_base = elements_trajectory(obs_el, epoch, 0.0, t_end, obs_reading, pole)
+    if changed is not None:
+        obs_base = changed(0.0, 0.0)[0]
+    else:
+        obs_base = elements_trajectory(obs_el, epoch, 0.0, t_end, obs_reading, pole)
     t_ref = 0.0 if tle_obs else seconds_between(epoch, obs_el.epoch)
     check_not_coplanar(tgt, obs_base, t1)
     timings["propagation"] = time.perf_counter() - clock
@@ -301,13 +329,20 @@ def make_plan(
     # Every candidate is refined against the changed observer's own propagation: the
     # alignment model's nodal-rate sensitivity leaves misses of 0.1-5 km otherwise.
     clock = time.perf_counter()
-    cache: dict[tuple[float, float], Trajectory] = {}
+    cache: dict[tuple[float, float], tuple[Trajectory, float]] = {}
 
-    def changed_observer(cand: Candidate) -> Trajectory:
+    def by_elements(delta_ha_km: float, delta_hp_km: float) -> tuple[Trajectory, float]:
+        changed_el = obs_el.with_heights(delta_ha_km, delta_hp_km)
+        return elements_trajectory(changed_el, epoch, 0.0, t_end, obs_reading, pole), max(0.0, t_ref)
+
+    def changed_and_ready(cand: Candidate) -> tuple[Trajectory, float]:
         key = (cand.delta_ha_km, cand.delta_hp_km)
         if key not in cache:
-            cache[key] = elements_trajectory(obs_el.with_heights(*key), epoch, 0.0, t_end, obs_reading, pole)
+            cache[key] = (changed or by_elements)(*key)
         return cache[key]
+
+    def changed_observer(cand: Candidate) -> Trajectory:
+        return changed_and_ready(cand)[0]
 
     candidates = _refine_all(candidates, tgt, changed_observer, windows, opts.max_miss_km, check, notes)
     timings["refinement"] = time.perf_counter() - clock
@@ -324,22 +359,23 @@ def make_plan(
     meet_chosen: Encounter | None = None
     for k, cand in enumerate(candidates):  # every candidate's own cost, stand-off and imaging geometry
         check("the screening of the candidates")
-        screened = screen(cand, changed_observer(cand), tgt, feas[k], epoch, opts, model, pole)
+        obs_k, ready = changed_and_ready(cand)
+        screened = screen(cand, obs_k, tgt, feas[k], epoch, opts, model, pole, ready)
         radar = _radar_reasons(cand, windows, station)
         feas[k] = replace(screened, feasible=screened.feasible and not radar, reasons=(*screened.reasons, *radar))
-    order = _order(feas, opts)
+    ranked = order(candidates, feas) if order is not None else rank_candidates(feas, opts.criterion)
     if candidates and not lit.any():
         notes.append("no candidate has the target sunlit at T_access; the best unlit one is planned")
     elif candidates and not any(f.feasible for f in feas):
         notes.append("no candidate passes every check in the span; the best one is planned, with its reasons")
-    for k in order:
+    for k in ranked:
         check("the phasing")
         cand = candidates[k]
-        obs_new = changed_observer(cand)
+        obs_new, ready = changed_and_ready(cand)
         t_access = cand.t_access_s
         sun_k = sun_position_km(epoch, t_access)
         try:
-            ph, window = _phase_at_standoff(obs_new, tgt, t_access, max(0.0, t_ref), pole, sun_k[:, 0], opts)
+            ph, window = _phase_at_standoff(obs_new, tgt, t_access, ready, pole, sun_k[:, 0], opts)
         except PlannerError as exc:
             notes.append(f"candidate {k} skipped: {exc}")
             continue
@@ -347,7 +383,7 @@ def make_plan(
         chosen = cand
         alignment_dv = float(height_change_dv_km_s(a, e, cand.delta_ha_km, cand.delta_hp_km))
         meet = meet_chosen = encounter(ph, obs_new, tgt, min(t_access + obs_period_s, t_end), pole)
-        r_t, _ = tgt.state(t_access)
+        r_t, v_t = tgt.state(t_access)
         # The line of sight from the target to the observer at T_access: the stand-off vector.
         los = ph.r_observer_km - r_t[:, 0]
         phase_deg = float(phase_angle_deg(r_t[:, 0], sun_k[:, 0], los))
@@ -357,6 +393,7 @@ def make_plan(
             *(() if feas[k].sunlit else (SHADOW,)),
             *_encounter_reasons(meet, phase_deg, sun_deg, opts, window),
             *_dv_reasons(dv_total, opts),
+            *_perigee_reasons(obs_new, ph),
             *_radar_reasons(cand, windows, station),
         ]
         chosen_feas = Feasibility(
@@ -370,6 +407,7 @@ def make_plan(
             float(np.linalg.norm(ph.standoff_km_vec)),
             meet.relative_speed_km_s,
             meet.target_angular_rate_deg_s,
+            line_of_sight_rtn(r_t[:, 0], v_t[:, 0], los),
         )
         feas[k] = chosen_feas
         break
@@ -443,7 +481,7 @@ def _illumination(
     return lit, feas
 
 
-def _order(feas: list[Feasibility], opts: PlanOptions) -> list[int]:
+def rank_candidates(feas: list[Feasibility], criterion: Criterion) -> list[int]:
     """The order in which candidates are phased: those that pass every check first, then the sunlit ones, then
     the rest; within each, by their screened Delta-v (``least_dv``) or by rank (``smallest_change``)."""
 
@@ -451,7 +489,7 @@ def _order(feas: list[Feasibility], opts: PlanOptions) -> list[int]:
         f = feas[k]
         tier = 0 if f.feasible else 1 if f.sunlit else 2
         dv = f.dv_total_km_s if math.isfinite(f.dv_total_km_s) else math.inf
-        return tier, dv if opts.criterion == "least_dv" else float(k)
+        return tier, dv if criterion == "least_dv" else float(k)
 
     return sorted(range(len(feas)), key=key)
 
@@ -465,6 +503,7 @@ def screen(
     opts: PlanOptions,
     model: ObserverPlaneModel,
     pole: Pole,
+    t_ready_s: float | None = None,
 ) -> Feasibility:
     """Screen one candidate: its phasing to its own stand-off (chosen as ``_phase_at_standoff`` does, from the
     optics' window), its cost, and the imaging geometry at T_access of a straight fly-by past the aim point
@@ -473,7 +512,8 @@ def screen(
 
     The relative speed comes from a plain Lambert burn, not integrated (``phase(propagate=False)``); the cost
     from a burn corrected once for J2 (``SCREEN_CORRECTIONS``), its side set once: the plain burn's cost is far
-    off, one correction's close (design/measurements.md, "Screening every candidate's burn").
+    off, one correction's close (design/measurements.md, "Screening every candidate's burn"). ``t_ready_s``:
+    the first moment the burn may come (default: the height change's epoch).
     """
     t = cand.t_access_s
     sun = sun_position_km(epoch, t)[:, 0]
@@ -485,7 +525,7 @@ def screen(
             tgt,
             t,
             opts.revolutions_before,
-            max(0.0, model.t_ref_s),
+            max(0.0, model.t_ref_s) if t_ready_s is None else t_ready_s,
             max_corrections=SCREEN_CORRECTIONS,
             pole=pole,
             standoff_km=standoff_km,
@@ -507,7 +547,8 @@ def screen(
                 ph = burn(_aim_km(window))
     except PlannerError as exc:
         return replace(lit, feasible=False, reasons=(*shadow, f"no phasing burn: {exc}"))
-    r_t = tgt.state(t)[0][:, 0]
+    r_ts, v_ts = tgt.state(t)
+    r_t = r_ts[:, 0]
     rho = np.asarray(ph.standoff_km_vec, float)
     v_rel = np.asarray(ph.v_relative_km_s, float)
     d = float(np.linalg.norm(rho))
@@ -518,8 +559,14 @@ def screen(
     speed = float(np.linalg.norm(v_rel))
     closest = float(np.linalg.norm(np.cross(rho, v_rel))) / speed  # a straight line's least distance
     straight = Encounter(d, speed, rate, closest, t, None)
-    reasons = (*shadow, *_encounter_reasons(straight, phase_deg, sun_deg, opts, window), *_dv_reasons(dv, opts))
-    return Feasibility(lit.sunlit, d, phase_deg, not reasons, reasons, sun_deg, dv, d, speed, rate)
+    reasons = (
+        *shadow,
+        *_encounter_reasons(straight, phase_deg, sun_deg, opts, window),
+        *_dv_reasons(dv, opts),
+        *_perigee_reasons(observer, ph),
+    )
+    los = line_of_sight_rtn(r_t, v_ts[:, 0], rho)
+    return Feasibility(lit.sunlit, d, phase_deg, not reasons, reasons, sun_deg, dv, d, speed, rate, los)
 
 
 def _radar_reasons(cand: Candidate, windows: AccessWindows, station: Station) -> list[str]:
@@ -538,6 +585,24 @@ def _rate_deg_s(ph: Phasing) -> float:
     rho = np.asarray(ph.standoff_km_vec, float)
     d2 = float(rho @ rho)
     return math.degrees(float(np.linalg.norm(np.cross(rho, ph.v_relative_km_s))) / d2) if d2 > 0.0 else math.inf
+
+
+def transfer_perigee_height_km(observer: Trajectory, ph: Phasing) -> float:
+    """The perigee height (above ``R_EARTH_KM``) of the two-body orbit the phasing burn puts the observer on."""
+    r, _ = observer.state(ph.t_burn_s)
+    a, e, *_ = state_to_elements(r[:, 0], ph.v_departure_km_s)
+    return float(a * (1.0 - e)) - R_EARTH_KM
+
+
+def _perigee_reasons(observer: Trajectory, ph: Phasing) -> list[str]:
+    """A phasing transfer whose perigee is below ``MIN_PERIGEE_HEIGHT_KM`` (it re-enters), in words."""
+    height = transfer_perigee_height_km(observer, ph)
+    if height >= MIN_PERIGEE_HEIGHT_KM:
+        return []
+    return [
+        f"the phasing transfer's perigee is {height:.0f} km high, below {MIN_PERIGEE_HEIGHT_KM:g} km: "
+        "the observer would re-enter"
+    ]
 
 
 def _dv_reasons(dv_total_km_s: float, opts: PlanOptions) -> list[str]:

@@ -441,7 +441,9 @@ class NumericalJ2Trajectory:
             solver = ode(_j2_rhs(pole)).set_integrator("dop853", rtol=rtol, atol=rtol * 1e-2, nsteps=10**7)
             solver.set_solout(solout)
             solver.set_initial_value(y0, t0_s)
-            solver.integrate(t1_s)
+            with warnings.catch_warnings():  # a failure is raised below as a PlannerError, not printed
+                warnings.simplefilter("ignore", UserWarning)
+                solver.integrate(t1_s)
             _release(solver)
             if not solver.successful():
                 raise PlannerError("numerical propagation failed (orbit decayed or diverged)", field="elements")
