@@ -10,10 +10,10 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from app.core.security import HMAC_SCHEME, LEGACY_SCHEME, digests_equal, key_digest, key_prefix, new_api_key
-from app.db.models import ApiKey, Estimate, GroundStation, Operator, Pass, Plan, utcnow
+from app.db.models import ApiKey, Campaign, Estimate, GroundStation, Operator, Pass, Plan, utcnow
 
 if TYPE_CHECKING:
-    from app.schemas import PassResult, PlanCreate, PlanResult
+    from app.schemas import CampaignCreate, CampaignResult, PassResult, PlanCreate, PlanResult
 
 
 def get_or_create_operator(*, session: Session, name: str) -> Operator:
@@ -106,6 +106,42 @@ def create_plan(*, session: Session, operator_id: str, request: PlanCreate, resu
     session.add(plan)
     session.commit()
     return plan
+
+
+def create_campaign(*, session: Session, operator_id: str, request: CampaignCreate, result: CampaignResult) -> Campaign:
+    """Store a campaign: its request as validated (a stored station's copy in it) and its typed result."""
+    assert not isinstance(request.ground_station, str)  # the service resolves a station's name before planning
+    row = Campaign(
+        operator_id=operator_id,
+        target_name=request.target.name,
+        observer_name=request.observer.name,
+        station_name=request.ground_station.name,
+        scenes=len(result.scenes),
+        dv_total_m_s=result.dv_total_m_s,
+        first_access=result.scenes[0].t_access if result.scenes else None,
+        request=request.model_dump(mode="json"),
+        result=result.stored(),
+    )
+    session.add(row)
+    session.commit()
+    return row
+
+
+def get_campaign(*, session: Session, operator_id: str, campaign_id: str) -> Campaign | None:
+    return session.scalar(select(Campaign).where(Campaign.id == campaign_id, Campaign.operator_id == operator_id))
+
+
+def list_campaigns(
+    *, session: Session, operator_id: str, limit: int, offset: int, target_name: str | None = None
+) -> tuple[list[Campaign], int]:
+    where = [Campaign.operator_id == operator_id]
+    if target_name is not None:
+        where.append(Campaign.target_name == target_name)
+    total = int(session.scalar(select(func.count()).select_from(Campaign).where(*where)) or 0)
+    rows = session.scalars(
+        select(Campaign).where(*where).order_by(Campaign.created_at.desc(), Campaign.id).limit(limit).offset(offset)
+    ).all()
+    return list(rows), total
 
 
 def get_plan(*, session: Session, operator_id: str, plan_id: str) -> Plan | None:

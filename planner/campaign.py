@@ -75,6 +75,7 @@ MAX_SCENE_SPAN_S = 30 * 86400.0  # one stretch is one plan: at most the planner'
 # among those, the line of sight farthest from the scenes already flown is preferred.
 NEAR_FACTOR = 1.25
 NEAR_MARGIN_KM_S = 0.005
+CAMPAIGN_MARGIN_S = 2 * 86400.0  # the flight and the target run this far past the span (the last scene's return)
 RETURN_REVOLUTIONS = (1, 2, 4, 8, 15)  # the return transfer's revolutions: the cheapest is flown
 RETURN_SHIFTS = tuple(np.linspace(-0.5, 0.5, 25))  # where on the original orbit it returns to, in its periods
 BurnKind = Literal["apogee", "perigee", "phasing", "return", "arrival"]
@@ -189,6 +190,7 @@ class Stretch:
     feasible: int
     scene: int | None
     note: str
+    plan: Plan | None = None  # the stretch's plan (its access windows, its candidates)
 
 
 @dataclass(frozen=True, slots=True)
@@ -458,8 +460,8 @@ def plan_campaign(
     notes: list[str] = []
     epoch = as_utc(opts.start) if opts.start is not None else target.epoch
     end_s = opts.duration_s
-    margin = 2 * 86400.0
-    pole = pole_of_date(epoch, min(0.0, seconds_between(epoch, observer.epoch)), end_s + margin)
+    margin = CAMPAIGN_MARGIN_S
+    pole = campaign_pole(epoch, observer, end_s)
     frames = earth_frames(epoch, 0.0, 1.0)
     start_state = trajectory(observer, epoch, frames, 0.0, 1.0, "osculating", pole).state(0.0)
     r0, v0 = start_state[0][:, 0], start_state[1][:, 0]
@@ -518,7 +520,7 @@ def plan_campaign(
         chosen = plan.chosen_feasibility
         if plan.chosen is None or plan.phasing is None or chosen is None or not chosen.feasible:
             note = _why_none(plan, left)
-            stretches.append(Stretch(offset, offset + span, len(plan.candidates), n_feasible, None, note))
+            stretches.append(Stretch(offset, offset + span, len(plan.candidates), n_feasible, None, note, plan))
             state = _coast(state, offset, offset + span, pole)
             t_free = offset + span
             if progress:
@@ -556,18 +558,19 @@ def plan_campaign(
             after, next_free = state_back, t_back
         timings["returns"] += time.perf_counter() - clock
         dv_scene = sum(b.dv_total_km_s for b in scene_burns)
-        if spent + dv_scene > budget:
+        if spent + dv_scene > budget:  # its return made it dearer than what is left: coast on past it
             note = (
                 f"the stretch's best scene needs {dv_scene * 1000.0:.1f} m/s"
                 f"{' with its return' if opts.return_to_orbit else ''}, over the {left * 1000.0:.1f} m/s left"
             )
-            stretches.append(Stretch(offset, offset + span, len(plan.candidates), n_feasible, None, note))
-            notes.append(f"the campaign ends at {scene_epoch:%Y-%m-%d %H:%M}: {note}")
-            break
+            stretches.append(Stretch(offset, offset + span, len(plan.candidates), n_feasible, None, note, plan))
+            state = _coast(state, offset, offset + span, pole)
+            t_free = offset + span
+            continue
         spent += dv_scene
         burns += scene_burns
         scenes.append(CampaignScene(index, plan, offset, t_access, tuple(scene_burns), dv_scene, chosen, slot_shift))
-        stretches.append(Stretch(offset, next_free, len(plan.candidates), n_feasible, index, "scene flown"))
+        stretches.append(Stretch(offset, next_free, len(plan.candidates), n_feasible, index, "scene flown", plan))
         t_free, state = next_free, (np.asarray(after[0]), np.asarray(after[1]))
         if progress:
             progress(min(1.0, t_free / end_s), f"{len(scenes)} scene(s) planned")
@@ -594,6 +597,12 @@ def plan_campaign(
         pole=pole,
         flown=flown,
     )
+
+
+def campaign_pole(epoch: datetime, observer: Orbit, duration_s: float) -> Pole:
+    """The one pole of date a campaign's J2 acts about: fitted from the observer's epoch (or the start) to past
+    the span's end."""
+    return pole_of_date(epoch, min(0.0, seconds_between(epoch, observer.epoch)), duration_s + CAMPAIGN_MARGIN_S)
 
 
 def _coast(state: tuple[Vec, Vec], t0_s: float, t1_s: float, pole: Pole) -> tuple[Vec, Vec]:

@@ -3,7 +3,7 @@ from fastapi.dependencies.models import Dependant
 from fastapi.routing import APIRoute
 
 from app.api.deps import CurrentOperator
-from app.api.routes import access, estimates, passes, plans, scenes, stations
+from app.api.routes import access, campaigns, estimates, passes, plans, scenes, stations
 from app.errors import InputError
 from app.schemas import ERROR_RESPONSES
 
@@ -58,6 +58,7 @@ api_router = APIRouter(
     responses=ERROR_RESPONSES, dependencies=[Depends(reject_unknown_query), Depends(reject_unknown_form_fields)]
 )
 api_router.include_router(plans.router)
+api_router.include_router(campaigns.router)
 api_router.include_router(access.router)
 api_router.include_router(estimates.router)
 api_router.include_router(scenes.router)

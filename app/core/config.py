@@ -35,6 +35,7 @@ class Settings(BaseSettings):
     max_span_days: float = Field(default=30.0, gt=0, le=30.0)
     max_grid_points: int = Field(default=25_000_000, ge=1)
     plan_timeout_s: float = Field(default=30.0, gt=0, le=3600.0)
+    campaign_timeout_s: float = Field(default=120.0, gt=0, le=3600.0)
     plan_memory_mb: float = Field(default=1024.0, gt=0, le=1_000_000.0)
     header_timeout_s: float = Field(default=10.0, gt=0, le=600.0)
     keep_alive_timeout_s: float = Field(default=5.0, gt=0, le=600.0)

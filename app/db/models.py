@@ -6,7 +6,7 @@ import uuid
 from datetime import UTC, datetime
 from typing import Any
 
-from sqlalchemy import JSON, DateTime, Float, ForeignKey, Index, String, UniqueConstraint
+from sqlalchemy import JSON, DateTime, Float, ForeignKey, Index, Integer, String, UniqueConstraint
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 
@@ -55,6 +55,25 @@ class Plan(Base):
     station_name: Mapped[str] = mapped_column(String(200))
     t_access: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
     miss_km: Mapped[float | None] = mapped_column(Float, nullable=True)
+    request: Mapped[dict[str, Any]] = mapped_column(JSON)
+    result: Mapped[dict[str, Any]] = mapped_column(JSON)
+
+
+class Campaign(Base):
+    """A series of GSA scenes (``POST /v1/campaigns``): the request as validated and the typed result."""
+
+    __tablename__ = "campaigns"
+    __table_args__ = (Index("ix_campaigns_operator_created", "operator_id", "created_at"),)
+
+    id: Mapped[str] = mapped_column(String(36), primary_key=True, default=new_id)
+    operator_id: Mapped[str] = mapped_column(ForeignKey("operators.id", ondelete="CASCADE"))
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    target_name: Mapped[str] = mapped_column(String(200), index=True)
+    observer_name: Mapped[str] = mapped_column(String(200))
+    station_name: Mapped[str] = mapped_column(String(200))
+    scenes: Mapped[int] = mapped_column(Integer)
+    dv_total_m_s: Mapped[float] = mapped_column(Float)
+    first_access: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
     request: Mapped[dict[str, Any]] = mapped_column(JSON)
     result: Mapped[dict[str, Any]] = mapped_column(JSON)
 

@@ -4,6 +4,17 @@ Each result has one shape from the domain to the wire and the database: built by
 constructor, stored as ``model_dump(mode="json")`` with a format version, read back by ``from_row``.
 """
 
+from app.schemas.campaigns import (
+    CAMPAIGN_EXAMPLE,
+    BurnPublic,
+    CampaignCreate,
+    CampaignPublic,
+    CampaignResult,
+    CampaignScenePublic,
+    CampaignsPublic,
+    CampaignSummary,
+    StretchPublic,
+)
 from app.schemas.common import (
     CONTROL_CHARACTERS,
     ERROR_RESPONSES,
@@ -42,6 +53,7 @@ from app.schemas.plans import (
     PlanResult,
     PlansPublic,
     PlanSummary,
+    SceneSearchIn,
     SearchIn,
     VerificationPublic,
     WindowPublic,
@@ -56,6 +68,16 @@ from app.schemas.stations import (
 )
 
 __all__ = [
+    "CAMPAIGN_EXAMPLE",
+    "BurnPublic",
+    "CampaignCreate",
+    "CampaignPublic",
+    "CampaignResult",
+    "CampaignScenePublic",
+    "CampaignSummary",
+    "CampaignsPublic",
+    "SceneSearchIn",
+    "StretchPublic",
     "CONTROL_CHARACTERS",
     "ERROR_RESPONSES",
     "ORBIT_SOURCES",

@@ -21,14 +21,9 @@ if TYPE_CHECKING:
     from planner.plan import Feasibility, Plan
 
 
-class SearchIn(Strict):
-    """The search: span, element reading, the (dHa, dHp) box and the choice criterion."""
+class SceneSearchIn(Strict):
+    """How one scene is searched for: the (dHa, dHp) box, the misses, the burn and the encounter's limits."""
 
-    start: IsoDateTime | None = Field(default=None, description="default: the target's epoch")
-    duration_days: Finite = Field(default=10.0, gt=0.0, le=30.0)
-    """the span to search from start, days (at most 30)"""
-    reading: Literal["osculating", "mean"] = "osculating"
-    """osculating (the instantaneous orbit, numerical J2) or mean (J2 secular rates)"""
     dha_min_km: Finite = Field(default=-50.0, ge=-500.0, le=500.0)
     """the lowest apogee height change to try, km"""
     dha_max_km: Finite = Field(default=50.0, ge=-500.0, le=500.0)
@@ -43,16 +38,9 @@ class SearchIn(Strict):
     """a candidate's node-line miss may be at most this, km"""
     revolutions_before: list[Literal[1, 2]] = Field(default=[1, 2], min_length=1, max_length=2)
     """how many target revolutions before t_access the phasing burn may be"""
-    criterion: Literal["smallest_change", "least_dv"] = "least_dv"
-    """how the chosen candidate is picked among those that pass every check (then the sunlit ones, then the rest):
-    least_dv, the cheapest, or smallest_change, the best-ranked"""
-    max_dv_m_s: Finite | None = Field(default=None, ge=0.0, le=20000.0)
-    """a candidate dearer than this (height change plus phasing), m/s, is infeasible (default: no cap)"""
     max_imaging_range_km: Finite | None = Field(default=None, gt=0.0)
     """a range cap below the optics' own, km (default: observer_optics' diffraction range, gsd x aperture /
     (1.22 wavelength))"""
-    max_phase_angle_deg: Finite | None = Field(default=None, gt=0.0, le=180.0)
-    """replaced by observer_optics.max_phase_angle_deg, and still read when given here: the largest Sun phase angle"""
     standoff_km: Finite | None = Field(
         default=None,
         ge=0.5,
@@ -68,6 +56,31 @@ class SearchIn(Strict):
         le=100.0,
         description="a plan whose closest approach over the arc is under this is marked infeasible (collision risk)",
     )
+
+    @model_validator(mode="after")
+    def _ordered(self) -> SceneSearchIn:
+        if self.dha_min_km > self.dha_max_km:
+            raise ValueError(f"dha_min_km ({self.dha_min_km}) is above dha_max_km ({self.dha_max_km})")
+        if self.dhp_min_km > self.dhp_max_km:
+            raise ValueError(f"dhp_min_km ({self.dhp_min_km}) is above dhp_max_km ({self.dhp_max_km})")
+        return self
+
+
+class SearchIn(SceneSearchIn):
+    """The search: span, element reading, the (dHa, dHp) box and the choice criterion."""
+
+    start: IsoDateTime | None = Field(default=None, description="default: the target's epoch")
+    duration_days: Finite = Field(default=10.0, gt=0.0, le=30.0)
+    """the span to search from start, days (at most 30)"""
+    reading: Literal["osculating", "mean"] = "osculating"
+    """osculating (the instantaneous orbit, numerical J2) or mean (J2 secular rates)"""
+    criterion: Literal["smallest_change", "least_dv"] = "least_dv"
+    """how the chosen candidate is picked among those that pass every check (then the sunlit ones, then the rest):
+    least_dv, the cheapest, or smallest_change, the best-ranked"""
+    max_dv_m_s: Finite | None = Field(default=None, ge=0.0, le=20000.0)
+    """a candidate dearer than this (height change plus phasing), m/s, is infeasible (default: no cap)"""
+    max_phase_angle_deg: Finite | None = Field(default=None, gt=0.0, le=180.0)
+    """replaced by observer_optics.max_phase_angle_deg, and still read when given here: the largest Sun phase angle"""
     max_tracking_rate_deg_s: Finite | None = Field(
         default=None,
         gt=0.0,
@@ -75,14 +88,6 @@ class SearchIn(Strict):
         description="replaced by observer_optics.max_rate_deg_s, and still read when given here: the fastest "
         "line-of-sight rate the observer's pointing follows",
     )
-
-    @model_validator(mode="after")
-    def _ordered(self) -> SearchIn:
-        if self.dha_min_km > self.dha_max_km:
-            raise ValueError(f"dha_min_km ({self.dha_min_km}) is above dha_max_km ({self.dha_max_km})")
-        if self.dhp_min_km > self.dhp_max_km:
-            raise ValueError(f"dhp_min_km ({self.dhp_min_km}) is above dhp_max_km ({self.dhp_max_km})")
-        return self
 
 
 PAPER_EXAMPLE: dict[str, Any] = {
@@ -252,6 +257,9 @@ class FeasibilityPublic(Described):
     """the fly-by's relative speed at t_access, km/s"""
     target_angular_rate_deg_s: float | None = None
     """how fast the target crosses the observer's sky at t_access, deg/s (what the pointing must follow)"""
+    line_of_sight_rtn: list[float] | None = None
+    """the imaging geometry: the unit vector from the target to the observer at t_access in the target's radial /
+    along-track / orbit-normal frame (which side of the target the observer sees), or null"""
 
     @classmethod
     def from_feasibility(cls, f: Feasibility) -> FeasibilityPublic:
@@ -264,6 +272,7 @@ class FeasibilityPublic(Described):
             sun_angle_deg=finite_or_null(f.sun_angle_deg),
             relative_speed_km_s=finite_or_null(f.relative_speed_km_s),
             target_angular_rate_deg_s=finite_or_null(f.target_angular_rate_deg_s),
+            line_of_sight_rtn=None if f.line_of_sight_rtn is None else list(f.line_of_sight_rtn),
         )
 
 

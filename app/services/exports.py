@@ -117,51 +117,86 @@ def _state_lines(r: Vec, v: Vec) -> list[str]:
     ]
 
 
+@dataclass(frozen=True)
+class Manoeuvre:
+    """One impulsive burn as the OPM writes it: its time (s after the epoch), impulse (GCRS, km/s) and RTN (m/s)."""
+
+    t_s: float
+    dv_km_s: tuple[float, float, float]
+    dv_rtn_m_s: tuple[float, float, float]
+    what: str
+
+
 def opm(arc: Arc, plan_id: str, observer_name: str, now: datetime | None = None) -> str:
     """CCSDS OPM 3.0 (502.0-B-3, KVN) of the observer just before the burn, with the burn as one impulsive manoeuvre."""
-    now = now or datetime.now(UTC)
     ph = arc.plan.phasing
     assert ph is not None
     r, v = arc.plan.observer_trajectory.state(arc.t_burn_s)  # type: ignore[union-attr]
-    dv = np.asarray(ph.dv_km_s, float)
-    rtn = np.asarray(ph.dv_rtn_km_s, float) * 1000.0
+    burn = Manoeuvre(
+        arc.t_burn_s,
+        (float(ph.dv_km_s[0]), float(ph.dv_km_s[1]), float(ph.dv_km_s[2])),
+        tuple(float(x) * 1000.0 for x in ph.dv_rtn_km_s),  # type: ignore[arg-type]
+        "Impulsive phasing burn (two-body Lambert corrected for J2)",
+    )
+    comment = (
+        f"The observer just before its phasing burn, plan {plan_id}; the target is met at "
+        f"{kvn_time(utc(arc.plan.epoch, arc.t_access_s))} UTC"
+    )
+    return opm_text(
+        arc.plan.epoch, arc.t_burn_s, r[:, 0], v[:, 0], [burn], f"GSA-{plan_id}", observer_name, comment, now
+    )
+
+
+def opm_text(
+    epoch: datetime,
+    t_state_s: float,
+    r: Vec,
+    v: Vec,
+    burns: list[Manoeuvre],
+    object_id: str,
+    observer_name: str,
+    comment: str,
+    now: datetime | None = None,
+) -> str:
+    """CCSDS OPM 3.0 (KVN): a state at ``t_state_s`` and each burn as one impulsive manoeuvre (GCRF, UTC)."""
+    now = now or datetime.now(UTC)
     lines = _header("OPM", "3.0", now) + [
         "META_START",
         f"OBJECT_NAME = {observer_name}",
-        f"OBJECT_ID = GSA-{plan_id}",
+        f"OBJECT_ID = {object_id}",
         "CENTER_NAME = EARTH",
         "REF_FRAME = GCRF",
         "TIME_SYSTEM = UTC",
         "META_STOP",
         "",
-        f"COMMENT The observer just before its phasing burn, plan {plan_id}; the target is met at "
-        f"{kvn_time(utc(arc.plan.epoch, arc.t_access_s))} UTC",
-        f"EPOCH = {kvn_time(utc(arc.plan.epoch, arc.t_burn_s))}",
-        *_state_lines(r[:, 0], v[:, 0]),
-        "",
-        "COMMENT Impulsive phasing burn (two-body Lambert corrected for J2). The same in RTN (radial, "
-        f"along-track, normal) at the burn: {rtn[0]:.4f} / {rtn[1]:.4f} / {rtn[2]:.4f} m/s. The observer's "
-        "mass is not planned: MAN_DELTA_MASS is 0",
-        f"MAN_EPOCH_IGNITION = {kvn_time(utc(arc.plan.epoch, arc.t_burn_s))}",
-        "MAN_DURATION = 0.000 [s]",
-        "MAN_DELTA_MASS = 0.000 [kg]",
-        "MAN_REF_FRAME = GCRF",
-        f"MAN_DV_1 = {dv[0]:.9f} [km/s]",
-        f"MAN_DV_2 = {dv[1]:.9f} [km/s]",
-        f"MAN_DV_3 = {dv[2]:.9f} [km/s]",
+        f"COMMENT {comment}",
+        f"EPOCH = {kvn_time(utc(epoch, t_state_s))}",
+        *_state_lines(r, v),
     ]
+    for burn in burns:
+        rtn = burn.dv_rtn_m_s
+        lines += [
+            "",
+            f"COMMENT {burn.what}. The same in RTN (radial, along-track, normal) at the burn: "
+            f"{rtn[0]:.4f} / {rtn[1]:.4f} / {rtn[2]:.4f} m/s. The observer's mass is not planned: MAN_DELTA_MASS is 0",
+            f"MAN_EPOCH_IGNITION = {kvn_time(utc(epoch, burn.t_s))}",
+            "MAN_DURATION = 0.000 [s]",
+            "MAN_DELTA_MASS = 0.000 [kg]",
+            "MAN_REF_FRAME = GCRF",
+            f"MAN_DV_1 = {burn.dv_km_s[0]:.9f} [km/s]",
+            f"MAN_DV_2 = {burn.dv_km_s[1]:.9f} [km/s]",
+            f"MAN_DV_3 = {burn.dv_km_s[2]:.9f} [km/s]",
+        ]
     return "\n".join(lines) + "\n"
 
 
 def oem(arc: Arc, plan_id: str, target_name: str, observer_name: str, now: datetime | None = None) -> str:
     """CCSDS OEM 3.0 (KVN): the target over the arc, the observer in two segments (before and after the burn)."""
-    now = now or datetime.now(UTC)
-    epoch = arc.plan.epoch
     assert arc.plan.observer_trajectory is not None and arc.plan.encounter is not None
     assert arc.plan.encounter.arc is not None
     segments = [  # the burn's own instant ends the first observer segment (before it) and starts the second
-        (target_name, f"GSA-{plan_id}-TARGET", arc.t0_s, arc.t1_s, arc.target, "the target"),
-        (
+        OemSegment(target_name, f"GSA-{plan_id}-TARGET", arc.t0_s, arc.t1_s, arc.target, "the target"),
+        OemSegment(
             observer_name,
             f"GSA-{plan_id}-OBSERVER",
             arc.t0_s,
@@ -169,7 +204,7 @@ def oem(arc: Arc, plan_id: str, target_name: str, observer_name: str, now: datet
             arc.plan.observer_trajectory.state,
             "the observer before the burn",
         ),
-        (
+        OemSegment(
             observer_name,
             f"GSA-{plan_id}-OBSERVER",
             arc.t_burn_s,
@@ -178,16 +213,41 @@ def oem(arc: Arc, plan_id: str, target_name: str, observer_name: str, now: datet
             "the observer after the burn",
         ),
     ]
+    return oem_text(arc.plan.epoch, segments, (arc.t_access_s,), f"plan {plan_id}", OEM_STEP_S, now)
+
+
+@dataclass(frozen=True)
+class OemSegment:
+    """One OEM segment: an object over ``[t0_s, t1_s]`` (s after the epoch), its states from ``states(t)``."""
+
+    name: str
+    object_id: str
+    t0_s: float
+    t1_s: float
+    states: Any
+    what: str
+
+
+def oem_text(
+    epoch: datetime,
+    segments: list[OemSegment],
+    must_s: tuple[float, ...],
+    source: str,
+    step_s: float,
+    now: datetime | None = None,
+) -> str:
+    """CCSDS OEM 3.0 (KVN): each segment sampled every ``step_s`` and at each of ``must_s`` it holds."""
+    now = now or datetime.now(UTC)
     lines = _header("OEM", "3.0", now)
-    for name, object_id, t0, t1, states, what in segments:
-        if t1 - t0 < 1e-6:
+    for seg in segments:
+        if seg.t1_s - seg.t0_s < 1e-6:
             continue
-        t = _grid(t0, t1, OEM_STEP_S, (arc.t_access_s,))
-        r, v = states(t)
+        t = _grid(seg.t0_s, seg.t1_s, step_s, must_s)
+        r, v = seg.states(t)
         lines += [
             "META_START",
-            f"OBJECT_NAME = {name}",
-            f"OBJECT_ID = {object_id}",
+            f"OBJECT_NAME = {seg.name}",
+            f"OBJECT_ID = {seg.object_id}",
             "CENTER_NAME = EARTH",
             "REF_FRAME = GCRF",
             "TIME_SYSTEM = UTC",
@@ -199,7 +259,7 @@ def oem(arc: Arc, plan_id: str, target_name: str, observer_name: str, now: datet
             "INTERPOLATION_DEGREE = 7",
             "META_STOP",
             "",
-            f"COMMENT {what}, plan {plan_id}: km and km/s",
+            f"COMMENT {seg.what}, {source}: km and km/s",
         ]
         for k in range(t.size):
             lines.append(
@@ -214,16 +274,45 @@ def oem(arc: Arc, plan_id: str, target_name: str, observer_name: str, now: datet
 
 def czml(arc: Arc, plan_id: str, names: dict[str, str], station: dict[str, Any], windows: list[dict[str, Any]]) -> str:
     """CZML for Cesium: both satellites over the arc, the station, its access intervals, the imaging moment."""
-    epoch = arc.plan.epoch
-    t0, t1 = utc(epoch, arc.t0_s), utc(epoch, arc.t1_s)
-    t_access = utc(epoch, arc.t_access_s)
-    t = _grid(arc.t0_s, arc.t1_s, OEM_STEP_S, (arc.t_burn_s, arc.t_access_s))
+    return czml_text(
+        arc.plan.epoch,
+        arc.t0_s,
+        arc.t1_s,
+        (arc.t_burn_s, arc.t_access_s),
+        arc.target,
+        arc.observer,
+        (arc.t_access_s,),
+        f"GSA-ISAR plan {plan_id}",
+        names,
+        station,
+        windows,
+    )
+
+
+def czml_text(
+    epoch: datetime,
+    t0_s: float,
+    t1_s: float,
+    must_s: tuple[float, ...],
+    target: Any,
+    observer: Any,
+    accesses_s: tuple[float, ...],
+    title: str,
+    names: dict[str, str],
+    station: dict[str, Any],
+    windows: list[dict[str, Any]],
+    step_s: float = OEM_STEP_S,
+) -> str:
+    """CZML for Cesium: both satellites over ``[t0_s, t1_s]`` (sampled every ``step_s`` and at ``must_s``: the burns,
+    the imaging moments), the station, its access intervals, each imaging moment."""
+    t0, t1 = utc(epoch, t0_s), utc(epoch, t1_s)
+    t = _grid(t0_s, t1_s, step_s, must_s)
 
     def samples(states: Any) -> list[float]:
         r, _ = states(t)
         out: list[float] = []
         for k in range(t.size):
-            out += [round(float(t[k] - arc.t0_s), 3), *(round(float(x) * 1000.0, 2) for x in r[:, k])]
+            out += [round(float(t[k] - t0_s), 3), *(round(float(x) * 1000.0, 2) for x in r[:, k])]
         return out
 
     interval = f"{z_time(t0)}/{z_time(t1)}"
@@ -245,7 +334,7 @@ def czml(arc: Arc, plan_id: str, names: dict[str, str], station: dict[str, Any],
             "path": {
                 "width": 1.5,
                 "leadTime": 0,
-                "trailTime": arc.t1_s - arc.t0_s,
+                "trailTime": t1_s - t0_s,
                 "material": {"solidColor": {"color": {"rgba": colour}}},
             },
         }
@@ -255,16 +344,21 @@ def czml(arc: Arc, plan_id: str, names: dict[str, str], station: dict[str, Any],
         for w in windows
         if datetime.fromisoformat(w["set"]) >= t0 and datetime.fromisoformat(w["rise"]) <= t1
     ]
-    r_access, _ = arc.target(np.array([arc.t_access_s]))
+    r_access, _ = target(np.asarray(accesses_s, float))
     packets: list[dict[str, Any]] = [
         {
             "id": "document",
-            "name": f"GSA-ISAR plan {plan_id}",
+            "name": title,
             "version": "1.0",
-            "clock": {"interval": interval, "currentTime": z_time(t_access), "multiplier": 10, "range": "CLAMPED"},
+            "clock": {
+                "interval": interval,
+                "currentTime": z_time(utc(epoch, accesses_s[0] if accesses_s else t0_s)),
+                "multiplier": 10,
+                "range": "CLAMPED",
+            },
         },
-        satellite("target", arc.target, [255, 127, 14, 255]),
-        satellite("observer", arc.observer, [31, 119, 180, 255]),
+        satellite("target", target, [255, 127, 14, 255]),
+        satellite("observer", observer, [31, 119, 180, 255]),
         {
             "id": "station",
             "name": names["station"],
@@ -288,18 +382,23 @@ def czml(arc: Arc, plan_id: str, names: dict[str, str], station: dict[str, Any],
                 "material": {"solidColor": {"color": {"rgba": [44, 160, 44, 200]}}},
             },
         },
-        {
-            "id": "imaging",
-            "name": "T_access: the imaging moment",
-            "availability": f"{z_time(t_access - timedelta(seconds=60))}/{z_time(t_access + timedelta(seconds=60))}",
-            "position": {
-                "referenceFrame": "INERTIAL",
-                "cartesian": [round(float(x) * 1000.0, 2) for x in r_access[:, 0]],
-            },
-            "point": {"pixelSize": 14, "color": {"rgba": [214, 39, 40, 255]}},
-            "label": {"text": f"T_access {z_time(t_access)}"},
-        },
     ]
+    for k, t_s in enumerate(accesses_s):
+        t_access = utc(epoch, t_s)
+        packets.append(
+            {
+                "id": "imaging" if len(accesses_s) == 1 else f"imaging-{k}",
+                "name": "T_access: the imaging moment" if len(accesses_s) == 1 else f"scene {k}: T_access",
+                "availability": f"{z_time(t_access - timedelta(seconds=60))}/"
+                f"{z_time(t_access + timedelta(seconds=60))}",
+                "position": {
+                    "referenceFrame": "INERTIAL",
+                    "cartesian": [round(float(x) * 1000.0, 2) for x in r_access[:, k]],
+                },
+                "point": {"pixelSize": 14, "color": {"rgba": [214, 39, 40, 255]}},
+                "label": {"text": f"T_access {z_time(t_access)}"},
+            }
+        )
     return json.dumps(packets, indent=1)
 
 

@@ -17,6 +17,7 @@ from app.schemas import (
     ORBIT_SOURCES,
     AccessCreate,
     AccessPublic,
+    CampaignCreate,
     OrbitIn,
     PlanCreate,
     PlanResult,
@@ -105,7 +106,7 @@ def to_station(st: StationIn | str) -> Station:
     )
 
 
-R = TypeVar("R", PlanCreate, AccessCreate)
+R = TypeVar("R", PlanCreate, AccessCreate, CampaignCreate)
 
 
 def stored_station_lookup(session: Any, operator_id: str) -> Callable[[str], dict[str, Any] | None]:
@@ -133,14 +134,14 @@ def with_stored_station(req: R, lookup: Callable[[str], dict[str, Any] | None]) 
     return req.model_copy(update={"ground_station": StationIn.model_validate(stored)})
 
 
-def observer_optics(req: PlanCreate) -> ObserverOptics:
+def observer_optics(req: PlanCreate | CampaignCreate) -> ObserverOptics:
     """The request's optics, with the search's older fields (max_tracking_rate_deg_s, max_phase_angle_deg) read
     where given; out of physical range: a 422 naming the field where it was given."""
     s, o = req.search, req.observer_optics
     values = o.model_dump()
     where: dict[str, list[str | int]] = {name: ["observer_optics", name] for name in values}
     for old, new in (("max_tracking_rate_deg_s", "max_rate_deg_s"), ("max_phase_angle_deg", "max_phase_angle_deg")):
-        if getattr(s, old) is not None:
+        if getattr(s, old, None) is not None:
             values[new] = getattr(s, old)
             where[new] = ["search", old]
     try:

@@ -23,19 +23,23 @@ router = APIRouter(prefix="/plans", tags=["plans"])
 NOT_FOUND: dict[int | str, dict[str, Any]] = {404: {"description": "no plan with this id belongs to the caller"}}
 
 
-def _budget(settings: SettingsDep, gone: threading.Event | None = None) -> StopCheck:
-    """A plan's stop check: the caller gone, or over its time (GSA_PLAN_TIMEOUT_S) or memory (GSA_PLAN_MEMORY_MB) budget.
+def _budget(
+    settings: SettingsDep, gone: threading.Event | None = None, timeout_s: float | None = None, name: str = "PLAN"
+) -> StopCheck:
+    """A plan's stop check: the caller gone, or over its time (GSA_PLAN_TIMEOUT_S; a campaign's
+    GSA_CAMPAIGN_TIMEOUT_S) or memory (GSA_PLAN_MEMORY_MB) budget.
 
     Creating a plan and recomputing one for an export are the same work, under the same budget.
     """
-    deadline = time.monotonic() + settings.plan_timeout_s
+    limit_s = settings.plan_timeout_s if timeout_s is None else timeout_s
+    deadline = time.monotonic() + limit_s
     memory_limit = resident_mb() + settings.plan_memory_mb
 
     def stop() -> str | None:
         if gone is not None and gone.is_set():
             return "the client disconnected"
         if time.monotonic() > deadline:
-            return f"over the {settings.plan_timeout_s:g}-s budget (GSA_PLAN_TIMEOUT_S); plan a shorter span or a coarser box"
+            return f"over the {limit_s:g}-s budget (GSA_{name}_TIMEOUT_S); plan a shorter span or a coarser box"
         if resident_mb() > memory_limit:
             return (
                 f"over the {settings.plan_memory_mb:g}-MB memory budget (GSA_PLAN_MEMORY_MB); plan a shorter span "

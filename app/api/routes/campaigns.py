@@ -1,0 +1,142 @@
+"""Campaigns: POST plans a series of GSA scenes and stores it; GET reads the caller's; exports fly it again."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Body, HTTPException, Path, Query, Request, Response
+from fastapi.concurrency import run_in_threadpool
+
+from app import crud
+from app.api import examples
+from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep
+from app.api.routes.plans import _budget
+from app.schemas import CAMPAIGN_EXAMPLE, CampaignCreate, CampaignPublic, CampaignsPublic, CampaignSummary, Text
+from app.services.campaigns import plan_and_store_campaign
+
+router = APIRouter(prefix="/campaigns", tags=["campaigns"])
+
+NOT_FOUND: dict[int | str, dict[str, Any]] = {404: {"description": "no campaign with this id belongs to the caller"}}
+
+
+@router.post(
+    "",
+    status_code=201,
+    response_model=CampaignPublic,
+    responses={
+        201: {"content": {"application/json": {"example": examples.load("campaign")}}},
+        503: {"description": "planning ran over GSA_CAMPAIGN_TIMEOUT_S and was stopped; nothing was stored"},
+    },
+)
+async def create_campaign(
+    request: Request,
+    session: SessionDep,
+    operator: CurrentOperator,
+    settings: SettingsDep,
+    campaign_in: Annotated[CampaignCreate, Body(openapi_examples={"paper_three_weeks": {"value": CAMPAIGN_EXAMPLE}})],
+) -> CampaignPublic:
+    """Plan a campaign: GSA scenes one after another, the observer carried from each to the next, within a budget.
+
+    Each stretch of ``scene_span_days`` is planned as a plan is (Algorithm 1 from where the last scene left the
+    observer) and its cheapest feasible scene flown, preferring among those nearly as cheap a new line of sight;
+    the whole burn sequence is then flown again and each scene measured on it. Runs in a worker thread under
+    ``GSA_CAMPAIGN_TIMEOUT_S`` and ``GSA_PLAN_MEMORY_MB``, and stops when the caller disconnects; then nothing
+    is stored.
+    """
+    gone = threading.Event()
+    stop = _budget(settings, gone, settings.campaign_timeout_s, "CAMPAIGN")
+
+    async def watch() -> None:
+        while not gone.is_set():
+            if await request.is_disconnected():
+                gone.set()
+            await asyncio.sleep(0.2)
+
+    watcher = asyncio.create_task(watch())
+    try:
+        row = await run_in_threadpool(
+            plan_and_store_campaign,
+            session=session,
+            operator_id=operator.id,
+            campaign_in=campaign_in,
+            settings=settings,
+            stop=stop,
+        )
+    finally:
+        watcher.cancel()
+    return CampaignPublic.from_row(row)
+
+
+@router.get("", response_model=CampaignsPublic)
+def list_campaigns(
+    session: SessionDep,
+    operator: CurrentOperator,
+    page: PageDep,
+    target_name: Annotated[Text | None, Query(max_length=200)] = None,
+) -> CampaignsPublic:
+    """List the caller's campaigns, newest first, filtered by target name."""
+    rows, total = crud.list_campaigns(
+        session=session, operator_id=operator.id, limit=page.limit, offset=page.offset, target_name=target_name
+    )
+    return CampaignsPublic(data=[CampaignSummary.from_row(r) for r in rows], count=total)
+
+
+@router.get(
+    "/{campaign_id}",
+    response_model=CampaignPublic,
+    responses={**NOT_FOUND, 200: {"content": {"application/json": {"example": examples.load("campaign")}}}},
+)
+def read_campaign(
+    session: SessionDep, operator: CurrentOperator, campaign_id: Annotated[Text, Path()]
+) -> CampaignPublic:
+    """Return one of the caller's campaigns."""
+    row = crud.get_campaign(session=session, operator_id=operator.id, campaign_id=campaign_id)
+    if row is None:
+        raise HTTPException(status_code=404, detail="Campaign not found")
+    return CampaignPublic.from_row(row)
+
+
+EXPORT_TYPES = {
+    "opm": ("text/plain", "CCSDS OPM 3.0 (KVN): the observer at the start, and every burn (GCRF, UTC)", "opm.txt"),
+    "oem": (
+        "text/plain",
+        "CCSDS OEM 3.0 (KVN): the target, and the observer in one segment between burns (GCRF, UTC, 120 s)",
+        "oem.txt",
+    ),
+    "czml": (
+        "application/json",
+        "CZML for Cesium: both satellites, the station, access intervals, each T_access",
+        "czml",
+    ),
+    "access.csv": ("text/csv", "every pass of the target over the station in the span searched, one row a pass", "csv"),
+}
+
+
+def _export_route(kind: str) -> None:
+    from app.services import campaigns
+
+    media, what, suffix = EXPORT_TYPES[kind]
+
+    def export(session: SessionDep, operator: CurrentOperator, campaign_id: Annotated[Text, Path()]) -> Response:
+        row = crud.get_campaign(session=session, operator_id=operator.id, campaign_id=campaign_id)
+        if row is None:
+            raise HTTPException(status_code=404, detail="Campaign not found")
+        body = campaigns.export(kind, row)
+        name = f"campaign-{row.id}.{suffix}"
+        return Response(body, media_type=media, headers={"Content-Disposition": f'attachment; filename="{name}"'})
+
+    export.__doc__ = f"The campaign as {what}. Flown again from the stored start and burns (no planning is repeated)."
+    export.__name__ = f"export_campaign_{kind.replace('.', '_')}"
+    router.add_api_route(
+        f"/{{campaign_id}}/export/{kind}",
+        export,
+        methods=["GET"],
+        response_class=Response,
+        responses={**NOT_FOUND, 200: {"content": {media: {}}, "description": what}},
+    )
+
+
+for _kind in EXPORT_TYPES:
+    _export_route(_kind)

@@ -1,0 +1,241 @@
+"""Campaigns: a request into ``planner.campaign``, its result stored, and its flight flown again for the exports."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from datetime import datetime
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from sqlalchemy.orm import Session
+
+from app import crud
+from app.core.config import Settings
+from app.db.models import Campaign as CampaignRow
+from app.errors import InputError
+from app.schemas import CampaignCreate, CampaignResult
+from app.services import exports
+from app.services.planning import (
+    check_epoch_gap,
+    observer_optics,
+    stored_station_lookup,
+    to_orbit,
+    to_station,
+    with_stored_station,
+)
+from planner.alignment import HeightBox
+from planner.campaign import (
+    CAMPAIGN_MARGIN_S,
+    Campaign,
+    CampaignOptions,
+    FlownTrajectory,
+    Progress,
+    campaign_pole,
+    fly,
+    plan_campaign,
+)
+from planner.errors import PlannerError, PlanningStopped
+from planner.orbits import earth_frames, trajectory
+from planner.plan import PlanOptions, StopCheck
+from planner.propagation import Trajectory, as_utc
+
+Vec = NDArray[np.float64]
+CAMPAIGN_OEM_STEP_S = 120.0  # a campaign's ephemerides span weeks: 2-min samples (LAGRANGE 7 reads them to metres)
+# Where a planner error's field belongs in the request.
+_TOP = ("duration_days", "dv_budget_m_s", "scene_span_days", "max_scenes", "return_to_orbit", "start")
+
+
+def campaign_options(req: CampaignCreate, max_grid_points: int | None = None) -> CampaignOptions:
+    """The planner's options from a request; out of range: a 422 naming the field."""
+    s = req.search
+    optics = observer_optics(req)
+    try:
+        box = HeightBox(s.dha_min_km, s.dha_max_km, s.dhp_min_km, s.dhp_max_km, s.step_km)
+    except PlannerError as exc:
+        raise InputError(["search", exc.field or "search"], str(exc)) from None
+    if max_grid_points is not None and box.grid_points > max_grid_points:
+        raise InputError(
+            ["search", "step_km"],
+            f"the dHa/dHp grid has {box.grid_points} points, over the limit of {max_grid_points}: widen step_km",
+        )
+    try:
+        scene = PlanOptions(
+            box=box,
+            max_miss_km=s.max_miss_km,
+            revolutions_before=tuple(sorted(set(s.revolutions_before))),
+            optics=optics,
+            max_imaging_range_km=s.max_imaging_range_km,
+            standoff_km=s.standoff_km,
+            min_separation_km=s.min_separation_km,
+        )
+    except PlannerError as exc:
+        raise InputError(["search", exc.field or "search"], str(exc)) from None
+    try:
+        return CampaignOptions(
+            start=as_utc(req.start) if req.start else None,
+            duration_s=req.duration_days * 86400.0,
+            dv_budget_m_s=req.dv_budget_m_s,
+            return_to_orbit=req.return_to_orbit,
+            scene_span_s=req.scene_span_days * 86400.0,
+            max_scenes=req.max_scenes,
+            plan=scene,
+        )
+    except PlannerError as exc:
+        raise InputError([exc.field if exc.field in _TOP else "search"], str(exc)) from None
+
+
+def run_campaign(
+    req: CampaignCreate,
+    max_grid_points: int | None = None,
+    max_epoch_gap_days: float | None = None,
+    stop: StopCheck | None = None,
+    progress: Progress | None = None,
+) -> tuple[Campaign, CampaignResult]:
+    """Validate a campaign request against the planner, plan it, and return the campaign and its result."""
+    target = to_orbit(req.target, "target")
+    observer = to_orbit(req.observer, "observer")
+    station = to_station(req.ground_station)
+    opts = campaign_options(req, max_grid_points)
+    if max_epoch_gap_days is not None:
+        start = opts.start or target.epoch
+        for orbit, orbit_in, where in ((target, req.target, "target"), (observer, req.observer, "observer")):
+            check_epoch_gap(orbit, orbit_in, where, start, opts.duration_s, max_epoch_gap_days)
+    try:
+        campaign = plan_campaign(target, observer, station, opts, stop=stop, progress=progress)
+    except PlanningStopped:
+        raise
+    except PlannerError as exc:
+        field = exc.field or "search"
+        loc: list[str | int] = [field] if field in ("target", "observer", *_TOP) else ["search", field]
+        raise InputError(loc, str(exc)) from None
+    return campaign, CampaignResult.from_campaign(campaign)
+
+
+def plan_and_store_campaign(
+    *,
+    session: Session,
+    operator_id: str,
+    campaign_in: CampaignCreate,
+    settings: Settings,
+    stop: StopCheck | None = None,
+) -> CampaignRow:
+    """Plan a campaign within the service's limits (``run_campaign``) and store it with its result."""
+    campaign_in = with_stored_station(campaign_in, stored_station_lookup(session, operator_id))
+    _, result = run_campaign(
+        campaign_in,
+        max_grid_points=settings.max_grid_points,
+        max_epoch_gap_days=settings.max_epoch_gap_days,
+        stop=stop,
+    )
+    return crud.create_campaign(session=session, operator_id=operator_id, request=campaign_in, result=result)
+
+
+@dataclass(frozen=True)
+class Flight:
+    """A stored campaign flown again: the observer from its stored start through its stored burns, the target
+    from the stored request (both deterministic: no planning is repeated). Times are s after ``epoch``."""
+
+    epoch: datetime
+    t1_s: float
+    observer_flight: FlownTrajectory
+    target_trajectory: Trajectory
+    burns: list[dict[str, Any]]
+    accesses_s: tuple[float, ...]
+
+    def target(self, t_s: Vec) -> tuple[Vec, Vec]:
+        return self.target_trajectory.state(t_s)
+
+    def observer(self, t_s: Vec) -> tuple[Vec, Vec]:
+        return self.observer_flight.state(t_s)
+
+
+def flight(request: dict[str, Any], result: dict[str, Any]) -> Flight:
+    """Fly a stored campaign again from its stored start state and burns."""
+    req = CampaignCreate.model_validate(request)
+    stored = CampaignResult.model_validate(CampaignResult.upgraded(result))
+    epoch = stored.epoch
+    observer = to_orbit(req.observer, "observer")
+    target = to_orbit(req.target, "target")
+    end = stored.duration_days * 86400.0
+    pole = campaign_pole(epoch, observer, end)
+    burns = [b for s in stored.scenes for b in s.burns]
+    times = [(b.time - epoch).total_seconds() for b in burns]
+    r0, v0 = np.asarray(stored.observer_state.r_km), np.asarray(stored.observer_state.v_km_s)
+    flown = fly(
+        r0,
+        v0,
+        0.0,
+        end + CAMPAIGN_MARGIN_S,
+        [(t, np.asarray(b.dv_m_s) / 1000.0) for t, b in zip(times, burns, strict=True)],
+        pole,
+    )
+    frames = earth_frames(epoch, 0.0, end + CAMPAIGN_MARGIN_S)
+    tgt = trajectory(target, epoch, frames, 0.0, end + CAMPAIGN_MARGIN_S, "osculating", pole)
+    return Flight(
+        epoch,
+        end,
+        flown,
+        tgt,
+        [
+            {
+                "t_s": t,
+                "kind": b.kind,
+                "dv_km_s": tuple(x / 1000.0 for x in b.dv_m_s),
+                "dv_rtn_m_s": tuple(b.dv_rtn_m_s),
+            }
+            for t, b in zip(times, burns, strict=True)
+        ],
+        tuple((s.t_access - epoch).total_seconds() for s in stored.scenes),
+    )
+
+
+def export(kind: str, row: CampaignRow) -> str:
+    """One export of a stored campaign: ``opm``, ``oem``, ``czml`` or ``access.csv``."""
+    from app.services.planning import access_csv
+
+    if kind == "access.csv":
+        return access_csv(row.result.get("access_windows", []))
+    fl = flight(row.request, row.result)
+    names = {"target": row.target_name, "observer": row.observer_name, "station": row.station_name}
+    if kind == "opm":
+        r, v = fl.observer(np.array([0.0]))
+        burns = [
+            exports.Manoeuvre(b["t_s"], b["dv_km_s"], b["dv_rtn_m_s"], f"Impulsive {b['kind']} burn") for b in fl.burns
+        ]
+        comment = (
+            f"The observer at the start of campaign {row.id}, before any burn; {len(fl.accesses_s)} scene(s), "
+            f"{len(burns)} burn(s)"
+        )
+        return exports.opm_text(fl.epoch, 0.0, r[:, 0], v[:, 0], burns, f"GSA-{row.id}", row.observer_name, comment)
+    if kind == "oem":
+        # One observer segment between burns: each burn's instant ends one (before it) and starts the next.
+        edges = [0.0, *(b["t_s"] for b in fl.burns), fl.t1_s]
+        segments = [exports.OemSegment(row.target_name, f"GSA-{row.id}-TARGET", 0.0, fl.t1_s, fl.target, "the target")]
+        for k, piece in enumerate(fl.observer_flight.pieces):
+            what = (
+                "the observer before any burn" if k == 0 else f"the observer after its {fl.burns[k - 1]['kind']} burn"
+            )
+            segments.append(
+                exports.OemSegment(
+                    row.observer_name, f"GSA-{row.id}-OBSERVER", edges[k], edges[k + 1], piece.state, what
+                )
+            )
+        return exports.oem_text(fl.epoch, segments, fl.accesses_s, f"campaign {row.id}", CAMPAIGN_OEM_STEP_S)
+    if kind == "czml":
+        must = (*fl.accesses_s, *(b["t_s"] for b in fl.burns))
+        return exports.czml_text(
+            fl.epoch,
+            0.0,
+            fl.t1_s,
+            must,
+            fl.target,
+            fl.observer,
+            fl.accesses_s,
+            f"GSA-ISAR campaign {row.id}",
+            names,
+            row.request["ground_station"],
+            row.result.get("access_windows", []),
+            step_s=CAMPAIGN_OEM_STEP_S,
+        )
+    raise InputError(["kind"], f"unknown export {kind!r}: opm, oem, czml or access.csv", where="path")

@@ -1,0 +1,148 @@
+"""POST/GET /v1/campaigns and their exports: read back by ccsds-ndm, flown by an independent J2 integrator."""
+
+import csv
+import io
+import json
+from datetime import UTC, datetime
+
+import numpy as np
+import pytest
+from ccsds_ndm.ndm_io import NdmIo
+
+from app.schemas import CAMPAIGN_EXAMPLE
+from planner.elements import elements_to_state
+from tests.conftest import KEY_A, KEY_B
+from tests.utils.j2 import fly_tod_j2, propagate_tod_j2
+from tests.utils.orbits import PAPER_TARGET
+
+A = {"X-API-Key": KEY_A}
+B = {"X-API-Key": KEY_B}
+
+
+@pytest.fixture(scope="module")
+def campaign(client):
+    r = client.post("/v1/campaigns", json=CAMPAIGN_EXAMPLE, headers=A)
+    assert r.status_code == 201, r.text
+    return r.json()
+
+
+def _t(kvn_time):
+    return datetime.fromisoformat(str(kvn_time).rstrip("Z")).replace(tzinfo=UTC)
+
+
+def _read(tmp_path, text, name):
+    path = tmp_path / f"{name}.kvn"
+    path.write_text(text)
+    return NdmIo().from_path(str(path))
+
+
+def test_a_campaign_flies_feasible_scenes_within_its_budget(client, campaign):
+    scenes = campaign["scenes"]
+    assert len(scenes) >= 3
+    assert campaign["dv_total_m_s"] <= campaign["dv_budget_m_s"]
+    assert campaign["dv_total_m_s"] == pytest.approx(sum(s["dv_total_m_s"] for s in scenes))
+    optics_range = 111.8
+    for s in scenes:
+        assert s["feasible"] and s["candidate"]["feasibility"]["feasible"]
+        assert s["burns"] and s["dv_total_m_s"] == pytest.approx(sum(b["dv_total_m_s"] for b in s["burns"]))
+        check = s["check"]
+        assert check["sunlit"] and check["target_angular_rate_deg_s"] < 10.0 and check["separation_km"] < optics_range
+        assert len(s["candidate"]["feasibility"]["line_of_sight_rtn"]) == 3
+        rise, set_ = (datetime.fromisoformat(s["access_window"][k]) for k in ("rise", "set"))
+        assert rise <= datetime.fromisoformat(s["t_access"]) <= set_
+    times = [datetime.fromisoformat(s["t_access"]) for s in scenes]
+    assert times == sorted(times)
+    assert campaign["stretches"] and all(st["note"] for st in campaign["stretches"])
+    # Stored and read back the same; listed; the operator's own.
+    got = client.get(f"/v1/campaigns/{campaign['id']}", headers=A)
+    assert got.status_code == 200 and got.json()["scenes"] == scenes
+    listing = client.get("/v1/campaigns", headers=A).json()
+    assert campaign["id"] in [c["id"] for c in listing["data"]]
+    row = next(c for c in listing["data"] if c["id"] == campaign["id"])
+    assert row["scenes"] == len(scenes) and row["first_access"] == scenes[0]["t_access"]
+    assert client.get(f"/v1/campaigns/{campaign['id']}", headers=B).status_code == 404
+    for kind in ("opm", "oem", "czml", "access.csv"):
+        assert client.get(f"/v1/campaigns/{campaign['id']}/export/{kind}", headers=B).status_code == 404
+
+
+@pytest.mark.parametrize(
+    ("change", "loc"),
+    [
+        ({"duration_days": 91}, ["body", "duration_days"]),
+        ({"dv_budget_m_s": -1}, ["body", "dv_budget_m_s"]),
+        ({"observer_optics": {"aperture_m": 0.0}}, ["observer_optics", "aperture_m"]),
+        ({"observer_optics": {"wavelength_nm": 1e9}}, ["observer_optics", "wavelength_nm"]),
+        (
+            {"ground_station": {**CAMPAIGN_EXAMPLE["ground_station"], "max_azimuth_rate_deg_s": 0}},
+            ["body", "ground_station", "max_azimuth_rate_deg_s"],
+        ),
+        ({"scene_span_days": 0.5}, ["body", "scene_span_days"]),
+    ],
+)
+def test_bad_campaign_input_is_a_422_naming_the_field_and_stores_nothing(client, change, loc):
+    before = client.get("/v1/campaigns", headers=B).json()["count"]
+    r = client.post("/v1/campaigns", json={**CAMPAIGN_EXAMPLE, **change}, headers=B)
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"]
+    assert any(list(d["loc"])[-len(loc) :] == loc for d in detail), detail
+    assert client.get("/v1/campaigns", headers=B).json()["count"] == before
+
+
+def test_the_opm_holds_every_burn_and_flies_to_each_scene(client, campaign, tmp_path):
+    r = client.get(f"/v1/campaigns/{campaign['id']}/export/opm", headers=A)
+    assert r.status_code == 200
+    opm = _read(tmp_path, r.text, "campaign_opm")
+    seg = opm.body.segment
+    sv = seg.data.state_vector
+    burns = [b for s in campaign["scenes"] for b in s["burns"]]
+    mans = seg.data.maneuver_parameters
+    assert len(mans) == len(burns)
+    epoch = datetime.fromisoformat(campaign["epoch"])
+    assert abs((_t(sv.epoch) - epoch).total_seconds()) < 1e-3
+    flown = []
+    for man, b in zip(mans, burns, strict=True):
+        t = (_t(man.man_epoch_ignition) - epoch).total_seconds()
+        assert abs(t - (datetime.fromisoformat(b["time"]) - epoch).total_seconds()) < 1e-3
+        dv = np.array([man.man_dv_1.value, man.man_dv_2.value, man.man_dv_3.value])
+        np.testing.assert_allclose(dv * 1000.0, b["dv_m_s"], atol=1e-5)
+        flown.append(((datetime.fromisoformat(b["time"]) - epoch).total_seconds(), dv))
+    # Fly the OPM's state through every burn with the independent integrator; the target from its elements.
+    r0 = np.array([sv.x.value, sv.y.value, sv.z.value])
+    v0 = np.array([sv.x_dot.value, sv.y_dot.value, sv.z_dot.value])
+    t_access = np.array([(datetime.fromisoformat(s["t_access"]) - epoch).total_seconds() for s in campaign["scenes"]])
+    obs, _ = fly_tod_j2(epoch, r0, v0, 0.0, flown, t_access)
+    rt, vt = elements_to_state(*PAPER_TARGET.radians())
+    tgt = propagate_tod_j2(epoch, rt, vt, (PAPER_TARGET.epoch - epoch).total_seconds(), t_access)
+    separation = np.linalg.norm(obs - tgt, axis=0)
+    np.testing.assert_allclose(separation, [s["check"]["separation_km"] for s in campaign["scenes"]], atol=0.2)
+
+
+def test_the_oem_has_one_observer_segment_between_burns(client, campaign, tmp_path):
+    r = client.get(f"/v1/campaigns/{campaign['id']}/export/oem", headers=A)
+    assert r.status_code == 200
+    segs = _read(tmp_path, r.text, "campaign_oem").body.segment
+    burns = [b for s in campaign["scenes"] for b in s["burns"]]
+    assert len(segs) == 1 + len(burns) + 1
+    for k, b in enumerate(burns):
+        before, after = segs[1 + k], segs[2 + k]
+        t_burn = datetime.fromisoformat(b["time"])
+        assert abs((_t(before.metadata.stop_time) - t_burn).total_seconds()) < 1e-3
+        assert abs((_t(after.metadata.start_time) - t_burn).total_seconds()) < 1e-3
+        last, first = before.data.state_vector[-1], after.data.state_vector[0]
+        dr = [first.x.value - last.x.value, first.y.value - last.y.value, first.z.value - last.z.value]
+        dv = [first.x_dot.value - last.x_dot.value, first.y_dot.value - last.y_dot.value, first.z_dot.value - last.z_dot.value]
+        assert np.linalg.norm(dr) < 1e-5
+        np.testing.assert_allclose(np.array(dv) * 1000.0, b["dv_m_s"], atol=1e-4)
+
+
+def test_the_czml_marks_every_scene_and_the_csv_every_pass(client, campaign):
+    r = client.get(f"/v1/campaigns/{campaign['id']}/export/czml", headers=A)
+    assert r.status_code == 200
+    packets = {p["id"]: p for p in json.loads(r.text)}
+    n = len(campaign["scenes"])
+    assert {f"imaging-{k}" for k in range(n)} <= set(packets)
+    assert {"document", "target", "observer", "station", "access"} <= set(packets)
+    r = client.get(f"/v1/campaigns/{campaign['id']}/export/access.csv", headers=A)
+    assert r.status_code == 200
+    rows = list(csv.DictReader(io.StringIO(r.text)))
+    assert len(rows) == len(campaign["access_windows"]) > n
