@@ -144,3 +144,68 @@ def plot_plan(plan, path: str, title: str = "") -> None:  # type: ignore[no-unty
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def plot_campaign(campaign, path: str, title: str = "") -> None:  # type: ignore[no-untyped-def]
+    """Write a two-panel PNG of ``campaign`` (a planner.campaign.Campaign) to ``path``: the Delta-v spent over
+    the span against the budget, each stretch shaded by what came of it; and each scene's line of sight in the
+    target's orbital frame (the imaging geometry the labelled frames will cover)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.dates as mdates
+    import matplotlib.pyplot as plt
+
+    ep = campaign.epoch
+    fig, (ax, sky) = plt.subplots(1, 2, figsize=(13, 4.8), gridspec_kw={"width_ratios": [1.7, 1.0]})
+    for s in campaign.stretches:
+        colour = "#2ca02c" if s.scene is not None else "#d62728"
+        ax.axvspan(utc(ep, s.t0_s), utc(ep, s.t1_s), color=colour, alpha=0.08, lw=0)
+    times = [utc(ep, 0.0)]
+    spent = [0.0]
+    for b in campaign.burns:
+        times += [utc(ep, b.t_s), utc(ep, b.t_s)]
+        spent += [spent[-1], spent[-1] + b.dv_total_km_s * 1000.0]
+    times.append(utc(ep, campaign.duration_s))
+    spent.append(spent[-1])
+    ax.plot(times, spent, color="#1f77b4", lw=2, label="Delta-v spent")
+    ax.axhline(campaign.options.dv_budget_m_s, color="k", ls="--", lw=1, label="budget")
+    for s in campaign.scenes:
+        t = utc(ep, s.t_access_s)
+        ax.axvline(t, color="#ff7f0e", lw=1)
+        ax.annotate(
+            f"{s.index}: {s.dv_total_km_s * 1000.0:.0f} m/s",
+            (t, campaign.options.dv_budget_m_s),
+            rotation=90,
+            va="top",
+            ha="right",
+            fontsize=8,
+        )
+    ax.set_ylabel("Delta-v spent (m/s)")
+    ax.set_ylim(0, campaign.options.dv_budget_m_s * 1.05 + 1.0)
+    ax.xaxis.set_major_formatter(mdates.DateFormatter("%m-%d"))  # type: ignore[no-untyped-call]
+    ax.set_xlabel(f"UTC ({ep:%Y}); green: a stretch that flew a scene, red: one that could not")
+    ax.legend(loc="upper left", fontsize=8)
+    ax.set_title(f"{len(campaign.scenes)} scene(s), {campaign.dv_total_km_s * 1000.0:.0f} m/s")
+    # The line of sight in the target's RTN frame, as azimuth in the along-track/radial plane and elevation off it.
+    for s in campaign.scenes:
+        los = s.feasibility.line_of_sight_rtn
+        if los is None:
+            continue
+        az = np.degrees(np.arctan2(los[0], los[1]))
+        el = np.degrees(np.arcsin(np.clip(los[2], -1.0, 1.0)))
+        sky.scatter([az], [el], s=60, color="#ff7f0e", zorder=3)
+        sky.annotate(str(s.index), (az, el), xytext=(5, 5), textcoords="offset points")
+    sky.set_xlim(-180, 180)
+    sky.set_ylim(-90, 90)
+    sky.set_xticks(range(-180, 181, 90))
+    sky.set_yticks(range(-90, 91, 45))
+    sky.grid(alpha=0.3)
+    sky.set_xlabel("azimuth from along-track toward radial (deg)")
+    sky.set_ylabel("elevation toward the orbit normal (deg)")
+    sky.set_title("where the observer sees the target from")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -1,7 +1,7 @@
 """The ``gsa`` command line: the parser, and each command imported from its module only when it runs.
 
 ``common`` (settings, the one-line errors, the client options) is all the parser needs;
-``service`` (serve, db, keys), ``planning`` (plan, access, plans, stations), ``estimates``
+``service`` (serve, db, keys), ``planning`` (plan, campaign, access, plans, campaigns, stations), ``estimates``
 (estimate, estimates) and ``passes`` (simulate --pass, pass) hold the commands, and the
 inference commands (simulate, train, ...) bring their own arguments from ``inference``.
 Bad input prints one line on stderr and exits with status 2.
@@ -98,14 +98,30 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
         help="also write the plan as opm.txt, oem.txt (CCSDS KVN), plan.czml, plan.geojson, access.csv and pointing.csv",
     )
     pl.set_defaults(func=_lazy("planning", "cmd_plan"))
-    for noun, func in (("plans", _lazy("planning", "cmd_plans")), ("estimates", _lazy("estimates", "cmd_estimates"))):
+    cp = sub.add_parser("campaign", help="plan a campaign of GSA scenes from a JSON request (POST /v1/campaigns)")
+    cp.add_argument("file", nargs="?", help="the request (JSON); or --example")
+    cp.add_argument(
+        "--example", choices=["paper"], help="the paper's target over 60 days (examples/paper-campaign.json)"
+    )
+    add_client_options(cp, "plan on a running service (stored there; a station may be named)")
+    cp.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    cp.add_argument("--plot", metavar="PNG", help="draw the Delta-v spent over the span and each scene's line of sight")
+    cp.add_argument(
+        "--export", metavar="DIR", help="also write opm.txt, oem.txt (CCSDS KVN), campaign.czml and access.csv"
+    )
+    cp.set_defaults(func=_lazy("planning", "cmd_campaign"))
+    for noun, func in (
+        ("plans", _lazy("planning", "cmd_plans")),
+        ("campaigns", _lazy("planning", "cmd_campaigns")),
+        ("estimates", _lazy("estimates", "cmd_estimates")),
+    ):
         c = sub.add_parser(noun, help=f"your {noun} stored on the service (list, show)")
         cs = c.add_subparsers(dest=f"{noun}_cmd", required=True)
         cl = cs.add_parser("list", help=f"your {noun}, newest first")
         cl.add_argument("--limit", type=int, default=20)
         cl.add_argument("--json", action="store_true")
-        if noun == "plans":
-            cl.add_argument("--target-name", help="only this target's plans")
+        if noun in ("plans", "campaigns"):
+            cl.add_argument("--target-name", help=f"only this target's {noun}")
         else:
             cl.add_argument("--plan-id", help="only the estimates tied to this plan")
         cw = cs.add_parser("show", help=f"one of your {noun}")

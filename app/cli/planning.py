@@ -245,3 +245,137 @@ def format_plan(r: PlanResult) -> str:
     for note in r.notes:
         out.append(f"note: {note}")
     return "\n".join(out)
+
+
+EXAMPLE_CAMPAIGNS = {"paper": "paper-campaign.json"}
+
+
+def cmd_campaign(args: argparse.Namespace) -> int:
+    from app.errors import InputError
+    from app.schemas import CampaignCreate, CampaignPublic
+    from app.services.campaigns import run_campaign
+
+    if args.export and Path(args.export).exists() and any(Path(args.export).iterdir()):
+        raise CliError(f"{args.export} is not empty: give a new or empty directory for --export")
+    if bool(args.file) == bool(args.example):
+        raise CliError("give a request file (the body of POST /v1/campaigns) or --example paper, not both")
+    source = args.file or str(EXAMPLES_DIR / EXAMPLE_CAMPAIGNS[args.example])
+    if args.server:
+        if args.export or args.plot:
+            raise CliError("--export and --plot plan locally; with --server, GET /v1/campaigns/ID/export/... instead")
+        body = call_server(args, "POST", "/v1/campaigns", json=read_json(source), timeout=900).json()
+        if args.json:
+            print(json.dumps(body, indent=2))
+        else:
+            answer = CampaignPublic.model_validate(body)
+            print(f"campaign {answer.id} stored\n" + format_campaign(answer))
+        return 0
+
+    def progress(fraction: float, what: str) -> None:
+        print(f"\r{fraction * 100:5.1f} % of the span searched, {what}", end="", file=sys.stderr, flush=True)
+
+    try:
+        req = CampaignCreate.model_validate(read_json(source))
+        campaign, result = run_campaign(req, progress=progress)
+    except ValidationError as exc:
+        raise CliError(validation_line(exc)) from None
+    except InputError as exc:
+        raise CliError(input_line(exc)) from None
+    finally:
+        print(file=sys.stderr)
+    assert not isinstance(req.ground_station, str)  # run_campaign refuses a station name: only the server resolves one
+    print(json.dumps(result.model_dump(mode="json"), indent=2) if args.json else format_campaign(result))
+    if args.export:
+        _export_campaign(req, result, Path(args.export))
+    if args.plot:
+        from planner.plot import plot_campaign
+
+        plot_campaign(campaign, args.plot, title=f"{req.target.name} / {req.observer.name} / {req.ground_station.name}")
+        print(f"plot written to {args.plot}", file=sys.stderr)
+    return 0
+
+
+def _export_campaign(req: Any, result: Any, folder: Path) -> None:
+    """Write the campaign in every export format into ``folder`` (as GET /v1/campaigns/{id}/export/... serves them)."""
+    from types import SimpleNamespace
+
+    from app.services import campaigns
+
+    folder.mkdir(parents=True, exist_ok=True)
+    row = SimpleNamespace(
+        id="local",
+        request=req.model_dump(mode="json"),
+        result=result.stored(),
+        target_name=req.target.name,
+        observer_name=req.observer.name,
+        station_name=req.ground_station.name,
+    )
+    files = {name: campaigns.export(kind, row) for kind, name in campaigns.EXPORT_FILES.items()}
+    for fname, body in files.items():
+        (folder / fname).write_text(body)
+    print(f"wrote {', '.join(sorted(files))} to {folder}", file=sys.stderr)
+
+
+def cmd_campaigns(args: argparse.Namespace) -> int:
+    from urllib.parse import quote
+
+    from app.schemas import CampaignPublic
+
+    if args.campaigns_cmd == "show":
+        body = call_server(args, "GET", f"/v1/campaigns/{quote(args.id, safe='')}").json()
+        if args.json:
+            print(json.dumps(body, indent=2))
+        else:
+            c = CampaignPublic.model_validate(body)
+            print(
+                f"campaign {c.id}: {c.target_name} / {c.observer_name} / {c.station_name}, "
+                f"created {utc_text(c.created_at)}"
+            )
+            print(format_campaign(c))
+        return 0
+
+    def row(c: dict[str, Any]) -> str:
+        return (
+            f"{c['id']:<36}  {utc_text(c['created_at']):<24}  {c['target_name'][:16]:<16} {c['observer_name'][:16]:<16} "
+            f"{c['station_name'][:14]:<14} {c['scenes']:>6} {c['dv_total_m_s']:>9.1f}  {utc_text(c['first_access'])}"
+        )
+
+    header = (
+        f"{'id':<36}  {'created (UTC)':<24}  {'target':<16} {'observer':<16} {'station':<14} {'scenes':>6} "
+        f"{'dv (m/s)':>9}  first T_access (UTC)"
+    )
+    return print_listing(
+        args, "/v1/campaigns", {"target_name": args.target_name}, "{count} campaigns; newest {shown}:", header, row
+    )
+
+
+def format_campaign(r: Any) -> str:
+    """Return a campaign (CampaignResult) as a readable report: its scenes, their burns, and every stretch."""
+    out = [
+        f"epoch {utc_text(r.epoch)}, {r.duration_days:g} days, budget {r.dv_budget_m_s:g} m/s, "
+        f"return to orbit: {'yes' if r.return_to_orbit else 'no'}",
+        f"\n{len(r.scenes)} scene(s), {r.dv_total_m_s:.1f} m/s in all",
+        f"{'#':>3} {'T_access (UTC)':<25} {'dv (m/s)':>9} {'stand-off (km)':>14} {'separation (km)':>15} "
+        f"{'rate (deg/s)':>12} {'phase (deg)':>11}  line of sight (R, T, N)",
+    ]
+    for s in r.scenes:
+        c = s.check
+        los = s.candidate.feasibility.line_of_sight_rtn or []
+        out.append(
+            f"{s.index:3d} {utc_text(s.t_access):<25} {s.dv_total_m_s:9.1f} {s.candidate.standoff_km or 0.0:14.1f} "
+            f"{c.separation_km:15.2f} {c.target_angular_rate_deg_s:12.2f} {c.phase_angle_deg:11.1f}  "
+            f"({', '.join(f'{x:+.2f}' for x in los)})"
+        )
+        for b in s.burns:
+            out.append(
+                f"      {b.kind:<8} {utc_text(b.time)}  {b.dv_total_m_s:8.1f} m/s  RTN "
+                f"[{', '.join(f'{x:.1f}' for x in b.dv_rtn_m_s)}]"
+            )
+    out.append("\nstretches searched")
+    for st in r.stretches:
+        out.append(
+            f"  {utc_text(st.start)} .. {utc_text(st.end)}: {st.candidates} candidates, {st.feasible} feasible; {st.note}"
+        )
+    for note in r.notes:
+        out.append(f"note: {note}")
+    return "\n".join(out)

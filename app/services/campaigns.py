@@ -41,6 +41,7 @@ from planner.plan import PlanOptions, StopCheck
 from planner.propagation import Trajectory, as_utc
 
 Vec = NDArray[np.float64]
+EXPORT_FILES = {"opm": "opm.txt", "oem": "oem.txt", "czml": "campaign.czml", "access.csv": "access.csv"}
 CAMPAIGN_OEM_STEP_S = 120.0  # a campaign's ephemerides span weeks: 2-min samples (LAGRANGE 7 reads them to metres)
 # Where a planner error's field belongs in the request.
 _TOP = ("duration_days", "dv_budget_m_s", "scene_span_days", "max_scenes", "return_to_orbit", "start")
@@ -190,8 +191,8 @@ def flight(request: dict[str, Any], result: dict[str, Any]) -> Flight:
     )
 
 
-def export(kind: str, row: CampaignRow) -> str:
-    """One export of a stored campaign: ``opm``, ``oem``, ``czml`` or ``access.csv``."""
+def export(kind: str, row: Any) -> str:
+    """One export of a stored campaign (a row, or anything with its fields): ``opm``, ``oem``, ``czml``, ``access.csv``."""
     from app.services.planning import access_csv
 
     if kind == "access.csv":
