@@ -1,7 +1,8 @@
 """Real response examples for the API docs: what the service answers to the shipped example requests.
 
 ``python -m app.openapi_examples`` runs a fresh service (a temporary SQLite database, the shipped
-models) in-process, sends the paper's plan (examples/paper-plan.json), the ISS access request
+models) in-process, sends the paper's plan (examples/paper-plan.json), its three-week campaign
+(``CAMPAIGN_EXAMPLE``), the ISS access request
 (examples/iss-access.json), the sample frame (examples/sample-frame.npy) and a station, and writes
 each answer into app/response_examples/, long lists cut to a few entries (the docs say so). tests/app/api/test_examples.py
 regenerates them and fails when the stored ones no longer match the service.
@@ -18,7 +19,7 @@ from typing import Any
 from app.api.examples import HERE, load
 
 REPO = HERE.parents[1]
-NAMES = ("plan", "access", "estimate", "station")
+NAMES = ("plan", "campaign", "access", "estimate", "station")
 KEY = "docs-example-key"
 # What changes from run to run and is not compared: ids, times of creation, timings, links with ids.
 VOLATILE = ("id", "created_at", "timings_s", "links", "request_id")
@@ -28,6 +29,10 @@ def _trim(body: dict[str, Any]) -> dict[str, Any]:
     out = dict(body)
     if "access_windows" in out:
         out["access_windows"] = out["access_windows"][:3]
+    if "scenes" in out:  # a campaign: each scene's candidate without its long family of height changes
+        out["scenes"] = [
+            {**sc, "candidate": {**sc["candidate"], "family": sc["candidate"]["family"][:3]}} for sc in out["scenes"]
+        ]
     if "candidates" in out:
         chosen = (out.get("chosen") or {}).get("t_access")
         keep = [c for k, c in enumerate(out["candidates"]) if k < 2 or c["t_access"] == chosen]
@@ -42,7 +47,7 @@ def generate() -> dict[str, dict[str, Any]]:
     from app.core.config import Settings
     from app.core.db import upgrade_database
     from app.main import create_app
-    from app.schemas import PAPER_EXAMPLE, STATION_EXAMPLE
+    from app.schemas import CAMPAIGN_EXAMPLE, PAPER_EXAMPLE, STATION_EXAMPLE
 
     with tempfile.TemporaryDirectory() as tmp:
         settings = Settings(data_dir=Path(tmp), api_keys=KEY, ort_threads=1)
@@ -50,6 +55,7 @@ def generate() -> dict[str, dict[str, Any]]:
         headers = {"X-API-Key": KEY}
         with TestClient(create_app(settings)) as client:
             plan = client.post("/v1/plans", json=PAPER_EXAMPLE, headers=headers)
+            campaign = client.post("/v1/campaigns", json=CAMPAIGN_EXAMPLE, headers=headers)
             access = client.post(
                 "/v1/access-windows", json=json.loads((REPO / "examples/iss-access.json").read_text()), headers=headers
             )
@@ -61,7 +67,7 @@ def generate() -> dict[str, dict[str, Any]]:
                 headers=headers,
             )
             station = client.post("/v1/stations", json=STATION_EXAMPLE, headers=headers)
-        answers = {"plan": plan, "access": access, "estimate": estimate, "station": station}
+        answers = {"plan": plan, "campaign": campaign, "access": access, "estimate": estimate, "station": station}
         for name, r in answers.items():
             if r.status_code >= 300:
                 raise RuntimeError(f"the {name} example answered {r.status_code}: {r.text[:300]}")

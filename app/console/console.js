@@ -217,6 +217,60 @@ async function planPage(id) {
   }));
 }
 
+// ---- campaigns
+async function campaignsPage() {
+  const body = await api("/v1/campaigns?limit=50");
+  const rows = body.data.map((c) => `<tr>
+      <td><a href="#/campaigns/${esc(c.id)}">${esc(c.id.slice(0, 8))}</a></td><td>${utc(c.created_at)}</td>
+      <td>${esc(c.target_name)}</td><td>${esc(c.observer_name)}</td><td>${esc(c.station_name)}</td>
+      <td class="num">${c.scenes}</td><td class="num">${num(c.dv_total_m_s, 1)}</td><td>${utc(c.first_access)}</td></tr>`).join("");
+  view.innerHTML = `<h1>Campaigns <span class="muted">(${body.count})</span></h1>
+    <table id="campaigns"><thead><tr><th>campaign</th><th>created (UTC)</th><th>target</th><th>observer</th><th>station</th>
+    <th class="num">scenes</th><th class="num">dv (m/s)</th><th>first T_access (UTC)</th></tr></thead><tbody>${rows ||
+      '<tr><td colspan="8" class="muted">No campaigns yet: POST /v1/campaigns, or gsa campaign --server.</td></tr>'}</tbody></table>`;
+}
+
+async function campaignPage(id) {
+  const c = await api(`/v1/campaigns/${encodeURIComponent(id)}`);
+  const scenes = c.scenes.map((s) => {
+    const f = s.candidate.feasibility;
+    const burns = s.burns.map((b) => `${esc(b.kind)} ${utc(b.time)} ${num(b.dv_total_m_s, 1)} m/s`).join("<br>");
+    return `<tr><td class="num">${s.index}</td><td>${utc(s.t_access)}</td><td class="num">${num(s.dv_total_m_s, 1)}</td>
+      <td class="num">${num(s.candidate.standoff_km, 1)}</td><td class="num">${num(s.check.separation_km, 2)}</td>
+      <td class="num">${num(s.check.target_angular_rate_deg_s, 2)}</td><td class="num">${num(s.check.phase_angle_deg, 1)}</td>
+      <td>${(f.line_of_sight_rtn || []).map((v) => num(v, 2)).join(", ")}</td><td class="reasons">${burns}</td></tr>`;
+  }).join("");
+  const stretches = c.stretches.map((st) => `<tr${st.scene === null ? "" : ' class="chosen"'}><td>${utc(st.start)}</td>
+      <td>${utc(st.end)}</td><td class="num">${st.candidates}</td><td class="num">${st.feasible}</td>
+      <td class="reasons">${esc(st.note)}</td></tr>`).join("");
+  const exportsList = ["opm", "oem", "czml", "access.csv"].map((k) => `<a href="#" data-export="${k}">${k}</a>`).join(" · ");
+  const verdict = c.scenes.length
+    ? `<p class="verdict good">${c.scenes.length} feasible scene(s) for ${num(c.dv_total_m_s, 1)} of ${num(c.dv_budget_m_s, 0)} m/s.</p>`
+    : `<p class="verdict bad">No feasible scene within the budget in the span: each stretch below says why.</p>`;
+  view.innerHTML = `<h1>Campaign ${esc(c.target_name)} / ${esc(c.observer_name)} / ${esc(c.station_name)}</h1>
+    <p class="muted">${esc(c.id)} · created ${utc(c.created_at)} · ${num(c.duration_days, 1)} days from ${utc(c.epoch)} ·
+    return to orbit: ${c.return_to_orbit ? "yes" : "no"}</p>${verdict}
+    ${(c.notes || []).map((n) => `<p class="muted">note: ${esc(n)}</p>`).join("")}
+    <h2>Scenes (measured on the whole flown burn sequence)</h2>
+    <table id="scenes"><thead><tr><th class="num">#</th><th>T_access (UTC)</th><th class="num">dv (m/s)</th>
+    <th class="num">stand-off (km)</th><th class="num">separation (km)</th><th class="num">rate (deg/s)</th>
+    <th class="num">phase (deg)</th><th>line of sight (R, T, N)</th><th>burns</th></tr></thead><tbody>${scenes ||
+      '<tr><td colspan="9" class="muted">None.</td></tr>'}</tbody></table>
+    <h2>Stretches searched</h2>
+    <table id="stretches"><thead><tr><th>from (UTC)</th><th>to (UTC)</th><th class="num">candidates</th>
+    <th class="num">feasible</th><th>what came of it</th></tr></thead><tbody>${stretches}</tbody></table>
+    <h2>Exports</h2><p>${exportsList}</p>`;
+  view.querySelectorAll("[data-export]").forEach((a) => a.addEventListener("click", async (ev) => {
+    ev.preventDefault();
+    const kind = a.dataset.export;
+    const blob = await api(`/v1/campaigns/${encodeURIComponent(id)}/export/${kind}`, "blob");
+    const link = document.createElement("a");
+    link.href = URL.createObjectURL(blob);
+    link.download = `campaign-${id}.${kind}`;
+    link.click();
+  }));
+}
+
 // ---- estimates
 function euler(att) {
   return att ? att.euler_zyx_deg.map((v) => num(v, 2)).join(", ") : "-";
@@ -295,6 +349,8 @@ async function route() {
   view.innerHTML = "<p>Loading...</p>";
   try {
     if (parts[0] === "plans" && parts[1]) await planPage(decodeURIComponent(parts[1]));
+    else if (parts[0] === "campaigns" && parts[1]) await campaignPage(decodeURIComponent(parts[1]));
+    else if (parts[0] === "campaigns") await campaignsPage();
     else if (parts[0] === "estimates" && parts[1]) await estimatePage(decodeURIComponent(parts[1]));
     else if (parts[0] === "estimates") await estimatesPage();
     else await plansPage(params);

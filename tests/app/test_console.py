@@ -1,7 +1,8 @@
 """The web console in a real headless Chromium (Debian's package) against a real `gsa serve`.
 
 Every page loads with no failed request (the server's access log has no 4xx or 5xx, the page counts no
-failed call), a plan created through the API is in the list, and its page draws its pass; a screenshot
+failed call), a plan and a campaign created through the API are in their lists, the plan's page draws its pass,
+the campaign's lists its scenes and stretches; a screenshot
 of each page is written to tests/screenshots/ for people to look at."""
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import httpx
 import numpy as np
 import pytest
 
-from app.schemas import PAPER_EXAMPLE
+from app.schemas import CAMPAIGN_EXAMPLE, PAPER_EXAMPLE
 from tests.conftest import KEY_A
 from tests.utils.server import Server
 
@@ -57,7 +58,8 @@ def served(tmp_path_factory, smoke_models):
     est = httpx.post(
         srv.url + "/v1/estimates", files={"file": ("frame.npy", buf.getvalue())}, headers=headers, timeout=120
     ).json()
-    yield srv, plan, est, data / "server.log"
+    campaign = httpx.post(srv.url + "/v1/campaigns", json=CAMPAIGN_EXAMPLE, headers=headers, timeout=300).json()
+    yield srv, plan, est, campaign, data / "server.log"
     srv.stop()
 
 
@@ -82,7 +84,7 @@ def _status(dom: str) -> tuple[int, int]:
 
 
 def test_console_pages_in_chromium(served, tmp_path):
-    srv, plan, est, log = served
+    srv, plan, est, campaign, log = served
     console = f"{srv.url}/console/#key={KEY_A}&"
     pages = {
         "plans": (f"{console}/plans", [plan["id"][:8], "Sat_Target"]),
@@ -97,6 +99,11 @@ def test_console_pages_in_chromium(served, tmp_path):
                 'id="candidates"',
                 "stand-off (km)",
             ],
+        ),
+        "campaigns": (f"{console}/campaigns", [campaign["id"][:8], "first T_access"]),
+        "campaign": (
+            f"{console}/campaigns/{campaign['id']}",
+            ['id="scenes"', 'id="stretches"', "feasible scene(s)", "scene flown", "phasing"],
         ),
         "estimates": (f"{console}/estimates", [est["id"][:8]]),
         "estimate": (

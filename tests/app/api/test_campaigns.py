@@ -130,7 +130,11 @@ def test_the_oem_has_one_observer_segment_between_burns(client, campaign, tmp_pa
         assert abs((_t(after.metadata.start_time) - t_burn).total_seconds()) < 1e-3
         last, first = before.data.state_vector[-1], after.data.state_vector[0]
         dr = [first.x.value - last.x.value, first.y.value - last.y.value, first.z.value - last.z.value]
-        dv = [first.x_dot.value - last.x_dot.value, first.y_dot.value - last.y_dot.value, first.z_dot.value - last.z_dot.value]
+        dv = [
+            first.x_dot.value - last.x_dot.value,
+            first.y_dot.value - last.y_dot.value,
+            first.z_dot.value - last.z_dot.value,
+        ]
         assert np.linalg.norm(dr) < 1e-5
         np.testing.assert_allclose(np.array(dv) * 1000.0, b["dv_m_s"], atol=1e-4)
 

@@ -6,9 +6,15 @@ from datetime import datetime
 import pytest
 
 from app import openapi_examples as examples
-from app.schemas import AccessPublic, EstimatePublic, PlanPublic, StationPublic
+from app.schemas import AccessPublic, CampaignPublic, EstimatePublic, PlanPublic, StationPublic
 
-MODELS = {"plan": PlanPublic, "access": AccessPublic, "estimate": EstimatePublic, "station": StationPublic}
+MODELS = {
+    "plan": PlanPublic,
+    "campaign": CampaignPublic,
+    "access": AccessPublic,
+    "estimate": EstimatePublic,
+    "station": StationPublic,
+}
 
 
 def _instant(text):
