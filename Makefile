@@ -33,6 +33,7 @@ browser:
 
 bench: $(STAMP)
 	$(BIN)/python -m bench.run
+	$(BIN)/python -m bench.campaigns
 	$(BIN)/python -m bench.trust
 	$(BIN)/python -m bench.robust
 	$(BIN)/python -m bench.passes

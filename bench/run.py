@@ -193,8 +193,8 @@ def main() -> None:
     from bench.sections import kept_sections
 
     lines += kept_sections(
-        ("Attitude fit and trust", "Robust networks", "Pass fusion", "Load", "Fuzzing")
-    )  # bench.trust, bench.robust, bench.passes, `make load`, `make fuzz`
+        ("Scenes and campaigns", "Attitude fit and trust", "Robust networks", "Pass fusion", "Load", "Fuzzing")
+    )  # bench.campaigns, bench.trust, bench.robust, bench.passes, `make load`, `make fuzz`
     Path("BENCHMARKS.md").write_text("\n".join(lines))
     print("\n".join(lines))
 

@@ -482,7 +482,7 @@ def plan_campaign(
         reason = stop() if stop is not None else None
         if reason:
             raise PlanningStopped(f"campaign planning stopped: {reason}", field="campaign")
-        offset = float(math.ceil(t_free))
+        offset = float(math.ceil(t_free - 1e-6))
         if offset > t_free:
             state = _coast(state, t_free, offset, pole)
         span = min(opts.scene_span_s, end_s - offset)
@@ -606,8 +606,9 @@ def campaign_pole(epoch: datetime, observer: Orbit, duration_s: float) -> Pole:
 
 
 def _coast(state: tuple[Vec, Vec], t0_s: float, t1_s: float, pole: Pole) -> tuple[Vec, Vec]:
-    """The observer's state at ``t1_s`` after coasting (no burn) from ``state`` at ``t0_s``."""
-    if t1_s <= t0_s:
+    """The observer's state at ``t1_s`` after coasting (no burn) from ``state`` at ``t0_s`` (a microsecond or less,
+    under 1 cm: none; the integrator cannot step that short)."""
+    if t1_s - t0_s <= 1e-6:
         return state
     return propagate_j2(state[0], state[1], t0_s, t1_s, pole)
 

@@ -271,8 +271,12 @@ def cmd_campaign(args: argparse.Namespace) -> int:
             print(f"campaign {answer.id} stored\n" + format_campaign(answer))
         return 0
 
-    def progress(fraction: float, what: str) -> None:
-        print(f"\r{fraction * 100:5.1f} % of the span searched, {what}", end="", file=sys.stderr, flush=True)
+    shown = []
+
+    def progress(fraction: float, what: str) -> None:  # on a terminal only: one line, rewritten
+        if sys.stderr.isatty():
+            shown.append(fraction)
+            print(f"\r{fraction * 100:5.1f} % of the span searched, {what}", end="", file=sys.stderr, flush=True)
 
     try:
         req = CampaignCreate.model_validate(read_json(source))
@@ -282,7 +286,8 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     except InputError as exc:
         raise CliError(input_line(exc)) from None
     finally:
-        print(file=sys.stderr)
+        if shown:
+            print(file=sys.stderr)
     assert not isinstance(req.ground_station, str)  # run_campaign refuses a station name: only the server resolves one
     print(json.dumps(result.model_dump(mode="json"), indent=2) if args.json else format_campaign(result))
     if args.export:

@@ -4,7 +4,7 @@ import sys
 
 import pytest
 
-from app.schemas import PAPER_EXAMPLE
+from app.schemas import CAMPAIGN_EXAMPLE, PAPER_EXAMPLE
 
 
 def _gsa(*args, cwd, env_extra=None):
@@ -164,3 +164,27 @@ def test_plan_export_writes_every_format(tmp_path):
     assert (tmp_path / "x" / "opm.txt").read_text().startswith("CCSDS_OPM_VERS = 3.0")
     again = _gsa("plan", str(req), "--export", str(tmp_path / "x"), cwd=tmp_path)
     assert again.returncode == 2 and "not empty" in again.stderr and again.stderr.count("\n") == 1
+
+
+def test_campaign_prints_its_scenes_plots_and_exports(tmp_path):
+    """A week and a day from 2022-12-15: one scene (2022-12-22 23:31), its burn, the stretches."""
+    req = tmp_path / "campaign.json"
+    req.write_text(json.dumps({**CAMPAIGN_EXAMPLE, "duration_days": 8}))
+    out = _gsa("campaign", str(req), "--plot", str(tmp_path / "c.png"), "--export", str(tmp_path / "x"), cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert "1 scene(s)" in out.stdout and "phasing" in out.stdout and "stretches searched" in out.stdout
+    assert (tmp_path / "c.png").stat().st_size > 10_000
+    names = sorted(p.name for p in (tmp_path / "x").iterdir())
+    assert names == ["access.csv", "campaign.czml", "oem.txt", "opm.txt"]
+    assert (tmp_path / "x" / "opm.txt").read_text().count("MAN_EPOCH_IGNITION") == 1
+
+
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [({"duration_days": 91}, "duration_days"), ({"dv_budget_m_s": -5}, "dv_budget_m_s")],
+)
+def test_bad_campaign_is_one_line_and_nonzero(tmp_path, change, field):
+    req = tmp_path / "bad.json"
+    req.write_text(json.dumps({**CAMPAIGN_EXAMPLE, **change}))
+    out = _gsa("campaign", str(req), cwd=tmp_path)
+    assert out.returncode == 2 and out.stderr.count("\n") == 1 and field in out.stderr, out.stderr
