@@ -332,6 +332,8 @@ def make_plan(
     cache: dict[tuple[float, float], tuple[Trajectory, float]] = {}
 
     def by_elements(delta_ha_km: float, delta_hp_km: float) -> tuple[Trajectory, float]:
+        if delta_ha_km == 0.0 and delta_hp_km == 0.0:  # no change: the observer as it is, already propagated
+            return obs_base, max(0.0, t_ref)
         changed_el = obs_el.with_heights(delta_ha_km, delta_hp_km)
         return elements_trajectory(changed_el, epoch, 0.0, t_end, obs_reading, pole), max(0.0, t_ref)
 
