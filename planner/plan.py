@@ -137,6 +137,13 @@ class Feasibility:
     # The unit vector from the target to the observer at T_access in the target's radial / along-track / normal
     # frame: the imaging geometry, the side of the target the observer sees (None where not phased).
     line_of_sight_rtn: tuple[float, float, float] | None = None
+    # The perigee height of the orbit the phasing burn puts the observer on, km (under MIN_PERIGEE_HEIGHT_KM it
+    # re-enters: infeasible, and ranked after every candidate that does not).
+    transfer_perigee_km: float = math.nan
+
+    @property
+    def reenters(self) -> bool:
+        return bool(self.transfer_perigee_km < MIN_PERIGEE_HEIGHT_KM)
 
 
 def line_of_sight_rtn(r_target_km: Vec, v_target_km_s: Vec, rho_km: Vec) -> tuple[float, float, float]:
@@ -391,11 +398,12 @@ def make_plan(
         phase_deg = float(phase_angle_deg(r_t[:, 0], sun_k[:, 0], los))
         sun_deg = sun_angle_deg(ph.r_observer_km, r_t[:, 0], sun_k[:, 0])
         dv_total = ph.dv_total_km_s + alignment_dv
+        perigee = transfer_perigee_height_km(obs_new, ph)
         reasons = [
             *(() if feas[k].sunlit else (SHADOW,)),
             *_encounter_reasons(meet, phase_deg, sun_deg, opts, window),
             *_dv_reasons(dv_total, opts),
-            *_perigee_reasons(obs_new, ph),
+            *_perigee_reasons(perigee),
             *_radar_reasons(cand, windows, station),
         ]
         chosen_feas = Feasibility(
@@ -410,6 +418,7 @@ def make_plan(
             meet.relative_speed_km_s,
             meet.target_angular_rate_deg_s,
             line_of_sight_rtn(r_t[:, 0], v_t[:, 0], los),
+            perigee,
         )
         feas[k] = chosen_feas
         break
@@ -485,13 +494,14 @@ def _illumination(
 
 def rank_candidates(feas: list[Feasibility], criterion: Criterion) -> list[int]:
     """The order in which candidates are phased: those that pass every check first, then the sunlit ones, then
-    the rest; within each, by their screened Delta-v (``least_dv``) or by rank (``smallest_change``)."""
+    the rest, in each of the last two those whose transfer stays up before those that re-enter; within each, by
+    their screened Delta-v (``least_dv``) or by rank (``smallest_change``)."""
 
-    def key(k: int) -> tuple[int, float]:
+    def key(k: int) -> tuple[int, bool, float]:
         f = feas[k]
         tier = 0 if f.feasible else 1 if f.sunlit else 2
         dv = f.dv_total_km_s if math.isfinite(f.dv_total_km_s) else math.inf
-        return tier, dv if criterion == "least_dv" else float(k)
+        return tier, f.reenters, dv if criterion == "least_dv" else float(k)
 
     return sorted(range(len(feas)), key=key)
 
@@ -561,14 +571,15 @@ def screen(
     speed = float(np.linalg.norm(v_rel))
     closest = float(np.linalg.norm(np.cross(rho, v_rel))) / speed  # a straight line's least distance
     straight = Encounter(d, speed, rate, closest, t, None)
+    perigee = transfer_perigee_height_km(observer, ph)
     reasons = (
         *shadow,
         *_encounter_reasons(straight, phase_deg, sun_deg, opts, window),
         *_dv_reasons(dv, opts),
-        *_perigee_reasons(observer, ph),
+        *_perigee_reasons(perigee),
     )
     los = line_of_sight_rtn(r_t, v_ts[:, 0], rho)
-    return Feasibility(lit.sunlit, d, phase_deg, not reasons, reasons, sun_deg, dv, d, speed, rate, los)
+    return Feasibility(lit.sunlit, d, phase_deg, not reasons, reasons, sun_deg, dv, d, speed, rate, los, perigee)
 
 
 def _radar_reasons(cand: Candidate, windows: AccessWindows, station: Station) -> list[str]:
@@ -596,9 +607,8 @@ def transfer_perigee_height_km(observer: Trajectory, ph: Phasing) -> float:
     return float(a * (1.0 - e)) - R_EARTH_KM
 
 
-def _perigee_reasons(observer: Trajectory, ph: Phasing) -> list[str]:
+def _perigee_reasons(height: float) -> list[str]:
     """A phasing transfer whose perigee is below ``MIN_PERIGEE_HEIGHT_KM`` (it re-enters), in words."""
-    height = transfer_perigee_height_km(observer, ph)
     if height >= MIN_PERIGEE_HEIGHT_KM:
         return []
     return [

@@ -260,6 +260,9 @@ class FeasibilityPublic(Described):
     line_of_sight_rtn: list[float] | None = None
     """the imaging geometry: the unit vector from the target to the observer at t_access in the target's radial /
     along-track / orbit-normal frame (which side of the target the observer sees), or null"""
+    transfer_perigee_km: float | None = None
+    """the perigee height of the orbit the phasing burn puts the observer on, km (under 100 km it re-enters:
+    infeasible), or null"""
 
     @classmethod
     def from_feasibility(cls, f: Feasibility) -> FeasibilityPublic:
@@ -273,6 +276,7 @@ class FeasibilityPublic(Described):
             relative_speed_km_s=finite_or_null(f.relative_speed_km_s),
             target_angular_rate_deg_s=finite_or_null(f.target_angular_rate_deg_s),
             line_of_sight_rtn=None if f.line_of_sight_rtn is None else list(f.line_of_sight_rtn),
+            transfer_perigee_km=finite_or_null(f.transfer_perigee_km),
         )
 
 

@@ -280,3 +280,43 @@ def test_a_plain_lambert_burn_gives_the_relative_speed_the_integrated_one_does(p
     assert np.linalg.norm(quick.standoff_km_vec) == pytest.approx(80.0)
     full = np.linalg.norm(plan.phasing.v_relative_km_s)
     assert np.linalg.norm(quick.v_relative_km_s) == pytest.approx(full, rel=0.02)
+
+
+def test_a_transfer_that_dips_into_the_atmosphere_is_infeasible():
+    """The transfer's perigee height against a brute-force scan of the integrated transfer's radius over an
+    orbit (two-body + J2: within 10 km of the two-body perigee); the paper's month flags the dips and chooses
+    a scene that stays up."""
+    from planner.manoeuvre import Phasing
+    from planner.plan import transfer_perigee_height_km
+    from planner.propagation import NumericalJ2Trajectory
+
+    r0, v0 = elements_to_state(*PAPER_OBSERVER.radians())
+    base = NumericalJ2Trajectory(r0, v0, 0.0, 100.0)
+    for dv_along in (-0.05, -0.15, -0.3):
+        v_dep = v0 + dv_along * v0 / np.linalg.norm(v0)
+        ph = Phasing(
+            0.0,
+            1.0,
+            1,
+            0,
+            True,
+            v_dep - v0,
+            np.zeros(3),
+            abs(dv_along),
+            0.0,
+            0.0,
+            0,
+            r0,
+            np.ones(3),
+            v_dep,
+            np.zeros(3),
+        )
+        arc = NumericalJ2Trajectory(r0, v_dep, 0.0, 6500.0)
+        scan = np.linalg.norm(arc.state(np.arange(0.0, 6500.0, 1.0))[0], axis=0).min() - 6378.137
+        assert transfer_perigee_height_km(base, ph) == pytest.approx(scan, abs=10.0)
+    plan = make_plan(
+        Orbit("T", PAPER_TARGET), Orbit("O", PAPER_OBSERVER), PAPER_STATION, PlanOptions(duration_s=30 * 86400.0)
+    )
+    dips = [f for f in plan.feasibility if f.reenters]
+    assert dips and all(not f.feasible and any("re-enter" in r for r in f.reasons) for f in dips)
+    assert plan.chosen_feasibility.feasible and plan.chosen_feasibility.transfer_perigee_km > 100.0
