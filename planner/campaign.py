@@ -348,7 +348,8 @@ def retarget(
 ) -> tuple[Vec, Vec, Vec]:
     """The burn from the exact state ``(r1, v1)`` at ``t_burn_s`` that arrives at ``goal_km`` at ``t_arrive_s``
     (two-body + J2), to ``tol_km``: Lambert on the branch given, its aim moved by each integrated miss, as
-    ``phase`` does. Returns the impulse and the state on arrival."""
+    ``phase`` does. Returns the impulse and the state on arrival. A burn computed from an interpolated state
+    instead drifts the next scenes by km (design/measurements.md, "Chaining a campaign's burns")."""
     tof = t_arrive_s - t_burn_s
     h = np.cross(r1_km, v1_km_s)
     aim = np.asarray(goal_km, float).copy()
