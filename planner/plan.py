@@ -337,12 +337,20 @@ def make_plan(
     # alignment model's nodal-rate sensitivity leaves misses of 0.1-5 km otherwise.
     clock = time.perf_counter()
     cache: dict[tuple[float, float], tuple[Trajectory, float]] = {}
+    # A changed observer is needed only up to its last candidate's T_access, plus an orbit for the encounter
+    # and the hour or two of track the exports and the plot draw (refinement moves T_access by under a minute).
+    horizon: dict[tuple[float, float], float] = {}
+    for cand in candidates:
+        key = (cand.delta_ha_km, cand.delta_hp_km)
+        horizon[key] = max(horizon.get(key, 0.0), cand.t_access_s)
 
     def by_elements(delta_ha_km: float, delta_hp_km: float) -> tuple[Trajectory, float]:
         if delta_ha_km == 0.0 and delta_hp_km == 0.0:  # no change: the observer as it is, already propagated
             return obs_base, max(0.0, t_ref)
         changed_el = obs_el.with_heights(delta_ha_km, delta_hp_km)
-        return elements_trajectory(changed_el, epoch, 0.0, t_end, obs_reading, pole), max(0.0, t_ref)
+        last = horizon.get((delta_ha_km, delta_hp_km), t_end)
+        t_stop = min(t_end, last + max(obs_period_s, 6000.0) + 1200.0)
+        return elements_trajectory(changed_el, epoch, 0.0, t_stop, obs_reading, pole), max(0.0, t_ref)
 
     def changed_and_ready(cand: Candidate) -> tuple[Trajectory, float]:
         key = (cand.delta_ha_km, cand.delta_hp_km)

@@ -22,16 +22,28 @@ from app import crud
 from app.core.db import head_revision, make_engine, make_session_factory
 from app.core.observability import JsonFormatter, TextFormatter, json_lines_wanted
 from app.core.security import LEGACY_SCHEME, key_digest, load_key_secret
-from app.db.models import ApiKey, Estimate, GroundStation, Pass, Plan
-from app.schemas import PAPER_EXAMPLE
+from app.db.models import ApiKey, Campaign, Estimate, GroundStation, Pass, Plan
+from app.schemas import CAMPAIGN_EXAMPLE, PAPER_EXAMPLE
 from tests.conftest import KEY_A, KEY_B
 from tests.utils.server import npy_bytes
 
 A = {"X-API-Key": KEY_A}
 B = {"X-API-Key": KEY_B}
 # The stored record each path parameter names; a route with any other parameter fails the test.
-ID_PARAMS = {"plan_id": "plan", "estimate_id": "estimate", "pass_id": "pass", "name": "station"}
-COLLECTIONS = {"plan": "plans", "estimate": "estimates", "pass": "passes", "station": "stations"}
+ID_PARAMS = {
+    "plan_id": "plan",
+    "estimate_id": "estimate",
+    "pass_id": "pass",
+    "name": "station",
+    "campaign_id": "campaign",
+}
+COLLECTIONS = {
+    "plan": "plans",
+    "estimate": "estimates",
+    "pass": "passes",
+    "station": "stations",
+    "campaign": "campaigns",
+}
 
 
 def _v1_routes(app):
@@ -45,7 +57,7 @@ def _counts(settings):
     with engine.connect() as conn:
         out = {
             t.__tablename__: conn.scalar(select(func.count()).select_from(t))
-            for t in (Plan, Estimate, Pass, ApiKey, GroundStation)
+            for t in (Plan, Estimate, Pass, ApiKey, GroundStation, Campaign)
         }
     engine.dispose()
     return out
@@ -76,7 +88,15 @@ def records(client):
     site = {**PAPER_EXAMPLE["ground_station"], "name": "site-of-operator-a"}
     st = client.post("/v1/stations", json=site, headers=A)
     assert st.status_code == 201, st.text
-    return {"plan": plan.json()["id"], "estimate": est.json()["id"], "pass": ps.json()["id"], "station": site["name"]}
+    campaign = client.post("/v1/campaigns", json={**CAMPAIGN_EXAMPLE, "duration_days": 8}, headers=A)
+    assert campaign.status_code == 201, campaign.text
+    return {
+        "plan": plan.json()["id"],
+        "estimate": est.json()["id"],
+        "pass": ps.json()["id"],
+        "station": site["name"],
+        "campaign": campaign.json()["id"],
+    }
 
 
 @pytest.fixture(scope="module")
@@ -128,11 +148,10 @@ def test_listings_never_show_another_operators_records(client, records):
             continue
         r = client.get(path, headers=B)
         assert r.status_code == 200, (path, r.text)
-        assert all(records[k] not in r.text for k in ("plan", "estimate", "station")), path
+        assert all(records[k] not in r.text for k in ("plan", "estimate", "station", "campaign")), path
         mine = client.get(path, headers=A).text
-        assert (
-            records["station"] in mine if path == "/v1/stations" else records["plan"] in mine or path == "/v1/estimates"
-        )
+        own = {"/v1/stations": "station", "/v1/campaigns": "campaign"}.get(path, "plan")
+        assert records[own] in mine or path == "/v1/estimates", path
     listed = client.get("/v1/estimates", headers=A).json()["data"]
     assert records["estimate"] in [e["id"] for e in listed]
 
