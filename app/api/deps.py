@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import threading
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Annotated, Any, cast
@@ -12,11 +14,13 @@ from sqlalchemy.orm import Session
 
 from app import crud
 from app.core.config import Settings
+from app.core.observability import resident_mb
 from app.core.security import digests_equal, key_fingerprint
 from app.db.models import Operator
 from app.errors import InputError
 from app.schemas import CONTROL_CHARACTERS, utc_or_none
 from inference.runtime import Estimator, ModelSets
+from planner.plan import StopCheck
 
 if TYPE_CHECKING:  # the fit's module imports the simulator's geometry: kept out of `gsa --help`
     from inference.trust import Checker, Checkers
@@ -183,3 +187,30 @@ def checker_for(checkers: Any, target: str | None) -> Any:
         return checkers.get(target or checkers.default)
     except ModelFileError as exc:
         raise InputError(["target"], str(exc)) from None
+
+
+def planning_budget(
+    settings: Settings, gone: threading.Event | None = None, timeout_s: float | None = None, name: str = "PLAN"
+) -> StopCheck:
+    """A plan's stop check: the caller gone, or over its time (GSA_PLAN_TIMEOUT_S; a campaign's
+    GSA_CAMPAIGN_TIMEOUT_S) or memory (GSA_PLAN_MEMORY_MB) budget.
+
+    Creating a plan and recomputing one for an export are the same work, under the same budget.
+    """
+    limit_s = settings.plan_timeout_s if timeout_s is None else timeout_s
+    deadline = time.monotonic() + limit_s
+    memory_limit = resident_mb() + settings.plan_memory_mb
+
+    def stop() -> str | None:
+        if gone is not None and gone.is_set():
+            return "the client disconnected"
+        if time.monotonic() > deadline:
+            return f"over the {limit_s:g}-s budget (GSA_{name}_TIMEOUT_S); plan a shorter span or a coarser box"
+        if resident_mb() > memory_limit:
+            return (
+                f"over the {settings.plan_memory_mb:g}-MB memory budget (GSA_PLAN_MEMORY_MB); plan a shorter span "
+                "or a coarser box"
+            )
+        return None
+
+    return stop

@@ -35,11 +35,11 @@ def _tables(url: str) -> set[str]:
 def test_upgrade_downgrade_upgrade(url):
     cfg = _cfg(url)
     command.upgrade(cfg, "head")
-    assert _tables(url) == {"operators", "api_keys", "plans", "estimates", "passes", "stations"}
+    assert _tables(url) == {"operators", "api_keys", "plans", "estimates", "passes", "stations", "campaigns"}
     command.downgrade(cfg, "base")
     assert _tables(url) == set()
     command.upgrade(cfg, "head")
-    assert _tables(url) == {"operators", "api_keys", "plans", "estimates", "passes", "stations"}
+    assert _tables(url) == {"operators", "api_keys", "plans", "estimates", "passes", "stations", "campaigns"}
     engine = create_engine(url)
     with engine.connect() as conn:
         assert conn.execute(text("SELECT version_num FROM alembic_version")).scalar() == head_revision()

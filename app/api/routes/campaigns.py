@@ -11,8 +11,7 @@ from fastapi.concurrency import run_in_threadpool
 
 from app import crud
 from app.api import examples
-from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep
-from app.api.routes.plans import _budget
+from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep, planning_budget
 from app.schemas import CAMPAIGN_EXAMPLE, CampaignCreate, CampaignPublic, CampaignsPublic, CampaignSummary, Text
 from app.services.campaigns import plan_and_store_campaign
 
@@ -46,7 +45,7 @@ async def create_campaign(
     is stored.
     """
     gone = threading.Event()
-    stop = _budget(settings, gone, settings.campaign_timeout_s, "CAMPAIGN")
+    stop = planning_budget(settings, gone, settings.campaign_timeout_s, "CAMPAIGN")
 
     async def watch() -> None:
         while not gone.is_set():

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import asyncio
 import threading
-import time
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, HTTPException, Path, Query, Request, Response
@@ -12,42 +11,13 @@ from fastapi.concurrency import run_in_threadpool
 
 from app import crud
 from app.api import examples
-from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep, as_utc, check_span
-from app.core.observability import resident_mb
+from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep, as_utc, check_span, planning_budget
 from app.schemas import PAPER_EXAMPLE, IsoDateTime, PlanCreate, PlanPublic, PlansPublic, PlanSummary, Text
 from app.services.planning import access_csv, plan_and_store, run_plan
-from planner.plan import StopCheck
 
 router = APIRouter(prefix="/plans", tags=["plans"])
 
 NOT_FOUND: dict[int | str, dict[str, Any]] = {404: {"description": "no plan with this id belongs to the caller"}}
-
-
-def _budget(
-    settings: SettingsDep, gone: threading.Event | None = None, timeout_s: float | None = None, name: str = "PLAN"
-) -> StopCheck:
-    """A plan's stop check: the caller gone, or over its time (GSA_PLAN_TIMEOUT_S; a campaign's
-    GSA_CAMPAIGN_TIMEOUT_S) or memory (GSA_PLAN_MEMORY_MB) budget.
-
-    Creating a plan and recomputing one for an export are the same work, under the same budget.
-    """
-    limit_s = settings.plan_timeout_s if timeout_s is None else timeout_s
-    deadline = time.monotonic() + limit_s
-    memory_limit = resident_mb() + settings.plan_memory_mb
-
-    def stop() -> str | None:
-        if gone is not None and gone.is_set():
-            return "the client disconnected"
-        if time.monotonic() > deadline:
-            return f"over the {limit_s:g}-s budget (GSA_{name}_TIMEOUT_S); plan a shorter span or a coarser box"
-        if resident_mb() > memory_limit:
-            return (
-                f"over the {settings.plan_memory_mb:g}-MB memory budget (GSA_PLAN_MEMORY_MB); plan a shorter span "
-                "or a coarser box"
-            )
-        return None
-
-    return stop
 
 
 @router.post(
@@ -74,7 +44,7 @@ async def create_plan(
     """
     check_span(plan_in.search.duration_days, settings, ["search", "duration_days"])
     gone = threading.Event()
-    stop = _budget(settings, gone)
+    stop = planning_budget(settings, gone)
 
     async def watch() -> None:
         while not gone.is_set():
@@ -178,7 +148,7 @@ def _export(kind: str, plan_id: str, session: SessionDep, operator: CurrentOpera
     if row is None:
         raise HTTPException(status_code=404, detail="Plan not found")
     plan, _ = run_plan(
-        PlanCreate.model_validate(row.request), max_grid_points=settings.max_grid_points, stop=_budget(settings)
+        PlanCreate.model_validate(row.request), max_grid_points=settings.max_grid_points, stop=planning_budget(settings)
     )
     names = {"target": row.target_name, "observer": row.observer_name, "station": row.station_name}
     windows = row.result.get("access_windows", [])

@@ -150,3 +150,17 @@ def test_the_czml_marks_every_scene_and_the_csv_every_pass(client, campaign):
     assert r.status_code == 200
     rows = list(csv.DictReader(io.StringIO(r.text)))
     assert len(rows) == len(campaign["access_windows"]) > n
+
+
+def test_a_campaign_over_its_time_budget_is_503_and_stores_nothing(settings):
+    from fastapi.testclient import TestClient
+
+    from app.main import create_app
+
+    tight = settings.model_copy(update={"campaign_timeout_s": 0.001})
+    with TestClient(create_app(tight)) as c:
+        before = c.get("/v1/campaigns", headers=A).json()["count"]
+        r = c.post("/v1/campaigns", json=CAMPAIGN_EXAMPLE, headers=A)
+        assert r.status_code == 503, r.text
+        assert "GSA_CAMPAIGN_TIMEOUT_S" in r.text
+        assert c.get("/v1/campaigns", headers=A).json()["count"] == before

@@ -314,11 +314,11 @@ def test_a_plan_over_its_memory_budget_is_503_and_stores_nothing(settings, monke
 
     from fastapi.testclient import TestClient
 
-    import app.api.routes.plans as plans_route
+    import app.api.deps as deps_module
     from app.main import create_app
 
     grows = itertools.count(100.0, 40.0)  # each reading 40 MiB above the last
-    monkeypatch.setattr(plans_route, "resident_mb", lambda: next(grows))
+    monkeypatch.setattr(deps_module, "resident_mb", lambda: next(grows))
     tight = settings.model_copy(update={"plan_memory_mb": 100.0})
     with TestClient(create_app(tight)) as c:
         before = c.get("/v1/plans", headers=A).json()["count"]
