@@ -261,6 +261,19 @@ def get_pass(*, session: Session, operator_id: str, pass_id: str) -> Pass | None
     return session.scalar(select(Pass).where(Pass.id == pass_id, Pass.operator_id == operator_id))
 
 
+def list_passes(
+    *, session: Session, operator_id: str, limit: int, offset: int, plan_id: str | None = None
+) -> tuple[list[Pass], int]:
+    where = [Pass.operator_id == operator_id]
+    if plan_id is not None:
+        where.append(Pass.plan_id == plan_id)
+    total = int(session.scalar(select(func.count()).select_from(Pass).where(*where)) or 0)
+    rows = session.scalars(
+        select(Pass).where(*where).order_by(Pass.created_at.desc(), Pass.id).limit(limit).offset(offset)
+    ).all()
+    return list(rows), total
+
+
 def create_station(*, session: Session, operator_id: str, station: dict[str, Any]) -> GroundStation | None:
     """Store a named station; None where the operator already has one of that name (nothing changes)."""
     row = GroundStation(operator_id=operator_id, name=station["name"], station=station)

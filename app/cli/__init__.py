@@ -114,6 +114,7 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
         ("plans", _lazy("planning", "cmd_plans")),
         ("campaigns", _lazy("planning", "cmd_campaigns")),
         ("estimates", _lazy("estimates", "cmd_estimates")),
+        ("passes", _lazy("passes", "cmd_passes")),
     ):
         c = sub.add_parser(noun, help=f"your {noun} stored on the service (list, show)")
         cs = c.add_subparsers(dest=f"{noun}_cmd", required=True)
@@ -123,7 +124,7 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
         if noun in ("plans", "campaigns"):
             cl.add_argument("--target-name", help=f"only this target's {noun}")
         else:
-            cl.add_argument("--plan-id", help="only the estimates tied to this plan")
+            cl.add_argument("--plan-id", help=f"only the {noun} tied to this plan")
         cw = cs.add_parser("show", help=f"one of your {noun}")
         cw.add_argument("id")
         cw.add_argument("--json", action="store_true")

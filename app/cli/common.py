@@ -49,9 +49,18 @@ def input_line(exc: ValueError) -> str:
 
 
 def validation_line(exc: ValidationError) -> str:
-    err = exc.errors()[0]
-    loc = ".".join(str(x) for x in err["loc"])
-    return f"{loc}: {err['msg']}"
+    """The first error as the field the user wrote and what is wrong with it: pydantic's own validator and union
+    tags (``function-after[...]``, ``none``) are left out of the path, and a union's "should be None" branch is
+    passed over for the error that says what to fix."""
+    errors = exc.errors()
+    err = next((e for e in errors if e["type"] != "none_required"), errors[0])
+    parts = [
+        str(x)
+        for x in err["loc"]
+        if not (isinstance(x, str) and ("[" in x or x.startswith("function-") or x in ("none", "null")))
+    ]
+    msg = "not a field this request takes: check its spelling" if err["type"] == "extra_forbidden" else err["msg"]
+    return f"{'.'.join(parts) or 'request'}: {msg}"
 
 
 EXAMPLES_DIR = Path(__file__).resolve().parents[2] / "examples"

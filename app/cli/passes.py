@@ -291,7 +291,12 @@ def _integration(rec: dict[str, Any]) -> tuple[list[float] | None, float | None]
 def _pass_on_server(args: argparse.Namespace, data: bytes, rec: dict[str, Any]) -> int:
 
     if not args.plan_id:
-        raise CliError("--server needs --plan-id: the stored plan the pass belongs to")
+        explicit = any(a == "--server" or a.startswith("--server=") for a in sys.argv[1:])
+        via = "--server" if explicit else "GSA_SERVER (set in the environment)"
+        raise CliError(
+            f"a pass sent to the service ({via}) needs --plan-id: the stored plan the pass belongs to; "
+            "unset GSA_SERVER to fuse it locally"
+        )
     form: dict[str, Any] = {
         "plan_id": args.plan_id,
         "normalised": "true",
@@ -442,3 +447,33 @@ def _plot_pass(result: PassResult, rec: dict[str, Any], path: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def cmd_passes(args: argparse.Namespace) -> int:
+    """gsa passes list|show: your fused passes on the service."""
+    from urllib.parse import quote
+
+    from app.cli.common import print_listing, utc_text
+    from app.schemas import PassPublic
+
+    if args.passes_cmd == "show":
+        body = call_server(args, "GET", f"/v1/passes/{quote(args.id, safe='')}").json()
+        if args.json:
+            print(json.dumps(body, indent=2))
+        else:
+            p = PassPublic.model_validate(body)
+            print(f"pass {p.id} (plan {p.plan_id or '-'}, target {p.target}, {utc_text(p.created_at)})")
+            _print_pass(p, {})
+        return 0
+
+    def row(p: dict[str, Any]) -> str:
+        stable = "-" if p["stable"] is None else "stable" if p["stable"] else "turning"
+        return (
+            f"{p['id']:<36}  {utc_text(p['created_at']):<24}  {p['target'][:16]:<16} {p['frames']:>6} {p['used']:>5} "
+            f"{('yes' if p['trusted'] else 'no'):<7} {stable:<8} {p.get('plan_id') or '-'}"
+        )
+
+    header = (
+        f"{'id':<36}  {'created (UTC)':<24}  {'target':<16} {'frames':>6} {'used':>5} {'trusted':<7} {'motion':<8} plan"
+    )
+    return print_listing(args, "/v1/passes", {"plan_id": args.plan_id}, "{count} passes; newest {shown}:", header, row)

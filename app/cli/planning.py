@@ -95,8 +95,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
     if args.export and Path(args.export).exists() and any(Path(args.export).iterdir()):
         raise CliError(f"{args.export} is not empty: give a new or empty directory for --export")
-    if bool(args.file) == bool(args.example):
+    if args.file and args.example:
         raise CliError("give a request file (the body of POST /v1/plans) or --example paper|iss, not both")
+    if not args.file and not args.example:
+        raise CliError("give a request file (the body of POST /v1/plans), or --example paper|iss")
     source = args.file or str(EXAMPLES_DIR / EXAMPLE_PLANS[args.example])
     if args.example and not Path(source).is_file():
         raise CliError(f"{source} is missing: the examples live in the repository's examples/ folder")
@@ -257,8 +259,10 @@ def cmd_campaign(args: argparse.Namespace) -> int:
 
     if args.export and Path(args.export).exists() and any(Path(args.export).iterdir()):
         raise CliError(f"{args.export} is not empty: give a new or empty directory for --export")
-    if bool(args.file) == bool(args.example):
+    if args.file and args.example:
         raise CliError("give a request file (the body of POST /v1/campaigns) or --example paper, not both")
+    if not args.file and not args.example:
+        raise CliError("give a request file (the body of POST /v1/campaigns), or --example paper")
     source = args.file or str(EXAMPLES_DIR / EXAMPLE_CAMPAIGNS[args.example])
     if args.server:
         if args.export or args.plot:

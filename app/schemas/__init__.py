@@ -39,7 +39,15 @@ from app.schemas.estimates import (
     ScenesPublic,
 )
 from app.schemas.orbits import ORBIT_SOURCES, ElementsIn, OmmIn, OrbitIn
-from app.schemas.passes import PassAttitudeJ2000, PassCommonFit, PassFramePublic, PassPublic, PassResult
+from app.schemas.passes import (
+    PassAttitudeJ2000,
+    PassCommonFit,
+    PassesPublic,
+    PassFramePublic,
+    PassPublic,
+    PassResult,
+    PassSummary,
+)
 from app.schemas.plans import (
     PAPER_EXAMPLE,
     AccessCreate,
@@ -68,6 +76,8 @@ from app.schemas.stations import (
 )
 
 __all__ = [
+    "PassSummary",
+    "PassesPublic",
     "CAMPAIGN_EXAMPLE",
     "BurnPublic",
     "CampaignCreate",

@@ -198,3 +198,46 @@ class PassPublic(PassResult, _PassRow):
         return cls.model_validate(
             {"id": p.id, "created_at": utc_or_none(p.created_at), "plan_id": p.plan_id, **PassResult.upgraded(p.result)}
         )
+
+
+class PassSummary(Described):
+    id: str
+    """the pass's id"""
+    created_at: datetime
+    """when it was stored (UTC)"""
+    plan_id: str | None
+    """the plan the pass belongs to"""
+    target: str
+    """the target model the frames were read with"""
+    frames: int
+    """how many frames the pass had"""
+    used: int
+    """how many the fusion used"""
+    trusted: bool
+    """whether at least 3 trusted frames agree"""
+    stable: bool | None
+    """three-axis stable over the pass (true), turning (false), undecided (null)"""
+    attitude_at: datetime | None
+    """the moment the pass's attitude holds (mid-pass)"""
+
+    @classmethod
+    def from_row(cls, p: Pass) -> PassSummary:
+        r = PassResult.upgraded(p.result)
+        return cls(
+            id=p.id,
+            created_at=utc_or_none(p.created_at),
+            plan_id=p.plan_id,
+            target=r.get("target", ""),
+            frames=len(r.get("frames", [])),
+            used=r.get("used", 0),
+            trusted=r.get("trusted", True),
+            stable=r.get("stable"),
+            attitude_at=r.get("attitude_at"),
+        )
+
+
+class PassesPublic(Described):
+    data: list[PassSummary]
+    """the passes of this page, newest first"""
+    count: int
+    """how many passes match in all"""

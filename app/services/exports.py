@@ -34,13 +34,13 @@ POINTING_STEP_S = 1.0
 
 
 def kvn_time(t: datetime) -> str:
-    """CCSDS KVN time: ISO 8601 UTC without a zone designator, milliseconds."""
-    t = t.astimezone(UTC)
-    return t.strftime("%Y-%m-%dT%H:%M:%S.") + f"{t.microsecond // 1000:03d}"
+    """CCSDS KVN time: ISO 8601 UTC without a zone designator, microseconds (a state written to the millisecond
+    belongs to a moment up to 0.5 ms away: 4 m along-track in low orbit)."""
+    return t.astimezone(UTC).strftime("%Y-%m-%dT%H:%M:%S.%f")
 
 
 def z_time(t: datetime) -> str:
-    """ISO 8601 UTC with a Z, milliseconds: the one time style of the CSV and CZML exports."""
+    """ISO 8601 UTC with a Z, microseconds: the one time style of the CSV and CZML exports."""
     return kvn_time(t) + "Z"
 
 

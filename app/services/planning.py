@@ -294,9 +294,9 @@ ACCESS_CSV_COLUMNS = (
 
 
 def _z(iso: str) -> str:
-    """ISO 8601 UTC with a Z, milliseconds: the one time style of the exports."""
+    """ISO 8601 UTC with a Z, microseconds: the one time style of the exports."""
     t = datetime.fromisoformat(iso).astimezone(UTC)
-    return t.strftime("%Y-%m-%dT%H:%M:%S.") + f"{t.microsecond // 1000:03d}Z"
+    return t.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
 
 
 def access_csv(windows: list[dict[str, Any]]) -> str:
@@ -311,7 +311,7 @@ def access_csv(windows: list[dict[str, Any]]) -> str:
     out = io.StringIO()
     w = csv.writer(out, lineterminator="\n")
     w.writerow(ACCESS_CSV_COLUMNS)
-    for k, win in enumerate(windows, start=1):
+    for k, win in enumerate(windows):  # numbered from 0, as the plan's pass_index, pointing.csv and the console
         w.writerow(
             [
                 k,

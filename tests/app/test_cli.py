@@ -188,3 +188,16 @@ def test_bad_campaign_is_one_line_and_nonzero(tmp_path, change, field):
     req.write_text(json.dumps({**CAMPAIGN_EXAMPLE, **change}))
     out = _gsa("campaign", str(req), cwd=tmp_path)
     assert out.returncode == 2 and out.stderr.count("\n") == 1 and field in out.stderr, out.stderr
+
+
+def test_plan_without_a_request_and_a_misspelt_field_say_what_to_fix(tmp_path):
+    none = _gsa("plan", cwd=tmp_path)
+    assert none.returncode == 2 and "not both" not in none.stderr and "--example" in none.stderr
+    body = json.loads(json.dumps(PAPER_EXAMPLE))
+    body["target"]["elements"]["inclinaton_deg"] = 43
+    req = tmp_path / "typo.json"
+    req.write_text(json.dumps(body))
+    out = _gsa("plan", str(req), cwd=tmp_path)
+    assert out.returncode == 2 and out.stderr.count("\n") == 1
+    assert "target.elements.inclinaton_deg: not a field this request takes" in out.stderr
+    assert "function-after" not in out.stderr

@@ -80,3 +80,18 @@ def test_plan_examples_run_as_shipped(capsys):
     assert rc == 0 and "72 access windows" in out and "chosen: T_access" in out
     rc, _, err = _run(capsys, "plan")
     assert rc == 2 and "--example" in err
+
+
+def test_campaigns_and_passes_through_the_command_line(served, capsys, tmp_path):
+    from app.schemas import CAMPAIGN_EXAMPLE
+
+    (tmp_path / "campaign.json").write_text(json.dumps({**CAMPAIGN_EXAMPLE, "duration_days": 8}))
+    rc, out, err = _run(capsys, "campaign", str(tmp_path / "campaign.json"))
+    assert rc == 0 and out.startswith("campaign ") and "1 scene(s)" in out, err
+    campaign_id = out.split()[1]
+    rc, out, _ = _run(capsys, "campaigns", "list")
+    assert rc == 0 and campaign_id in out and "first T_access" in out
+    rc, out, _ = _run(capsys, "campaigns", "show", campaign_id)
+    assert rc == 0 and "phasing" in out and "stretches searched" in out
+    rc, out, _ = _run(capsys, "passes", "list", "--json")
+    assert rc == 0 and "count" in json.loads(out)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, HTTPException, UploadFile
+from fastapi import APIRouter, File, Form, HTTPException, Query, UploadFile
 from fastapi import Path as PathParam
 from fastapi.concurrency import run_in_threadpool
 
@@ -13,6 +13,7 @@ from app.api.deps import (
     CheckersDep,
     CurrentOperator,
     ModelSetsDep,
+    PageDep,
     SessionDep,
     SettingsDep,
     cells_from_form,
@@ -20,7 +21,7 @@ from app.api.deps import (
     models_for,
     read_uploads,
 )
-from app.schemas import IsoDateTime, PassPublic, Text
+from app.schemas import IsoDateTime, PassesPublic, PassPublic, PassSummary, Text
 from app.services import passes as pass_svc
 
 router = APIRouter(prefix="/passes", tags=["passes"])
@@ -81,6 +82,20 @@ async def create_pass(
         aperture_deg=aperture_deg,
     )
     return PassPublic.from_row(row)
+
+
+@router.get("", response_model=PassesPublic)
+def list_passes(
+    session: SessionDep,
+    operator: CurrentOperator,
+    page: PageDep,
+    plan_id: Annotated[Text | None, Query(max_length=36, description="only the passes of this plan")] = None,
+) -> PassesPublic:
+    """List the caller's fused passes, newest first (filter by plan)."""
+    rows, total = crud.list_passes(
+        session=session, operator_id=operator.id, limit=page.limit, offset=page.offset, plan_id=plan_id
+    )
+    return PassesPublic(data=[PassSummary.from_row(r) for r in rows], count=total)
 
 
 @router.get("/{pass_id}", response_model=PassPublic, responses={404: {"description": "no pass with this id is yours"}})

@@ -236,4 +236,6 @@ def test_geojson_tracks_station_and_where_it_sees_the_target(client, plan):
     a_lon, a_lat = kinds["t_access"]["geometry"]["coordinates"]
     track = np.concatenate([np.array(p) for p in kinds["target_track"]["geometry"]["coordinates"]])
     assert _central_deg(a_lat, a_lon, track[:, 1], track[:, 0]).min() < 1.5  # 20-s steps at 7 km/s
-    assert kinds["t_access"]["properties"]["time"] == plan["chosen"]["t_access"].replace("+00:00", "Z")[:23] + "Z"
+    written = datetime.fromisoformat(kinds["t_access"]["properties"]["time"].replace("Z", "+00:00"))
+    assert kinds["t_access"]["properties"]["time"].endswith("Z")
+    assert written == datetime.fromisoformat(plan["chosen"]["t_access"])  # to the microsecond

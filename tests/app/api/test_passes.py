@@ -80,6 +80,13 @@ def test_a_pass_is_fused_and_stored(client, plan):
     again = client.get(f"/v1/passes/{body['id']}", headers=A)
     assert again.status_code == 200 and again.json()["attitude_lvlh"] == body["attitude_lvlh"]
     assert client.get(f"/v1/passes/{body['id']}", headers={"X-API-Key": KEY_B}).status_code == 404
+    # Found again in the listing, by plan too; never in another operator's.
+    listing = client.get("/v1/passes", params={"plan_id": plan["id"]}, headers=A).json()
+    row = next(p for p in listing["data"] if p["id"] == body["id"])
+    assert row["frames"] == 4 and row["used"] == body["used"] and row["plan_id"] == plan["id"]
+    assert listing["count"] >= 1
+    assert client.get("/v1/passes", params={"plan_id": "no-such-plan"}, headers=A).json()["count"] == 0
+    assert body["id"] not in client.get("/v1/passes", headers={"X-API-Key": KEY_B}).text
 
 
 @pytest.mark.parametrize(

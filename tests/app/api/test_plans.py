@@ -365,6 +365,11 @@ def test_access_report_csv_matches_the_plan(client, paper_plan):
     rows = list(csv.DictReader(io.StringIO(r.text)))
     windows = paper_plan["access_windows"]
     assert len(rows) == len(windows) > 0
+    # One pass numbering everywhere: the row's number is the window's place in the plan (pass_index), from 0.
+    assert [int(row["access"]) for row in rows] == list(range(len(windows)))
+    chosen = paper_plan["chosen"]
+    w_chosen = windows[chosen["pass_index"]]
+    assert w_chosen["rise"] <= chosen["t_access"] <= w_chosen["set"]
     for row, w in zip(rows, windows, strict=True):
         for col, key in (("rise_utc", "rise"), ("culmination_utc", "culmination"), ("set_utc", "set")):
             assert row[col].endswith("Z")
