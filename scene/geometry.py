@@ -65,14 +65,25 @@ def choose_window(windows: Sequence[Window], index: int | None) -> tuple[int, Wi
 
 
 def check_times(windows: Sequence[Window], observed_at: Sequence[datetime]) -> None:
-    """Refuse any frame time outside every access window (``observed_at``: the station cannot see the target)."""
+    """Refuse any frame time outside every access window (``observed_at``: the station cannot see the target),
+    naming the nearest window and how far outside it the time is."""
     for k, t in enumerate(observed_at):
-        if not any(w.rise <= t <= w.set for w in windows):
-            raise SceneError(
-                ["observed_at", k],
-                f"frame {k}'s time {t.isoformat()} is in none of the plan's access windows: the station cannot see "
-                "the target then",
+        if any(w.rise <= t <= w.set for w in windows):
+            continue
+        where = "the plan has no access windows"
+        if windows:
+            gaps = [max((w.rise - t).total_seconds(), (t - w.set).total_seconds()) for w in windows]
+            j = int(np.argmin(gaps))
+            w = windows[j]
+            side = "before it rises" if t < w.rise else "after it sets"
+            where = (
+                f"the nearest is window {j}, {w.rise.isoformat()} to {w.set.isoformat()}, {gaps[j]:.0f} s {side}"
             )
+        raise SceneError(
+            ["observed_at", k],
+            f"frame {k}'s time {t.isoformat()} is in none of the plan's access windows: the station cannot see "
+            f"the target then ({where})",
+        )
 
 
 @dataclass(frozen=True)

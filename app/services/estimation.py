@@ -22,9 +22,11 @@ from app.errors import InputError
 from app.schemas import CONTROL_CHARACTERS
 from app.schemas.estimates import EstimateResult
 from app.services import images
-from app.services.scenes import scene_for
+from app.services.scenes import scene_for, windows_of
 from app.services.uploads import Upload, decode, prepare
 from inference.rotations import rotation_matrix
+from scene.errors import SceneError
+from scene.geometry import check_times
 from scene.reading import Readings, read_frames
 
 if TYPE_CHECKING:  # the checks load numba: the service gets them from its dependencies
@@ -110,6 +112,11 @@ def estimate_and_store(
         plan = crud.get_plan(session=session, operator_id=operator_id, plan_id=plan_id)
         if plan is None:
             raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
+        if observed_at is not None:  # a frame the station could not have made is refused, not placed
+            try:
+                check_times(windows_of(plan.result), [observed_at])
+            except SceneError as exc:
+                raise InputError(["observed_at"], str(exc).replace("frame 0's time", "observed_at")) from None
     read = check_frames(
         est=est,
         checker=checker,

@@ -160,14 +160,14 @@ def opm_text(
 ) -> str:
     """CCSDS OPM 3.0 (KVN): a state at ``t_state_s`` and each burn as one impulsive manoeuvre (GCRF, UTC)."""
     now = now or datetime.now(UTC)
+    # 502.0-B-3 lays an OPM's metadata out as plain KEYWORD = value lines: no META_START/META_STOP (those are
+    # the OEM's and OCM's), so the service, ccsds-ndm and Orekit all read it back.
     lines = _header("OPM", "3.0", now) + [
-        "META_START",
         f"OBJECT_NAME = {observer_name}",
         f"OBJECT_ID = {object_id}",
         "CENTER_NAME = EARTH",
         "REF_FRAME = GCRF",
         "TIME_SYSTEM = UTC",
-        "META_STOP",
         "",
         f"COMMENT {comment}",
         f"EPOCH = {kvn_time(utc(epoch, t_state_s))}",

@@ -91,6 +91,12 @@ def test_bad_campaign_input_is_a_422_naming_the_field_and_stores_nothing(client,
 def test_the_opm_holds_every_burn_and_flies_to_each_scene(client, campaign, tmp_path):
     r = client.get(f"/v1/campaigns/{campaign['id']}/export/opm", headers=A)
     assert r.status_code == 200
+    assert "META_START" not in r.text
+    from app.schemas import OrbitIn
+    from app.services.planning import to_orbit
+
+    back = to_orbit(OrbitIn.model_validate({"name": "x", "opm": r.text}), "observer")  # the service reads it back
+    assert abs((back.epoch - datetime.fromisoformat(campaign["epoch"])).total_seconds()) < 1e-6
     opm = _read(tmp_path, r.text, "campaign_opm")
     seg = opm.body.segment
     sv = seg.data.state_vector

@@ -2,6 +2,8 @@ import io
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
+from datetime import datetime, timedelta
+
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
@@ -127,6 +129,18 @@ def test_plan_ties_attitude_to_lvlh_and_j2000(client, frame):
     assert [e["id"] for e in scene["estimates"]] == [body["id"]]
     listed = client.get("/v1/estimates", params={"plan_id": plan["id"]}, headers=A).json()
     assert listed["count"] == 1
+    # A moment the station cannot see the target is refused, the nearest window named; nothing stored.
+    w = plan["access_windows"][0]
+    late = (datetime.fromisoformat(w["set"]) + timedelta(seconds=90)).isoformat()
+    r = _post(client, _npy(frame), plan_id=plan["id"], observed_at=late)
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"][0]
+    assert (
+        detail["loc"][-1] == "observed_at"
+        and "the nearest is window 0" in detail["msg"]
+        and "after it sets" in detail["msg"]
+    )
+    assert client.get("/v1/estimates", params={"plan_id": plan["id"]}, headers=A).json()["count"] == 1
 
 
 def test_scenes_page_through_plans_each_with_its_own_estimates(client, frame):

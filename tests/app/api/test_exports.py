@@ -239,3 +239,23 @@ def test_geojson_tracks_station_and_where_it_sees_the_target(client, plan):
     written = datetime.fromisoformat(kinds["t_access"]["properties"]["time"].replace("Z", "+00:00"))
     assert kinds["t_access"]["properties"]["time"].endswith("Z")
     assert written == datetime.fromisoformat(plan["chosen"]["t_access"])  # to the microsecond
+
+
+def test_the_opm_goes_back_in_as_an_observer(client, plan):
+    """The service reads its own OPM (502.0-B-3 KVN: no META_START/META_STOP): as a new plan's observer, its
+    state read back to the millimetre and planned."""
+    text = client.get(f"/v1/plans/{plan['id']}/export/opm", headers=A).text
+    assert "META_START" not in text and "META_STOP" not in text
+    body = dict(PAPER_EXAMPLE, observer={"name": "from its own OPM", "opm": text})
+    body["search"] = {"start": plan["phasing"]["t_burn"], "duration_days": 2}
+    r = client.post("/v1/plans", json=body, headers=A)
+    assert r.status_code == 201, r.text
+    from app.schemas import OrbitIn
+    from app.services.planning import to_orbit
+
+    el = to_orbit(OrbitIn.model_validate({"name": "x", "opm": text}), "observer").elements
+    r_back, v_back = elements_to_state(*el.radians())
+    values = dict(line.split(" = ", 1) for line in text.splitlines() if " = " in line)
+    r_opm = np.array([float(values[k].split()[0]) for k in ("X", "Y", "Z")])
+    v_opm = np.array([float(values[k].split()[0]) for k in ("X_DOT", "Y_DOT", "Z_DOT")])
+    assert np.linalg.norm(r_back - r_opm) < 1e-6 and np.linalg.norm(v_back - v_opm) < 1e-9
