@@ -1,7 +1,6 @@
 import io
 import threading
 from concurrent.futures import ThreadPoolExecutor
-
 from datetime import datetime, timedelta
 
 import numpy as np
