@@ -76,9 +76,7 @@ def check_times(windows: Sequence[Window], observed_at: Sequence[datetime]) -> N
             j = int(np.argmin(gaps))
             w = windows[j]
             side = "before it rises" if t < w.rise else "after it sets"
-            where = (
-                f"the nearest is window {j}, {w.rise.isoformat()} to {w.set.isoformat()}, {gaps[j]:.0f} s {side}"
-            )
+            where = f"the nearest is window {j}, {w.rise.isoformat()} to {w.set.isoformat()}, {gaps[j]:.0f} s {side}"
         raise SceneError(
             ["observed_at", k],
             f"frame {k}'s time {t.isoformat()} is in none of the plan's access windows: the station cannot see "
