@@ -231,7 +231,15 @@ def export(kind: str, row: Any) -> str:
             fl.t1_s,
             must,
             fl.target,
-            fl.observer,
+            [
+                (lo, hi, piece.state)
+                for lo, hi, piece in zip(
+                    [0.0, *(b["t_s"] for b in fl.burns)],
+                    [*(b["t_s"] for b in fl.burns), fl.t1_s],
+                    fl.observer_flight.pieces,
+                    strict=True,
+                )
+            ],
             fl.accesses_s,
             f"GSA-ISAR campaign {row.id}",
             names,

@@ -1,6 +1,6 @@
 """A plan in the formats operators' tools read: CCSDS OPM and OEM (KVN), CZML, an access report and a pointing file.
 
-Every time is ISO 8601 UTC (a Z in the CSV files and CZML; CCSDS KVN writes UTC without a zone
+Every time is ISO 8601 UTC to the microsecond (a Z in the CSV files and CZML; CCSDS KVN writes UTC without a zone
 designator and states TIME_SYSTEM = UTC), every frame is named: GCRF for the CCSDS messages
 (the planner's GCRS axes), INERTIAL (ICRF axes, Cesium's name) for CZML, and azimuth from north
 through east with elevation above the station's horizon (WGS-84) for the pointing file.
@@ -60,16 +60,31 @@ class Arc:
 
     def observer(self, t_s: Vec) -> tuple[Vec, Vec]:
         """The observer on its planned path: before the burn as changed for the alignment, after it the burn's arc."""
-        assert self.plan.observer_trajectory is not None and self.plan.encounter is not None
-        assert self.plan.encounter.arc is not None
+        return PlannedObserver(self.plan).state(t_s)
+
+
+class PlannedObserver:
+    """A plan's observer on its planned path (a trajectory): before the phasing burn as changed for the alignment,
+    from the burn on the burn's own arc; a plan without a burn, as changed."""
+
+    def __init__(self, plan: Plan) -> None:
+        assert plan.observer_trajectory is not None
+        self.plan = plan
+
+    def state(self, t_s: Any) -> tuple[Vec, Vec]:
+        plan = self.plan
+        assert plan.observer_trajectory is not None
         t = np.atleast_1d(np.asarray(t_s, float))
-        before = t < self.t_burn_s
+        arc = plan.encounter.arc if plan.encounter is not None else None
+        if plan.phasing is None or arc is None:
+            return plan.observer_trajectory.state(t)
+        before = t < plan.phasing.t_burn_s
         r = np.empty((3, t.size))
         v = np.empty((3, t.size))
         if before.any():
-            r[:, before], v[:, before] = self.plan.observer_trajectory.state(t[before])
+            r[:, before], v[:, before] = plan.observer_trajectory.state(t[before])
         if (~before).any():
-            r[:, ~before], v[:, ~before] = self.plan.encounter.arc.state(t[~before])
+            r[:, ~before], v[:, ~before] = arc.state(t[~before])
         return r, v
 
 
@@ -280,7 +295,7 @@ def czml(arc: Arc, plan_id: str, names: dict[str, str], station: dict[str, Any],
         arc.t1_s,
         (arc.t_burn_s, arc.t_access_s),
         arc.target,
-        arc.observer,
+        [(arc.t0_s, arc.t_burn_s, arc.plan.observer_trajectory.state), (arc.t_burn_s, arc.t1_s, arc.observer)],  # type: ignore[union-attr]
         (arc.t_access_s,),
         f"GSA-ISAR plan {plan_id}",
         names,
@@ -304,31 +319,49 @@ def czml_text(
     step_s: float = OEM_STEP_S,
 ) -> str:
     """CZML for Cesium: both satellites over ``[t0_s, t1_s]`` (sampled every ``step_s`` and at ``must_s``: the burns,
-    the imaging moments), the station, its access intervals, each imaging moment."""
+    the imaging moments), the station, its access intervals, each imaging moment. ``observer`` is a state function,
+    or a list of ``(t0_s, t1_s, states)`` pieces between burns, each its own position interval (Cesium would
+    otherwise interpolate across a burn: 0.8 km off near it)."""
     t0, t1 = utc(epoch, t0_s), utc(epoch, t1_s)
     t = _grid(t0_s, t1_s, step_s, must_s)
 
-    def samples(states: Any) -> list[float]:
-        r, _ = states(t)
+    def samples(states: Any, lo: float, hi: float) -> list[float]:
+        tt = np.unique(np.concatenate([t[(t >= lo) & (t <= hi)], [lo, hi]]))
+        r, _ = states(tt)
         out: list[float] = []
-        for k in range(t.size):
-            out += [round(float(t[k] - t0_s), 3), *(round(float(x) * 1000.0, 2) for x in r[:, k])]
+        for k in range(tt.size):
+            out += [round(float(tt[k] - lo), 3), *(round(float(x) * 1000.0, 2) for x in r[:, k])]
         return out
 
     interval = f"{z_time(t0)}/{z_time(t1)}"
+
+    def position(pieces: Any) -> Any:
+        """One interpolated track, or one a piece (a track split at each burn: no interpolation across one)."""
+        if not isinstance(pieces, list):
+            pieces = [(t0_s, t1_s, pieces)]
+        out = [
+            {
+                "interval": f"{z_time(utc(epoch, lo))}/{z_time(utc(epoch, hi))}",
+                "epoch": z_time(utc(epoch, lo)),
+                "referenceFrame": "INERTIAL",
+                "interpolationAlgorithm": "LAGRANGE",
+                "interpolationDegree": 5,
+                "cartesian": samples(states, lo, hi),
+            }
+            for lo, hi, states in pieces
+            if hi > lo
+        ]
+        if len(out) == 1:
+            del out[0]["interval"]
+            return out[0]
+        return out
 
     def satellite(key: str, states: Any, colour: list[int]) -> dict[str, Any]:
         return {
             "id": key,
             "name": names[key],
             "availability": interval,
-            "position": {
-                "epoch": z_time(t0),
-                "referenceFrame": "INERTIAL",
-                "interpolationAlgorithm": "LAGRANGE",
-                "interpolationDegree": 5,
-                "cartesian": samples(states),
-            },
+            "position": position(states),
             "point": {"pixelSize": 8, "color": {"rgba": colour}},
             "label": {"text": names[key], "font": "12px sans-serif", "pixelOffset": {"cartesian2": [10, -10]}},
             "path": {
@@ -516,8 +549,8 @@ def geojson(plan: Plan, names: dict[str, str], windows: list[dict[str, Any]]) ->
             elevation_limit="the station's mask by azimuth, never below min_elevation_deg (geometric)",
         )
     )
-    if plan.observer_trajectory is not None:
-        o_lat, o_lon, _ = ground_track(plan.observer_trajectory, plan.frames, t)
+    if plan.observer_trajectory is not None:  # where the plan flies it: across its phasing burn
+        o_lat, o_lon, _ = ground_track(PlannedObserver(plan), plan.frames, t)
         features.append(
             _feature(
                 "observer_track",
@@ -535,4 +568,14 @@ def geojson(plan: Plan, names: dict[str, str], windows: list[dict[str, Any]]) ->
                 time=z_time(utc(epoch, t_c)),
             )
         )
+        if plan.observer_trajectory is not None:
+            b_lat, b_lon, _ = ground_track(PlannedObserver(plan), plan.frames, np.array([t_c]))
+            features.append(
+                _feature(
+                    "observer_at_t_access",
+                    {"type": "Point", "coordinates": [round(float(b_lon[0]), 5), round(float(b_lat[0]), 5)]},
+                    time=z_time(utc(epoch, t_c)),
+                    name=names["observer"],
+                )
+            )
     return json.dumps({"type": "FeatureCollection", "features": features}, indent=1)

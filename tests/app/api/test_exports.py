@@ -147,10 +147,18 @@ def test_czml_holds_both_satellites_the_station_and_the_moment(client, plan):
     assert datetime.fromisoformat(
         packets["document"]["clock"]["currentTime"].replace("Z", "+00:00")
     ) - t_access < __import__("datetime").timedelta(milliseconds=1)
-    for key in ("target", "observer"):
-        pos = packets[key]["position"]
-        assert pos["referenceFrame"] == "INERTIAL" and pos["epoch"].endswith("Z")
-        assert len(pos["cartesian"]) % 4 == 0 and len(pos["cartesian"]) >= 4 * 100
+    pos = packets["target"]["position"]
+    assert pos["referenceFrame"] == "INERTIAL" and pos["epoch"].endswith("Z")
+    assert len(pos["cartesian"]) % 4 == 0 and len(pos["cartesian"]) >= 4 * 100
+    # The observer in two intervals split at the burn (no interpolation across it): the same position on either
+    # side of the burn, the first ending and the second starting there.
+    before, after = packets["observer"]["position"]
+    t_burn = datetime.fromisoformat(plan["phasing"]["t_burn"])
+    for part in (before, after):
+        assert part["referenceFrame"] == "INERTIAL" and len(part["cartesian"]) % 4 == 0
+    edge = datetime.fromisoformat(before["interval"].split("/")[1].replace("Z", "+00:00"))
+    assert abs((edge - t_burn).total_seconds()) < 1e-6 and after["interval"].startswith(before["interval"][-27:])
+    np.testing.assert_allclose(before["cartesian"][-3:], after["cartesian"][1:4], atol=0.02)  # metres
     gs = PAPER_EXAMPLE["ground_station"]
     assert packets["station"]["position"]["cartographicDegrees"][:2] == [gs["longitude_deg"], gs["latitude_deg"]]
     assert all(iv.endswith("Z") for iv in "/".join(np.atleast_1d(packets["access"]["availability"])).split("/"))
@@ -217,6 +225,7 @@ def test_geojson_tracks_station_and_where_it_sees_the_target(client, plan):
         "visibility_circle",
         "observer_track",
         "t_access",
+        "observer_at_t_access",
     }
     for f in doc["features"]:
         parts = f["geometry"]["coordinates"]
@@ -239,6 +248,11 @@ def test_geojson_tracks_station_and_where_it_sees_the_target(client, plan):
     written = datetime.fromisoformat(kinds["t_access"]["properties"]["time"].replace("Z", "+00:00"))
     assert kinds["t_access"]["properties"]["time"].endswith("Z")
     assert written == datetime.fromisoformat(plan["chosen"]["t_access"])  # to the microsecond
+    # The observer is where the plan flies it, across its burn: beside the target at T_access (80.6 km planned:
+    # 0.72 deg of arc on the ground), not where it would have been unburnt (thousands of km).
+    o_lon, o_lat = kinds["observer_at_t_access"]["geometry"]["coordinates"]
+    standoff_deg = np.degrees(plan["chosen"]["standoff_km"] / 6378.137)
+    assert _central_deg(a_lat, a_lon, np.array([o_lat]), np.array([o_lon]))[0] < standoff_deg + 0.05
 
 
 def test_the_opm_goes_back_in_as_an_observer(client, plan):
