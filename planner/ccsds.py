@@ -8,9 +8,10 @@ osculating elements the planner propagates.
 
 from __future__ import annotations
 
+import calendar
 import math
 import re
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 
 from planner.constants import MU_EARTH_KM3_S2, R_EARTH_KM
 from planner.elements import Elements, state_to_elements, validate_elements
@@ -64,6 +65,28 @@ def _number(fields: dict[str, str], key: str) -> float:
     return value
 
 
+_DOY = re.compile(r"^(\d{4})-(\d{3})T(\d{2}):(\d{2}):(\d{2}(?:\.\d+)?)Z?$")
+
+
+def ccsds_time(text: str) -> datetime:
+    """A CCSDS time (502.0-B-3 / 301.0-B-4 ASCII time code A or B): ``YYYY-MM-DDThh:mm:ss[.d...]`` or the day of
+    year, ``YYYY-DDDThh:mm:ss[.d...]``, with or without a trailing Z; UTC. Raises ValueError.
+
+    >>> ccsds_time("2022-331T16:00:00").isoformat()
+    '2022-11-27T16:00:00+00:00'
+    """
+    text = text.strip()
+    m = _DOY.match(text)
+    if m:
+        year, day, hour, minute, second = m.groups()
+        if not 1 <= int(day) <= (366 if calendar.isleap(int(year)) else 365):
+            raise ValueError(f"day of year {day} does not exist in {year}")
+        whole = float(second)
+        start = datetime(int(year), 1, 1, int(hour), int(minute), tzinfo=UTC)
+        return start + timedelta(days=int(day) - 1, seconds=whole)
+    return datetime.fromisoformat(text.rstrip("Z")).replace(tzinfo=UTC)
+
+
 def elements_from_opm(text: str) -> Elements:
     """The osculating elements of an OPM's state vector (km, km/s; Earth-centred, inertial, UTC)."""
     fields = parse_kvn(text, "CCSDS_OPM_VERS", "opm")[0]
@@ -72,9 +95,12 @@ def elements_from_opm(text: str) -> Elements:
         if got not in allowed:
             raise ElementsError(f"{key} {got or 'missing'}: give {' or '.join(allowed)}", field=key)
     try:
-        epoch = datetime.fromisoformat(fields.get("EPOCH", "").rstrip("Z")).replace(tzinfo=UTC)
+        epoch = ccsds_time(fields.get("EPOCH", ""))
     except ValueError:
-        raise ElementsError(f"EPOCH {fields.get('EPOCH')!r} is not an ISO 8601 time", field="EPOCH") from None
+        raise ElementsError(
+            f"EPOCH {fields.get('EPOCH')!r} is not a CCSDS time (YYYY-MM-DDThh:mm:ss or YYYY-DDDThh:mm:ss, UTC)",
+            field="EPOCH",
+        ) from None
     r = [_number(fields, k) for k in STATE_KEYS[:3]]
     v = [_number(fields, k) for k in STATE_KEYS[3:]]
     energy = 0.5 * sum(x * x for x in v) - MU_EARTH_KM3_S2 / math.sqrt(sum(x * x for x in r))

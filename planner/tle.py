@@ -115,6 +115,36 @@ def tle_lines(text_or_lines: str | list[str], field: str = "tle") -> tuple[str, 
     raise TLEError(f"a TLE is 2 lines, or 3 with a name line first; this one has {len(lines)}", field=field)
 
 
+def split_tles(text_or_lines: str | list[str], field: str = "tle") -> list[tuple[str, str, str | None]]:
+    """Every element set of a TLE text (CelesTrak's 2LE or 3LE files): ``(line1, line2, name or None)`` each.
+
+    >>> [s[2] for s in split_tles(["0 A", "1 x", "2 y", "B", "1 z", "2 w"])]
+    ['A', 'B']
+    """
+    lines = text_or_lines.splitlines() if isinstance(text_or_lines, str) else list(text_or_lines)
+    lines = [ln.rstrip("\r\n ") for ln in lines if ln.strip()]
+    sets: list[tuple[str, str, str | None]] = []
+    k = 0
+    while k < len(lines):
+        one, two = (lines[k + j] if k + j < len(lines) else "" for j in (1, 2))
+        if lines[k].startswith("1 ") and one.startswith("2 "):
+            sets.append((lines[k], one, None))
+            k += 2
+        elif not lines[k].startswith(("1 ", "2 ")) and one.startswith("1 ") and two.startswith("2 "):
+            name = lines[k][2:] if lines[k].startswith("0 ") else lines[k]
+            sets.append((one, two, name.strip()))
+            k += 3
+        else:
+            raise TLEError(
+                f"line {k + 1} ({lines[k][:24]!r}) is neither a name line nor the first line of an element set "
+                "(sets are an optional name line, a line starting '1 ', a line starting '2 ')",
+                field=field,
+            )
+    if not sets:
+        raise TLEError("no element set (a line starting '1 ' followed by one starting '2 ') in the text", field=field)
+    return sets
+
+
 OMM_DEFAULTS = {
     "CLASSIFICATION_TYPE": "U",
     "OBJECT_ID": "",
@@ -157,10 +187,16 @@ def tle_from_omm(fields: dict[str, object], field: str = "omm") -> TLE:
         raise TLEError(
             f"MEAN_ELEMENT_THEORY {theory!r}: only SGP4 mean elements can be used", field="MEAN_ELEMENT_THEORY"
         )
-    epoch = str(values["EPOCH"]).rstrip("Z")
-    if "." not in epoch:
-        epoch += ".000000"
-    values["EPOCH"] = epoch
+    from planner.ccsds import ccsds_time
+
+    try:  # sgp4's reader takes calendar time only: a day-of-year epoch (CCSDS's other form) is written as one
+        epoch = ccsds_time(str(values["EPOCH"]))
+    except ValueError:
+        raise TLEError(
+            f"EPOCH {values['EPOCH']!r} is not a CCSDS time (YYYY-MM-DDThh:mm:ss or YYYY-DDDThh:mm:ss, UTC)",
+            field="EPOCH",
+        ) from None
+    values["EPOCH"] = epoch.strftime("%Y-%m-%dT%H:%M:%S.%f")
     for key in OMM_REQUIRED[1:] + ("BSTAR", "MEAN_MOTION_DOT", "MEAN_MOTION_DDOT"):
         try:
             number = float(values[key])  # type: ignore[arg-type]

@@ -122,12 +122,17 @@ class OrbitIn(Strict):
     elements: ElementsIn | SkipJsonSchema[None] = None
     """orbital elements (Table 1 form: heights, or a and e)"""
     tle: (
-        Annotated[list[Annotated[str, Field(max_length=80)]], Field(min_length=2, max_length=3)]
-        | Annotated[str, Field(max_length=300)]
+        Annotated[list[Annotated[str, Field(max_length=80)]], Field(min_length=2, max_length=30_000)]
+        | Annotated[str, Field(max_length=1_000_000)]
         | SkipJsonSchema[None]
-    ) = Field(default=None, description="two element lines, a 3LE (a name line first), or the same as one text block")
-    omm: OmmIn | SkipJsonSchema[None] = None
-    """one CCSDS OMM as a CelesTrak JSON object"""
+    ) = Field(
+        default=None,
+        description="two element lines, a 3LE (a name line first), or the same as one text block; a text block of "
+        "several satellites (CelesTrak's 3LE files) gives the one whose name line or NORAD number is this orbit's name",
+    )
+    omm: OmmIn | Annotated[list[OmmIn], Field(min_length=1, max_length=2000)] | SkipJsonSchema[None] = None
+    """a CCSDS OMM as a CelesTrak JSON object, or CelesTrak's JSON array as served (one object or several: the one
+    whose OBJECT_NAME or NORAD_CAT_ID is this orbit's name is taken)"""
     omm_xml: Annotated[str, Field(max_length=20_000)] | SkipJsonSchema[None] = None
     """one CCSDS OMM as CelesTrak's XML"""
     omm_csv: Annotated[str, Field(max_length=5_000)] | SkipJsonSchema[None] = None

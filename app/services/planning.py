@@ -33,17 +33,30 @@ from planner.optics import ObserverOptics
 from planner.orbits import Orbit, earth_frames, trajectory
 from planner.plan import Plan, PlanOptions, StopCheck, make_plan
 from planner.propagation import Station, as_utc
-from planner.tle import omm_fields_from_text, parse_tle, tle_from_omm, tle_lines
+from planner.tle import omm_fields_from_text, parse_tle, split_tles, tle_from_omm, tle_lines
 
 
 def to_orbit(orbit: OrbitIn, where: str) -> Orbit:
     """Build a planner Orbit, re-raising domain errors with the JSON path of the bad field."""
     try:
         if orbit.tle is not None:
-            line1, line2, _ = tle_lines(orbit.tle)
+            lines = orbit.tle.splitlines() if isinstance(orbit.tle, str) else orbit.tle
+            if len([ln for ln in lines if ln.strip()]) <= 3:
+                line1, line2, _ = tle_lines(orbit.tle)
+            else:  # a file of several: the one named
+                sets = split_tles(orbit.tle)
+                line1, line2, _ = _named(orbit.name, [(s[2], s[0][2:7].strip(), s) for s in sets], where, "tle")
             return Orbit(orbit.name, tle=parse_tle(line1, line2))
         if orbit.omm is not None:
-            return Orbit(orbit.name, tle=tle_from_omm(orbit.omm.model_dump(exclude_none=True)))
+            omm = orbit.omm
+            if isinstance(omm, list):
+                omm = _named(
+                    orbit.name,
+                    [(o.OBJECT_NAME, None if o.NORAD_CAT_ID is None else str(o.NORAD_CAT_ID), o) for o in omm],
+                    where,
+                    "omm",
+                )
+            return Orbit(orbit.name, tle=tle_from_omm(omm.model_dump(exclude_none=True)))
         if orbit.omm_kvn is not None:
             return Orbit(orbit.name, tle=tle_from_omm(omm_fields_from_kvn(orbit.omm_kvn), field="omm_kvn"))
         if orbit.opm is not None:
@@ -71,6 +84,27 @@ def to_orbit(orbit: OrbitIn, where: str) -> Orbit:
         if exc.field and exc.field != sub:
             loc.append(exc.field)
         raise InputError(loc, str(exc)) from None
+
+
+T = TypeVar("T")
+
+
+def _named(name: str, sets: list[tuple[str | None, str | None, T]], where: str, source: str) -> T:
+    """The one of several element sets whose name (case and spaces aside) or NORAD number is ``name``; the only
+    one when there is one; else a 422 saying how to choose."""
+    if len(sets) == 1:
+        return sets[0][2]
+    key = " ".join(name.split()).casefold()
+    hits = [s for s in sets if (s[0] and " ".join(s[0].split()).casefold() == key) or (s[1] and s[1] == name.strip())]
+    if len(hits) == 1:
+        return hits[0][2]
+    shown = ", ".join(f"{s[0] or '?'} ({s[1] or '?'})" for s in sets[:8]) + (", ..." if len(sets) > 8 else "")
+    what = "several match" if hits else "none matches"
+    raise InputError(
+        [where, source],
+        f"{len(sets)} satellites are given and {what} the name {name!r}: set the orbit's name to one of their names "
+        f"or NORAD numbers: {shown}",
+    )
 
 
 def _osculating_states(orbits: tuple[tuple[OrbitIn, str], ...], reading: str, loc: list[str | int]) -> None:

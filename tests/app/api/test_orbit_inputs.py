@@ -265,3 +265,60 @@ def test_bad_orbit_inputs_name_the_field(client, target, loc):
     assert r.status_code == 422, r.text
     got = r.json()["detail"][0]["loc"]
     assert got[: len(loc)] == loc, (got, r.text)
+
+
+def _windows_named(client, name, target):
+    body = {"target": {"name": name, **target}, "ground_station": STATION, "start": ISS_EPOCH.isoformat()}
+    return client.post("/v1/access-windows", json={**body, "duration_days": 1.0}, headers=A)
+
+
+def test_celestraks_json_array_and_a_file_of_several_tles_give_the_one_named(client):
+    """CelesTrak serves OMM JSON as an array and TLEs as files of many satellites: the orbit's name (or NORAD
+    number) picks one; two that match, or none, is a 422 listing what is there."""
+    from tests.utils.orbits import SSO_L1, SSO_L2
+
+    reference = _windows(client, {"tle": [ISS_L1, ISS_L2]})
+    decoy = {**OMM, "OBJECT_NAME": "DECOY", "NORAD_CAT_ID": 99999, "MEAN_ANOMALY": 10.0}
+    served = [decoy, OMM, {**decoy, "OBJECT_NAME": "DECOY 2", "NORAD_CAT_ID": 99998}]
+    text = f"DECOY SSO\n{SSO_L1}\n{SSO_L2}\n0 ISS (ZARYA)\n{ISS_L1}\n{ISS_L2}\n"
+    for name, target in (
+        ("ISS", {"omm": [OMM]}),
+        ("iss  (zarya)", {"omm": served}),
+        ("25544", {"omm": served}),
+        ("ISS (ZARYA)", {"tle": text}),
+        ("25544", {"tle": text.splitlines()}),
+    ):
+        r = _windows_named(client, name, target)
+        assert r.status_code == 200, (name, r.text)
+        assert [w["rise"] for w in r.json()["access_windows"]] == [w["rise"] for w in reference], name
+    from app.schemas import OrbitIn
+    from app.services.planning import to_orbit
+
+    for name in ("43001", "decoy sso"):
+        picked = to_orbit(OrbitIn.model_validate({"name": name, "tle": text}), "target").tle
+        assert picked is not None and picked.line1 == SSO_L1
+    for target, source in (({"omm": served}, "omm"), ({"tle": text}, "tle")):
+        r = _windows_named(client, "HUBBLE", target)
+        assert r.status_code == 422, r.text
+        detail = r.json()["detail"][0]
+        assert detail["loc"][-2:] == ["target", source] and "none matches" in detail["msg"]
+        assert ("DECOY" in detail["msg"]) and "NORAD" in detail["msg"]
+
+
+def test_ccsds_day_of_year_epochs_read_as_their_calendar_dates(client):
+    """502.0-B-3 allows YYYY-DDDThh:mm:ss epochs: the same OMM and OPM with day 264 of 2008 read as 2008-09-20."""
+    from app.schemas import OrbitIn
+    from app.services.planning import to_orbit
+
+    reference = _windows(client, {"omm": OMM})
+    doy = {**OMM, "EPOCH": "2008-264T12:25:40.104192"}
+    assert [w["rise"] for w in _windows(client, {"omm": doy})] == [w["rise"] for w in reference]
+    geo = _iss_state()
+    calendar_opm = _opm(geo.position.km, geo.velocity.km_per_s)
+    doy_opm = calendar_opm.replace("EPOCH = 2008-09-20T12:25:40.104192", "EPOCH = 2008-264T12:25:40.104192Z")
+    assert doy_opm != calendar_opm
+    a = to_orbit(OrbitIn.model_validate({"name": "x", "opm": calendar_opm}), "target").elements
+    b = to_orbit(OrbitIn.model_validate({"name": "x", "opm": doy_opm}), "target").elements
+    assert a == b
+    bad = _windows_named(client, "ISS", {"omm": {**OMM, "EPOCH": "2023-366T00:00:00"}})
+    assert bad.status_code == 422 and bad.json()["detail"][0]["loc"][-1] == "EPOCH"
