@@ -57,6 +57,16 @@ def _print_checked(body: EstimateResult, prefix: str = "") -> None:
     if net and body.refined:
         nz, ny, nx = net.euler_zyx_deg
         print(f"Swin alone: z {nz:.2f} y {ny:.2f} x {nx:.2f} deg")
+    for label, att in (
+        ("LVLH (the target's orbital frame)", body.attitude_lvlh),
+        ("J2000", body.attitude_j2000),
+    ):
+        if att is not None:
+            lz, ly, lx = att.euler_zyx_deg
+            print(
+                f"in {label}: z {lz:.2f} y {ly:.2f} x {lx:.2f} deg; quaternion w x y z "
+                f"{', '.join(f'{v:.5f}' for v in att.quaternion_wxyz)}"
+            )
     qual = body.quality
     if qual:
         bounds = " / ".join("-" if b is None else f"{b:.2f}" for b in qual.uncertainty_deg)

@@ -45,15 +45,16 @@ def cmd_plans(args: argparse.Namespace) -> int:
         return 0
 
     def row(p: dict[str, Any]) -> str:
-        miss = "-" if p["miss_km"] is None else f"{p['miss_km']:9.3f}"
+        dv = "-" if p.get("dv_total_m_s") is None else f"{p['dv_total_m_s']:9.1f}"
+        feasible = "-" if p.get("feasible") is None else "yes" if p["feasible"] else "no"
         return (
             f"{p['id']:<36}  {utc_text(p['created_at']):<24}  {p['target_name'][:16]:<16} {p['observer_name'][:16]:<16} "
-            f"{p['station_name'][:14]:<14} {utc_text(p['t_access']):<24} {miss:>9}"
+            f"{p['station_name'][:14]:<14} {utc_text(p['t_access']):<24} {dv:>9} {feasible:>8}"
         )
 
     header = (
         f"{'id':<36}  {'created (UTC)':<24}  {'target':<16} {'observer':<16} {'station':<14} {'T_access (UTC)':<24} "
-        f"{'miss (km)':>9}"
+        f"{'dv (m/s)':>9} {'feasible':>8}"
     )
     return print_listing(
         args, "/v1/plans", {"target_name": args.target_name}, "{count} plans; newest {shown}:", header, row

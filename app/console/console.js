@@ -89,13 +89,14 @@ async function plansPage(params) {
   const rows = body.data.map((p) => `<tr>
       <td><a href="#/plans/${esc(p.id)}">${esc(p.id.slice(0, 8))}</a></td><td>${utc(p.created_at)}</td>
       <td>${esc(p.target_name)}</td><td>${esc(p.observer_name)}</td><td>${esc(p.station_name)}</td>
-      <td>${utc(p.t_access)}</td><td class="num">${num(p.miss_km, 3)}</td></tr>`).join("");
+      <td>${utc(p.t_access)}</td><td class="num">${num(p.dv_total_m_s, 1)}</td>
+      <td>${p.feasible === null || p.feasible === undefined ? "-" : p.feasible ? "yes" : "no"}</td></tr>`).join("");
   view.innerHTML = `<h1>Plans <span class="muted">(${body.count})</span></h1>
     <form class="filter" id="filter"><input type="text" id="target" placeholder="target name" value="${esc(target)}">
     <button>Filter</button></form>
     <table id="plans"><thead><tr><th>plan</th><th>created (UTC)</th><th>target</th><th>observer</th><th>station</th>
-    <th>T_access (UTC)</th><th class="num">miss (km)</th></tr></thead><tbody>${rows ||
-      '<tr><td colspan="7" class="muted">No plans yet: POST /v1/plans, or gsa plan --server.</td></tr>'}</tbody></table>`;
+    <th>T_access (UTC)</th><th class="num">dv (m/s)</th><th>feasible</th></tr></thead><tbody>${rows ||
+      '<tr><td colspan="8" class="muted">No plans yet: POST /v1/plans, or gsa plan --server.</td></tr>'}</tbody></table>`;
   document.getElementById("filter").addEventListener("submit", (ev) => {
     ev.preventDefault();
     const t = document.getElementById("target").value.trim();
@@ -164,11 +165,12 @@ async function planPage(id) {
     : f.feasible ? `<p class="verdict good">Feasible: the target is sunlit at T_access and every check of the encounter passes.</p>`
       : `<p class="verdict bad">Not feasible: ${esc(f.reasons.join("; "))}.</p>`;
   const inChosen = (w) => ch && new Date(w.rise) <= new Date(ch.t_access) && new Date(ch.t_access) <= new Date(w.set);
-  const shownWindows = p.access_windows.map((w, k) => [k, w]).filter(([k, w]) => k < 30 || inChosen(w));
-  const windows = shownWindows.map(([k, w]) => `<tr${inChosen(w) ? ' class="chosen"' : ""}>
+  const windows = p.access_windows.map((w, k) => `<tr${inChosen(w) ? ' class="chosen"' : ""}>
       <td class="num">${k}</td><td>${utc(w.rise)}</td><td>${utc(w.culmination)}</td><td>${utc(w.set)}</td>
+      <td class="num">${num(w.rise_azimuth_deg, 1)}</td><td class="num">${num(w.culmination_azimuth_deg, 1)}</td>
+      <td class="num">${num(w.set_azimuth_deg, 1)}</td>
       <td class="num">${num(w.max_elevation_deg, 2)}</td><td class="num">${num(w.min_range_km, 1)}</td>
-      <td class="num">${num(w.duration_s, 1)}</td></tr>`).join("");
+      <td class="num">${num(w.duration_s, 1)}</td><td>${w.keyhole ? "keyhole" : ""}</td></tr>`).join("");
   const ph = p.phasing;
   const scene = ch ? `<div class="grid">
       <div class="card"><b>Chosen scene</b><br>T_access ${utc(ch.t_access)}<br>height change dHa ${num(ch.delta_ha_km, 1)} km,
@@ -196,10 +198,11 @@ async function planPage(id) {
   view.innerHTML = `<h1>Plan ${esc(p.target_name)} / ${esc(p.observer_name)} / ${esc(p.station_name)}</h1>
     <p class="muted">${esc(p.id)} · created ${utc(p.created_at)} · ${p.duration_days} days from ${utc(p.epoch)} · elements ${esc(p.reading)}</p>
     ${verdict}${(p.notes || []).map((n) => `<p class="muted">note: ${esc(n)}</p>`).join("")}${mapSvg(geo, coastLines)}${scene}
-    <h2>Access windows (${p.access_windows.length}${p.access_windows.length > 30 ? ", the first 30 and the chosen one" : ""}; the chosen pass highlighted)</h2>
-    <table id="windows"><thead><tr><th class="num">#</th><th>rise (UTC)</th><th>culmination (UTC)</th><th>set (UTC)</th>
-    <th class="num">max el (deg)</th><th class="num">min range (km)</th><th class="num">duration (s)</th></tr></thead>
-    <tbody>${windows}</tbody></table>
+    <h2>Access windows (${p.access_windows.length}, every one; the chosen pass highlighted)</h2>
+    <div class="scroll"><table id="windows"><thead><tr><th class="num">#</th><th>rise (UTC)</th><th>culmination (UTC)</th><th>set (UTC)</th>
+    <th class="num">az rise (deg)</th><th class="num">az culm. (deg)</th><th class="num">az set (deg)</th>
+    <th class="num">max el (deg)</th><th class="num">min range (km)</th><th class="num">duration (s)</th><th></th></tr></thead>
+    <tbody>${windows}</tbody></table></div>
     <h2>Candidates (${p.candidates.length}, every one; the chosen one highlighted)</h2>
     <table id="candidates"><thead><tr><th class="num">#</th><th>T_access (UTC)</th><th class="num">dHa (km)</th>
     <th class="num">dHp (km)</th><th class="num">miss (km)</th><th class="num">dv (m/s)</th><th class="num">stand-off (km)</th>
@@ -252,10 +255,10 @@ async function campaignPage(id) {
     return to orbit: ${c.return_to_orbit ? "yes" : "no"}</p>${verdict}
     ${(c.notes || []).map((n) => `<p class="muted">note: ${esc(n)}</p>`).join("")}
     <h2>Scenes (measured on the whole flown burn sequence)</h2>
-    <table id="scenes"><thead><tr><th class="num">#</th><th>T_access (UTC)</th><th class="num">dv (m/s)</th>
+    <div class="scroll"><table id="scenes"><thead><tr><th class="num">#</th><th>T_access (UTC)</th><th class="num">dv (m/s)</th>
     <th class="num">stand-off (km)</th><th class="num">separation (km)</th><th class="num">rate (deg/s)</th>
     <th class="num">phase (deg)</th><th>line of sight (R, T, N)</th><th>burns</th></tr></thead><tbody>${scenes ||
-      '<tr><td colspan="9" class="muted">None.</td></tr>'}</tbody></table>
+      '<tr><td colspan="9" class="muted">None.</td></tr>'}</tbody></table></div>
     <h2>Stretches searched</h2>
     <table id="stretches"><thead><tr><th>from (UTC)</th><th>to (UTC)</th><th class="num">candidates</th>
     <th class="num">feasible</th><th>what came of it</th></tr></thead><tbody>${stretches}</tbody></table>

@@ -485,6 +485,25 @@ class PlanSummary(Described):
     """the chosen candidate's t_access (UTC), or null"""
     miss_km: float | None
     """the chosen candidate's miss, km, or null"""
+    feasible: bool | None = None
+    """whether the chosen candidate passes every check, or null (no candidate)"""
+    dv_total_m_s: float | None = None
+    """the chosen candidate's Delta-v (height change plus phasing), m/s, or null"""
+
+    @classmethod
+    def from_row(cls, p: PlanRow) -> PlanSummary:
+        chosen = (p.result or {}).get("chosen") or {}
+        return cls(
+            id=p.id,
+            created_at=utc_or_none(p.created_at),
+            target_name=p.target_name,
+            observer_name=p.observer_name,
+            station_name=p.station_name,
+            t_access=utc_or_none(p.t_access),
+            miss_km=p.miss_km,
+            feasible=(chosen.get("feasibility") or {}).get("feasible") if chosen else None,
+            dv_total_m_s=chosen.get("dv_total_m_s") if chosen else None,
+        )
 
 
 class PlansPublic(Described):

@@ -11,7 +11,7 @@ from fastapi.concurrency import run_in_threadpool
 
 from app import crud
 from app.api import examples
-from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep, as_utc, check_span, planning_budget
+from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep, check_span, planning_budget
 from app.schemas import PAPER_EXAMPLE, IsoDateTime, PlanCreate, PlanPublic, PlansPublic, PlanSummary, Text
 from app.services.planning import access_csv, plan_and_store, run_plan
 
@@ -81,18 +81,7 @@ def list_plans(
         created_after=created_after,
         created_before=created_before,
     )
-    data = [
-        PlanSummary(
-            id=p.id,
-            created_at=as_utc(p.created_at),
-            target_name=p.target_name,
-            observer_name=p.observer_name,
-            station_name=p.station_name,
-            t_access=as_utc(p.t_access),
-            miss_km=p.miss_km,
-        )
-        for p in rows
-    ]
+    data = [PlanSummary.from_row(p) for p in rows]
     return {"data": data, "count": total}
 
 

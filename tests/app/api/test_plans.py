@@ -65,6 +65,14 @@ def test_list_paginates_and_filters(client, paper_plan):
     assert body["count"] >= 1 and len(body["data"]) == 1
     assert body["data"][0]["target_name"] == "Sat_Target"
     assert body["data"][0]["created_at"].endswith(("Z", "+00:00"))  # times come back in UTC, stated
+    # Each row says whether its chosen scene can be flown and what it costs (the paper's ten days: unlit, 168 m/s).
+    row = next(
+        p
+        for p in client.get("/v1/plans", params={"limit": 100}, headers=A).json()["data"]
+        if p["id"] == paper_plan["id"]
+    )
+    assert row["feasible"] is paper_plan["chosen"]["feasibility"]["feasible"] is False
+    assert row["dv_total_m_s"] == pytest.approx(paper_plan["chosen"]["dv_total_m_s"])
     r = client.get("/v1/plans", params={"target_name": "nobody"}, headers=A)
     assert r.json() == {"data": [], "count": 0}
     r = client.get("/v1/plans", params={"created_after": "2100-01-01T00:00:00Z"}, headers=A)
