@@ -121,7 +121,18 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         multipart = headers.get("content-type", "").startswith("multipart/")
         return settings.max_batch_bytes if multipart else settings.max_request_bytes
 
-    app.add_middleware(RequestContextMiddleware, body_limit=body_limit)
+    from app.core.metrics import Metrics
+
+    app.state.metrics = Metrics()
+    app.add_middleware(RequestContextMiddleware, body_limit=body_limit, metrics=app.state.metrics)
+
+    @app.get("/metrics", tags=["health"], response_class=Response)
+    def metrics() -> Response:
+        """This worker's metrics in Prometheus' text format: requests by route template and status, their latency,
+        the time plans, campaigns, estimates and passes took, frames estimated. No API key (as /healthz)."""
+        from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
+
+        return Response(generate_latest(app.state.metrics.registry), media_type=CONTENT_TYPE_LATEST)
 
     @app.get("/readyz", tags=["health"], responses={503: {"description": "the database does not answer"}})
     def readyz() -> Any:

@@ -214,3 +214,14 @@ def planning_budget(
         return None
 
     return stop
+
+
+def observe_work(request: Request, kind: str, started: float, frames: int = 0) -> None:
+    """Count a stored piece of work in the app's metrics (``/metrics``): its time since ``started`` (a
+    ``time.perf_counter()`` reading) and, for estimates and passes, its frames."""
+    metrics = getattr(request.app.state, "metrics", None)
+    if metrics is None:
+        return
+    metrics.work.labels(kind).observe(time.perf_counter() - started)
+    if frames:
+        metrics.frames.inc(frames)

@@ -149,6 +149,16 @@ def _json_response(status: int, body: dict[str, Any], rid: str) -> list[Message]
     ]
 
 
+def route_template(scope: Scope) -> str:
+    """The path a request matched with each path parameter's segment put back as ``{name}`` ("/v1/plans/{plan_id}",
+    never an id: one metrics series a route); "unmatched" where no route matched."""
+    if scope.get("route") is None:
+        return "unmatched"
+    params = {str(v): k for k, v in (scope.get("path_params") or {}).items()}
+    segments = str(scope.get("path", "")).split("/")
+    return "/".join(f"{{{params[seg]}}}" if seg in params else seg for seg in segments)
+
+
 class RequestContextMiddleware:
     """Outermost middleware: request id, body-size limits, the access log line, and a JSON 500 for any bug.
 
@@ -156,9 +166,10 @@ class RequestContextMiddleware:
     ``Content-Length`` up front and against the bytes actually received (chunked uploads).
     """
 
-    def __init__(self, app: ASGIApp, body_limit: Any) -> None:
+    def __init__(self, app: ASGIApp, body_limit: Any, metrics: Any = None) -> None:
         self.app = app
         self.body_limit = body_limit
+        self.metrics = metrics  # app.core.metrics.Metrics: each request counted by its route's template
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
@@ -211,6 +222,11 @@ class RequestContextMiddleware:
             for m in _json_response(500, body, rid):
                 await send(m)
         finally:
+            if self.metrics is not None:
+                route = route_template(scope)
+                self.metrics.request(
+                    str(scope.get("method")), str(route), int(state["status"]), time.perf_counter() - t0
+                )
             log.info(
                 "request",
                 extra={

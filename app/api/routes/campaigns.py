@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import threading
+import time
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, HTTPException, Path, Query, Request, Response
@@ -11,7 +12,7 @@ from fastapi.concurrency import run_in_threadpool
 
 from app import crud
 from app.api import examples
-from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep, planning_budget
+from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep, observe_work, planning_budget
 from app.schemas import CAMPAIGN_EXAMPLE, CampaignCreate, CampaignPublic, CampaignsPublic, CampaignSummary, Text
 from app.services.campaigns import plan_and_store_campaign
 
@@ -54,6 +55,7 @@ async def create_campaign(
             await asyncio.sleep(0.2)
 
     watcher = asyncio.create_task(watch())
+    started = time.perf_counter()
     try:
         row = await run_in_threadpool(
             plan_and_store_campaign,
@@ -65,6 +67,7 @@ async def create_campaign(
         )
     finally:
         watcher.cancel()
+    observe_work(request, "campaign", started)
     return CampaignPublic.from_row(row)
 
 

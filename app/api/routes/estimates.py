@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
-from fastapi import APIRouter, Depends, File, Form, HTTPException, Query, UploadFile
+from fastapi import APIRouter, Depends, File, Form, HTTPException, Query, Request, UploadFile
 from fastapi import Path as PathParam
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse, Response
@@ -24,6 +25,7 @@ from app.api.deps import (
     cells_from_form,
     checker_for,
     models_for,
+    observe_work,
     read_upload,
     read_uploads,
 )
@@ -97,6 +99,7 @@ EstimateFormDep = Annotated[svc.EstimateRequest, Depends(estimate_form)]
     },
 )
 async def create_estimate(
+    request: Request,
     session: SessionDep,
     operator: CurrentOperator,
     settings: SettingsDep,
@@ -109,6 +112,7 @@ async def create_estimate(
     """Estimate the attitude of one ISAR frame: Swin's answer, fitted to the target's projection and checked; stored."""
     checker = checker_for(checkers, asked.target)
     est = models_for(model_sets, checker)
+    started = time.perf_counter()
     data = await read_upload(file, settings.max_upload_bytes)
     # Decoding, the models and the database run in a worker thread, so the event loop keeps serving meanwhile.
     row = await run_in_threadpool(
@@ -123,6 +127,7 @@ async def create_estimate(
         asked=asked,
         snr_db=snr_db,
     )
+    observe_work(request, "estimate", started, frames=1)
     return EstimatePublic.from_row(row)
 
 
@@ -130,6 +135,7 @@ async def create_estimate(
     "/batch", status_code=201, response_model=EstimatesPublic, responses={413: {"description": "file too large"}}
 )
 async def create_estimates_batch(
+    request: Request,
     session: SessionDep,
     operator: CurrentOperator,
     settings: SettingsDep,
@@ -141,6 +147,7 @@ async def create_estimates_batch(
     """Estimate several frames as one batch through the models, each fitted and checked; one stored row each."""
     checker = checker_for(checkers, asked.target)
     est = models_for(model_sets, checker)
+    started = time.perf_counter()
     uploads = await read_uploads(files, settings)
     rows = await run_in_threadpool(
         svc.estimate_and_store,
@@ -152,6 +159,7 @@ async def create_estimates_batch(
         uploads=uploads,
         asked=asked,
     )
+    observe_work(request, "estimate_batch", started, frames=len(rows))
     return EstimatesPublic(data=[EstimatePublic.from_row(r) for r in rows], count=len(rows))
 
 

@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import time
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, HTTPException, Query, UploadFile
+from fastapi import APIRouter, File, Form, HTTPException, Query, Request, UploadFile
 from fastapi import Path as PathParam
 from fastapi.concurrency import run_in_threadpool
 
@@ -19,6 +20,7 @@ from app.api.deps import (
     cells_from_form,
     checker_for,
     models_for,
+    observe_work,
     read_uploads,
 )
 from app.schemas import IsoDateTime, PassesPublic, PassPublic, PassSummary, Text
@@ -40,6 +42,7 @@ APERTURE_DEG = (
 
 @router.post("", status_code=201, response_model=PassPublic, responses={413: {"description": "file too large"}})
 async def create_pass(
+    request: Request,
     session: SessionDep,
     operator: CurrentOperator,
     settings: SettingsDep,
@@ -65,6 +68,7 @@ async def create_pass(
     cells_m = cells_from_form(range_cell_m, cross_range_cell_m)
     checker = checker_for(checkers, target)
     est = models_for(model_sets, checker)
+    started = time.perf_counter()
     uploads = await read_uploads(files, settings)
     row = await run_in_threadpool(
         pass_svc.create_pass,
@@ -81,6 +85,7 @@ async def create_pass(
         integration_s=integration_s,
         aperture_deg=aperture_deg,
     )
+    observe_work(request, "pass", started, frames=len(uploads))
     return PassPublic.from_row(row)
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import threading
+import time
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, HTTPException, Path, Query, Request, Response
@@ -11,7 +12,7 @@ from fastapi.concurrency import run_in_threadpool
 
 from app import crud
 from app.api import examples
-from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep, check_span, planning_budget
+from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep, check_span, observe_work, planning_budget
 from app.schemas import PAPER_EXAMPLE, IsoDateTime, PlanCreate, PlanPublic, PlansPublic, PlanSummary, Text
 from app.services.planning import access_csv, plan_and_store, run_plan
 
@@ -53,12 +54,14 @@ async def create_plan(
             await asyncio.sleep(0.2)
 
     watcher = asyncio.create_task(watch())
+    started = time.perf_counter()
     try:
         plan = await run_in_threadpool(
             plan_and_store, session=session, operator_id=operator.id, plan_in=plan_in, settings=settings, stop=stop
         )
     finally:
         watcher.cancel()
+    observe_work(request, "plan", started)
     return PlanPublic.from_row(plan)
 
 
