@@ -261,6 +261,21 @@ def get_pass(*, session: Session, operator_id: str, pass_id: str) -> Pass | None
     return session.scalar(select(Pass).where(Pass.id == pass_id, Pass.operator_id == operator_id))
 
 
+def tied_to_plan(*, session: Session, operator_id: str, plan_id: str) -> tuple[list[str], list[str]]:
+    """The ids of the operator's estimates and passes tied to a plan, oldest first."""
+    estimates = session.scalars(
+        select(Estimate.id)
+        .where(Estimate.operator_id == operator_id, Estimate.plan_id == plan_id)
+        .order_by(Estimate.created_at, Estimate.id)
+    ).all()
+    passes = session.scalars(
+        select(Pass.id)
+        .where(Pass.operator_id == operator_id, Pass.plan_id == plan_id)
+        .order_by(Pass.created_at, Pass.id)
+    ).all()
+    return list(estimates), list(passes)
+
+
 def list_passes(
     *, session: Session, operator_id: str, limit: int, offset: int, plan_id: str | None = None
 ) -> tuple[list[Pass], int]:

@@ -454,10 +454,16 @@ class PlanPublic(PlanResult):
     """the observer's name"""
     station_name: str
     """the station's name"""
+    estimate_ids: list[str] = Field(default_factory=list)
+    """the caller's estimates tied to this plan (observed in its passes), oldest first"""
+    pass_ids: list[str] = Field(default_factory=list)
+    """the caller's fused passes of this plan, oldest first"""
 
     @classmethod
-    def from_row(cls, plan: PlanRow) -> PlanPublic:
-        """Return a stored plan row, of any stored format, as the answer."""
+    def from_row(
+        cls, plan: PlanRow, estimate_ids: list[str] | None = None, pass_ids: list[str] | None = None
+    ) -> PlanPublic:
+        """Return a stored plan row, of any stored format, as the answer (with what is tied to it, where given)."""
         return cls.model_validate(
             {
                 **PlanResult.upgraded(plan.result),
@@ -466,6 +472,8 @@ class PlanPublic(PlanResult):
                 "target_name": plan.target_name,
                 "observer_name": plan.observer_name,
                 "station_name": plan.station_name,
+                "estimate_ids": estimate_ids or [],
+                "pass_ids": pass_ids or [],
             }
         )
 

@@ -98,7 +98,8 @@ def read_plan(session: SessionDep, operator: CurrentOperator, plan_id: Annotated
     plan = crud.get_plan(session=session, operator_id=operator.id, plan_id=plan_id)
     if plan is None:
         raise HTTPException(status_code=404, detail="Plan not found")
-    return PlanPublic.from_row(plan)
+    estimate_ids, pass_ids = crud.tied_to_plan(session=session, operator_id=operator.id, plan_id=plan.id)
+    return PlanPublic.from_row(plan, estimate_ids, pass_ids)
 
 
 @router.get(

@@ -128,6 +128,8 @@ def test_plan_ties_attitude_to_lvlh_and_j2000(client, frame):
     assert [e["id"] for e in scene["estimates"]] == [body["id"]]
     listed = client.get("/v1/estimates", params={"plan_id": plan["id"]}, headers=A).json()
     assert listed["count"] == 1
+    linked = client.get(f"/v1/plans/{plan['id']}", headers=A).json()
+    assert linked["estimate_ids"] == [body["id"]] and linked["pass_ids"] == []
     # A moment the station cannot see the target is refused, the nearest window named; nothing stored.
     w = plan["access_windows"][0]
     late = (datetime.fromisoformat(w["set"]) + timedelta(seconds=90)).isoformat()

@@ -87,6 +87,8 @@ def test_a_pass_is_fused_and_stored(client, plan):
     assert listing["count"] >= 1
     assert client.get("/v1/passes", params={"plan_id": "no-such-plan"}, headers=A).json()["count"] == 0
     assert body["id"] not in client.get("/v1/passes", headers={"X-API-Key": KEY_B}).text
+    # The plan links its passes.
+    assert body["id"] in client.get(f"/v1/plans/{plan['id']}", headers=A).json()["pass_ids"]
 
 
 @pytest.mark.parametrize(
