@@ -40,11 +40,11 @@ from numpy.typing import ArrayLike, NDArray
 from planner.access import validate_station
 from planner.alignment import Candidate
 from planner.constants import MU_EARTH_KM3_S2
-from planner.elements import Elements, state_to_elements
+from planner.elements import elements_of_state, state_to_elements
 from planner.errors import PlannerError, PlanningStopped, SearchRangeError
 from planner.illumination import phase_angle_deg, sun_position_km, sunlit
 from planner.lambert import lambert
-from planner.manoeuvre import best_lambert, period_s, rtn_matrix
+from planner.manoeuvre import best_lambert, period_s, retarget, rtn_matrix
 from planner.orbits import Orbit, earth_frames, trajectory
 from planner.plan import (
     CandidateOrder,
@@ -172,11 +172,6 @@ class CampaignScene:
     feasibility: Feasibility
     slot_shift_s: float | None = None  # with return_to_orbit: how far along its original orbit it returned to
     check: SceneCheck | None = None
-
-    @property
-    def candidate(self) -> Candidate:
-        assert self.plan.chosen is not None
-        return self.plan.chosen
 
 
 @dataclass(frozen=True, slots=True)
@@ -335,35 +330,6 @@ def _tangential(r_km: Vec, v_km_s: Vec, other_apsis_km: float, change_km: float)
     return np.asarray((speed(other_apsis_km + change_km) - speed(other_apsis_km)) * vhat, float)
 
 
-def retarget(
-    r1_km: Vec,
-    v1_km_s: Vec,
-    t_burn_s: float,
-    goal_km: Vec,
-    t_arrive_s: float,
-    revolutions: int,
-    low_path: bool,
-    pole: Pole | None,
-    tol_km: float = 1e-6,
-) -> tuple[Vec, Vec, Vec]:
-    """The burn from the exact state ``(r1, v1)`` at ``t_burn_s`` that arrives at ``goal_km`` at ``t_arrive_s``
-    (two-body + J2), to ``tol_km``: Lambert on the branch given, its aim moved by each integrated miss, as
-    ``phase`` does. Returns the impulse and the state on arrival. A burn computed from an interpolated state
-    instead drifts the next scenes by km (design/measurements.md, "Chaining a campaign's burns")."""
-    tof = t_arrive_s - t_burn_s
-    h = np.cross(r1_km, v1_km_s)
-    aim = np.asarray(goal_km, float).copy()
-    v_dep = lambert(r1_km, aim, tof, revolutions, low_path, prograde_normal=h).v1_km_s
-    r_end, v_end = propagate_j2(r1_km, v_dep, t_burn_s, t_arrive_s, pole)
-    for _ in range(12):
-        if np.linalg.norm(r_end - goal_km) <= tol_km:
-            break
-        aim = aim + (goal_km - r_end)
-        v_dep = lambert(r1_km, aim, tof, revolutions, low_path, prograde_normal=h).v1_km_s
-        r_end, v_end = propagate_j2(r1_km, v_dep, t_burn_s, t_arrive_s, pole)
-    return np.asarray(v_dep - v1_km_s, float), r_end, v_end
-
-
 def spread_order(previous: Sequence[tuple[float, float, float]]) -> CandidateOrder:
     """The campaign's order of a stretch's candidates: feasible first, cheapest first, except that among the
     feasible ones nearly as cheap as the cheapest (``NEAR_FACTOR``, ``NEAR_MARGIN_KM_S``) the one whose line of
@@ -389,27 +355,6 @@ def spread_order(previous: Sequence[tuple[float, float, float]]) -> CandidateOrd
         return near + [k for k in ranked if k not in near]
 
     return order
-
-
-def angle_between_deg(u: Sequence[float], w: Sequence[float]) -> float:
-    """The angle between two unit vectors, degrees."""
-    return math.degrees(math.acos(max(-1.0, min(1.0, float(np.dot(u, w))))))
-
-
-def _elements_at(state: tuple[Vec, Vec], epoch: datetime) -> Elements:
-    """The osculating elements of a GCRS state (the observer as a stretch's plan takes it)."""
-    from planner.constants import R_EARTH_KM
-
-    a, e, i, raan, argp, m = (float(x) for x in state_to_elements(*state))
-    return Elements(
-        epoch,
-        a * (1 + e) - R_EARTH_KM,
-        a * (1 - e) - R_EARTH_KM,
-        math.degrees(i),
-        math.degrees(raan),
-        math.degrees(argp),
-        math.degrees(m),
-    )
 
 
 def _burn(t_s: float, dv: Vec, r: Vec, v: Vec, kind: BurnKind, scene: int) -> Burn:
@@ -630,7 +575,7 @@ def _plan_stretch(
     target_traj: Trajectory | None,
 ) -> tuple[Plan, dict[tuple[float, float], tuple[FlownTrajectory, list[tuple[float, Vec, BurnKind]]]]]:
     """Plan one stretch from the observer's carried state: Algorithm 1 with the height change flown as burns."""
-    carried = Orbit(name, elements=_elements_at(state, scene_epoch))
+    carried = Orbit(name, elements=elements_of_state(state[0], state[1], scene_epoch))
     scene_pole = _shifted(pole, offset_s)
     t_end = span_s + 86400.0 + 600.0  # past make_plan's own end (the span, an observer orbit, 600 s)
     base = NumericalJ2Trajectory(state[0], state[1], 0.0, t_end, pole=scene_pole)

@@ -13,8 +13,8 @@ import math
 import re
 from datetime import UTC, datetime, timedelta
 
-from planner.constants import MU_EARTH_KM3_S2, R_EARTH_KM
-from planner.elements import Elements, state_to_elements, validate_elements
+from planner.constants import MU_EARTH_KM3_S2
+from planner.elements import Elements, elements_of_state
 from planner.errors import ElementsError, TLEError
 
 VERSIONS = ("2.0", "3.0")
@@ -106,15 +106,4 @@ def elements_from_opm(text: str) -> Elements:
     energy = 0.5 * sum(x * x for x in v) - MU_EARTH_KM3_S2 / math.sqrt(sum(x * x for x in r))
     if not energy < 0.0:
         raise ElementsError("the state vector is not a bound (elliptic) Earth orbit: check X_DOT..Z_DOT", field="X_DOT")
-    a, e, i, raan, argp, m = (float(x) for x in state_to_elements(r, v))
-    el = Elements(
-        epoch=epoch,
-        ha_km=a * (1 + e) - R_EARTH_KM,
-        hp_km=a * (1 - e) - R_EARTH_KM,
-        inclination_deg=math.degrees(i),
-        raan_deg=math.degrees(raan),
-        arg_perigee_deg=math.degrees(argp),
-        mean_anomaly_deg=math.degrees(m),
-    )
-    validate_elements(el)
-    return el
+    return elements_of_state(r, v, epoch)  # Elements validate themselves

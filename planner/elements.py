@@ -263,6 +263,20 @@ def state_to_elements(
     return a, ecc, i, raan, argp, m
 
 
+def elements_of_state(r_km: ArrayLike, v_km_s: ArrayLike, epoch: datetime) -> Elements:
+    """The osculating elements of an elliptic GCRS state (shape (3,)) in Table 1 form, as elements of ``epoch``."""
+    a, e, i, raan, argp, m = (float(x) for x in state_to_elements(r_km, v_km_s))
+    return Elements(
+        epoch,
+        a * (1 + e) - R_EARTH_KM,
+        a * (1 - e) - R_EARTH_KM,
+        math.degrees(i),
+        math.degrees(raan),
+        math.degrees(argp),
+        math.degrees(m),
+    )
+
+
 def secular_state(
     elements: tuple[float, float, float, float, float, float], t_s: ArrayLike
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

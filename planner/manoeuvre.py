@@ -146,12 +146,9 @@ def phase(
             if standoff_km > 0.0:
                 offset = standoff_km * standoff_direction(r2, v_end - v2_target, sun_km)
             goal = r2 + offset
-            n = 0
-            while np.linalg.norm(r_end - goal) > tol_km and n < max_corrections:
-                aim = aim + (goal - r_end)
-                v_dep = lambert(r1, aim, tof, m, low, prograde_normal=h).v1_km_s
-                r_end, v_end = propagate_j2(r1, v_dep, t_burn, t_access_s, pole)
-                n += 1
+            aim, v_dep, r_end, v_end, n = _shoot(
+                r1, h, aim, goal, v_dep, r_end, v_end, t_burn, t_access_s, m, low, pole, tol_km, max_corrections
+            )
             corrections += n
         miss = float(np.linalg.norm(r_end - (r2 + offset)))
     else:  # the plain Lambert burn: its arrival velocity, no integration, no miss measured
@@ -178,6 +175,59 @@ def phase(
         v_departure_km_s=v_dep,
         standoff_km_vec=offset,
     )
+
+
+def _shoot(
+    r1: Vec,
+    h: Vec,
+    aim: Vec,
+    goal: Vec,
+    v_dep: Vec,
+    r_end: Vec,
+    v_end: Vec,
+    t_burn_s: float,
+    t_arrive_s: float,
+    revolutions: int,
+    low_path: bool,
+    pole: Pole | None,
+    tol_km: float,
+    max_corrections: int,
+) -> tuple[Vec, Vec, Vec, Vec, int]:
+    """Correct a Lambert burn from ``r1`` for J2 by shooting: while the integrated arrival ``r_end`` misses ``goal``
+    by over ``tol_km`` (at most ``max_corrections`` times), move the aim by the miss and solve Lambert again on the
+    same branch. Returns the aim, the burn's departure velocity, the arrival state and the corrections made."""
+    n = 0
+    while np.linalg.norm(r_end - goal) > tol_km and n < max_corrections:
+        aim = aim + (goal - r_end)
+        v_dep = lambert(r1, aim, t_arrive_s - t_burn_s, revolutions, low_path, prograde_normal=h).v1_km_s
+        r_end, v_end = propagate_j2(r1, v_dep, t_burn_s, t_arrive_s, pole)
+        n += 1
+    return aim, v_dep, r_end, v_end, n
+
+
+def retarget(
+    r1_km: Vec,
+    v1_km_s: Vec,
+    t_burn_s: float,
+    goal_km: Vec,
+    t_arrive_s: float,
+    revolutions: int,
+    low_path: bool,
+    pole: Pole | None,
+    tol_km: float = 1e-6,
+) -> tuple[Vec, Vec, Vec]:
+    """The burn from the exact state ``(r1, v1)`` at ``t_burn_s`` that arrives at ``goal_km`` at ``t_arrive_s``
+    (two-body + J2), to ``tol_km``: Lambert on the branch given, corrected as ``phase`` corrects it (``_shoot``).
+    Returns the impulse and the state on arrival. A campaign's burn computed from an interpolated state instead
+    drifts the next scenes by km (design/measurements.md, "Chaining a campaign's burns")."""
+    h = np.cross(r1_km, v1_km_s)
+    goal = np.asarray(goal_km, float)
+    v_dep = lambert(r1_km, goal, t_arrive_s - t_burn_s, revolutions, low_path, prograde_normal=h).v1_km_s
+    r_end, v_end = propagate_j2(r1_km, v_dep, t_burn_s, t_arrive_s, pole)
+    _, v_dep, r_end, v_end, _ = _shoot(
+        r1_km, h, goal.copy(), goal, v_dep, r_end, v_end, t_burn_s, t_arrive_s, revolutions, low_path, pole, tol_km, 12
+    )
+    return np.asarray(v_dep - v1_km_s, float), r_end, v_end
 
 
 def standoff_direction(r_target_km: Vec, v_relative_km_s: Vec, r_sun_km: Vec | None) -> Vec:

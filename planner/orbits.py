@@ -8,13 +8,11 @@ samples the Earth's orientation over a span with the one margin every caller nee
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from datetime import datetime
 from typing import Literal
 
-from planner.constants import R_EARTH_KM
-from planner.elements import Elements, state_to_elements
+from planner.elements import Elements, elements_of_state
 from planner.errors import PlannerError
 from planner.propagation import (
     EarthFrames,
@@ -98,13 +96,4 @@ def osculating_elements(orbit: Orbit, epoch: datetime, frames: EarthFrames) -> E
         return orbit.elements
     assert orbit.tle is not None
     r, v = SGP4Trajectory(orbit.tle, epoch, frames).state(0.0)
-    a, e, i, raan, argp, m = (float(x) for x in state_to_elements(r[:, 0], v[:, 0]))
-    return Elements(
-        epoch,
-        a * (1 + e) - R_EARTH_KM,
-        a * (1 - e) - R_EARTH_KM,
-        math.degrees(i),
-        math.degrees(raan),
-        math.degrees(argp),
-        math.degrees(m),
-    )
+    return elements_of_state(r[:, 0], v[:, 0], epoch)

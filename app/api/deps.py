@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import asyncio
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Annotated, Any, cast
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar, cast
 
 from fastapi import Depends, HTTPException, Query, Request, Security, UploadFile
+from fastapi.concurrency import run_in_threadpool
 from fastapi.security import APIKeyHeader
 from sqlalchemy.orm import Session
 
@@ -225,3 +227,36 @@ def observe_work(request: Request, kind: str, started: float, frames: int = 0) -
     metrics.work.labels(kind).observe(time.perf_counter() - started)
     if frames:
         metrics.frames.inc(frames)
+
+
+T = TypeVar("T")
+
+
+async def plan_in_worker(
+    request: Request,
+    kind: str,
+    work: Callable[..., T],
+    settings: Settings,
+    timeout_s: float | None = None,
+    budget_name: str = "PLAN",
+    **kwargs: Any,
+) -> T:
+    """Run planning ``work(settings=..., stop=..., **kwargs)`` in a worker thread under its budget (``planning_budget``), stopped
+    when the caller disconnects, and count it in the metrics as ``kind``: what a plan and a campaign route share."""
+    gone = threading.Event()
+    stop = planning_budget(settings, gone, timeout_s, budget_name)
+
+    async def watch() -> None:
+        while not gone.is_set():
+            if await request.is_disconnected():
+                gone.set()
+            await asyncio.sleep(0.2)
+
+    watcher = asyncio.create_task(watch())
+    started = time.perf_counter()
+    try:
+        result = await run_in_threadpool(work, settings=settings, stop=stop, **kwargs)
+    finally:
+        watcher.cancel()
+    observe_work(request, kind, started)
+    return result

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import replace
-from datetime import UTC, datetime, timedelta
+from datetime import datetime, timedelta
 from typing import Any, TypeVar
 
 from sqlalchemy.orm import Session
@@ -328,9 +328,10 @@ ACCESS_CSV_COLUMNS = (
 
 
 def _z(iso: str) -> str:
-    """ISO 8601 UTC with a Z, microseconds: the one time style of the exports."""
-    t = datetime.fromisoformat(iso).astimezone(UTC)
-    return t.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+    """A stored ISO 8601 time in the exports' one time style (``exports.z_time``)."""
+    from app.services.exports import z_time
+
+    return z_time(datetime.fromisoformat(iso))
 
 
 def access_csv(windows: list[dict[str, Any]]) -> str:

@@ -2,17 +2,13 @@
 
 from __future__ import annotations
 
-import asyncio
-import threading
-import time
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, HTTPException, Path, Query, Request, Response
-from fastapi.concurrency import run_in_threadpool
 
 from app import crud
 from app.api import examples
-from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep, observe_work, planning_budget
+from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep, plan_in_worker
 from app.schemas import CAMPAIGN_EXAMPLE, CampaignCreate, CampaignPublic, CampaignsPublic, CampaignSummary, Text
 from app.services.campaigns import plan_and_store_campaign
 
@@ -45,29 +41,17 @@ async def create_campaign(
     ``GSA_CAMPAIGN_TIMEOUT_S`` and ``GSA_PLAN_MEMORY_MB``, and stops when the caller disconnects; then nothing
     is stored.
     """
-    gone = threading.Event()
-    stop = planning_budget(settings, gone, settings.campaign_timeout_s, "CAMPAIGN")
-
-    async def watch() -> None:
-        while not gone.is_set():
-            if await request.is_disconnected():
-                gone.set()
-            await asyncio.sleep(0.2)
-
-    watcher = asyncio.create_task(watch())
-    started = time.perf_counter()
-    try:
-        row = await run_in_threadpool(
-            plan_and_store_campaign,
-            session=session,
-            operator_id=operator.id,
-            campaign_in=campaign_in,
-            settings=settings,
-            stop=stop,
-        )
-    finally:
-        watcher.cancel()
-    observe_work(request, "campaign", started)
+    row = await plan_in_worker(
+        request,
+        "campaign",
+        plan_and_store_campaign,
+        settings,
+        settings.campaign_timeout_s,
+        "CAMPAIGN",
+        session=session,
+        operator_id=operator.id,
+        campaign_in=campaign_in,
+    )
     return CampaignPublic.from_row(row)
 
 

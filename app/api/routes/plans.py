@@ -2,17 +2,13 @@
 
 from __future__ import annotations
 
-import asyncio
-import threading
-import time
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, HTTPException, Path, Query, Request, Response
-from fastapi.concurrency import run_in_threadpool
 
 from app import crud
 from app.api import examples
-from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep, check_span, observe_work, planning_budget
+from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep, check_span, plan_in_worker, planning_budget
 from app.schemas import PAPER_EXAMPLE, IsoDateTime, PlanCreate, PlanPublic, PlansPublic, PlanSummary, Text
 from app.services.planning import access_csv, plan_and_store, run_plan
 
@@ -44,24 +40,9 @@ async def create_plan(
     plans) and stops when the caller disconnects; in each case nothing is stored.
     """
     check_span(plan_in.search.duration_days, settings, ["search", "duration_days"])
-    gone = threading.Event()
-    stop = planning_budget(settings, gone)
-
-    async def watch() -> None:
-        while not gone.is_set():
-            if await request.is_disconnected():
-                gone.set()
-            await asyncio.sleep(0.2)
-
-    watcher = asyncio.create_task(watch())
-    started = time.perf_counter()
-    try:
-        plan = await run_in_threadpool(
-            plan_and_store, session=session, operator_id=operator.id, plan_in=plan_in, settings=settings, stop=stop
-        )
-    finally:
-        watcher.cancel()
-    observe_work(request, "plan", started)
+    plan = await plan_in_worker(
+        request, "plan", plan_and_store, settings, session=session, operator_id=operator.id, plan_in=plan_in
+    )
     return PlanPublic.from_row(plan)
 
 
