@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from inference.errors import ModelFileError, RadarError
 from inference.rotations import rotation_matrix
+from inference.simulation.po import Mesh, POOptions, checked_mesh, po_echo, po_sources, prepared
 from inference.simulation.radar import (
     Imager,
     Radar,
@@ -149,6 +150,11 @@ IMAGING = ("polar", "range-doppler")
 SCATTERERS = ("lattice", "dense")
 
 
+PHYSICS = ("centres", "po")
+_CENTRES_ONLY = {"scatterers": "lattice", "edge_gain": 1.0, "lobe_scale": 1.0, "dominant": 0}
+_PO_ONLY = {"bounces": 1, "roughness": 0.0, "facet_m": 0.2}
+
+
 @dataclass(frozen=True, slots=True)
 class Scattering:
     """How the simulator turns the target into an image; the defaults are what every data set so far used.
@@ -168,6 +174,11 @@ class Scattering:
     * ``scale_error``: range and cross-range scale errors drawn in +-this (an uncertain
       rotation rate scales cross-range); the label keeps the true geometry.
     * ``blur_px``: Gaussian blur (sigma, pixels) of the magnitude image (defocus).
+    * ``physics``: ``centres``, the scattering-centre heuristic above; or ``po``, physical optics on
+      the target's facets (``inference.simulation.po``: closed-form facet integrals, ray-traced
+      shadowing), which takes ``bounces`` (1, or 2-3 for shooting and bouncing rays), ``roughness``
+      (Lambert's gamma of a diffuse term per facet, 0-1) and ``facet_m`` (facet size, 0.05-0.5 m)
+      instead of ``scatterers``, ``edge_gain``, ``lobe_scale`` and ``dominant``.
     """
 
     scatterers: str = "lattice"
@@ -179,9 +190,17 @@ class Scattering:
     phase_error_rad: float = 0.0
     scale_error: float = 0.0
     blur_px: float = 0.0
+    physics: str = "centres"
+    bounces: int = 1
+    roughness: float = 0.0
+    facet_m: float = 0.2
 
     def __post_init__(self) -> None:
         checks = (
+            ("physics", self.physics in PHYSICS),
+            ("bounces", isinstance(self.bounces, int) and 1 <= self.bounces <= 3),
+            ("roughness", 0.0 <= self.roughness <= 1.0),
+            ("facet_m", 0.05 <= self.facet_m <= 0.5),
             ("scatterers", self.scatterers in SCATTERERS),
             ("edge_gain", 0.0 <= self.edge_gain <= 10.0),
             ("lobe_scale", 0.1 <= self.lobe_scale <= 10.0),
@@ -193,6 +212,13 @@ class Scattering:
             ("blur_px", 0.0 <= self.blur_px <= 10.0),
         )
         refuse_unusable(self, checks)
+        other, wrong = ("centres", _CENTRES_ONLY) if self.physics == "po" else ("po", _PO_ONLY)
+        for name, default in wrong.items():
+            if getattr(self, name) != default:
+                raise RadarError(
+                    f"{name} does not apply to physics {self.physics!r} (it belongs to the {other!r} physics)",
+                    field=name,
+                )
 
 
 DEFAULT_SCATTERING = Scattering()
@@ -249,22 +275,10 @@ def _dense_skin(model: TargetModel) -> tuple[Vec, Vec]:
     return _DENSE[key]
 
 
-def simulate(
-    model: TargetModel,
-    imager: Imager,
-    angles_deg: tuple[float, float, float],
-    snr_db: float | None,
-    seed: int,
-    scattering: Scattering = DEFAULT_SCATTERING,
-) -> Frame:
-    """Simulate one frame: rotate, cull hidden scatterers, image, add noise at ``snr_db`` (None: noise-free).
-
-    ``scattering`` other than the default changes how (``Scattering``); the default draws the
-    same random numbers in the same order as before it existed, so every data set stays the same.
-    """
-    rng = np.random.default_rng(seed)
-    rot = rotation_matrix(*angles_deg)
-    sc = scattering
+def _centres_echo(
+    model: TargetModel, imager: Imager, rot: Vec, sc: Scattering, rng: np.random.Generator
+) -> NDArray[np.complex128]:
+    """The scattering-centre physics' echo: rotate, cull hidden scatterers, their amplitudes, the NUFFT."""
     radar = imager.radar
     if sc.scatterers == "dense":
         skin, skin_normals = _dense_skin(model)
@@ -292,6 +306,62 @@ def simulate(
         echo = polar_echo(radar, p, amps)
     else:
         echo = imager.echo(p, amps)
+    return echo
+
+
+def po_mesh(model: TargetModel) -> tuple[Mesh, list[str]]:
+    """Return the model's facets checked for physical optics (``po.checked_mesh``) and what was done to them."""
+    if model.mesh is None:
+        raise ModelFileError(
+            f"model {model.name!r} has no facets (a point cloud): physics 'po' needs a triangle mesh", field="model"
+        )
+    key = id(model.mesh)
+    if key not in _PO_MESH:
+        _PO_MESH.clear()
+        _PO_MESH[key] = checked_mesh(model.mesh.vertices, model.mesh.faces, model.name)
+    return _PO_MESH[key]
+
+
+_PO_MESH: dict[int, tuple[Mesh, list[str]]] = {}
+
+
+def _po_echo(
+    model: TargetModel, imager: Imager, rot: Vec, sc: Scattering, rng: np.random.Generator
+) -> NDArray[np.complex128]:
+    """The physical-optics echo of the model's facets (``inference.simulation.po``)."""
+    mesh, _ = po_mesh(model)
+    pm = prepared(mesh, sc.facet_m)
+    options = POOptions(sc.facet_m, sc.bounces, sc.roughness)
+    scale = (1.0, 1.0)
+    if sc.scale_error:
+        scale = (1.0 + rng.uniform(-1, 1) * sc.scale_error, 1.0 + rng.uniform(-1, 1) * sc.scale_error)
+    if sc.imaging == "range-doppler":
+        pts, amps = po_sources(pm, rot, imager.radar, options, rng)
+        return polar_echo(imager.radar, pts * np.array([scale[0], scale[1], 1.0]), amps)
+    return po_echo(pm, rot, imager, options, rng, scale)
+
+
+def simulate(
+    model: TargetModel,
+    imager: Imager,
+    angles_deg: tuple[float, float, float],
+    snr_db: float | None,
+    seed: int,
+    scattering: Scattering = DEFAULT_SCATTERING,
+) -> Frame:
+    """Simulate one frame: rotate, cull hidden scatterers, image, add noise at ``snr_db`` (None: noise-free).
+
+    ``scattering`` other than the default changes how (``Scattering``); the default draws the
+    same random numbers in the same order as before it existed, so every data set stays the same.
+    """
+    rng = np.random.default_rng(seed)
+    rot = rotation_matrix(*angles_deg)
+    sc = scattering
+    radar = imager.radar
+    if sc.physics == "po":
+        echo = _po_echo(model, imager, rot, sc, rng)
+    else:
+        echo = _centres_echo(model, imager, rot, sc, rng)
     if sc.phase_error_rad:
         t = np.linspace(-1.0, 1.0, radar.n_azimuth)
         curve = rng.uniform(-1, 1) * t**2 + rng.uniform(-1, 1) * t**3

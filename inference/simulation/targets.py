@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from inference.errors import ModelFileError
+from inference.simulation.po import Mesh, box_mesh, cylinder_mesh, join, plate_mesh, sphere_mesh
 
 Vec = NDArray[np.float64]
 
@@ -39,6 +40,7 @@ class TargetModel:
     normals: Vec
     kinds: NDArray[np.int8]
     description: str = ""
+    mesh: Mesh | None = None  # the skin as triangles (physical optics); None for a point cloud
 
     @property
     def radius_m(self) -> float:
@@ -194,14 +196,22 @@ def _tilted(axis_u: Vec, axis_v: Vec, tilt_deg: float) -> tuple[Vec, Vec]:
     return u, v * math.cos(t) + np.cross(u, v) * math.sin(t)
 
 
-def _assembled(name: str, parts_sc: list[tuple[Vec, Vec, int]], parts_surf: list[Vec], description: str) -> TargetModel:
-    """Join a built target's parts and centre it on its skin's centroid."""
+def _assembled(
+    name: str, parts_sc: list[tuple[Vec, Vec, int]], parts_surf: list[Vec], parts_mesh: list[Mesh], description: str
+) -> TargetModel:
+    """Join a built target's parts (scattering centres, skin, facets) and centre it on its skin's centroid."""
     sc = np.concatenate([p for p, _, _ in parts_sc])
     normals = np.concatenate([n for _, n, _ in parts_sc])
     kinds = np.concatenate([np.full(len(p), k, np.int8) for p, _, k in parts_sc])
     surface = np.concatenate(parts_surf)
     centroid = surface.mean(axis=0)
-    return TargetModel(name, surface - centroid, sc - centroid, normals, kinds, description)
+    mesh = join(parts_mesh).shifted(-centroid)
+    return TargetModel(name, surface - centroid, sc - centroid, normals, kinds, description, mesh)
+
+
+def _segments(radius: float) -> int:
+    """Facets around a cylinder: strips 10 cm wide (17 cm along it), so neighbouring strips' specular lobes overlap."""
+    return max(24, math.ceil(2 * math.pi * radius / 0.1))
 
 
 def tiangong_like(scatterer_spacing_m: float = 0.3, surface_spacing_m: float = 0.08) -> TargetModel:
@@ -225,8 +235,12 @@ def tiangong_like(scatterer_spacing_m: float = 0.3, surface_spacing_m: float = 0
     ex, ey, ez = np.eye(3)
     parts_sc: list[tuple[Vec, Vec, int]] = []
     parts_surf: list[Vec] = []
+    parts_mesh: list[Mesh] = []
 
     def add_cylinder(origin: Vec, axis: Vec, radius: float, length: float, caps: tuple[bool, bool]) -> None:
+        parts_mesh.append(
+            cylinder_mesh(origin, axis, radius, length, _segments(radius), max(1, math.ceil(length / 0.17)))
+        )
         p, n, rim, rim_n = cylinder(origin, axis, radius, length, s_sc)
         parts_sc.extend([(p, n, CURVED), (rim, rim_n, EDGE)])
         parts_surf.append(cylinder(origin, axis, radius, length, s_surf)[0])
@@ -240,6 +254,7 @@ def tiangong_like(scatterer_spacing_m: float = 0.3, surface_spacing_m: float = 0
 
     def add_plate(center: Vec, u: Vec, v: Vec, su: float, sv: float, tilt: float) -> None:
         u, v = _tilted(u, v, tilt)
+        parts_mesh.append(plate_mesh(center, u, v, su, sv))
         face, normals, edge = plate(center, u, v, su, sv, s_sc)
         parts_sc.extend([(face, normals, FLAT), (edge, np.broadcast_to(normals[0], edge.shape).copy(), EDGE)])
         parts_surf.append(plate(center, u, v, su, sv, s_surf)[0])
@@ -250,6 +265,7 @@ def tiangong_like(scatterer_spacing_m: float = 0.3, surface_spacing_m: float = 0
     add_cylinder(origin + [4.0, 0, 0], ex, 1.4, 3.5, (False, False))
     node = np.array([8.7, 0.0, 0.0])
     p, n = sphere(node, 1.4, s_sc)
+    parts_mesh.append(sphere_mesh(node, 1.4, 3))
     parts_sc.append((p, n, CURVED))
     parts_surf.append(sphere(node, 1.4, s_surf)[0])
     add_cylinder(node + [0, 1.2, 0], ey, 2.1, 7.0, (False, True))
@@ -262,6 +278,7 @@ def tiangong_like(scatterer_spacing_m: float = 0.3, surface_spacing_m: float = 0
         "tiangong-like",
         parts_sc,
         parts_surf,
+        parts_mesh,
         "compact asymmetric Tiangong-like station (inference/simulation/targets.py: tiangong_like)",
     )
 
@@ -279,15 +296,21 @@ def comsat_like(scatterer_spacing_m: float = 0.3, surface_spacing_m: float = 0.0
     ex, ey, ez = np.eye(3)
     parts_sc: list[tuple[Vec, Vec, int]] = []
     parts_surf: list[Vec] = []
+    parts_mesh: list[Mesh] = []
 
-    def add_plate(center: Vec, u: Vec, v: Vec, su: float, sv: float, tilt: float = 0.0) -> None:
+    def add_plate(center: Vec, u: Vec, v: Vec, su: float, sv: float, tilt: float = 0.0, mesh: bool = True) -> None:
         u, v = _tilted(u, v, tilt)
+        if mesh:
+            parts_mesh.append(plate_mesh(center, u, v, su, sv))
         face, normals, edge = plate(center, u, v, su, sv, s_sc)
         parts_sc.extend([(face, normals, FLAT), (edge, np.broadcast_to(normals[0], edge.shape).copy(), EDGE)])
         fine = plate(center, u, v, su, sv, s_surf)
         parts_surf.extend([fine[0], fine[2]])
 
     def add_cylinder(origin: Vec, axis: Vec, radius: float, length: float) -> None:
+        parts_mesh.append(
+            cylinder_mesh(origin, axis, radius, length, _segments(radius), max(1, math.ceil(length / 0.17)))
+        )
         p, n, rim, rim_n = cylinder(origin, axis, radius, length, s_sc)
         parts_sc.extend([(p, n, CURVED), (rim, rim_n, EDGE)])
         parts_surf.append(cylinder(origin, axis, radius, length, s_surf)[0])
@@ -303,7 +326,8 @@ def comsat_like(scatterer_spacing_m: float = 0.3, surface_spacing_m: float = 0.0
         (ez, lz, (ex, ey, lx, ly)),
     ):
         for sign in (1.0, -1.0):
-            add_plate(sign * axis * size / 2, u, v, su, sv)
+            add_plate(sign * axis * size / 2, u, v, su, sv, mesh=False)
+    parts_mesh.append(box_mesh(np.array([lx, ly, lz])))
     add_plate(np.array([0.0, ly / 2 + 0.6 + 3.5, 0.0]), ey, ex, 7.0, 2.2, 25.0)
     add_plate(np.array([0.0, -ly / 2 - 0.6 - 3.5, 0.0]), ey, ex, 7.0, 2.2, -10.0)
     for sign in (1.0, -1.0):  # the yokes: rods from the bus to the wings
@@ -314,6 +338,7 @@ def comsat_like(scatterer_spacing_m: float = 0.3, surface_spacing_m: float = 0.0
         "comsat-like",
         parts_sc,
         parts_surf,
+        parts_mesh,
         "box-wing communications satellite (inference/simulation/targets.py: comsat_like)",
     )
 
