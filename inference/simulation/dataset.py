@@ -22,7 +22,7 @@ import shutil
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +34,16 @@ from inference.files import read_json, sha256_file, write_json
 from inference.frames import normalise_frame
 from inference.simulation.meshes import load_model
 from inference.simulation.radar import Imager, Radar
-from inference.simulation.scene import check_fits, draw_scattering, mirror_pair_iou, simulate
+from inference.simulation.scene import (
+    DEFAULT_SCATTERING,
+    PHYSICS,
+    Scattering,
+    check_fits,
+    draw_scattering,
+    mirror_pair_iou,
+    po_mesh,
+    simulate,
+)
 from inference.simulation.targets import TargetModel, tiangong_like
 
 FORMAT_VERSION = 1
@@ -58,6 +67,14 @@ class DatasetSpec:
     # Under ``variety``, the share of frames drawn from the preset; the others are default frames, so a
     # set can teach the varied looks without giving up the default one (1.0: every frame varied).
     variety_share: float = 1.0
+    # ``physics`` "po": frames by physical optics on the model's facets (inference/simulation/po.py), a share
+    # ``physics_share`` of them (the rest default frames), each with ``po_bounces``, a roughness drawn
+    # uniformly in ``po_roughness`` (low, high) and facets of ``po_facet_m``.
+    physics: str = "centres"
+    physics_share: float = 1.0
+    po_bounces: int = 1
+    po_roughness: tuple[float, float] = (0.0, 0.0)
+    po_facet_m: float = 0.2
 
     def __post_init__(self) -> None:
         if not isinstance(self.n, int) or self.n <= 0:
@@ -88,6 +105,24 @@ class DatasetSpec:
             )
         if self.variety is not None:
             draw_scattering(self.variety, np.random.default_rng(0), dict(self.variety_overrides))  # fails early
+        if self.physics not in PHYSICS:
+            raise DatasetError(f"unknown physics {self.physics!r}; one of {', '.join(PHYSICS)}", field="physics")
+        if not (isinstance(self.physics_share, (int, float)) and 0.0 < self.physics_share <= 1.0):
+            raise DatasetError(
+                f"physics_share {self.physics_share} must be in (0, 1]: the share of frames made by --physics",
+                field="physics_share",
+            )
+        lo, hi = self.po_roughness
+        if not 0.0 <= lo <= hi <= 1.0:
+            raise DatasetError(f"roughness {lo}:{hi} must be LOW:HIGH within [0, 1]", field="roughness")
+        if self.physics == "centres" and (
+            self.physics_share < 1.0 or self.po_bounces != 1 or hi > 0 or self.po_facet_m != 0.2
+        ):
+            raise DatasetError(
+                "--physics-share, --bounces, --roughness and --facet-m belong to --physics po", field="physics"
+            )
+        if self.physics == "po":
+            Scattering(physics="po", bounces=self.po_bounces, roughness=hi, facet_m=self.po_facet_m)  # fails early
         if self.n_train is not None and not 0 <= self.n_train <= self.n:
             raise DatasetError(f"n_train {self.n_train} must be within [0, n={self.n}]", field="n_train")
 
@@ -123,7 +158,37 @@ def is_varied(spec: DatasetSpec, frame_seed: int) -> bool:
 def build_model(spec: DatasetSpec, radar: Radar) -> TargetModel:
     model = tiangong_like() if spec.model_path is None else load_model(spec.model_path, spec.model_scale)
     check_fits(model, radar)
+    if spec.physics == "po":
+        po_mesh(model)  # a point cloud or an unusable mesh fails here, before any work
     return model
+
+
+def frame_scattering(spec: DatasetSpec, frame_seed: int) -> Scattering:
+    """Return the scattering of the frame of this seed: the default, a variety draw, physical optics, or both.
+
+    The variety and the physics each draw from a stream of their own, so a frame's angles, SNR and
+    seed stay the default set's. A PO frame keeps a variety draw's window, imaging and errors and
+    drops what belongs to the scattering-centre physics.
+    """
+    sc = DEFAULT_SCATTERING
+    if spec.variety is not None and is_varied(spec, frame_seed):
+        sc = draw_scattering(spec.variety, np.random.default_rng([frame_seed, 1]), dict(spec.variety_overrides))
+    if spec.physics == "po":
+        rng = np.random.default_rng([frame_seed, 3])
+        if spec.physics_share >= 1.0 or float(rng.uniform()) < spec.physics_share:
+            lo, hi = spec.po_roughness
+            sc = replace(
+                sc,
+                scatterers="lattice",
+                edge_gain=1.0,
+                lobe_scale=1.0,
+                dominant=0,
+                physics="po",
+                bounces=spec.po_bounces,
+                roughness=float(rng.uniform(lo, hi)) if hi > lo else lo,
+                facet_m=spec.po_facet_m,
+            )
+    return sc
 
 
 def render_frames(
@@ -140,11 +205,7 @@ def render_frames(
     seeds = np.empty(n, np.int64)
     for k, index in enumerate(range(start, stop)):
         ang, snr, s = frame_truth(spec, index)
-        if spec.variety is None or not is_varied(spec, s):
-            frame = simulate(model, imager, ang, snr, s)
-        else:  # the variety draws from its own stream, so a frame's angles, SNR and seed stay the default set's
-            sc = draw_scattering(spec.variety, np.random.default_rng([s, 1]), dict(spec.variety_overrides))
-            frame = simulate(model, imager, ang, snr, s, sc)
+        frame = simulate(model, imager, ang, snr, s, frame_scattering(spec, s))
         images[k] = normalise_frame(np.abs(frame.image))
         labels[k] = np.packbits(frame.label, axis=1)
         angles[k] = ang
@@ -405,6 +466,25 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="P",
         help="under --variety, the share of frames drawn from the preset; the rest are default frames (default 1)",
     )
+    p.add_argument(
+        "--physics",
+        default="centres",
+        help="centres (the scattering-centre simulator, default) or po (physical optics on the model's facets)",
+    )
+    p.add_argument(
+        "--physics-share",
+        type=float,
+        default=1.0,
+        metavar="P",
+        help="under --physics po, the share of frames made by PO; the rest are default frames (default 1)",
+    )
+    p.add_argument("--bounces", type=int, default=1, help="under --physics po: 1, or 2-3 (shooting and bouncing rays)")
+    p.add_argument(
+        "--roughness",
+        default="0",
+        help="under --physics po: Lambert's gamma of a diffuse term per facet, G or LOW:HIGH drawn per frame (0-1)",
+    )
+    p.add_argument("--facet-m", type=float, default=0.2, help="under --physics po: facet size in metres (default 0.2)")
     p.add_argument("--out", help="new directory for the data set")
     p.add_argument("--preview", metavar="PNG", help="draw a few frames beside their labels instead")
 
@@ -420,6 +500,19 @@ def parse_override(text: str) -> tuple[str, Any]:
         except ValueError:
             continue
     return name.strip(), value.strip()
+
+
+def parse_roughness(text: str) -> tuple[float, float]:
+    """Parse G or LOW:HIGH (Lambert's gamma, 0-1)."""
+    lo, sep, hi = str(text).partition(":")
+    try:
+        low = float(lo)
+        high = float(hi) if sep else low
+    except ValueError:
+        raise DatasetError(
+            f"--roughness {text!r}: write a number or LOW:HIGH, e.g. 0.2 or 0:0.5", field="roughness"
+        ) from None
+    return low, high
 
 
 def run(args: argparse.Namespace) -> int:
@@ -443,6 +536,11 @@ def run(args: argparse.Namespace) -> int:
         args.variety,
         tuple(parse_override(v) for v in args.variety_set),
         args.variety_share,
+        args.physics,
+        args.physics_share,
+        args.bounces,
+        parse_roughness(args.roughness),
+        args.facet_m,
     )
     radar = Radar(args.carrier_hz, args.bandwidth_hz, args.n_range, args.n_azimuth, args.aperture_deg)
     if args.preview:

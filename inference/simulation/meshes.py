@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from inference.errors import ModelFileError
+from inference.simulation.po import Mesh
 from inference.simulation.targets import FLAT, ISOTROPIC, TargetModel
 
 Vec = NDArray[np.float64]
@@ -169,4 +170,5 @@ def load_model(path: str | Path, scale: float = 1.0, scatterer_spacing_m: float 
         normals = np.zeros_like(sc)
         kinds = np.full(len(sc), ISOTROPIC, np.int8)
     centroid = surface.mean(axis=0)
-    return TargetModel(p.stem, surface - centroid, sc - centroid, normals, kinds, f"loaded from {p.name}")
+    mesh = Mesh(verts - centroid, faces, np.zeros(len(faces), bool)) if len(faces) else None
+    return TargetModel(p.stem, surface - centroid, sc - centroid, normals, kinds, f"loaded from {p.name}", mesh)
