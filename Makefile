@@ -36,6 +36,7 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.campaigns
 	$(BIN)/python -m bench.trust
 	$(BIN)/python -m bench.robust
+	$(BIN)/python -m bench.physics
 	$(BIN)/python -m bench.passes
 	$(BIN)/python -m bench.load
 

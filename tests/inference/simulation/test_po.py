@@ -144,9 +144,9 @@ def test_a_plate_behind_another_is_shadowed():
 
 
 def test_fast_echo_matches_the_exact_echo():
-    """The fast path (2 x 2 nodes, NUFFT) against every sample's exact integral, for a box and a plate: with 5 cm facets
-    within 6 % of the windowed echo at every aspect (0.4 % at specular, 5.2 % where the return is 700x weaker);
-    with the default 0.2 m facets within 10 % at specular only (design/measurements.md, "Physical optics")."""
+    """The fast path (3 x 3 nodes, NUFFT) against every sample's exact integral, for a box and a plate: with 5 cm facets
+    within 6 % of the windowed echo at every aspect, including where the return is 700x weaker than at specular;
+    with the default 0.2 m facets within 10 % at specular (BENCHMARKS.md, "Physical optics", has the station's)."""
     radar = Radar(n_range=64, n_azimuth=64)
     imager = Imager(radar)
     mesh = join(
