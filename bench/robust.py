@@ -53,6 +53,9 @@ HELD_OUT = {
     "dense speckle, range-Doppler, 1.5 px blur": Scattering(scatterers="dense", imaging="range-doppler", blur_px=1.5),
     "phase error 2 rad, scale errors +-3 %": Scattering(phase_error_rad=2.0, scale_error=0.03),
     "10 dominant returns, Hamming": Scattering(dominant=10, window="hamming"),
+    # The electromagnetic end (inference/simulation/po.py): no network has seen a PO frame.
+    "physical optics": Scattering(physics="po"),
+    "physical optics, roughness 0.3": Scattering(physics="po", roughness=0.3),
 }
 
 
