@@ -9,7 +9,7 @@ are the same whatever the number of workers. The set is written to ``DIR.partial
 and renamed at the end: an interrupted run never leaves a set that looks complete.
 
 Runs with numpy and scipy only (``python -m inference.simulation.dataset ...``), so a bare GPU
-machine can make its own training data.
+machine can make its own training data; ``--physics po`` also needs trimesh, embreex and numba.
 """
 
 from __future__ import annotations

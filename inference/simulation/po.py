@@ -423,7 +423,8 @@ def lit_facets(pm: PreparedMesh, rot: Vec, los: Vec) -> tuple[NDArray[np.int64],
 
 # The fast path's nodes: the facets' integrals at K0 + (a, b) x the half-patch (range, cross-range), interpolated
 # by quadratic Lagrange polynomials between them. On the default target with 0.2 m facets, 3 x 3 nodes at +-0.7
-# err by 5 % (median; 15 % at most) in 178 ms a frame, 2 x 2 at +-0.5 by 22 % in 88 ms (BENCHMARKS.md, "Physical optics").
+# err by 5 % (median; 20 % at most), 2 x 2 at +-0.5 by 22 % in half the time (measured before the kernels were
+# compiled: 178 against 88 ms a frame; BENCHMARKS.md, "Physical optics", has today's 109 ms for 3 x 3).
 NODES = (-0.7, 0.0, 0.7)
 
 
@@ -466,9 +467,12 @@ def po_echo(
     cos = np.abs(nrm @ los)
     rel = pm.rel[idx] @ rot.T
     pts = pm.centroids[idx] @ rot.T
-    cols = [
-        gain * cos * triangle_integral(rel, k0 + a * half_r * los + b * half_a * rate) for a in NODES for b in NODES
-    ]
+    nodes = np.asarray(NODES, float)
+    block = np.empty((len(idx), len(nodes) ** 2), np.complex128)
+    from inference.simulation.kernels import node_integrals
+
+    node_integrals(np.ascontiguousarray(rel), k0, half_r * los, half_a * rate, nodes, gain * cos, block)
+    cols = list(block.T)
     extra_p, extra_a = _extra_sources(pm, rot, idx, nrm, los, lam, options, rng)
     if len(extra_p):  # point-like terms: the same amplitude at every node
         pts = np.concatenate([pts, extra_p])

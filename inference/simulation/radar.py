@@ -145,19 +145,18 @@ def nufft_type1(
     l_a = np.floor(x_a / h_a).astype(np.int64)[:, None] + taps
     g_r = np.exp(-((l_r * h_r - x_r[:, None]) ** 2) / (4.0 * tau_r))
     g_a = np.exp(-((l_a * h_a - x_a[:, None]) ** 2) / (4.0 * tau_a))
-    index = (np.mod(l_r, big_r)[:, :, None] * big_a + np.mod(l_a, big_a)[:, None, :]).ravel()
     m = np.arange(-n_r // 2, n_r // 2)
     n = np.arange(-n_a // 2, n_a // 2)
     deconv = np.outer(np.sqrt(np.pi / tau_r) * np.exp(m**2 * tau_r), np.sqrt(np.pi / tau_a) * np.exp(n**2 * tau_a))
-    if c.ndim == 2:  # several coefficient sets on the same sources: the gridding weights once, one FFT each
-        g = (g_r[:, :, None] * g_a[:, None, :]).reshape(len(u), -1)
-        grids = [
-            np.bincount(index, (g * col.real[:, None]).ravel(), big_r * big_a)
-            + 1j * np.bincount(index, (g * col.imag[:, None]).ravel(), big_r * big_a)
-            for col in c.T
-        ]
-        spectra = scipy.fft.fft2(np.stack(grids).reshape(-1, big_r, big_a), axes=(1, 2)) / (big_r * big_a)
-        return np.asarray(spectra[:, np.mod(m, big_r)][:, :, np.mod(n, big_a)] * deconv)
+    if c.ndim == 2:  # several coefficient sets on the same sources: gridded in one compiled pass, FFTs pruned
+        grid = np.zeros((big_r, big_a, c.shape[1]), np.complex128)
+        from inference.simulation.kernels import spread_columns
+
+        spread_columns(l_r[:, 0], l_a[:, 0], g_r, g_a, np.ascontiguousarray(c, np.complex128), grid)
+        half = scipy.fft.fft(grid, axis=1)[:, np.mod(n, big_a)]  # only the output's columns go on to the next pass
+        spectra = scipy.fft.fft(half, axis=0)[np.mod(m, big_r)] / (big_r * big_a)
+        return np.asarray(np.moveaxis(spectra, 2, 0) * deconv)
+    index = (np.mod(l_r, big_r)[:, :, None] * big_a + np.mod(l_a, big_a)[:, None, :]).ravel()
     weights = ((c[:, None] * g_r)[:, :, None] * g_a[:, None, :]).ravel()
     grid = np.bincount(index, weights.real, big_r * big_a) + 1j * np.bincount(index, weights.imag, big_r * big_a)
     spectrum = scipy.fft.fft2(grid.reshape(big_r, big_a)) / (big_r * big_a)

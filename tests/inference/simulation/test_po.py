@@ -244,3 +244,41 @@ def test_simulate_command_po_and_its_refusals(tmp_path, capsys):
     spec = DatasetSpec(40, physics="po", physics_share=0.5)
     kinds = {frame_scattering(spec, frame_truth(spec, i)[2]).physics for i in range(40)}
     assert kinds == {"centres", "po"}  # a mixed set
+
+
+def test_compiled_kernels_match_the_numpy_formulas():
+    """The node integrals (numba) against ``triangle_integral`` node by node; the multi-column NUFFT against one at a time."""
+    from inference.simulation.kernels import node_integrals
+    from inference.simulation.radar import nufft_type1
+
+    rng = np.random.default_rng(4)
+    rel = rng.uniform(-0.1, 0.1, (500, 3, 3))
+    rel -= rel.mean(axis=1, keepdims=True)
+    rel[0] = [[0, 0, 0], [0, 0.1, 0], [0, 0, 0.1]] - np.array([0, 0.1, 0.1]) / 3  # broadside to K0: the series branch
+    k0, dk_r, dk_a = np.array([628.0, 0, 0]), np.array([33.0, 0, 0]), np.array([0, 28.0, 0])
+    nodes, weight = np.array([-0.7, 0.0, 0.7]), rng.random(500)
+    out = np.empty((500, 9), np.complex128)
+    node_integrals(rel, k0, dk_r, dk_a, nodes, weight, out)
+    ref = np.stack([weight * triangle_integral(rel, k0 + a * dk_r + b * dk_a) for a in nodes for b in nodes], 1)
+    assert np.abs(out - ref).max() < 1e-12 * np.abs(ref).max()
+    u, v = rng.uniform(20, 40, 300), rng.uniform(20, 40, 300)
+    c = rng.standard_normal((300, 3)) + 1j * rng.standard_normal((300, 3))
+    many = nufft_type1(u, v, c, 64, 64)
+    one = np.stack([nufft_type1(u, v, c[:, p].copy(), 64, 64) for p in range(3)])
+    assert np.abs(many - one).max() < 1e-12 * np.abs(one).max()
+
+
+def test_the_default_physics_needs_numpy_and_scipy_only():
+    """Importing the simulator and making default frames loads neither numba nor the ray engine (a bare GPU machine)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from inference.simulation.dataset import DatasetSpec, render_frames\n"
+        "from inference.simulation.radar import Radar\n"
+        "render_frames(DatasetSpec(2), Radar(), 0, 2)\n"
+        "print([m for m in ('numba', 'trimesh', 'embreex') if m in sys.modules])\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "[]"
