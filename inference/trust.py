@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -206,19 +207,31 @@ class Checker:
         network_deg: NDArray[np.floating] | None,
         refine: bool = True,
         search: bool = True,
+        progress: Callable[[int, int], None] | None = None,
     ) -> list[Checked]:
         """``check`` every frame [N, H, W], ``threads`` frames at once; the same answers as one by one.
+
+        ``progress(done, total)`` is called as each frame's check ends (from the fitting threads, in turn).
 
         The fit's work is the compiled renderer's and numpy's, both of which let go of the GIL, so
         threads share the cores: two fit a 30-frame pass in 1.6 s where one takes 3.1-3.3, on 2 cores
         (design/measurements.md, "Fitting a pass's frames on every core").
         """
         import os
+        import threading
         from concurrent.futures import ThreadPoolExecutor
+
+        lock = threading.Lock()
+        done = [0]
 
         def one(k: int) -> Checked:
             net = None if network_deg is None else network_deg[k]
-            return self.check(frames[k], enhanced[k], net, refine, search)
+            checked = self.check(frames[k], enhanced[k], net, refine, search)
+            if progress is not None:
+                with lock:
+                    done[0] += 1
+                    progress(done[0], len(frames))
+            return checked
 
         workers = min(self.threads or os.cpu_count() or 1, len(frames))
         if workers <= 1:

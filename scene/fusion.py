@@ -25,7 +25,7 @@ from inference.fusion import PassFrame, fuse, sweep_rates, sweep_sigmas
 from inference.rotations import MIRROR, RX_180, euler_from_matrix, rotation_matrix
 from scene.errors import SceneError
 from scene.geometry import Placements, Scene
-from scene.reading import read_frames
+from scene.reading import Progress, read_frames
 
 if TYPE_CHECKING:  # the fit and the checks load numba's compiled renderer: imported where they run
     from inference.fit import CommonFit, Renderer
@@ -225,14 +225,16 @@ def fit_and_fuse(
     names: list[str],
     sweeps: Sweeps | None = None,
     preprocess_s: float = 0.0,
+    progress: Progress | None = None,
 ) -> FusedPass:
     """Read every frame of a pass (the networks, then the fit, no library search), place each and fuse them.
 
     ``frames``: the pass's frames as the models take them [N, H, W]; ``scene``: over the pass's span
     (``pass_span``); ``sweeps``: each frame's measured sweep rate and integration time (``sweeps_from``), or None.
+    ``progress(stage, done, total)``: "estimated", "fitted" per frame, then "fused" when the answer is made.
     """
     t0 = time.perf_counter()
-    read = read_frames(est, checker, frames, search=False, preprocess_s=preprocess_s)
+    read = read_frames(est, checker, frames, search=False, preprocess_s=preprocess_s, progress=progress)
     t1 = time.perf_counter()
     attitude, checks = fuse_pass(
         est=est,
@@ -245,6 +247,8 @@ def fit_and_fuse(
         sweeps=sweeps,
         enhanced=read.network.enhanced,
     )
+    if progress is not None:
+        progress("fused", len(frames), len(frames))
     return FusedPass(attitude, checks, read.timings_s, t1 - t0 + preprocess_s, time.perf_counter() - t1)
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -12,6 +13,9 @@ from numpy.typing import NDArray
 if TYPE_CHECKING:  # the checks load numba's compiled renderer: the caller has them loaded already
     from inference.runtime import Estimator, NetworkOutput
     from inference.trust import Checked, Checker
+
+
+Progress = Callable[[str, int, int], None]  # (stage, done, total): long reads say how far they are
 
 
 @dataclass(frozen=True)
@@ -32,15 +36,26 @@ def read_frames(
     refine: bool = True,
     search: bool = True,
     preprocess_s: float = 0.0,
+    progress: Progress | None = None,
 ) -> Readings:
     """Run the networks on the frames [N, H, W] as one batch, then fit and check each (``Checker.check_many``).
 
     ``preprocess_s``: what preparing the frames took (s, the whole batch), kept in the timings.
+    ``progress(stage, done, total)``: "estimated" once the networks have read the batch, then "fitted" per frame.
     """
     res = est.estimate(frames)
-    t1 = time.perf_counter()
-    checks = checker.check_many(frames, res.enhanced, res.angles_deg if checker.networks else None, refine, search)
-    t_fit = time.perf_counter() - t1
     n = len(frames)
+    if progress is not None:
+        progress("estimated", n, n)
+    t1 = time.perf_counter()
+    checks = checker.check_many(
+        frames,
+        res.enhanced,
+        res.angles_deg if checker.networks else None,
+        refine,
+        search,
+        None if progress is None else (lambda done, total: progress("fitted", done, total)),
+    )
+    t_fit = time.perf_counter() - t1
     per_frame = {"preprocess": preprocess_s / n, **{k: v / n for k, v in res.timings_s.items()}, "fit": t_fit / n}
     return Readings(frames, res, checks, per_frame)

@@ -6,6 +6,7 @@ import argparse
 import json
 import math
 import sys
+import time
 from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -264,6 +265,7 @@ def cmd_pass(args: argparse.Namespace) -> int:
             names=[f"frame {k}" for k in range(len(times))],
             sweeps=sweeps,
             preprocess_s=prep_s,
+            progress=pass_progress(sys.stderr),
         )
         result = PassResult.from_pass(fused.attitude, target=checker.model.name, timings_s=fused.timings_s)
     except DOMAIN_ERRORS as exc:
@@ -277,6 +279,27 @@ def cmd_pass(args: argparse.Namespace) -> int:
         _plot_pass(result, rec, args.plot)
         print(f"plot written to {args.plot}", file=sys.stderr)
     return 0
+
+
+def pass_progress(stream: Any, width: int = 30) -> Any:
+    """A progress bar for ``fit_and_fuse`` on ``stream`` when it is a terminal (one line, rewritten), else nothing.
+
+    The networks read the whole pass at once ("estimated"), the fit goes frame by frame ("fitted k/N"),
+    then the fusion ("fused"); the line ends when the pass is fused.
+    """
+    if not stream.isatty():
+        return None
+    t0 = time.perf_counter()
+
+    def show(stage: str, done: int, total: int) -> None:
+        # the networks count for a tenth of the bar, the fit for the rest up to the fusion
+        share = {"estimated": 0.1, "fitted": 0.1 + 0.85 * done / max(total, 1), "fused": 1.0}[stage]
+        bar = "#" * round(width * share)
+        what = {"estimated": f"{total} frames estimated", "fitted": f"{done}/{total} fitted", "fused": "fused"}[stage]
+        end = "\n" if stage == "fused" else ""
+        print(f"\r[{bar:<{width}}] {what}, {time.perf_counter() - t0:.0f} s   ", end=end, file=stream, flush=True)
+
+    return show
 
 
 def _integration(rec: dict[str, Any]) -> tuple[list[float] | None, float | None]:

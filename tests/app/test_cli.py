@@ -15,6 +15,31 @@ def _gsa(*args, cwd, env_extra=None):
     return subprocess.run([sys.executable, "-m", "app.cli", *args], capture_output=True, text=True, cwd=cwd, env=env)
 
 
+def _on_a_terminal(args, cwd):
+    """Run gsa with its stderr on a pseudo-terminal; return what it wrote there."""
+    import os
+    import pty
+
+    master, slave = pty.openpty()
+    env = dict(os.environ, GSA_DATA_DIR=str(cwd / "data"))
+    proc = subprocess.run(
+        [sys.executable, "-m", "app.cli", *args], stdout=subprocess.DEVNULL, stderr=slave, cwd=cwd, env=env
+    )
+    os.close(slave)
+    chunks = []
+    while True:
+        try:
+            chunk = os.read(master, 65536)
+        except OSError:
+            break
+        if not chunk:
+            break
+        chunks.append(chunk)
+    os.close(master)
+    assert proc.returncode == 0
+    return b"".join(chunks).decode(errors="replace")
+
+
 def test_plan_prints_table_json_and_plot(tmp_path):
     req = tmp_path / "paper.json"
     req.write_text(json.dumps(PAPER_EXAMPLE))
@@ -122,6 +147,9 @@ def test_simulate_a_pass_then_fuse_it(tmp_path, smoke_models):
     )
     assert fused.returncode == 0, fused.stderr
     assert "fused, body to LVLH" in fused.stdout and (tmp_path / "p.png").stat().st_size > 10_000
+    assert "fitted" not in fused.stderr  # no bar where stderr is not a terminal
+    bar = _on_a_terminal(["pass", str(tmp_path / "pass"), "--models", str(smoke_models)], cwd=tmp_path)
+    assert "5 frames estimated" in bar and "5/5 fitted" in bar and "] fused" in bar, bar
     as_json = _gsa("pass", str(tmp_path / "pass"), "--models", str(smoke_models), "--json", cwd=tmp_path)
     frames = json.loads(as_json.stdout)["frames"]
     assert len(frames) == 5 and "sweep" in fused.stdout
