@@ -502,6 +502,22 @@ def _feature(kind: str, geometry: dict[str, Any], **properties: Any) -> dict[str
     return {"type": "Feature", "geometry": geometry, "properties": {"kind": kind, **properties}}
 
 
+def footprint_polygon(lat: Any, lon: Any) -> dict[str, Any]:
+    """The area inside a visibility circle as a GeoJSON Polygon, or a MultiPolygon where it crosses the antimeridian.
+
+    The ``antimeridian`` package (with shapely) cuts the ring at +-180 deg and closes a ring that encloses a
+    pole along it (RFC 7946 3.1.9), so GIS tools can fill it: hand-cutting rings gets the pole cases wrong.
+    """
+    import antimeridian
+    from shapely.geometry import Polygon, mapping
+
+    # The circle runs clockwise (azimuth); RFC 7946's right-hand rule wants exteriors counter-clockwise, which is
+    # also how antimeridian tells which pole a ring that crosses the antimeridian once encloses.
+    ring = [(round(float(x), 5), round(float(y), 5)) for x, y in zip(lon, lat, strict=True)][::-1]
+    shape = antimeridian.fix_polygon(Polygon(ring))
+    return dict(mapping(shape))
+
+
 def geojson(plan: Plan, names: dict[str, str], windows: list[dict[str, Any]]) -> str:
     """GeoJSON (RFC 7946, WGS-84 longitude/latitude): the station, where it sees the target, both ground tracks
     around the chosen moment (the target's in-view part apart), and the target under T_access."""
@@ -545,6 +561,14 @@ def geojson(plan: Plan, names: dict[str, str], windows: list[dict[str, Any]]) ->
         _feature(
             "visibility_circle",
             {"type": "MultiLineString", "coordinates": _lines(c_lat, c_lon)},
+            height_km=round(height, 3),
+            elevation_limit="the station's mask by azimuth, never below min_elevation_deg (geometric)",
+        )
+    )
+    features.append(
+        _feature(
+            "visibility_footprint",
+            footprint_polygon(c_lat, c_lon),
             height_km=round(height, 3),
             elevation_limit="the station's mask by azimuth, never below min_elevation_deg (geometric)",
         )

@@ -223,11 +223,14 @@ def test_geojson_tracks_station_and_where_it_sees_the_target(client, plan):
         "target_track",
         "target_in_view",
         "visibility_circle",
+        "visibility_footprint",
         "observer_track",
         "t_access",
         "observer_at_t_access",
     }
     for f in doc["features"]:
+        if f["geometry"]["type"] in ("Polygon", "MultiPolygon"):
+            continue  # read back by shapely below
         parts = f["geometry"]["coordinates"]
         for part in parts if f["geometry"]["type"] == "MultiLineString" else [[parts]]:
             lon, lat = np.array(part).T
@@ -241,6 +244,13 @@ def test_geojson_tracks_station_and_where_it_sees_the_target(client, plan):
     radius = _central_deg(s_lat, s_lon, circle[:, 1], circle[:, 0])
     seen = np.concatenate([np.array(p) for p in kinds["target_in_view"]["geometry"]["coordinates"]])
     assert seen.size and np.all(_central_deg(s_lat, s_lon, seen[:, 1], seen[:, 0]) <= radius.max() + 0.2)
+    # The footprint is a polygon GIS tools can fill (shapely reads it back valid): the station inside, the area
+    # that of a spherical cap of the circle's mean radius within 5 % (the mask makes it a little uneven).
+    from shapely.geometry import Point, shape
+
+    foot = shape(kinds["visibility_footprint"]["geometry"])
+    assert foot.geom_type == "Polygon" and foot.is_valid and foot.contains(Point(s_lon, s_lat))
+    assert all(foot.buffer(0.05).contains(Point(x, y)) for x, y in circle[::10])
     # T_access lies on the target's track.
     a_lon, a_lat = kinds["t_access"]["geometry"]["coordinates"]
     track = np.concatenate([np.array(p) for p in kinds["target_track"]["geometry"]["coordinates"]])
@@ -273,3 +283,22 @@ def test_the_opm_goes_back_in_as_an_observer(client, plan):
     r_opm = np.array([float(values[k].split()[0]) for k in ("X", "Y", "Z")])
     v_opm = np.array([float(values[k].split()[0]) for k in ("X_DOT", "Y_DOT", "Z_DOT")])
     assert np.linalg.norm(r_back - r_opm) < 1e-6 and np.linalg.norm(v_back - v_opm) < 1e-9
+
+
+def test_a_footprint_across_the_antimeridian_and_about_a_pole_stays_fillable():
+    """Stations where hand-cut rings go wrong: at 179.5 E the footprint is two polygons either side of +-180; at 85 N
+    it encloses the pole and is closed along the map's edge. shapely reads each back valid, the station inside."""
+    from shapely.geometry import Point, shape
+
+    from app.services.exports import footprint_polygon
+    from planner.frames import visibility_circle
+    from planner.propagation import Station
+
+    for lat, lon, kind in ((10.0, 179.5, "MultiPolygon"), (85.0, 20.0, "Polygon")):
+        station = Station(latitude_deg=lat, longitude_deg=lon, altitude_m=0.0, min_elevation_deg=10.0)
+        c_lat, c_lon = visibility_circle(station, 500.0)
+        foot = shape(footprint_polygon(c_lat, c_lon))
+        assert foot.geom_type == kind and foot.is_valid, (lat, lon)
+        assert foot.buffer(1e-6).contains(Point(lon, lat))
+        lons = np.concatenate([np.array(g.exterior.coords)[:, 0] for g in getattr(foot, "geoms", [foot])])
+        assert np.all(np.abs(lons) <= 180.0)
