@@ -13,7 +13,6 @@ Run with `python -m bench.physics` (about 3 minutes on 2 cores).
 
 from __future__ import annotations
 
-import math
 import sys
 import tempfile
 import time
@@ -26,8 +25,8 @@ from bench.common import machine
 from bench.sections import replace_section
 from inference.rotations import rotation_matrix
 from inference.simulation.dataset import DatasetSpec, generate
-from inference.simulation.po import POOptions, lit_facets, po_echo, prepared, triangle_integral
-from inference.simulation.radar import C_M_S, Imager, Radar, projection_matrix
+from inference.simulation.po import POOptions, po_echo, po_echo_direct, prepared
+from inference.simulation.radar import Imager, Radar
 from inference.simulation.scene import Scattering, po_mesh, simulate
 from inference.simulation.targets import tiangong_like
 
@@ -116,29 +115,14 @@ def accuracy(model, imager: Imager, facet_m: float, n_samples: int = 400) -> lis
     radar = imager.radar
     mesh, _ = po_mesh(model)
     pm = prepared(mesh, facet_m)
-    los, rate = projection_matrix(radar)
-    nr, na = radar.n_range, radar.n_azimuth
-    dkx, dky = 2 * math.pi / (nr * radar.range_cell_m), 2 * math.pi / (na * radar.cross_range_cell_m)
-    kc = 4 * math.pi * radar.carrier_hz / C_M_S
     w2 = imager.window_2d()
     rng = np.random.default_rng(SEED + 1)
     errors = []
     for ang in rng.uniform(-45, 45, (6, 3)):
         rot = rotation_matrix(*ang)
         fast = po_echo(pm, rot, imager, POOptions(facet_m=facet_m), rng)
-        idx, nrm = lit_facets(pm, rot, los)
-        tri = pm.mesh.triangles[idx] @ rot.T
-        m, n = rng.integers(0, nr, n_samples), rng.integers(0, na, n_samples)
-        exact = np.empty(n_samples, np.complex128)
-        for s in range(n_samples):
-            kv = (kc + dkx * (m[s] - nr // 2)) * los + dky * (n[s] - na // 2) * rate
-            kn = np.linalg.norm(kv)
-            exact[s] = (
-                math.sqrt(4 * math.pi)
-                * kn
-                / (4 * math.pi)
-                * np.sum(np.abs(nrm @ (kv / kn)) * triangle_integral(tri, kv))
-            )
+        m, n = rng.integers(0, radar.n_range, n_samples), rng.integers(0, radar.n_azimuth, n_samples)
+        exact = po_echo_direct(pm, rot, radar, samples=(m, n))
         w = w2[m, n]
         errors.append(float(np.linalg.norm(w * (fast[m, n] - exact)) / np.linalg.norm(w * exact)))
     return errors

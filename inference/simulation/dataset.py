@@ -35,8 +35,10 @@ from inference.frames import normalise_frame
 from inference.simulation.meshes import load_model
 from inference.simulation.radar import Imager, Radar
 from inference.simulation.scene import (
+    CENTRES_ONLY,
     DEFAULT_SCATTERING,
     PHYSICS,
+    PO_ONLY,
     Scattering,
     check_fits,
     draw_scattering,
@@ -116,7 +118,8 @@ class DatasetSpec:
         if not 0.0 <= lo <= hi <= 1.0:
             raise DatasetError(f"roughness {lo}:{hi} must be LOW:HIGH within [0, 1]", field="roughness")
         if self.physics == "centres" and (
-            self.physics_share < 1.0 or self.po_bounces != 1 or hi > 0 or self.po_facet_m != 0.2
+            self.physics_share < 1.0
+            or (self.po_bounces, hi, self.po_facet_m) != (PO_ONLY["bounces"], PO_ONLY["roughness"], PO_ONLY["facet_m"])
         ):
             raise DatasetError(
                 "--physics-share, --bounces, --roughness and --facet-m belong to --physics po", field="physics"
@@ -179,10 +182,7 @@ def frame_scattering(spec: DatasetSpec, frame_seed: int) -> Scattering:
             lo, hi = spec.po_roughness
             sc = replace(
                 sc,
-                scatterers="lattice",
-                edge_gain=1.0,
-                lobe_scale=1.0,
-                dominant=0,
+                **CENTRES_ONLY,
                 physics="po",
                 bounces=spec.po_bounces,
                 roughness=float(rng.uniform(lo, hi)) if hi > lo else lo,

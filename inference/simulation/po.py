@@ -90,7 +90,8 @@ def join(meshes: list[Mesh]) -> Mesh:
 # --- building meshes of primitives (the built-in targets, the closed-form tests) -------------------------
 
 
-def _frame(axis: Vec) -> tuple[Vec, Vec, Vec]:
+def orthonormal_frame(axis: Vec) -> tuple[Vec, Vec, Vec]:
+    """Return the unit ``axis`` and two unit vectors across it (a right-handed frame a, u, w)."""
     a = np.asarray(axis, float) / np.linalg.norm(axis)
     helper = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     u = np.cross(a, helper)
@@ -100,7 +101,7 @@ def _frame(axis: Vec) -> tuple[Vec, Vec, Vec]:
 
 def cylinder_mesh(origin: Vec, axis: Vec, radius: float, length: float, segments: int = 64, rings: int = 1) -> Mesh:
     """Return a closed circular cylinder (side and both end caps), wound outward: ``segments`` around, ``rings`` along."""
-    a, u, w = _frame(axis)
+    a, u, w = orthonormal_frame(axis)
     phi = np.linspace(0.0, 2 * math.pi, segments, endpoint=False)
     ring = radius * (np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * w)
     o = np.asarray(origin, float)
@@ -173,7 +174,7 @@ def plate_mesh(center: Vec, u_dir: Vec, v_dir: Vec, size_u: float, size_v: float
 
 def disc_mesh(center: Vec, normal: Vec, radius: float, segments: int = 96) -> Mesh:
     """Return a flat circular disc (a fan of ``segments`` triangles, lit from both sides), its normal ``normal``."""
-    a, u, w = _frame(normal)
+    a, u, w = orthonormal_frame(normal)
     phi = np.linspace(0.0, 2 * math.pi, segments, endpoint=False)
     c = np.asarray(center, float)
     verts = np.concatenate([[c], c + radius * (np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * w)])
@@ -613,11 +614,18 @@ def band_factor(radar: Radar) -> Vec:
     return np.asarray((kc + dkx * np.arange(-nr // 2, nr // 2)) / kc)
 
 
-def po_echo_direct(pm: PreparedMesh, rot: Vec, radar: Radar, chunk: int = 256) -> NDArray[np.complex128]:
+def po_echo_direct(
+    pm: PreparedMesh,
+    rot: Vec,
+    radar: Radar,
+    chunk: int = 256,
+    samples: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None,
+) -> NDArray[np.complex128]:
     """Return the exact PO echo on the Cartesian k-grid (the reference): every lit facet's integral at every sample.
 
     Each sample K gets sqrt(4 pi) |K| / (4 pi) |n . K/|K|| int exp(-j K . x) dS summed over the facets lit at
-    the aperture's centre. O(F N_r N_a): seconds for a test mesh, minutes for a station.
+    the aperture's centre. O(F N_r N_a): seconds for a test mesh, minutes for a station. ``samples`` (rows,
+    columns of the grid) evaluates only those, returned in their order.
     """
     from inference.simulation.radar import projection_matrix
 
@@ -629,9 +637,11 @@ def po_echo_direct(pm: PreparedMesh, rot: Vec, radar: Radar, chunk: int = 256) -
     dkx = 2.0 * math.pi / (nr * radar.range_cell_m)
     dky = 2.0 * math.pi / (na * radar.cross_range_cell_m)
     a = projection_matrix(radar)
-    kx = kc + dkx * np.arange(-nr // 2, nr // 2)
-    ky = dky * np.arange(-na // 2, na // 2)
-    kvec = (kx[:, None, None] * a[0] + ky[None, :, None] * a[1]).reshape(-1, 3)
+    if samples is None:
+        rows, cols = (g.ravel() for g in np.meshgrid(np.arange(nr), np.arange(na), indexing="ij"))
+    else:
+        rows, cols = (np.asarray(g) for g in samples)
+    kvec = (kc + dkx * (rows - nr // 2))[:, None] * a[0] + (dky * (cols - na // 2))[:, None] * a[1]
     kmag = np.linalg.norm(kvec, axis=1)
     out = np.zeros(len(kvec), np.complex128)
     for s in range(0, len(kvec), chunk):
@@ -640,4 +650,4 @@ def po_echo_direct(pm: PreparedMesh, rot: Vec, radar: Radar, chunk: int = 256) -
         cos = np.abs(nrm @ (kk / kn[:, None]).T)  # (F, chunk)
         integral = triangle_integral(tri[:, None, :, :], kk[None, :, :])  # (F, chunk)
         out[s : s + chunk] = np.sqrt(4.0 * np.pi) * kn / (4.0 * np.pi) * (cos * integral).sum(axis=0)
-    return out.reshape(nr, na)
+    return out if samples is not None else out.reshape(nr, na)

@@ -151,8 +151,9 @@ SCATTERERS = ("lattice", "dense")
 
 
 PHYSICS = ("centres", "po")
-_CENTRES_ONLY = {"scatterers": "lattice", "edge_gain": 1.0, "lobe_scale": 1.0, "dominant": 0}
-_PO_ONLY = {"bounces": 1, "roughness": 0.0, "facet_m": 0.2}
+# The options that belong to one physics, at their defaults (what the other physics must leave them at).
+CENTRES_ONLY: dict[str, Any] = {"scatterers": "lattice", "edge_gain": 1.0, "lobe_scale": 1.0, "dominant": 0}
+PO_ONLY: dict[str, Any] = {"bounces": 1, "roughness": 0.0, "facet_m": 0.2}
 
 
 @dataclass(frozen=True, slots=True)
@@ -212,7 +213,7 @@ class Scattering:
             ("blur_px", 0.0 <= self.blur_px <= 10.0),
         )
         refuse_unusable(self, checks)
-        other, wrong = ("centres", _CENTRES_ONLY) if self.physics == "po" else ("po", _PO_ONLY)
+        other, wrong = ("centres", CENTRES_ONLY) if self.physics == "po" else ("po", PO_ONLY)
         for name, default in wrong.items():
             if getattr(self, name) != default:
                 raise RadarError(

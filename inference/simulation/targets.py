@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from inference.errors import ModelFileError
-from inference.simulation.po import Mesh, box_mesh, cylinder_mesh, join, plate_mesh, sphere_mesh
+from inference.simulation.po import Mesh, box_mesh, cylinder_mesh, join, orthonormal_frame, plate_mesh, sphere_mesh
 
 Vec = NDArray[np.float64]
 
@@ -118,11 +118,7 @@ def _kd(points: Vec):  # type: ignore[no-untyped-def]
 
 
 def _orthonormal(axis: Vec) -> tuple[Vec, Vec]:
-    a = axis / np.linalg.norm(axis)
-    helper = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    u = np.cross(a, helper)
-    u /= np.linalg.norm(u)
-    return u, np.cross(a, u)
+    return orthonormal_frame(axis)[1:]
 
 
 def surface_normals(points: Vec, k: int = 12) -> Vec:
