@@ -31,3 +31,58 @@ def normalise_frame(magnitude: NDArray[np.floating], dynamic_range_db: float = 4
         return np.zeros(mag.shape, np.float32)
     db = 20.0 * np.log10(np.maximum(mag, ref * 1e-12) / ref)
     return np.clip((db + dynamic_range_db) / dynamic_range_db, 0.0, 1.0).astype(np.float32)
+
+
+NORMALISED_MIN_TOP_SHARE = 0.004  # normalise_frame clips the top 0.5 % of pixels to 1.0 (a margin for ties)
+
+
+def normalised_problem(mag: NDArray[np.floating]) -> str | None:
+    """Why ``mag`` cannot be ``normalise_frame``'s output (a phrase after "normalised"), or None when it can be.
+
+    A normalised frame lies in [0, 1] and, since ``normalise_frame`` maps its 99.5th percentile and
+    everything above it to 1.0, has at least 0.5 % of its pixels at 1.0; a raw frame that merely
+    lies in [0, 1] does not.
+    """
+    lo, hi = float(np.min(mag)), float(np.max(mag))
+    if lo < 0.0 or hi > 1.0:
+        return (
+            f"needs values in [0, 1] (inference.frames.normalise_frame output); this frame spans [{lo:.3g}, {hi:.3g}]"
+        )
+    at_top = float(np.mean(np.asarray(mag) >= 0.999))
+    if at_top < NORMALISED_MIN_TOP_SHARE:
+        return (
+            f"needs 0.5 % of the pixels at 1.0, where inference.frames.normalise_frame puts its top; this frame "
+            f"has {100 * at_top:.2g} %: this is a raw frame"
+        )
+    return None
+
+
+def resample_metres(
+    mag: NDArray[np.floating], cells_m: tuple[float, float], model_cells_m: tuple[float, float], size: int
+) -> NDArray[np.float64]:
+    """Resample a frame of cells ``cells_m`` (range, cross-range metres) to the models' cells, centred, ``size`` a side.
+
+    Bilinear; the frame's centre pixel (N/2, counted from 0) stays the centre. Where the frame
+    covers less than the models' frame (24 x 29 m for the shipped models), the rest is its median
+    (its noise floor). Raises ``InferenceError`` (field ``range_cell_m``) when the frame covers
+    under 8 of the models' pixels.
+    """
+    from scipy.ndimage import affine_transform
+
+    from inference.errors import InferenceError
+
+    mag = np.asarray(mag, np.float64)
+    scale = (model_cells_m[0] / cells_m[0], model_cells_m[1] / cells_m[1])  # input pixels per model pixel
+    spans = (mag.shape[0] / scale[0], mag.shape[1] / scale[1])
+    if min(spans) < 8:
+        raise InferenceError(
+            f"a {mag.shape[0]}x{mag.shape[1]} frame of {cells_m[0]:g} x {cells_m[1]:g} m cells covers under 8 of the "
+            f"models' {model_cells_m[0]:.4f} x {model_cells_m[1]:.4f} m pixels: check the cell sizes",
+            field="range_cell_m",
+        )
+    centre_in = np.array([mag.shape[0] // 2, mag.shape[1] // 2], float)
+    offset = centre_in - np.array(scale) * (size // 2)
+    out = affine_transform(
+        mag, scale, offset=offset, output_shape=(size, size), order=1, mode="constant", cval=float(np.median(mag))
+    )
+    return np.asarray(out, np.float64)

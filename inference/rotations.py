@@ -93,6 +93,30 @@ def euler_to_quaternion(z_deg: float, y_deg: float, x_deg: float) -> tuple[float
     )
 
 
+def quaternion_matrix(q: Vec) -> Vec:
+    """Return the rotation matrix of the unit quaternion ``q`` = (w, x, y, z), scalar first (the inverse of
+    ``euler_to_quaternion`` composed with ``rotation_matrix``). Raises ValueError unless ``q`` has unit norm
+    (within 1e-3): a quaternion that is not a rotation is a caller's mistake, not something to normalise away.
+
+    >>> [round(a, 9) for a in euler_from_matrix(quaternion_matrix(np.array(euler_to_quaternion(30.0, -20.0, 10.0))))]
+    [30.0, -20.0, 10.0]
+    """
+    q = np.asarray(q, np.float64)
+    if q.shape != (4,) or not np.all(np.isfinite(q)):
+        raise ValueError(f"a quaternion is 4 finite numbers (w, x, y, z); got {q.tolist()}")
+    norm = float(np.linalg.norm(q))
+    if abs(norm - 1.0) > 1e-3:
+        raise ValueError(f"a rotation's quaternion has unit norm; this one's norm is {norm:.6g}")
+    w, x, y, z = q / norm
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
 def geodesic_deg(a_deg: Vec, b_deg: Vec) -> Vec:
     """Return the rotation angle (deg) between attitudes a and b, Euler z, y, x in degrees, each [N, 3] or [3].
 

@@ -14,7 +14,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.errors import InputError
-from inference.frames import normalise_frame
+from inference.errors import InferenceError
+from inference.frames import normalise_frame, normalised_problem
+from inference.frames import resample_metres as _resample_metres
 
 MAX_NPZ_MEMBER_BYTES = 64 * 1024 * 1024  # decompressed; refuses zip bombs before reading them
 
@@ -192,35 +194,14 @@ def decode(data: bytes, name: str, allow_stack: bool = True, max_side: int = DEF
     return out
 
 
-NORMALISED_MIN_TOP_SHARE = 0.004  # normalise_frame clips the top 0.5 % of pixels to 1.0 (a margin for ties)
-
-
 def resample_metres(
     mag: NDArray[np.float64], cells_m: tuple[float, float], model_cells_m: tuple[float, float], size: int
 ) -> NDArray[np.float64]:
-    """Resample a frame of cells ``cells_m`` (range, cross-range metres) to the models' cells, centred, ``size`` a side.
-
-    Bilinear; the frame's centre pixel (N/2, counted from 0) stays the centre. Where the frame
-    covers less than the models' frame (24 x 29 m for the shipped models), the rest is its median
-    (its noise floor).
-    """
-    from scipy.ndimage import affine_transform
-
-    model = model_cells_m
-    scale = (model[0] / cells_m[0], model[1] / cells_m[1])  # input pixels per model pixel
-    spans = (mag.shape[0] / scale[0], mag.shape[1] / scale[1])
-    if min(spans) < 8:
-        raise InputError(
-            ["range_cell_m"],
-            f"a {mag.shape[0]}x{mag.shape[1]} frame of {cells_m[0]:g} x {cells_m[1]:g} m cells covers under 8 of the "
-            f"models' {model[0]:.4f} x {model[1]:.4f} m pixels: check the cell sizes",
-        )
-    centre_in = np.array([mag.shape[0] // 2, mag.shape[1] // 2], float)
-    offset = centre_in - np.array(scale) * (size // 2)
-    out = affine_transform(
-        mag, scale, offset=offset, output_shape=(size, size), order=1, mode="constant", cval=float(np.median(mag))
-    )
-    return np.asarray(out, np.float64)
+    """``inference.frames.resample_metres``, its refusal as the API's error."""
+    try:
+        return _resample_metres(mag, cells_m, model_cells_m, size)
+    except InferenceError as exc:
+        raise InputError([exc.field or "range_cell_m"], str(exc)) from exc
 
 
 def prepare(
@@ -243,23 +224,8 @@ def prepare(
     """
     mag = upload.magnitude
     normalised = normalised or upload.normalised
-    if normalised:
-        lo, hi = float(mag.min()), float(mag.max())
-        if lo < 0.0 or hi > 1.0:
-            raise InputError(
-                _loc(upload.name),
-                f"normalised=true needs values in [0, 1] (inference.frames.normalise_frame output); "
-                f"this frame spans [{lo:.3g}, {hi:.3g}]: send it without normalised=true",
-            )
-        # normalise_frame maps its 99.5th percentile and everything above it to 1.0, so at least
-        # 0.5 % of a normalised frame's pixels are 1.0; a raw frame that merely lies in [0, 1] is not.
-        at_top = float(np.mean(mag >= 0.999))
-        if at_top < NORMALISED_MIN_TOP_SHARE:
-            raise InputError(
-                _loc(upload.name),
-                f"normalised=true, but only {100 * at_top:.2g} % of the pixels are at 1.0, where "
-                "inference.frames.normalise_frame puts 0.5 %: this is a raw frame; send it without normalised=true",
-            )
+    if normalised and (problem := normalised_problem(mag)) is not None:
+        raise InputError(_loc(upload.name), f"normalised=true {problem}: send it without normalised=true")
     if cells_m is not None:
         if model_cells_m is None:
             raise ValueError("resampling in metres needs the models' cells")
