@@ -53,6 +53,7 @@ INFERENCE_COMMANDS = (
     ("simulate", "simulation.dataset", "simulate a labelled ISAR data set (or --preview a few frames)"),
     ("train", "training.train", "train UNet++ and Swin on a simulated data set"),
     ("finetune", "training.finetune", "fine-tune Swin's last stage of a trained run on cached features (CPU)"),
+    ("adapt", "training.adapt", "adapt a model set to a radar's labelled frames (fine-tune, export, recalibrate trust)"),
     ("export", "export", "export a training run to ONNX with a model card"),
     ("calibrate", "trust", "fit the attitude checks' thresholds and 90-percent bounds on fresh frames (trust.json)"),
     ("compare", "evaluation.compare", "set training runs side by side: Swin's test error per epoch"),

@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 from inference.errors import DatasetError, InferenceError, module_main
 from inference.files import write_json
 from inference.frames import ANGLE_SCALE_DEG
-from inference.labelled import LabelledFrames, read_folder, scene_split
+from inference.labelled import LabelledFrames, frame_files, read_folder, scene_split
 from inference.networks.swin import angle_loss
 from inference.networks.unetpp import relative_frobenius_loss
 from inference.rotations import geodesic_deg
@@ -210,6 +210,8 @@ def adapt(
         )
     model = builtin_target(trained_target)
     max_angle = float(card.get("max_angle_deg") or 45.0)
+    if not isinstance(frames, LabelledFrames):
+        frame_files(frames)  # a missing or empty folder is refused before any work
     _say(f"reading the base set {base} back from its ONNX files")
     unet, swin, cfg, parity = recover(base)
     if not isinstance(frames, LabelledFrames):

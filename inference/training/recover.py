@@ -36,7 +36,7 @@ UNET_PARITY = 0.02  # mean |ONNX int8 - torch float| of the enhanced frame (the 
 
 
 class _Graph:
-    """An ONNX graph's constants: initializers, Constant nodes, and what Cast / DequantizeLinear make of them."""
+    """An ONNX graph's constants: initializers, Constant nodes, and what Identity, Cast and DequantizeLinear make of them."""
 
     def __init__(self, path: Path) -> None:
         import onnx
@@ -60,6 +60,8 @@ class _Graph:
         node = self.producer.get(name)
         if node is None:
             return None
+        if node.op_type == "Identity":  # the exporter shares equal constants through Identity nodes
+            return self.const(node.input[0])
         if node.op_type == "Cast":
             v = self.const(node.input[0])
             return None if v is None else v.astype(np.float32)
@@ -178,25 +180,39 @@ def recover_swin(path: Path, cfg: dict[str, Any]) -> torch.nn.Module:
     params = dict(swin.named_parameters())
     modules = dict(swin.named_modules())
     done: set[str] = set()
-    for n in g.nodes:
-        if n.op_type == "MatMul" and (c := g.const(n.input[1])) is not None:
-            key = f"{scope(n.name)}.weight"
-            if key in params and key not in named:
-                _set(params[key], c.T, f"{path.name} {key}")
-                done.add(key)
-        elif n.op_type == "Add":
-            attn = modules.get(scope(n.name))
-            if isinstance(attn, WindowAttention):
-                for inp in n.input:
-                    c = g.const(inp)
-                    if c is not None and c.shape == (1, attn.num_heads, attn.n, attn.n):
-                        key = f"{scope(n.name)}.bias_table"
-                        _set(attn.bias_table, _bias_table(c, attn), f"{path.name} {key}")
-                        done.add(key)
-    for key, v in named.items():
-        if key in params:
-            _set(params[key], v, key)
+    def place(key: str, value: NDArray[Any] | None) -> None:
+        if value is not None and key in params and key not in done and tuple(params[key].shape) == value.shape:
+            _set(params[key], value, f"{path.name} {key}")
             done.add(key)
+
+    for n in g.nodes:  # by the scope of the node that uses the weight (the exporter may share equal constants)
+        where = scope(n.name)
+        consts = [g.const(i) if i else None for i in n.input]
+        if n.op_type == "MatMul" and consts[1] is not None:
+            place(f"{where}.weight", consts[1].T)
+        elif n.op_type in ("LayerNormalization", "Conv"):
+            place(f"{where}.weight", consts[1])
+            if len(consts) > 2:
+                place(f"{where}.bias", consts[2])
+        elif n.op_type == "Gemm":
+            trans_b = next((a.i for a in n.attribute if a.name == "transB"), 0)
+            if consts[1] is not None:
+                place(f"{where}.weight", consts[1] if trans_b else consts[1].T)
+            if len(consts) > 2:
+                place(f"{where}.bias", consts[2])
+        elif n.op_type == "Add":
+            attn = modules.get(where)
+            for c in consts:
+                if c is None:
+                    continue
+                if isinstance(attn, WindowAttention) and c.shape == (1, attn.num_heads, attn.n, attn.n):
+                    key = f"{where}.bias_table"
+                    _set(attn.bias_table, _bias_table(c, attn), f"{path.name} {key}")
+                    done.add(key)
+                elif isinstance(attn, torch.nn.Linear):
+                    place(f"{where}.bias", c)
+    for key, v in named.items():  # what kept its name and no node's scope placed
+        place(key, v)
     missing = [k for k, _ in swin.named_parameters() if k not in done]
     if missing:
         raise ModelFileError(f"{path.name}: no weight found for {', '.join(missing[:3])}", field="model")

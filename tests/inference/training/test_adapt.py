@@ -1,0 +1,138 @@
+"""Adaptation: networks read back from ONNX files, fine-tuned on labelled frames split by scene, exported, trusted anew."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from app.cli import main as gsa
+from inference.errors import DatasetError, ModelFileError
+from inference.export import export
+from inference.labelled import write_frame
+from inference.networks.build import build_models, get_config
+from inference.runtime import Estimator
+from inference.simulation.dataset import DatasetSpec, render_frames
+from inference.training.adapt import AdaptOptions, adapt
+from inference.training.checkpoints import save_checkpoint
+from inference.training.recover import recover, recover_swin, recover_unet
+from tests.utils.models import SMOKE_RADAR
+
+
+def _run_dir(path, unet, swin, cfg):
+    path.mkdir()
+    for name, net in (("unetpp.pt", unet), ("swin.pt", swin)):
+        save_checkpoint({"state_dict": net.state_dict(), "config": cfg, "enhance": True}, path / name)
+    return path
+
+
+def test_networks_read_back_from_onnx_compute_what_torch_did(tmp_path):
+    # Batch norm with running statistics far from the identity: folded into the convolutions at export,
+    # recovered as plain convolutions; the same function either way.
+    cfg = get_config("smoke")
+    torch.manual_seed(0)
+    unet, swin = build_models(cfg)
+    with torch.no_grad():
+        for m in unet.modules():
+            if isinstance(m, torch.nn.BatchNorm2d):
+                m.running_mean.uniform_(-0.5, 0.5)
+                m.running_var.uniform_(0.5, 2.0)
+                m.weight.uniform_(0.5, 1.5)
+                m.bias.uniform_(-0.2, 0.2)
+        for m in swin.modules():
+            if hasattr(m, "bias_table"):
+                m.bias_table.normal_(0.0, 0.5)
+    unet.eval()
+    swin.eval()
+    run = _run_dir(tmp_path / "run", unet, swin, cfg.as_dict())
+    export(run, tmp_path / "f32")
+    x = torch.rand(3, 1, 64, 64)
+    with torch.no_grad():
+        ref_u, ref_s = unet(x), swin(x)
+        got_u = recover_unet(tmp_path / "f32" / "unetpp.onnx", cfg.as_dict())(x)
+        got_s = recover_swin(tmp_path / "f32" / "swin.onnx", cfg.as_dict())(x)
+    assert float((got_u - ref_u).abs().max()) < 1e-5
+    assert float((got_s - ref_s).abs().max()) < 1e-5
+    assert not any(isinstance(m, torch.nn.BatchNorm2d) for m in recover_unet(tmp_path / "f32" / "unetpp.onnx", cfg.as_dict()).modules())
+
+
+def test_the_shipped_set_reads_back_within_its_own_rounding():
+    unet, swin, cfg, figures = recover("inference/models/shipped")
+    assert cfg["unet_norm"] is False
+    assert figures["swin_max_abs_diff"] < 1e-4  # float16 weights read back exactly
+    assert figures["unetpp_mean_abs_diff"] < 0.01  # int8 activations against float: the card's 0.0048
+
+
+def test_a_folder_that_is_not_the_configured_network_is_refused(tmp_path):
+    cfg = get_config("smoke")
+    unet, swin = build_models(cfg)
+    run = _run_dir(tmp_path / "run", unet.eval(), swin.eval(), cfg.as_dict())
+    export(run, tmp_path / "m")
+    wider = {**cfg.as_dict(), "unet_filters": [8, 16, 32, 64, 128]}
+    with pytest.raises(ModelFileError, match="config does not describe this file"):
+        recover_unet(tmp_path / "m" / "unetpp.onnx", wider)
+
+
+@pytest.fixture(scope="module")
+def smoke_base(tmp_path_factory):
+    from inference.training.options import recipe
+    from inference.training.train import train
+    from inference.simulation.dataset import generate
+
+    root = tmp_path_factory.mktemp("base")
+    generate(DatasetSpec(n=32, seed=5, shard_size=32, n_train=24), root / "data", SMOKE_RADAR, workers=1, progress=False)
+    train(root / "data", root / "run", recipe("smoke", epochs=1, log_every=0))
+    frames = render_frames(DatasetSpec(n=16, seed=9), SMOKE_RADAR, 0, 16)["image"].astype(np.float32)
+    export(root / "run", root / "models", frames, half=True, int8=True)
+    return root / "models"
+
+
+def _labelled(folder, scenes, per, seed):
+    """Frames of another radar's look (the robust preset's scattering), scene by scene."""
+    folder.mkdir()
+    spec = DatasetSpec(n=scenes * per, seed=seed, variety="robust")
+    arr = render_frames(spec, SMOKE_RADAR, 0, scenes * per)
+    for k in range(scenes * per):
+        write_frame(
+            folder / f"f{k:03d}.npz", arr["image"][k].astype(np.float32), angles_deg=arr["angles_deg"][k],
+            scene=f"pass-{k // per}", normalised=True,
+        )
+    return folder
+
+
+def test_adapt_splits_by_scene_keeps_the_best_weights_and_serves(smoke_base, tmp_path, capsys):
+    frames = _labelled(tmp_path / "lab", scenes=3, per=20, seed=41)
+    out = tmp_path / "adapted"
+    rec = adapt(smoke_base, frames, out, AdaptOptions(epochs=2, sim_ratio=0.5, validation_share=0.3))
+    lab = rec["labelled"]
+    assert not set(lab["train_scenes"]) & set(lab["validation_scenes"])
+    assert lab["train_frames"] + lab["validation_frames"] == 60 and lab["validation_frames"] >= 20
+    # The weights kept are the validation-best of every epoch, the starting ones included.
+    losses = [h["loss"] for h in rec["history"]]
+    assert rec["after"]["loss"] == pytest.approx(min(losses), rel=1e-4)
+    assert rec["history"][rec["chosen_epoch"]]["loss"] == min(losses)
+    # A folder the service serves, its card saying how it was made, trust fitted on the held-out frames.
+    card = json.loads((out / "model_card.json").read_text())
+    assert card["adaptation"]["labelled"]["list_sha256"] == lab["list_sha256"]
+    assert card["radar"]["n_range"] == 64
+    est = Estimator.load(out)
+    assert est.estimate(np.zeros((1, 64, 64), np.float32)).angles_deg.shape == (1, 3)
+    trust = json.loads((out / "trust.json").read_text())
+    assert rec["calibration"]["recalibrated"] and trust["made"]["frames"] == lab["validation_frames"]
+    assert sorted(trust["made"]["scenes"]) == lab["validation_scenes"]
+    assert {n for n in trust["made"]["labelled_frames"]} <= {p.name for p in frames.iterdir()}
+
+
+def test_adapt_refusals_leave_nothing(smoke_base, tmp_path, capsys):
+    one = _labelled(tmp_path / "one", scenes=1, per=6, seed=2)
+    with pytest.raises(DatasetError, match="at least 2"):
+        adapt(smoke_base, one, tmp_path / "o", AdaptOptions(epochs=1))
+    with pytest.raises(DatasetError, match="base set's networks know"):
+        adapt(smoke_base, one, tmp_path / "o", AdaptOptions(epochs=1), target="comsat-like")
+    assert not (tmp_path / "o").exists()
+    capsys.readouterr()
+    code = gsa(["adapt", "--frames", str(tmp_path / "missing"), "--base", str(smoke_base), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert code == 2 and "not a folder of labelled frames" in err and len(err.strip().splitlines()) == 1
+    code = gsa(["adapt", "--frames", str(one), "--base", str(smoke_base), "--out", str(smoke_base)])
+    assert code == 2 and "new folder" in capsys.readouterr().err
