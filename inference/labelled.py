@@ -232,7 +232,10 @@ def read_frame(
                 raise _bad(path, "observed_at", "a quaternion_j2000 label needs the frame's time, observed_at")
             if resolve is None:
                 raise _bad(
-                    path, "quaternion_j2000", "a label in J2000 needs the plan whose geometry places the frame: give --plan-id"
+                    path,
+                    "quaternion_j2000",
+                    "a label in J2000 needs the plan whose geometry places the frame: give it (gsa adapt --plan, "
+                    "plan_id in the API)",
                 )
             angles = check_angles(resolve(q / norm, when, path.name), f"{path.name}: quaternion_j2000")
         else:
@@ -323,7 +326,9 @@ def write_frame(
     return path
 
 
-def scene_split(scenes: Sequence[str], validation_share: float = 0.3, seed: int = 0) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+def scene_split(
+    scenes: Sequence[str], validation_share: float = 0.3, seed: int = 0
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """Split frames into training and validation by scene: no scene on both sides.
 
     Whole scenes (in a seeded random order) go to validation until it holds ``validation_share`` of the
@@ -338,7 +343,7 @@ def scene_split(scenes: Sequence[str], validation_share: float = 0.3, seed: int 
             field="scene",
         )
     order = [names[k] for k in np.random.default_rng(seed).permutation(len(names))]
-    counts = {s: 0 for s in names}
+    counts = dict.fromkeys(names, 0)
     for s in scenes:
         counts[s] += 1
     held: set[str] = set()

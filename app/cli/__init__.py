@@ -53,7 +53,11 @@ INFERENCE_COMMANDS = (
     ("simulate", "simulation.dataset", "simulate a labelled ISAR data set (or --preview a few frames)"),
     ("train", "training.train", "train UNet++ and Swin on a simulated data set"),
     ("finetune", "training.finetune", "fine-tune Swin's last stage of a trained run on cached features (CPU)"),
-    ("adapt", "training.adapt", "adapt a model set to a radar's labelled frames (fine-tune, export, recalibrate trust)"),
+    (
+        "adapt",
+        "training.adapt",
+        "adapt a model set to a radar's labelled frames (fine-tune, export, recalibrate trust)",
+    ),
     ("export", "export", "export a training run to ONNX with a model card"),
     ("calibrate", "trust", "fit the attitude checks' thresholds and 90-percent bounds on fresh frames (trust.json)"),
     ("compare", "evaluation.compare", "set training runs side by side: Swin's test error per epoch"),
@@ -156,6 +160,11 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
 
                 add_pass_arguments(p_inf)
                 p_inf.set_defaults(func=pass_or_data_set(p_inf.get_default("func")))
+            if name == "adapt":  # --plan places J2000 labels by the planner's geometry: here too, not in inference
+                from app.cli.labelled import adapt_with_plan, add_plan_argument
+
+                add_plan_argument(p_inf)
+                p_inf.set_defaults(func=adapt_with_plan(p_inf.get_default("func")))
         else:
             # Not asked for: a stand-in that keeps `gsa --help` from importing torch and the simulator.
             sub.add_parser(name, help=help, add_help=False)

@@ -37,6 +37,20 @@ def add_pass_arguments(p: argparse.ArgumentParser) -> None:
         help="a plan request (the body of POST /v1/plans): its target over one of its access windows to its "
         "station; with --out DIR writes DIR/frames.npz, DIR/pass.json and DIR/frames.png",
     )
+    g.add_argument(
+        "--scene",
+        metavar="PLAN_ID|REQUEST.json",
+        help="labelled frames of a planned GSA scene, for gsa adapt: a stored plan (its id, from this machine's "
+        "database) or a plan request file; the pass's frames rendered with --physics (a stand-in for your radar) "
+        "and labelled by the optical observer's attitude, off by --label-error-deg; --out DIR gets one .npz a "
+        "frame (inference.labelled's format), scene.json and frames.png",
+    )
+    g.add_argument(
+        "--label-error-deg",
+        type=float,
+        default=0.2,
+        help="with --scene: the optical attitude's error, 1-sigma per axis (default 0.2 deg)",
+    )
     g.add_argument("--window", type=int, help="which of the plan's access windows (default: the highest)")
     g.add_argument("--frames", type=int, default=60, help="at most this many frames, thinned evenly (default 60)")
     g.add_argument(
@@ -64,9 +78,13 @@ def add_pass_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def pass_or_data_set(data_set: Any) -> Any:
-    """``gsa simulate``: a pass with --pass, else the data set command."""
+    """``gsa simulate``: a pass with --pass, a scene's labelled frames with --scene, else the data set command."""
 
     def command(args: argparse.Namespace) -> int:
+        if args.pass_request and args.scene:
+            raise CliError("give --pass or --scene, not both")
+        if args.scene:
+            return cmd_simulate_scene(args)
         return cmd_simulate_pass(args) if args.pass_request else int(data_set(args))
 
     return command
@@ -105,21 +123,30 @@ def _plan_for_pass(request: Any) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     return req.model_dump(mode="json", exclude_none=True), windows
 
 
-def cmd_simulate_pass(args: argparse.Namespace) -> int:
+def _scattering(args: argparse.Namespace) -> Any:
+    """The stand-in physics of a simulated pass: the data set command's --physics options, one frame's worth."""
+    from inference.simulation.dataset import parse_roughness
+    from inference.simulation.scene import DEFAULT_SCATTERING, Scattering
+
+    if getattr(args, "physics", "centres") != "po":
+        return DEFAULT_SCATTERING
+    lo, hi = parse_roughness(args.roughness)
+    if hi > lo:
+        raise CliError(f"--roughness {args.roughness}: a pass takes one roughness, not a range")
+    return Scattering(physics="po", bounces=args.bounces, roughness=lo, facet_m=args.facet_m)
+
+
+def _simulated_pass(args: argparse.Namespace, request_source: Any, out: Path) -> tuple[Any, ...]:
+    """Simulate and render a pass of ``request_source`` (a plan request); return what both commands write."""
     import numpy as np
 
     from app.errors import DOMAIN_ERRORS
-    from app.services.passes import pass_record
     from app.services.scenes import scene_for, windows_of
     from inference.simulation.dataset import parse_snr
     from inference.simulation.radar import Radar
     from scene import choose_window
-    from scene.fusion import reversed_reading
     from scene.simulation import PassOptions, render_pass, simulate_pass
 
-    if not args.out:
-        raise CliError("give --out DIR for the pass's frames")
-    out = Path(args.out)
     if out.exists():
         raise CliError(f"{out} exists: give a new directory")
     lo, hi = parse_snr(args.snr_db)
@@ -134,7 +161,8 @@ def cmd_simulate_pass(args: argparse.Namespace) -> int:
             raise CliError(f"--snr-reference {args.snr_reference!r}: write DB@KM with KM over 0, e.g. 12@800")
     try:
         radar = Radar(args.carrier_hz, args.bandwidth_hz, args.n_range, args.n_azimuth, args.aperture_deg)
-        request, windows = _plan_for_pass(read_json(args.pass_request))
+        scattering = _scattering(args)
+        request, windows = _plan_for_pass(request_source)
         opts = PassOptions(
             window=args.window,
             aperture_deg=args.aperture_deg,
@@ -152,7 +180,8 @@ def cmd_simulate_pass(args: argparse.Namespace) -> int:
         index, chosen = choose_window(windows_of({"access_windows": windows}), opts.window)
         window = windows[index]
         rng = np.random.default_rng(opts.seed)
-        meta = simulate_pass(scene_for(request, chosen.rise, chosen.set, field="window"), opts, rng)
+        scene = scene_for(request, chosen.rise, chosen.set, field="window")
+        meta = simulate_pass(scene, opts, rng)
         model = None
         if args.model:
             from inference.simulation.dataset import DatasetSpec, build_model
@@ -160,12 +189,28 @@ def cmd_simulate_pass(args: argparse.Namespace) -> int:
             model = build_model(DatasetSpec(n=1, model_path=args.model, model_scale=args.model_scale), radar)
         print(
             f"window {index}: {window['rise']} to {window['set']}, culminating at "
-            f"{window['max_elevation_deg']:.1f} deg; rendering {len(meta)} frames",
+            f"{window['max_elevation_deg']:.1f} deg; rendering {len(meta)} frames"
+            + (" by physical optics" if scattering.physics == "po" else ""),
             file=sys.stderr,
         )
-        images, snrs = render_pass(meta, opts, rng, radar, model)
+        images, snrs = render_pass(meta, opts, rng, radar, model, scattering)
     except DOMAIN_ERRORS as exc:
         raise CliError(input_line(exc)) from None
+    return meta, images, snrs, opts, index, window, request, radar, rng
+
+
+def cmd_simulate_pass(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from app.services.passes import pass_record
+    from scene.fusion import reversed_reading
+
+    if not args.out:
+        raise CliError("give --out DIR for the pass's frames")
+    out = Path(args.out)
+    meta, images, snrs, opts, index, window, request, radar, _ = _simulated_pass(
+        args, read_json(args.pass_request), out
+    )
     record = pass_record(meta, snrs, opts, index, window, request, (radar.range_cell_m, radar.cross_range_cell_m))
     partial = out.with_name(out.name + ".partial")
     partial.mkdir(parents=True, exist_ok=False)
@@ -181,6 +226,80 @@ def cmd_simulate_pass(args: argparse.Namespace) -> int:
         f"{len(meta)} frames in {out} ({inside} within the networks' 45 deg range"
         + (f", {reversed_} more read reversed in cross-range" if reversed_ else "")
         + "); upload frames.npz with normalised=true and each frame's observed_at from pass.json"
+    )
+    return 0
+
+
+def _stored_plan_request(plan_id: str) -> tuple[dict[str, Any], str]:
+    """A plan stored in this machine's database (the service's, GSA_DATABASE_URL): its request and its id."""
+    from sqlalchemy.exc import SQLAlchemyError
+
+    from app.cli.common import open_session
+    from app.db.models import Plan
+
+    try:
+        with open_session() as session:
+            plan = session.get(Plan, plan_id)
+            request = None if plan is None else (dict(plan.request), plan.id)
+    except SQLAlchemyError as exc:
+        raise CliError(
+            f"{plan_id}: no such file, and this machine's database cannot be read for plans "
+            f"({type(exc).__name__}; run gsa db upgrade, or give a plan request file)"
+        ) from None
+    if request is None:
+        raise CliError(
+            f"{plan_id}: no such plan in this machine's database, and no such file; give a plan id "
+            "(gsa plans list) or a plan request file"
+        )
+    return request
+
+
+def cmd_simulate_scene(args: argparse.Namespace) -> int:
+    """``gsa simulate --scene``: a planned scene's frames in the labelled-frame format, labelled by the observer."""
+    import numpy as np
+
+    from app.services.passes import pass_record
+    from inference.labelled import write_frame
+    from scene.labels import optical_attitudes
+
+    if not args.out:
+        raise CliError("give --out DIR for the scene's labelled frames")
+    if not (0.0 <= args.label_error_deg <= 10.0) or not math.isfinite(args.label_error_deg):
+        raise CliError(f"--label-error-deg {args.label_error_deg}: between 0 and 10 deg")
+    out = Path(args.out)
+    source = Path(args.scene)
+    if source.is_file():
+        request_source, name = read_json(str(source)), source.stem
+    else:
+        request_source, name = _stored_plan_request(args.scene)
+    meta, images, snrs, opts, index, window, request, radar, rng = _simulated_pass(args, request_source, out)
+    quats, labels = optical_attitudes(meta, args.label_error_deg, rng)
+    scene_name = f"{name}-window-{index}"
+    partial = out.with_name(out.name + ".partial")
+    partial.mkdir(parents=True, exist_ok=False)
+    for k, f in enumerate(meta):
+        write_frame(
+            partial / f"frame-{k:03d}.npz",
+            images[k].astype(np.float32),
+            angles_deg=labels[k],
+            quaternion_j2000=quats[k],
+            observed_at=f.observed_at,
+            scene=scene_name,
+            attitude_sigma_deg=args.label_error_deg,
+            snr_db=float(snrs[k]),
+            normalised=True,
+        )
+    record = pass_record(meta, snrs, opts, index, window, request, (radar.range_cell_m, radar.cross_range_cell_m))
+    record["scene"] = scene_name
+    record["label_error_deg"] = args.label_error_deg
+    record["physics"] = _scattering(args).physics
+    (partial / "scene.json").write_text(json.dumps(record, indent=1))
+    _contact_sheet(images, record, partial / "frames.png")
+    partial.rename(out)
+    inside = int(np.sum(np.all(np.abs(labels) <= 45.0, axis=1)))
+    print(
+        f"{len(meta)} labelled frames of scene {scene_name} in {out} ({inside} within the networks' 45 deg range); "
+        f"adapt with: gsa adapt --frames {out} --out MODELS"
     )
     return 0
 

@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 from inference.errors import DatasetError, InferenceError, module_main
 from inference.files import write_json
 from inference.frames import ANGLE_SCALE_DEG
-from inference.labelled import LabelledFrames, frame_files, read_folder, scene_split
+from inference.labelled import LabelledFrames, read_folder, scene_split
 from inference.networks.swin import angle_loss
 from inference.networks.unetpp import relative_frobenius_loss
 from inference.rotations import geodesic_deg
@@ -114,7 +114,9 @@ def _augment(
         pick = torch.rand(b, generator=gen) < opts.noise_share
         if bool(pick.any()):
             amp = torch.pow(10.0, (x[pick] * 40.0 - 40.0) / 20.0)
-            level = amp.pow(2).mean(dim=(-2, -1), keepdim=True) * (0.3 + 2.7 * torch.rand(amp.shape[0], 1, 1, 1, generator=gen))
+            level = amp.pow(2).mean(dim=(-2, -1), keepdim=True) * (
+                0.3 + 2.7 * torch.rand(amp.shape[0], 1, 1, 1, generator=gen)
+            )
             re = torch.randn(amp.shape, generator=gen)
             im = torch.randn(amp.shape, generator=gen)
             noisy = torch.sqrt((amp + torch.sqrt(level / 2) * re) ** 2 + (torch.sqrt(level / 2) * im) ** 2)
@@ -210,11 +212,7 @@ def adapt(
         )
     model = builtin_target(trained_target)
     max_angle = float(card.get("max_angle_deg") or 45.0)
-    if not isinstance(frames, LabelledFrames):
-        frame_files(frames)  # a missing or empty folder is refused before any work
-    _say(f"reading the base set {base} back from its ONNX files")
-    unet, swin, cfg, parity = recover(base)
-    if not isinstance(frames, LabelledFrames):
+    if not isinstance(frames, LabelledFrames):  # bad frames are refused before any work
         frames = read_folder(frames, size, (radar.range_cell_m, radar.cross_range_cell_m))
     inside = np.all(np.abs(frames.angles_deg) <= max_angle, axis=1)
     left_out = int(np.count_nonzero(~inside))
@@ -226,6 +224,8 @@ def adapt(
             field="frames",
         )
     train_idx, val_idx = scene_split(frames.scenes, opts.validation_share, opts.seed)
+    _say(f"reading the base set {base} back from its ONNX files")
+    unet, swin, cfg, parity = recover(base)
     train, val = frames.subset(train_idx), frames.subset(val_idx)
     _say(
         f"{len(frames)} labelled frames ({left_out} outside +-{max_angle:g} deg left out): {len(train)} from "
@@ -306,7 +306,11 @@ def adapt(
     train_seconds = time.perf_counter() - t0
 
     record: dict[str, Any] = {
-        "base": {"dir": str(base), "name": card.get("name"), "files": {k: v.get("sha256") for k, v in card["files"].items()}},
+        "base": {
+            "dir": str(base),
+            "name": card.get("name"),
+            "files": {k: v.get("sha256") for k, v in card["files"].items()},
+        },
         "recovered_parity": parity,
         "labelled": {
             "frames": len(frames),
@@ -336,9 +340,7 @@ def adapt(
     try:
         for name, net in (("unetpp.pt", unet), ("swin.pt", swin)):
             save_checkpoint({"state_dict": net.state_dict(), "config": cfg, "enhance": True}, work / name)
-        data = {
-            k: card.get(k) for k in ("radar", "target", "target_model", "max_angle_deg")
-        }
+        data = {k: card.get(k) for k in ("radar", "target", "target_model", "max_angle_deg")}
         data["target"] = data["target"] or trained_target
         write_json(work / "training.json", {"mode": "adapt", "data": data, "complete": True, "seed": opts.seed})
         _say(f"exporting to {out} (int8 UNet++, float16 Swin)")
@@ -412,10 +414,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--base", default=None, help="model folder to start from (default: the shipped models)")
     p.add_argument("--out", required=True, help="where to write the adapted model folder (GSA_MODEL_DIR serves it)")
     p.add_argument("--target", default=None, help="the target the frames show (default: the base set's)")
-    p.add_argument("--sim-ratio", type=float, default=d.sim_ratio, help=f"simulated frames per labelled one ({d.sim_ratio:g})")
+    p.add_argument(
+        "--sim-ratio", type=float, default=d.sim_ratio, help=f"simulated frames per labelled one ({d.sim_ratio:g})"
+    )
     p.add_argument("--epochs", type=int, default=d.epochs, help=f"at most this many epochs ({d.epochs})")
-    p.add_argument("--max-minutes", type=float, default=d.max_minutes, help=f"stop after the epoch that passes this ({d.max_minutes:g})")
-    p.add_argument("--validation-share", type=float, default=d.validation_share, help="share of frames held out, by whole scenes")
+    p.add_argument(
+        "--max-minutes",
+        type=float,
+        default=d.max_minutes,
+        help=f"stop after the epoch that passes this ({d.max_minutes:g})",
+    )
+    p.add_argument(
+        "--validation-share", type=float, default=d.validation_share, help="share of frames held out, by whole scenes"
+    )
     p.add_argument("--batch-size", type=int, default=d.batch_size)
     p.add_argument("--seed", type=int, default=d.seed)
 
@@ -435,7 +446,8 @@ def run(args: argparse.Namespace) -> int:
     base = Path(args.base) if args.base else DEFAULT_MODEL_DIR
     if out.resolve() == base.resolve():
         raise InferenceError("--out is the base folder: write the adapted set to a new folder", field="out")
-    record = adapt(base, args.frames, out, opts, args.target)
+    # ``gsa adapt --plan`` reads the folder beforehand (the planner places its J2000 labels): ``args.labelled``.
+    record = adapt(base, getattr(args, "labelled", None) or args.frames, out, opts, args.target)
     print(json.dumps({k: record[k] for k in ("before", "after", "chosen_epoch", "calibration", "minutes")}, indent=1))
     return 0
 

@@ -124,7 +124,7 @@ def recover_unet(path: Path, cfg: dict[str, Any]) -> torch.nn.Module:
             else:  # "0_1.block.3" -> node 0_1, ordered by the layer index
                 key, _, layer = where.partition(".block.")
                 found.setdefault(f"nodes.{key}", []).append((int(layer or 0), n))
-    targets: dict[str, list[torch.nn.Module]] = {}
+    targets: dict[str, list[torch.nn.Conv2d | torch.nn.ConvTranspose2d]] = {}
     for name, m in unet.named_modules():
         if isinstance(m, torch.nn.ConvTranspose2d | torch.nn.Conv2d):
             owner = name.rsplit(".block.", 1)[0] if ".block." in name else name
@@ -145,7 +145,9 @@ def recover_unet(path: Path, cfg: dict[str, Any]) -> torch.nn.Module:
                 raise ModelFileError(f"{path.name}: {owner} convolution {k}'s weight is not a constant", field="model")
             _set(conv.weight, w, f"{path.name} {owner} convolution {k}")
             assert conv.bias is not None  # built without batch norm: every convolution has a bias
-            _set(conv.bias, b if b is not None else np.zeros(conv.bias.shape, np.float32), f"{path.name} {owner}")
+            _set(
+                conv.bias, b if b is not None else np.zeros(tuple(conv.bias.shape), np.float32), f"{path.name} {owner}"
+            )
     unet.eval()
     return unet
 
@@ -180,6 +182,7 @@ def recover_swin(path: Path, cfg: dict[str, Any]) -> torch.nn.Module:
     params = dict(swin.named_parameters())
     modules = dict(swin.named_modules())
     done: set[str] = set()
+
     def place(key: str, value: NDArray[Any] | None) -> None:
         if value is not None and key in params and key not in done and tuple(params[key].shape) == value.shape:
             _set(params[key], value, f"{path.name} {key}")

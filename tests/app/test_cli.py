@@ -229,3 +229,72 @@ def test_plan_without_a_request_and_a_misspelt_field_say_what_to_fix(tmp_path):
     assert out.returncode == 2 and out.stderr.count("\n") == 1
     assert "target.elements.inclinaton_deg: not a field this request takes" in out.stderr
     assert "function-after" not in out.stderr
+
+
+def test_simulate_a_scene_as_labelled_frames_and_place_j2000_labels_by_the_plan(tmp_path, smoke_models):
+    """gsa simulate --scene writes the labelled-frame format; a folder labelled only in J2000 is placed by --plan."""
+    import numpy as np
+
+    from app.cli.labelled import read_with_plan
+    from inference.labelled import read_folder
+    from inference.rotations import geodesic_deg
+
+    req = tmp_path / "paper.json"
+    req.write_text(json.dumps(PAPER_EXAMPLE))
+    radar = ["--n-range", "64", "--n-azimuth", "64", "--bandwidth-hz", "0.4e9", "--aperture-deg", str(5.1 / 4)]
+    out = _gsa(
+        "simulate",
+        "--scene",
+        str(req),
+        "--out",
+        str(tmp_path / "labelled"),
+        "--frames",
+        "6",
+        "--physics",
+        "po",
+        "--roughness",
+        "0.3",
+        "--label-error-deg",
+        "0.3",
+        *radar,
+        cwd=tmp_path,
+    )
+    assert out.returncode == 0, out.stderr
+    assert "by physical optics" in out.stderr and "gsa adapt --frames" in out.stdout
+    rec = json.loads((tmp_path / "labelled" / "scene.json").read_text())
+    assert rec["physics"] == "po" and rec["label_error_deg"] == 0.3 and len(rec["frames"]) == 6
+    lab = read_folder(tmp_path / "labelled", 64)
+    assert len(set(lab.scenes)) == 1 and np.all(lab.sigma_deg == 0.3)
+    truth = np.array([f["attitude_observation"]["euler_zyx_deg"] for f in rec["frames"]])
+    assert 0.01 < np.median(geodesic_deg(lab.angles_deg, truth)) < 1.5  # the observer's error, as asked
+    # The same frames labelled only in J2000 (as an observer's file would be): the plan places them.
+    only_j2000 = tmp_path / "j2000"
+    only_j2000.mkdir()
+    for f in sorted((tmp_path / "labelled").glob("*.npz")):
+        with np.load(f) as z:
+            np.savez(only_j2000 / f.name, **{k: z[k] for k in z.files if k != "angles_deg"})
+    placed = read_with_plan(str(only_j2000), str(req), 64, (0.375, 0.42))
+    assert geodesic_deg(placed.angles_deg, lab.angles_deg).max() < 0.05
+    no_plan = _gsa("adapt", "--frames", str(only_j2000), "--base", str(smoke_models), "--out", "o", cwd=tmp_path)
+    assert no_plan.returncode == 2 and "--plan" in no_plan.stderr and no_plan.stderr.count("\n") == 1, no_plan.stderr
+    one_scene = _gsa(
+        "adapt",
+        "--frames",
+        str(only_j2000),
+        "--plan",
+        str(req),
+        "--base",
+        str(smoke_models),
+        "--out",
+        "o",
+        cwd=tmp_path,
+    )
+    assert one_scene.returncode == 2 and "adapting needs at least 4, from 2 scenes" in one_scene.stderr, (
+        one_scene.stderr
+    )
+    both = _gsa("simulate", "--scene", str(req), "--pass", str(req), "--out", "x", cwd=tmp_path)
+    assert both.returncode == 2 and "not both" in both.stderr
+    missing = _gsa("simulate", "--scene", "no-such-plan", "--out", "x", cwd=tmp_path)
+    assert missing.returncode == 2 and "no such file" in missing.stderr and missing.stderr.count("\n") == 1, (
+        missing.stderr
+    )

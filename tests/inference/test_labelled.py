@@ -62,7 +62,7 @@ def test_a_j2000_label_is_placed_by_the_plans_geometry(tmp_path):
     got = read_folder(tmp_path, SIZE, resolve=resolve)
     assert np.allclose(got.angles_deg[0], (12.0, -7.0, 3.0), atol=1e-9)
     assert seen == [(t, "f.npz")] and got.observed_at == (t.isoformat(),)
-    with pytest.raises(DatasetError, match="f.npz: quaternion_j2000: .*--plan-id"):
+    with pytest.raises(DatasetError, match="f.npz: quaternion_j2000: .*gsa adapt --plan"):
         read_folder(tmp_path, SIZE)
 
 

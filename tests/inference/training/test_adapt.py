@@ -53,7 +53,10 @@ def test_networks_read_back_from_onnx_compute_what_torch_did(tmp_path):
         got_s = recover_swin(tmp_path / "f32" / "swin.onnx", cfg.as_dict())(x)
     assert float((got_u - ref_u).abs().max()) < 1e-5
     assert float((got_s - ref_s).abs().max()) < 1e-5
-    assert not any(isinstance(m, torch.nn.BatchNorm2d) for m in recover_unet(tmp_path / "f32" / "unetpp.onnx", cfg.as_dict()).modules())
+    assert not any(
+        isinstance(m, torch.nn.BatchNorm2d)
+        for m in recover_unet(tmp_path / "f32" / "unetpp.onnx", cfg.as_dict()).modules()
+    )
 
 
 def test_the_shipped_set_reads_back_within_its_own_rounding():
@@ -75,12 +78,14 @@ def test_a_folder_that_is_not_the_configured_network_is_refused(tmp_path):
 
 @pytest.fixture(scope="module")
 def smoke_base(tmp_path_factory):
+    from inference.simulation.dataset import generate
     from inference.training.options import recipe
     from inference.training.train import train
-    from inference.simulation.dataset import generate
 
     root = tmp_path_factory.mktemp("base")
-    generate(DatasetSpec(n=32, seed=5, shard_size=32, n_train=24), root / "data", SMOKE_RADAR, workers=1, progress=False)
+    generate(
+        DatasetSpec(n=32, seed=5, shard_size=32, n_train=24), root / "data", SMOKE_RADAR, workers=1, progress=False
+    )
     train(root / "data", root / "run", recipe("smoke", epochs=1, log_every=0))
     frames = render_frames(DatasetSpec(n=16, seed=9), SMOKE_RADAR, 0, 16)["image"].astype(np.float32)
     export(root / "run", root / "models", frames, half=True, int8=True)
@@ -94,8 +99,11 @@ def _labelled(folder, scenes, per, seed):
     arr = render_frames(spec, SMOKE_RADAR, 0, scenes * per)
     for k in range(scenes * per):
         write_frame(
-            folder / f"f{k:03d}.npz", arr["image"][k].astype(np.float32), angles_deg=arr["angles_deg"][k],
-            scene=f"pass-{k // per}", normalised=True,
+            folder / f"f{k:03d}.npz",
+            arr["image"][k].astype(np.float32),
+            angles_deg=arr["angles_deg"][k],
+            scene=f"pass-{k // per}",
+            normalised=True,
         )
     return folder
 
@@ -120,7 +128,7 @@ def test_adapt_splits_by_scene_keeps_the_best_weights_and_serves(smoke_base, tmp
     trust = json.loads((out / "trust.json").read_text())
     assert rec["calibration"]["recalibrated"] and trust["made"]["frames"] == lab["validation_frames"]
     assert sorted(trust["made"]["scenes"]) == lab["validation_scenes"]
-    assert {n for n in trust["made"]["labelled_frames"]} <= {p.name for p in frames.iterdir()}
+    assert set(trust["made"]["labelled_frames"]) <= {p.name for p in frames.iterdir()}
 
 
 def test_adapt_refusals_leave_nothing(smoke_base, tmp_path, capsys):
@@ -131,7 +139,9 @@ def test_adapt_refusals_leave_nothing(smoke_base, tmp_path, capsys):
         adapt(smoke_base, one, tmp_path / "o", AdaptOptions(epochs=1), target="comsat-like")
     assert not (tmp_path / "o").exists()
     capsys.readouterr()
-    code = gsa(["adapt", "--frames", str(tmp_path / "missing"), "--base", str(smoke_base), "--out", str(tmp_path / "o")])
+    code = gsa(
+        ["adapt", "--frames", str(tmp_path / "missing"), "--base", str(smoke_base), "--out", str(tmp_path / "o")]
+    )
     err = capsys.readouterr().err
     assert code == 2 and "not a folder of labelled frames" in err and len(err.strip().splitlines()) == 1
     code = gsa(["adapt", "--frames", str(one), "--base", str(smoke_base), "--out", str(smoke_base)])
