@@ -10,7 +10,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from app.core.security import HMAC_SCHEME, LEGACY_SCHEME, digests_equal, key_digest, key_prefix, new_api_key
-from app.db.models import ApiKey, Campaign, Estimate, GroundStation, Operator, Pass, Plan, utcnow
+from app.db.models import ApiKey, Campaign, Estimate, GroundStation, LabelledFrame, Operator, Pass, Plan, utcnow
 
 if TYPE_CHECKING:
     from app.schemas import CampaignCreate, CampaignResult, PassResult, PlanCreate, PlanResult
@@ -237,6 +237,7 @@ def blob_digests(*, session: Session) -> set[str]:
     used: set[str] = set()
     for original, enhanced in session.execute(select(Estimate.original_sha256, Estimate.enhanced_sha256)):
         used.update((original, enhanced))
+    used.update(session.scalars(select(LabelledFrame.frame_sha256)))
     return used
 
 
@@ -246,7 +247,10 @@ def blob_in_use(*, session: Session, digest: str) -> bool:
         .select_from(Estimate)
         .where((Estimate.original_sha256 == digest) | (Estimate.enhanced_sha256 == digest))
     )
-    return bool(hit)
+    labelled = session.scalar(
+        select(func.count()).select_from(LabelledFrame).where(LabelledFrame.frame_sha256 == digest)
+    )
+    return bool(hit) or bool(labelled)
 
 
 def create_pass(*, session: Session, operator_id: str, plan_id: str, result: PassResult) -> Pass:
@@ -319,3 +323,67 @@ def list_stations(*, session: Session, operator_id: str, limit: int, offset: int
 def delete_station(*, session: Session, station: GroundStation) -> None:
     session.delete(station)
     session.commit()
+
+
+def labelled_inputs(*, session: Session, operator_id: str, target: str, digests: list[str]) -> set[str]:
+    """Which of these uploaded files' digests the operator already stored as labelled frames of ``target``."""
+    if not digests:
+        return set()
+    rows = session.scalars(
+        select(LabelledFrame.input_sha256).where(
+            LabelledFrame.operator_id == operator_id,
+            LabelledFrame.target == target,
+            LabelledFrame.input_sha256.in_(digests),
+        )
+    )
+    return set(rows)
+
+
+def labelled_targets_of_plan(*, session: Session, operator_id: str, plan_id: str) -> set[str]:
+    """The targets whose labelled frames the operator placed by this plan."""
+    rows = session.scalars(
+        select(LabelledFrame.target)
+        .where(LabelledFrame.operator_id == operator_id, LabelledFrame.plan_id == plan_id)
+        .distinct()
+    )
+    return set(rows)
+
+
+def create_labelled(*, session: Session, rows: list[LabelledFrame]) -> list[LabelledFrame]:
+    """Store labelled frames together (all or none)."""
+    session.add_all(rows)
+    session.commit()
+    for r in rows:
+        session.refresh(r)
+    return rows
+
+
+def list_labelled(
+    *, session: Session, operator_id: str, target: str, limit: int, offset: int, scene: str | None = None
+) -> tuple[list[LabelledFrame], int]:
+    where = [LabelledFrame.operator_id == operator_id, LabelledFrame.target == target]
+    if scene is not None:
+        where.append(LabelledFrame.scene == scene)
+    total = int(session.scalar(select(func.count()).select_from(LabelledFrame).where(*where)) or 0)
+    rows = session.scalars(
+        select(LabelledFrame)
+        .where(*where)
+        .order_by(LabelledFrame.created_at.desc(), LabelledFrame.id)
+        .limit(limit)
+        .offset(offset)
+    ).all()
+    return list(rows), total
+
+
+def labelled_summary(*, session: Session, operator_id: str, target: str) -> tuple[dict[str, int], list[list[float]]]:
+    """Counts per scene and every label's angles, for the operator's labelled frames of ``target``."""
+    per_scene: dict[str, int] = {}
+    angles: list[list[float]] = []
+    for scene, a in session.execute(
+        select(LabelledFrame.scene, LabelledFrame.angles_deg).where(
+            LabelledFrame.operator_id == operator_id, LabelledFrame.target == target
+        )
+    ):
+        per_scene[scene] = per_scene.get(scene, 0) + 1
+        angles.append(list(a))
+    return per_scene, angles

@@ -180,23 +180,49 @@ def prepare_image(
 
 
 @dataclass(frozen=True)
-class _Read:
+class FrameRead:
+    """One labelled frame file, read and checked: the models' input, its label, and what the file said."""
+
     frame: NDArray[np.float32]
     angles_deg: tuple[float, float, float]
     scene: str
     snr_db: float | None
     sigma_deg: float | None
     observed_at: str | None
+    quaternion_j2000: tuple[float, float, float, float] | None = None  # the label as given, where in J2000
+    scene_given: bool = True  # False: the file named no scene (the file's stem stands in)
+
+
+MAX_MEMBER_BYTES = 64 * 1024 * 1024  # a member's declared size, checked before it is read (no zip bombs)
+
+
+def _open_npz(source: Path | bytes, path: Path) -> Any:
+    """np.load of a file or of bytes, every member's declared size checked against ``MAX_MEMBER_BYTES`` first."""
+    import io
+
+    try:
+        raw: Any = io.BytesIO(source) if isinstance(source, bytes) else source
+        with zipfile.ZipFile(raw) as zf:
+            big = next((i for i in zf.infolist() if i.file_size > MAX_MEMBER_BYTES), None)
+        if big is not None:
+            raise _bad(path, big.filename.removesuffix(".npy"), f"over {MAX_MEMBER_BYTES // 2**20} MiB uncompressed")
+        return np.load(io.BytesIO(source) if isinstance(source, bytes) else source, allow_pickle=False)
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        if isinstance(exc, DatasetError):
+            raise
+        raise DatasetError(f"{path.name}: not a readable .npz ({exc})", field="file") from exc
 
 
 def read_frame(
-    path: Path, size: int, model_cells_m: tuple[float, float] | None = None, resolve: Resolver | None = None
-) -> _Read:
-    """Read and check one labelled frame file (see the module's text)."""
-    try:
-        z = np.load(path, allow_pickle=False)
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise DatasetError(f"{path.name}: not a readable .npz ({exc})", field="file") from exc
+    path: Path,
+    size: int,
+    model_cells_m: tuple[float, float] | None = None,
+    resolve: Resolver | None = None,
+    data: bytes | None = None,
+) -> FrameRead:
+    """Read and check one labelled frame file (see the module's text); ``data``: its bytes, when not on disk
+    (``path`` then only names it)."""
+    z = _open_npz(data if data is not None else path, path)
     with z:
         if "image" not in z.files:
             raise _bad(path, "image", f"missing (the file holds {', '.join(sorted(z.files)) or 'nothing'})")
@@ -219,6 +245,7 @@ def read_frame(
         )
         observed = _text(z, path, "observed_at")
         when = parse_time(observed, path) if observed is not None else None
+        quat = None
         if "angles_deg" in z.files:
             angles = check_angles(z["angles_deg"], f"{path.name}: angles_deg")
         elif "quaternion_j2000" in z.files:
@@ -238,15 +265,19 @@ def read_frame(
                     "plan_id in the API)",
                 )
             angles = check_angles(resolve(q / norm, when, path.name), f"{path.name}: quaternion_j2000")
+            quat = (float(q[0] / norm), float(q[1] / norm), float(q[2] / norm), float(q[3] / norm))
         else:
             raise _bad(path, "angles_deg", "no label: give angles_deg, or quaternion_j2000 with observed_at")
-        return _Read(
+        scene = _text(z, path, "scene")
+        return FrameRead(
             frame,
             angles,
-            _text(z, path, "scene") or path.stem,
+            scene or path.stem,
             _scalar(z, path, "snr_db", -60.0, 100.0),
             _scalar(z, path, "attitude_sigma_deg", 0.0, MAX_SIGMA_DEG),
             when.isoformat() if when is not None else None,
+            quat,
+            scene is not None,
         )
 
 
@@ -289,7 +320,7 @@ def read_folder(
 
 
 def write_frame(
-    path: str | Path,
+    path: str | Path | Any,
     image: Any,
     *,
     angles_deg: Sequence[float] | None = None,
@@ -300,8 +331,9 @@ def write_frame(
     snr_db: float | None = None,
     cells_m: tuple[float, float] | None = None,
     normalised: bool = False,
-) -> Path:
-    """Write one labelled frame in the folder format (the reader's counterpart; at least one label)."""
+) -> Any:
+    """Write one labelled frame in the folder format (the reader's counterpart; at least one label) to a path
+    or a file object; return it."""
     if angles_deg is None and quaternion_j2000 is None:
         raise DatasetError("a labelled frame needs angles_deg or quaternion_j2000", field="angles_deg")
     members: dict[str, Any] = {"image": np.asarray(image)}
@@ -321,6 +353,9 @@ def write_frame(
         members["snr_db"] = np.array(float(snr_db))
     if cells_m is not None:
         members["range_cell_m"], members["cross_range_cell_m"] = np.array(cells_m[0]), np.array(cells_m[1])
+    if not isinstance(path, str | Path):  # a file object (an upload being built in memory)
+        np.savez_compressed(path, **members)
+        return path
     path = Path(path)
     np.savez_compressed(path, **members)
     return path

@@ -121,3 +121,34 @@ class GroundStation(Base):
     name: Mapped[str] = mapped_column(String(200))
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     station: Mapped[dict[str, Any]] = mapped_column(JSON)
+
+
+class LabelledFrame(Base):
+    """A radar frame with the attitude an optical observer measured (``/v1/targets/{target}/labelled-frames``).
+
+    The frame is stored as the models' input (a PNG blob, like an estimate's); ``angles_deg`` is the label in the
+    frame's observation frame, computed from ``quaternion_j2000`` and the plan's geometry where the label came so.
+    """
+
+    __tablename__ = "labelled_frames"
+    __table_args__ = (
+        Index("ix_labelled_operator_target", "operator_id", "target", "created_at"),
+        UniqueConstraint("operator_id", "target", "input_sha256", name="uq_labelled_operator_target_input"),
+    )
+
+    id: Mapped[str] = mapped_column(String(36), primary_key=True, default=new_id)
+    operator_id: Mapped[str] = mapped_column(ForeignKey("operators.id", ondelete="CASCADE"))
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    target: Mapped[str] = mapped_column(String(200))
+    scene: Mapped[str] = mapped_column(String(200), index=True)
+    plan_id: Mapped[str | None] = mapped_column(ForeignKey("plans.id", ondelete="SET NULL"), nullable=True, index=True)
+    station_name: Mapped[str | None] = mapped_column(String(200), nullable=True)
+    observed_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+    input_name: Mapped[str] = mapped_column(String(255))
+    input_sha256: Mapped[str] = mapped_column(String(64))
+    angles_deg: Mapped[list[float]] = mapped_column(JSON)
+    quaternion_j2000: Mapped[list[float] | None] = mapped_column(JSON, nullable=True)
+    attitude_sigma_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    snr_db: Mapped[float | None] = mapped_column(Float, nullable=True)
+    cells_m: Mapped[list[float] | None] = mapped_column(JSON, nullable=True)
+    frame_sha256: Mapped[str] = mapped_column(String(64))

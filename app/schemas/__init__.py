@@ -38,6 +38,7 @@ from app.schemas.estimates import (
     ScenePublic,
     ScenesPublic,
 )
+from app.schemas.labelled import LabelledFramePublic, LabelledFramesPublic, LabelledSummary, LabelledUpload
 from app.schemas.orbits import ORBIT_SOURCES, ElementsIn, OmmIn, OrbitIn
 from app.schemas.passes import (
     PassAttitudeJ2000,
@@ -76,6 +77,10 @@ from app.schemas.stations import (
 )
 
 __all__ = [
+    "LabelledFramePublic",
+    "LabelledFramesPublic",
+    "LabelledSummary",
+    "LabelledUpload",
     "PassSummary",
     "PassesPublic",
     "CAMPAIGN_EXAMPLE",

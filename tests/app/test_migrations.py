@@ -35,11 +35,29 @@ def _tables(url: str) -> set[str]:
 def test_upgrade_downgrade_upgrade(url):
     cfg = _cfg(url)
     command.upgrade(cfg, "head")
-    assert _tables(url) == {"operators", "api_keys", "plans", "estimates", "passes", "stations", "campaigns"}
+    assert _tables(url) == {
+        "operators",
+        "api_keys",
+        "plans",
+        "estimates",
+        "passes",
+        "stations",
+        "campaigns",
+        "labelled_frames",
+    }
     command.downgrade(cfg, "base")
     assert _tables(url) == set()
     command.upgrade(cfg, "head")
-    assert _tables(url) == {"operators", "api_keys", "plans", "estimates", "passes", "stations", "campaigns"}
+    assert _tables(url) == {
+        "operators",
+        "api_keys",
+        "plans",
+        "estimates",
+        "passes",
+        "stations",
+        "campaigns",
+        "labelled_frames",
+    }
     engine = create_engine(url)
     with engine.connect() as conn:
         assert conn.execute(text("SELECT version_num FROM alembic_version")).scalar() == head_revision()

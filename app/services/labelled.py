@@ -1,0 +1,184 @@
+"""Labelled frames in: each uploaded file (``inference.labelled``'s .npz format) read, its label placed by the plan
+where it is given in J2000, checked as a whole, then stored (frames as blobs, then the rows in one transaction)."""
+
+from __future__ import annotations
+
+import hashlib
+from datetime import datetime, timedelta
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from sqlalchemy.orm import Session
+
+from app import crud
+from app.core.config import Settings
+from app.db.models import LabelledFrame, Plan, utcnow
+from app.errors import InputError
+from app.schemas import LabelledFramePublic, LabelledSummary, LabelledUpload
+from app.services import images
+from app.services.scenes import scene_for, windows_of
+from inference.errors import InferenceError
+from inference.labelled import MAX_SIGMA_DEG, FrameRead, coverage, parse_time, read_frame
+from scene.errors import SceneError
+from scene.geometry import check_times
+from scene.labels import plan_resolver
+
+
+def _times_of(files: list[tuple[str, bytes]]) -> list[datetime]:
+    """Every file's observed_at, read before the frames (the plan's scene spans them)."""
+    times = []
+    for name, data in files:
+        try:
+            import io
+
+            with np.load(io.BytesIO(data), allow_pickle=False) as z:
+                if "observed_at" in z.files:
+                    times.append(parse_time(str(z["observed_at"]), Path(name)))
+        except (OSError, ValueError, EOFError):
+            continue  # the reader says what is wrong with this file, by name
+    return times
+
+
+def _plan(session: Session, operator_id: str, plan_id: str | None, target: str) -> Plan | None:
+    if plan_id is None:
+        return None
+    plan = crud.get_plan(session=session, operator_id=operator_id, plan_id=plan_id)
+    if plan is None:
+        raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
+    others = crud.labelled_targets_of_plan(session=session, operator_id=operator_id, plan_id=plan_id) - {target}
+    if others:
+        raise InputError(
+            ["plan_id"],
+            f"plan {plan_id} already labels frames of target {sorted(others)[0]!r}: a plan's scene images one "
+            f"target, not {target!r}",
+        )
+    return plan
+
+
+def read_labelled(
+    *,
+    files: list[tuple[str, bytes]],
+    size: int,
+    model_cells_m: tuple[float, float],
+    plan: Plan | None,
+) -> list[FrameRead]:
+    """Read every file (all before anything is stored); J2000 labels placed by the plan's geometry."""
+    resolve = None
+    if plan is not None:
+        times = _times_of(files)
+        try:
+            if times:
+                check_times(windows_of(plan.result), times)
+                resolve = plan_resolver(
+                    scene_for(plan.request, min(times) - timedelta(seconds=1), max(times) + timedelta(seconds=1))
+                )
+        except SceneError as exc:
+            raise InputError(["observed_at"], str(exc)) from None
+    out = []
+    for name, data in files:
+        try:
+            out.append(read_frame(Path(name), size, model_cells_m, resolve, data=data))
+        except InferenceError as exc:
+            raise InputError(["files", name, exc.field or "file"], str(exc)) from None
+        except SceneError as exc:
+            raise InputError(["files", name, "observed_at"], str(exc)) from None
+    return out
+
+
+def create_labelled(
+    *,
+    session: Session,
+    operator_id: str,
+    settings: Settings,
+    target: str,
+    size: int,
+    model_cells_m: tuple[float, float],
+    files: list[tuple[str, bytes]],
+    plan_id: str | None = None,
+    scene: str | None = None,
+    attitude_sigma_deg: float | None = None,
+) -> LabelledUpload:
+    """Store the uploaded labelled frames of ``target`` (see the module's text); return what was stored."""
+    if not files:
+        raise InputError(["files"], "no frames in the upload")
+    if len(files) > settings.max_batch_frames:
+        raise InputError(["files"], f"{len(files)} files is over the batch limit of {settings.max_batch_frames}")
+    if attitude_sigma_deg is not None and not 0.0 <= attitude_sigma_deg <= MAX_SIGMA_DEG:
+        raise InputError(["attitude_sigma_deg"], f"between 0 and {MAX_SIGMA_DEG:g} deg")
+    plan = _plan(session, operator_id, plan_id, target)
+    reads = read_labelled(files=files, size=size, model_cells_m=model_cells_m, plan=plan)
+    for (name, _), r in zip(files, reads, strict=True):
+        if r.quaternion_j2000 is not None and plan is None:  # the reader refuses these without a plan
+            raise InputError(["files", name, "plan_id"], "a label in J2000 needs plan_id")
+    digests = [hashlib.sha256(data).hexdigest() for _, data in files]
+    known = crud.labelled_inputs(session=session, operator_id=operator_id, target=target, digests=digests)
+    station = plan.station_name if plan is not None else None
+    rows, blobs, seen = [], [], set(known)
+    for (name, _), digest, r in zip(files, digests, reads, strict=True):
+        if digest in seen:
+            continue
+        seen.add(digest)
+        blob = images.png_bytes(r.frame)
+        blobs.append(blob)
+        rows.append(
+            LabelledFrame(
+                operator_id=operator_id,
+                created_at=utcnow(),
+                target=target,
+                scene=(r.scene if r.scene_given or scene is None else scene)[:200],
+                plan_id=plan.id if plan is not None else None,
+                station_name=station,
+                observed_at=datetime.fromisoformat(r.observed_at) if r.observed_at else None,
+                input_name=name[:255],
+                input_sha256=digest,
+                angles_deg=[round(a, 6) for a in r.angles_deg],
+                quaternion_j2000=list(r.quaternion_j2000) if r.quaternion_j2000 else None,
+                attitude_sigma_deg=r.sigma_deg if r.sigma_deg is not None else attitude_sigma_deg,
+                snr_db=r.snr_db,
+                cells_m=None,
+                frame_sha256=images.store_blob(settings.data_dir, blob),
+            )
+        )
+    stored = crud.create_labelled(session=session, rows=rows) if rows else []
+    for blob in blobs:  # a concurrent sweep may have removed a blob before its row existed
+        images.store_blob(settings.data_dir, blob)
+    summary = summarise(session=session, operator_id=operator_id, target=target)
+    return LabelledUpload(
+        **summary.model_dump(),
+        stored=[LabelledFramePublic.from_row(r) for r in stored],
+        already_stored=[name for (name, _), d in zip(files, digests, strict=True) if d in known],
+    )
+
+
+def summarise(*, session: Session, operator_id: str, target: str) -> LabelledSummary:
+    per_scene, angles = crud.labelled_summary(session=session, operator_id=operator_id, target=target)
+    return LabelledSummary(
+        target=target,
+        count=sum(per_scene.values()),
+        per_scene=per_scene,
+        coverage=round(coverage(np.array(angles, float).reshape(-1, 3)), 4) if angles else 0.0,
+    )
+
+
+def frames_of(*, session: Session, operator_id: str, target: str, data_dir: Path) -> Any:
+    """The operator's labelled frames of ``target`` as ``inference.labelled.LabelledFrames`` (for an adaptation)."""
+    from PIL import Image
+
+    from inference.labelled import LabelledFrames
+
+    rows, _ = crud.list_labelled(session=session, operator_id=operator_id, target=target, limit=10**6, offset=0)
+    rows = sorted(rows, key=lambda r: (r.created_at, r.id))
+    frames = []
+    for r in rows:
+        with Image.open(images.blob_path(data_dir, r.frame_sha256)) as im:
+            frames.append(np.asarray(im, np.float32) / 255.0)
+    return LabelledFrames(
+        np.stack(frames) if frames else np.zeros((0, 0, 0), np.float32),
+        np.array([r.angles_deg for r in rows], float).reshape(-1, 3),
+        tuple(r.scene for r in rows),
+        tuple(f"{r.id}:{r.input_name}" for r in rows),
+        np.array([np.nan if r.snr_db is None else r.snr_db for r in rows]),
+        np.array([np.nan if r.attitude_sigma_deg is None else r.attitude_sigma_deg for r in rows]),
+        tuple(r.observed_at.isoformat() if r.observed_at else None for r in rows),
+    )

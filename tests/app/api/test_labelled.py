@@ -1,0 +1,137 @@
+"""POST/GET /v1/targets/{target}/labelled-frames: frames with the optical observer's attitude, stored and listed."""
+
+import io
+
+import numpy as np
+import pytest
+from sqlalchemy import create_engine, func, select
+
+from app.db.models import LabelledFrame
+from app.schemas import PAPER_EXAMPLE
+from app.services.scenes import scene_for, windows_of
+from inference.labelled import coverage, write_frame
+from inference.rotations import euler_from_matrix, euler_to_quaternion, geodesic_deg, rotation_matrix
+from tests.conftest import KEY_A, KEY_B
+
+A = {"X-API-Key": KEY_A}
+B = {"X-API-Key": KEY_B}
+T = "tiangong-like"
+
+
+def _npz(seed, **label):
+    rng = np.random.default_rng(seed)
+    buf = io.BytesIO()
+    write_frame(buf, rng.random((64, 64)) + 0.01, **label)
+    return buf.getvalue()
+
+
+def _post(client, files, headers=A, **form):
+    return client.post(
+        f"/v1/targets/{T}/labelled-frames",
+        files=[("files", (name, data)) for name, data in files],
+        data=form,
+        headers=headers,
+    )
+
+
+def _count(settings):
+    engine = create_engine(settings.database_url)
+    with engine.connect() as conn:
+        n = conn.scalar(select(func.count()).select_from(LabelledFrame))
+    engine.dispose()
+    return n
+
+
+@pytest.fixture(scope="module")
+def plan(client):
+    return client.post("/v1/plans", json=PAPER_EXAMPLE, headers=A).json()
+
+
+def test_frames_with_angles_are_stored_listed_and_not_stored_twice(client, settings):
+    files = [
+        ("a.npz", _npz(1, angles_deg=(10.0, -20.0, 30.0), scene="pass-1", snr_db=4.0)),
+        ("b.npz", _npz(2, angles_deg=(-35.0, 5.0, 0.0), scene="pass-1")),
+        ("c.npz", _npz(3, angles_deg=(1.0, 2.0, 3.0))),
+    ]
+    r = _post(client, files, scene="pass-2", attitude_sigma_deg="0.25")
+    assert r.status_code == 201, r.text
+    body = r.json()
+    assert [f["name"] for f in body["stored"]] == ["a.npz", "b.npz", "c.npz"]
+    assert [f["scene"] for f in body["stored"]] == ["pass-1", "pass-1", "pass-2"]  # the form's scene for c only
+    assert body["stored"][0]["angles_deg"] == [10.0, -20.0, 30.0] and body["stored"][0]["snr_db"] == 4.0
+    assert all(f["attitude_sigma_deg"] == 0.25 for f in body["stored"])
+    assert body["per_scene"] == {"pass-1": 2, "pass-2": 1} and body["count"] == 3
+    assert body["coverage"] == pytest.approx(coverage(np.array([[10, -20, 30], [-35, 5, 0], [1, 2, 3]])), abs=1e-4)
+    again = _post(client, files[:1]).json()
+    assert again["stored"] == [] and again["already_stored"] == ["a.npz"] and again["count"] == 3
+    listed = client.get(f"/v1/targets/{T}/labelled-frames", params={"scene": "pass-1"}, headers=A).json()
+    assert {f["name"] for f in listed["data"]} == {"a.npz", "b.npz"} and listed["count"] == 3
+    # another operator sees none of them
+    assert client.get(f"/v1/targets/{T}/labelled-frames", headers=B).json()["count"] == 0
+
+
+def test_a_j2000_label_is_placed_by_the_plan(client, plan):
+    w = windows_of(plan)[0]
+    when = w.rise + (w.set - w.rise) / 2
+    observation = scene_for(PAPER_EXAMPLE, when, when).placements([when]).observation[0]
+    body_to_obs = rotation_matrix(12.0, -7.0, 3.0)
+    q = euler_to_quaternion(*euler_from_matrix(observation @ body_to_obs))
+    r = _post(
+        client, [("q.npz", _npz(7, quaternion_j2000=q, observed_at=when.isoformat(), scene="j"))], plan_id=plan["id"]
+    )
+    assert r.status_code == 201, r.text
+    got = r.json()["stored"][0]
+    assert geodesic_deg(np.array(got["angles_deg"]), np.array([12.0, -7.0, 3.0]))[0] < 0.01
+    assert got["plan_id"] == plan["id"] and got["station_name"] == plan["station_name"]
+    assert np.allclose(got["quaternion_j2000"], q)
+
+
+@pytest.mark.parametrize(
+    ("files", "form", "field", "says"),
+    [
+        ([("x.npz", b"not a zip")], {}, "file", "not a readable .npz"),
+        ([("x.npz", _npz(1, angles_deg=(0, 95, 0)))], {}, "angles_deg", "y within"),
+        (
+            [("x.npz", _npz(1, quaternion_j2000=(1.0, 0.3, 0, 0), observed_at="2022-11-28T16:00:00Z"))],
+            {},
+            "quaternion_j2000",
+            "unit norm",
+        ),
+        (
+            [("x.npz", _npz(1, quaternion_j2000=(1.0, 0, 0, 0), observed_at="2022-11-28T16:00:00Z"))],
+            {},
+            "quaternion_j2000",
+            "plan",
+        ),
+        ([("x.npz", _npz(1, angles_deg=(0, 0, 0)))], {"plan_id": "no-such-plan"}, "plan_id", "no plan"),
+        ([("x.npz", _npz(1, angles_deg=(0, 0, 0)))], {"attitude_sigma_deg": "45"}, "attitude_sigma_deg", "10"),
+    ],
+)
+def test_bad_frames_and_labels_are_refused_and_nothing_is_stored(client, settings, files, form, field, says):
+    before = _count(settings)
+    good = ("good.npz", _npz(99, angles_deg=(0.0, 0.0, 0.0)))
+    r = _post(client, [good, *files], **form)
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"][0]
+    assert field in [str(v) for v in detail["loc"]] and says in detail["msg"], detail
+    assert _count(settings) == before
+
+
+def test_times_outside_the_plan_and_a_plan_of_another_target(client, settings, plan):
+    w = windows_of(plan)[0]
+    outside = (w.rise.replace(year=w.rise.year - 1)).isoformat()
+    q = euler_to_quaternion(0.0, 0.0, 0.0)
+    r = _post(client, [("o.npz", _npz(11, quaternion_j2000=q, observed_at=outside))], plan_id=plan["id"])
+    assert r.status_code == 422 and "none of the plan's access windows" in r.json()["detail"][0]["msg"]
+    # the plan already labels tiangong-like frames (the test above): another target is refused
+    ok = _post(client, [("p.npz", _npz(12, angles_deg=(1.0, 1.0, 1.0)))], plan_id=plan["id"])
+    assert ok.status_code == 201
+    other = client.post(
+        "/v1/targets/comsat-like/labelled-frames",
+        files=[("files", ("c.npz", _npz(13, angles_deg=(0.0, 0.0, 0.0))))],
+        data={"plan_id": plan["id"]},
+        headers=A,
+    )
+    assert other.status_code == 422 and "images one target" in other.json()["detail"][0]["msg"]
+    unknown = client.get("/v1/targets/no-such-target/labelled-frames", headers=A)
+    assert unknown.status_code == 422 and "unknown target" in unknown.json()["detail"][0]["msg"]
