@@ -65,3 +65,59 @@ def adapt_with_plan(command: Any) -> Any:
         return int(command(args))
 
     return run
+
+
+def cmd_labelled(args: argparse.Namespace) -> int:
+    """``gsa labelled add FOLDER --target T`` and ``gsa labelled list --target T`` on the service."""
+    import json
+
+    from app.cli.common import call_server
+    from inference.labelled import frame_files
+
+    path = f"/v1/targets/{args.target}/labelled-frames"
+    if args.labelled_cmd == "list":
+        params: dict[str, Any] = {"limit": args.limit}
+        if args.scene:
+            params["scene"] = args.scene
+        body = call_server(args, "GET", path, params=params).json()
+        if args.json:
+            print(json.dumps(body, indent=1))
+            return 0
+        _summary(body)
+        for f in body["data"]:
+            z, y, x = f["angles_deg"]
+            print(f"  {f['id'][:8]}  {f['scene'][:24]:<24} {z:8.2f} {y:8.2f} {x:8.2f}  {f['name']}")
+        return 0
+    if not 1 <= args.batch <= 64:
+        raise CliError(f"--batch {args.batch}: between 1 and 64 files a request")
+    try:
+        files = frame_files(args.folder)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    form: dict[str, Any] = {}
+    if args.plan_id:
+        form["plan_id"] = args.plan_id
+    if args.scene:
+        form["scene"] = args.scene
+    stored, already, body = 0, 0, {}
+    for k in range(0, len(files), args.batch):
+        part = files[k : k + args.batch]
+        upload = [("files", (f.name, f.read_bytes())) for f in part]
+        body = call_server(args, "POST", path, files=upload, data=form, timeout=300).json()
+        stored += len(body["stored"])
+        already += len(body["already_stored"])
+        print(f"{k + len(part)}/{len(files)} files sent", file=__import__("sys").stderr)
+    if args.json:
+        print(json.dumps({**body, "stored": stored, "already_stored": already}, indent=1))
+        return 0
+    print(f"{stored} labelled frames stored, {already} already there")
+    _summary(body)
+    return 0
+
+
+def _summary(body: dict[str, Any]) -> None:
+    scenes = ", ".join(f"{k} ({v})" for k, v in sorted(body["per_scene"].items()))
+    print(
+        f"{body['count']} labelled frames of {body['target']} in {len(body['per_scene'])} scene(s): {scenes or '-'}; "
+        f"attitude coverage {100 * body['coverage']:.1f} % of the networks' +-45 deg cube (15 deg cells)"
+    )

@@ -95,3 +95,24 @@ def test_campaigns_and_passes_through_the_command_line(served, capsys, tmp_path)
     assert rc == 0 and "phasing" in out and "stretches searched" in out
     rc, out, _ = _run(capsys, "passes", "list", "--json")
     assert rc == 0 and "count" in json.loads(out)
+
+
+def test_labelled_frames_through_the_command_line(served, capsys, tmp_path):
+    from inference.labelled import write_frame
+
+    folder = tmp_path / "lab"
+    folder.mkdir()
+    rng = np.random.default_rng(5)
+    for k in range(5):
+        write_frame(folder / f"f{k}.npz", rng.random((64, 64)) + 0.01, angles_deg=(k, -k, 2 * k), scene=f"s{k % 2}")
+    rc, out, err = _run(capsys, "labelled", "add", str(folder), "--target", "tiangong-like", "--batch", "2")
+    assert rc == 0 and "5 labelled frames stored, 0 already there" in out and "5/5 files sent" in err, (out, err)
+    assert "in 2 scene(s): s0 (3), s1 (2)" in out
+    rc, out, _ = _run(capsys, "labelled", "add", str(folder), "--target", "tiangong-like")
+    assert rc == 0 and "0 labelled frames stored, 5 already there" in out
+    rc, out, _ = _run(capsys, "labelled", "list", "--target", "tiangong-like", "--scene", "s1", "--json")
+    assert rc == 0 and {f["name"] for f in json.loads(out)["data"]} == {"f1.npz", "f3.npz"}
+    rc, _, err = _run(capsys, "labelled", "list", "--target", "no-such")
+    assert rc == 2 and "unknown target" in err and err.count("\n") == 1
+    rc, _, err = _run(capsys, "labelled", "add", str(tmp_path / "none"), "--target", "tiangong-like")
+    assert rc == 2 and "not a folder" in err
