@@ -111,6 +111,10 @@ def _allowed_methods(app: FastAPI, request: Request) -> list[str]:
     return sorted(methods)
 
 
+class Conflict(Exception):
+    """A request the service's present state refuses (HTTP 409): ask again once that state has passed."""
+
+
 def install_error_handlers(app: FastAPI) -> None:
     async def _domain_error(_request: Request, exc: Exception) -> JSONResponse:
         assert isinstance(exc, ValueError)
@@ -119,6 +123,10 @@ def install_error_handlers(app: FastAPI) -> None:
 
     for kind in DOMAIN_ERRORS:
         app.add_exception_handler(kind, _domain_error)
+
+    @app.exception_handler(Conflict)
+    async def _conflict(_request: Request, exc: Conflict) -> JSONResponse:
+        return JSONResponse(status_code=409, content={"detail": str(exc), "request_id": current_request_id()})
 
     @app.exception_handler(PlanningStopped)
     async def _planning_stopped(_request: Request, exc: PlanningStopped) -> JSONResponse:

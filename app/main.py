@@ -10,6 +10,7 @@ from typing import Any
 from fastapi import FastAPI
 from fastapi.responses import HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
+from sqlalchemy.exc import SQLAlchemyError
 
 from app.api.main import api_router
 from app.core.config import Settings, get_settings
@@ -110,6 +111,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             "know: give its mesh as GSA_TARGET_MODEL",
             field="extra_model_dirs",
         )
+    from app.services.model_versions import Served
+
+    app.state.served = Served(settings.data_dir, threads=settings.ort_threads or None, fit_threads=settings.fit_threads)
+    try:  # adaptations a stopped process of this host left "running" fail, saying why
+        from app.services.model_versions import fail_interrupted
+
+        with make_session_factory(engine)() as s:
+            fail_interrupted(s)
+    except SQLAlchemyError:
+        pass  # a database not yet migrated: /readyz says so
     app.state.settings = settings
     app.state.key_secret = load_key_secret(settings.key_secret, settings.data_dir)
     app.state.engine = engine

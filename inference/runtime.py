@@ -186,6 +186,8 @@ class Estimator:
             "unetpp_sha256": self.card["files"]["unetpp"]["sha256"],
             "swin_sha256": self.card["files"]["swin"]["sha256"],
             "trained_on": card_target(self.card),
+            # an adapted version of the target's set (the service's /v1/model-sets); 0: the set as configured
+            "version": int((self.card.get("version") or {}).get("number", 0)),
         }
 
     def _run(self, role: str, frames: NDArray[np.float32]) -> NDArray[np.float32]:

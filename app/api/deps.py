@@ -90,8 +90,15 @@ ModelSetsDep = Annotated[ModelSets, Depends(get_model_sets)]
 
 
 def models_for(model_sets: ModelSets, checker: Checker) -> Estimator:
-    """The networks for the checker's target: its own model set, or the default set's."""
+    """The networks for the checker's target: its own model set, or the default set's (version 0)."""
     return model_sets.for_target(checker.model.name)
+
+
+def answering(request: Request, session: Session, model_sets: ModelSets, checkers: Any, target: str | None) -> Any:
+    """(Estimator, Checker) that answer ``target`` now: its promoted version's networks and calibration, where a
+    version is promoted (``app.services.model_versions``), else the configured set's."""
+    checker = checker_for(checkers, target)
+    return request.app.state.served.resolve(session, model_sets, checker)
 
 
 def get_checkers(request: Request) -> Checkers:

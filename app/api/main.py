@@ -3,7 +3,7 @@ from fastapi.dependencies.models import Dependant
 from fastapi.routing import APIRoute
 
 from app.api.deps import CurrentOperator
-from app.api.routes import access, campaigns, estimates, passes, plans, scenes, stations, targets
+from app.api.routes import access, campaigns, estimates, model_sets, passes, plans, scenes, stations, targets
 from app.errors import InputError
 from app.schemas import ERROR_RESPONSES
 
@@ -65,3 +65,4 @@ api_router.include_router(scenes.router)
 api_router.include_router(passes.router)
 api_router.include_router(stations.router)
 api_router.include_router(targets.router)
+api_router.include_router(model_sets.router)

@@ -6,7 +6,7 @@ import uuid
 from datetime import UTC, datetime
 from typing import Any
 
-from sqlalchemy import JSON, DateTime, Float, ForeignKey, Index, Integer, String, UniqueConstraint
+from sqlalchemy import JSON, Boolean, DateTime, Float, ForeignKey, Index, Integer, String, Text, UniqueConstraint
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 
@@ -152,3 +152,43 @@ class LabelledFrame(Base):
     snr_db: Mapped[float | None] = mapped_column(Float, nullable=True)
     cells_m: Mapped[list[float] | None] = mapped_column(JSON, nullable=True)
     frame_sha256: Mapped[str] = mapped_column(String(64))
+
+
+class ModelVersion(Base):
+    """An adapted version of a target's model set (``gsa adapt`` run by the service); version 0, the configured
+    set (GSA_MODEL_DIR), has no row. At most one version of a target is promoted: it answers that target."""
+
+    __tablename__ = "model_versions"
+    __table_args__ = (UniqueConstraint("target", "version", name="uq_model_versions_target_version"),)
+
+    id: Mapped[str] = mapped_column(String(36), primary_key=True, default=new_id)
+    target: Mapped[str] = mapped_column(String(200), index=True)
+    version: Mapped[int] = mapped_column(Integer)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    operator_id: Mapped[str | None] = mapped_column(ForeignKey("operators.id", ondelete="SET NULL"), nullable=True)
+    base_version: Mapped[int] = mapped_column(Integer)
+    dir: Mapped[str] = mapped_column(String(500))
+    summary: Mapped[dict[str, Any]] = mapped_column(JSON)
+    promoted: Mapped[bool] = mapped_column(Boolean, default=False)
+
+
+class Adaptation(Base):
+    """An adaptation job (``POST /v1/model-sets/{target}/adaptations``): its state, stage, progress and log."""
+
+    __tablename__ = "adaptations"
+    __table_args__ = (Index("ix_adaptations_operator_created", "operator_id", "created_at"),)
+
+    id: Mapped[str] = mapped_column(String(36), primary_key=True, default=new_id)
+    operator_id: Mapped[str] = mapped_column(ForeignKey("operators.id", ondelete="CASCADE"))
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    finished_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+    target: Mapped[str] = mapped_column(String(200), index=True)
+    state: Mapped[str] = mapped_column(String(16))
+    stage: Mapped[str] = mapped_column(String(300), default="")
+    progress: Mapped[float] = mapped_column(Float, default=0.0)
+    log: Mapped[str] = mapped_column(Text, default="")
+    options: Mapped[dict[str, Any]] = mapped_column(JSON)
+    frames: Mapped[int] = mapped_column(Integer, default=0)
+    version: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    error: Mapped[str | None] = mapped_column(Text, nullable=True)
+    runner: Mapped[str] = mapped_column(String(120), default="")  # host:pid of the process that runs it

@@ -39,6 +39,13 @@ from app.schemas.estimates import (
     ScenesPublic,
 )
 from app.schemas.labelled import LabelledFramePublic, LabelledFramesPublic, LabelledSummary, LabelledUpload
+from app.schemas.model_sets import (
+    AdaptationCreate,
+    AdaptationPublic,
+    ModelSetPublic,
+    ModelSetsPublic,
+    ModelVersionPublic,
+)
 from app.schemas.orbits import ORBIT_SOURCES, ElementsIn, OmmIn, OrbitIn
 from app.schemas.passes import (
     PassAttitudeJ2000,
@@ -77,6 +84,11 @@ from app.schemas.stations import (
 )
 
 __all__ = [
+    "AdaptationCreate",
+    "AdaptationPublic",
+    "ModelSetPublic",
+    "ModelSetsPublic",
+    "ModelVersionPublic",
     "LabelledFramePublic",
     "LabelledFramesPublic",
     "LabelledSummary",

@@ -357,6 +357,8 @@ def adapt(
         if not work_dir:
             shutil.rmtree(work, ignore_errors=True)
     record["calibration"] = recalibrate(out, val, radar, model)
+    if not record["calibration"]["recalibrated"] and (base / "trust.json").is_file():
+        shutil.copyfile(base / "trust.json", out / "trust.json")
     record["cpu_minutes"] = round((time.process_time() - cpu0) / 60.0, 2)
     record["minutes"] = round((time.perf_counter() - t0) / 60.0, 2)
     exported["adaptation"] = record
@@ -383,7 +385,8 @@ def recalibrate(model_dir: Path, val: LabelledFrames, radar: Any, model: Any) ->
     if len(val) < MIN_CALIBRATION_FRAMES:
         return {
             "recalibrated": False,
-            "why": f"{len(val)} held-out frames; recalibrating needs {MIN_CALIBRATION_FRAMES}",
+            "why": f"{len(val)} held-out frames; recalibrating needs {MIN_CALIBRATION_FRAMES}: the base set's "
+            "calibration is kept",
         }
     est = Estimator.load(model_dir)
     res = est.estimate(val.frames)

@@ -44,6 +44,8 @@ def test_upgrade_downgrade_upgrade(url):
         "stations",
         "campaigns",
         "labelled_frames",
+        "model_versions",
+        "adaptations",
     }
     command.downgrade(cfg, "base")
     assert _tables(url) == set()
@@ -57,6 +59,8 @@ def test_upgrade_downgrade_upgrade(url):
         "stations",
         "campaigns",
         "labelled_frames",
+        "model_versions",
+        "adaptations",
     }
     engine = create_engine(url)
     with engine.connect() as conn:

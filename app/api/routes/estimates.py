@@ -21,10 +21,9 @@ from app.api.deps import (
     PageDep,
     SessionDep,
     SettingsDep,
+    answering,
     as_utc,
     cells_from_form,
-    checker_for,
-    models_for,
     observe_work,
     read_upload,
     read_uploads,
@@ -110,8 +109,7 @@ async def create_estimate(
     snr_db: Annotated[float | None, Form(ge=-100, le=200, description=SNR_DB)] = None,
 ) -> EstimatePublic:
     """Estimate the attitude of one ISAR frame: Swin's answer, fitted to the target's projection and checked; stored."""
-    checker = checker_for(checkers, asked.target)
-    est = models_for(model_sets, checker)
+    est, checker = answering(request, session, model_sets, checkers, asked.target)
     started = time.perf_counter()
     data = await read_upload(file, settings.max_upload_bytes)
     # Decoding, the models and the database run in a worker thread, so the event loop keeps serving meanwhile.
@@ -145,8 +143,7 @@ async def create_estimates_batch(
     files: Annotated[list[UploadFile], File(description="several frames, or one .npz stack [N, H, W]; " + FILE)],
 ) -> EstimatesPublic:
     """Estimate several frames as one batch through the models, each fitted and checked; one stored row each."""
-    checker = checker_for(checkers, asked.target)
-    est = models_for(model_sets, checker)
+    est, checker = answering(request, session, model_sets, checkers, asked.target)
     started = time.perf_counter()
     uploads = await read_uploads(files, settings)
     rows = await run_in_threadpool(

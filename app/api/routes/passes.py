@@ -17,9 +17,8 @@ from app.api.deps import (
     PageDep,
     SessionDep,
     SettingsDep,
+    answering,
     cells_from_form,
-    checker_for,
-    models_for,
     observe_work,
     read_uploads,
 )
@@ -66,8 +65,7 @@ async def create_pass(
 ) -> PassPublic:
     """Fit every frame of a pass, place each in the plan target's LVLH frame at its time, and fuse them; stored."""
     cells_m = cells_from_form(range_cell_m, cross_range_cell_m)
-    checker = checker_for(checkers, target)
-    est = models_for(model_sets, checker)
+    est, checker = answering(request, session, model_sets, checkers, target)
     started = time.perf_counter()
     uploads = await read_uploads(files, settings)
     row = await run_in_threadpool(

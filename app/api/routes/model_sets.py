@@ -1,0 +1,116 @@
+"""Model sets: each target's versions, adaptations that make new ones from the caller's labelled frames, promotion."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Body, HTTPException, Request
+from fastapi import Path as PathParam
+
+from app.api.deps import CheckersDep, CurrentOperator, ModelSetsDep, SessionDep, SettingsDep, checker_for
+from app.db.models import Adaptation
+from app.schemas import AdaptationCreate, AdaptationPublic, ModelSetPublic, ModelSetsPublic, ModelVersionPublic, Text
+from app.services import model_versions as mv
+
+router = APIRouter(prefix="/model-sets", tags=["model sets"])
+
+
+def _set_of(session: Any, model_sets: Any, target: str) -> ModelSetPublic:
+    rows = [r for r in mv.versions(session) if r.target == target]
+    est = model_sets.for_target(target)
+    answering = next((r.version for r in rows if r.promoted), 0)
+    base = ModelVersionPublic(version=0, promoted=answering == 0, summary={"dir": str(est.model_dir), **est.identity})
+    return ModelSetPublic(
+        target=target, answering_version=answering, versions=[base, *(ModelVersionPublic.from_row(r) for r in rows)]
+    )
+
+
+@router.get("", response_model=ModelSetsPublic)
+def list_model_sets(session: SessionDep, operator: CurrentOperator, model_sets: ModelSetsDep) -> ModelSetsPublic:
+    """Every target's model set: its versions (0, the configured set, and each adaptation) and which one answers."""
+    return ModelSetsPublic(data=[_set_of(session, model_sets, t) for t in model_sets.sets])
+
+
+def _trained_target(checkers: Any, model_sets: Any, target: str) -> str:
+    name = str(checker_for(checkers, target).model.name)
+    if name not in model_sets.sets:
+        from app.errors import InputError
+
+        raise InputError(
+            ["target"],
+            f"no model set is trained on {name!r} (the service's sets: {', '.join(model_sets.sets)}); adapt a set "
+            "trained on the target the frames show",
+            where="path",
+        )
+    return name
+
+
+@router.post(
+    "/{target}/adaptations",
+    status_code=202,
+    response_model=AdaptationPublic,
+    responses={409: {"description": "an adaptation of this target is already queued or running"}},
+)
+def create_adaptation(
+    request: Request,
+    session: SessionDep,
+    operator: CurrentOperator,
+    settings: SettingsDep,
+    model_sets: ModelSetsDep,
+    checkers: CheckersDep,
+    target: Annotated[Text, PathParam(max_length=200, description="the target whose set to adapt")],
+    body: Annotated[AdaptationCreate | None, Body()] = None,
+) -> AdaptationPublic:
+    """Adapt the target's answering set to the caller's labelled frames of it, in the background: a new version,
+    not promoted. ``GET .../adaptations/{id}`` follows it; a failure leaves the served set unchanged."""
+    name = _trained_target(checkers, model_sets, target)
+    job = mv.start(
+        session=session,
+        session_factory=request.app.state.session_factory,
+        settings=settings,
+        operator_id=operator.id,
+        target=name,
+        base_dir=model_sets.for_target(name).model_dir,
+        options=(body or AdaptationCreate()).model_dump(exclude_none=True),
+    )
+    return AdaptationPublic.from_row(job)
+
+
+@router.get(
+    "/{target}/adaptations/{adaptation_id}",
+    response_model=AdaptationPublic,
+    responses={404: {"description": "no adaptation with this id is yours"}},
+)
+def read_adaptation(
+    session: SessionDep,
+    operator: CurrentOperator,
+    target: Annotated[Text, PathParam(max_length=200)],
+    adaptation_id: Annotated[Text, PathParam(max_length=36)],
+) -> AdaptationPublic:
+    """One of the caller's adaptations: state, stage, progress, log, and the version it made."""
+    job = session.get(Adaptation, adaptation_id)
+    if job is None or job.operator_id != operator.id or job.target != target:
+        raise HTTPException(status_code=404, detail="Adaptation not found")
+    return AdaptationPublic.from_row(job)
+
+
+@router.post(
+    "/{target}/versions/{version}/promote",
+    response_model=ModelSetPublic,
+    responses={404: {"description": "the target's set has no such version"}},
+)
+def promote_version(
+    session: SessionDep,
+    operator: CurrentOperator,
+    model_sets: ModelSetsDep,
+    checkers: CheckersDep,
+    target: Annotated[Text, PathParam(max_length=200)],
+    version: Annotated[int, PathParam(ge=0, le=100_000, description="the version; 0 rolls back to the configured set")],
+) -> ModelSetPublic:
+    """Make ``version`` answer the target from the next request on (every worker reads it from the database)."""
+    name = _trained_target(checkers, model_sets, target)
+    try:
+        mv.promote(session, name, version)
+    except LookupError:
+        raise HTTPException(status_code=404, detail=f"{name} has no version {version}") from None
+    return _set_of(session, model_sets, name)

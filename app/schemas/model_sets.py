@@ -1,0 +1,110 @@
+"""Model sets: each target's versions (the configured set and its adaptations), which one answers, adaptation jobs."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import TYPE_CHECKING, Any
+
+from pydantic import Field
+
+from app.schemas.common import Described, Strict, utc_or_none
+
+if TYPE_CHECKING:
+    from app.db.models import Adaptation, ModelVersion
+
+
+class AdaptationCreate(Strict):
+    """How to adapt (every field optional; ``gsa adapt``'s defaults)."""
+
+    sim_ratio: float | None = Field(default=None, ge=0, le=20)
+    """simulated frames mixed in per labelled frame, so what the simulator taught is kept (default 1)"""
+    epochs: int | None = Field(default=None, ge=1, le=1000)
+    """at most this many epochs (default 30)"""
+    max_minutes: float | None = Field(default=None, gt=0, le=24 * 60)
+    """stop after the epoch in which this runs out (default 25)"""
+    validation_share: float | None = Field(default=None, ge=0.05, le=0.8)
+    """share of the frames held out for validation and trust calibration, by whole scenes (default 0.3)"""
+    seed: int | None = Field(default=None, ge=0, le=2**31)
+    """the split's and training's seed (default 0)"""
+
+
+class AdaptationPublic(Described):
+    id: str
+    """the job's id"""
+    target: str
+    """the target whose set is adapted"""
+    state: str
+    """queued, running, done or failed"""
+    stage: str
+    """what it is doing now, in words"""
+    progress: float
+    """0 to 1"""
+    created_at: datetime
+    """when it was asked for (UTC)"""
+    finished_at: datetime | None = None
+    """when it ended (UTC)"""
+    frames: int
+    """the labelled frames it learns from (the caller's, of this target)"""
+    options: dict[str, Any]
+    """the options asked for"""
+    version: int | None = None
+    """the version it made, once done (not promoted: POST .../versions/{version}/promote)"""
+    error: str | None = None
+    """why it failed; the served set is unchanged"""
+    log: str
+    """the last lines of the adaptation's output"""
+
+    @classmethod
+    def from_row(cls, row: Adaptation) -> AdaptationPublic:
+        return cls(
+            id=row.id,
+            target=row.target,
+            state=row.state,
+            stage=row.stage,
+            progress=row.progress,
+            created_at=utc_or_none(row.created_at) or row.created_at,
+            finished_at=utc_or_none(row.finished_at),
+            frames=row.frames,
+            options=dict(row.options),
+            version=row.version,
+            error=row.error,
+            log=row.log,
+        )
+
+
+class ModelVersionPublic(Described):
+    version: int
+    """the version (0: the set the service was started with)"""
+    promoted: bool
+    """whether it answers the target now"""
+    created_at: datetime | None = None
+    """when it was made (UTC; none for version 0)"""
+    base_version: int | None = None
+    """the version it was adapted from"""
+    summary: dict[str, Any] = Field(default_factory=dict)
+    """how it was made: labelled frames and scenes (with a sha256 of their list), held-out figures before and after,
+    the trust calibration, CPU minutes; version 0: its networks' identity"""
+
+    @classmethod
+    def from_row(cls, row: ModelVersion) -> ModelVersionPublic:
+        return cls(
+            version=row.version,
+            promoted=row.promoted,
+            created_at=utc_or_none(row.created_at),
+            base_version=row.base_version,
+            summary=dict(row.summary),
+        )
+
+
+class ModelSetPublic(Described):
+    target: str
+    """the target the set was trained on"""
+    answering_version: int
+    """the version that answers this target now (0 when none is promoted)"""
+    versions: list[ModelVersionPublic]
+    """every version, 0 first"""
+
+
+class ModelSetsPublic(Described):
+    data: list[ModelSetPublic]
+    """one entry per target with a model set"""

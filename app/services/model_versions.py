@@ -1,0 +1,286 @@
+"""Model-set versions and adaptations: what answers a target now, and the jobs that make new versions.
+
+Version 0 of a target's set is the folder the service was started with (GSA_MODEL_DIR, GSA_EXTRA_MODEL_DIRS);
+each adaptation (``gsa adapt`` on the operator's labelled frames, run as a child process so the service stays
+responsive) makes the next version under ``GSA_DATA_DIR/model-sets/TARGET/vN``, not promoted. One version per
+target is promoted (a row's flag; none promoted: version 0); every request reads it from the database, so every
+worker and host answers with the same version as soon as it is promoted, and rolls back as soon as 0 is.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy import func, select, update
+from sqlalchemy.orm import Session
+
+from app.core.config import Settings
+from app.db.models import Adaptation, ModelVersion, utcnow
+from app.errors import Conflict, InputError
+
+STATES_ACTIVE = ("queued", "running")
+LOG_LINES = 80
+EPOCH = re.compile(r"epoch (\d+)/(\d+)")
+
+
+def promoted(session: Session, target: str) -> ModelVersion | None:
+    return session.scalar(select(ModelVersion).where(ModelVersion.target == target, ModelVersion.promoted.is_(True)))
+
+
+def versions(session: Session) -> list[ModelVersion]:
+    return list(session.scalars(select(ModelVersion).order_by(ModelVersion.target, ModelVersion.version)))
+
+
+def promote(session: Session, target: str, version: int) -> None:
+    """Promote ``version`` of ``target`` (0: the configured set, a rollback); the others are demoted with it."""
+    if version != 0:
+        row = session.scalar(select(ModelVersion).where(ModelVersion.target == target, ModelVersion.version == version))
+        if row is None:
+            raise LookupError(version)
+    session.execute(update(ModelVersion).where(ModelVersion.target == target).values(promoted=False))
+    if version != 0:
+        session.execute(
+            update(ModelVersion)
+            .where(ModelVersion.target == target, ModelVersion.version == version)
+            .values(promoted=True)
+        )
+    session.commit()
+
+
+class Served:
+    """The networks and checks that answer each target: its promoted version's, or the configured set's.
+
+    A version's networks and its calibration (its ``trust.json``: the radar it was adapted to) load on first
+    use and stay loaded.
+    """
+
+    def __init__(self, data_dir: Path, threads: int | None = None, fit_threads: int = 0) -> None:
+        self.data_dir = Path(data_dir)
+        self.threads = threads
+        self.fit_threads = fit_threads
+        self._loaded: dict[tuple[str, int], tuple[Any, Any]] = {}
+        self._lock = threading.Lock()
+
+    def resolve(self, session: Session, model_sets: Any, checker: Any) -> tuple[Any, Any]:
+        """(Estimator, Checker) for the checker's target: its promoted version's where one is promoted."""
+        row = promoted(session, checker.model.name)
+        if row is None:
+            return model_sets.for_target(checker.model.name), checker
+        key = (row.target, row.version)
+        with self._lock:
+            if key not in self._loaded:
+                self._loaded[key] = self._load(self.data_dir / row.dir, checker)
+            return self._loaded[key]
+
+    def _load(self, folder: Path, base_checker: Any) -> tuple[Any, Any]:
+        from inference.runtime import Estimator
+        from inference.trust import TRUST_FILE, Calibration, Checker, card_radar_and_target
+
+        est = Estimator.load(folder, threads=self.threads)
+        radar, _ = card_radar_and_target(folder, est.img_size)
+        path = folder / TRUST_FILE
+        cal = Calibration.load(path) if path.is_file() else base_checker.calibration
+        return est, Checker(base_checker.model, radar, cal, networks=True, threads=self.fit_threads)
+
+
+def runner_id() -> str:
+    import socket
+
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def fail_interrupted(session: Session) -> int:
+    """Mark this host's adaptations whose process is gone (a restart) as failed, saying so; return how many.
+
+    A job another host runs, or another live worker of this host, is left alone.
+    """
+    import socket
+
+    host = socket.gethostname()
+    gone = []
+    for job in session.scalars(select(Adaptation).where(Adaptation.state.in_(STATES_ACTIVE))):
+        name, _, pid = job.runner.rpartition(":")
+        if name != host or not pid.isdigit():
+            continue
+        try:
+            os.kill(int(pid), 0)
+            alive = int(pid) != os.getpid()  # this very process starting up cannot be running it
+        except OSError:
+            alive = False
+        if not alive:
+            gone.append(job.id)
+    if gone:
+        session.execute(
+            update(Adaptation)
+            .where(Adaptation.id.in_(gone))
+            .values(state="failed", error="the service stopped while it ran; ask again", finished_at=utcnow())
+        )
+        session.commit()
+    return len(gone)
+
+
+def start(
+    *,
+    session: Session,
+    session_factory: Any,
+    settings: Settings,
+    operator_id: str,
+    target: str,
+    base_dir: Path,
+    options: dict[str, Any],
+) -> Adaptation:
+    """Check the request, store the job, and start it in a thread that runs ``gsa adapt`` as a child process."""
+    from app.services.labelled import summarise
+
+    summary = summarise(session=session, operator_id=operator_id, target=target)
+    if summary.count < 4 or len(summary.per_scene) < 2:
+        raise InputError(
+            ["target"],
+            f"you have {summary.count} labelled frames of {target} from {len(summary.per_scene)} scene(s); an "
+            "adaptation needs at least 4, from 2 scenes or more (POST /v1/targets/{target}/labelled-frames)",
+        )
+    busy = session.scalar(
+        select(func.count())
+        .select_from(Adaptation)
+        .where(Adaptation.target == target, Adaptation.state.in_(STATES_ACTIVE))
+    )
+    if busy:
+        raise Conflict(f"an adaptation of {target} is already queued or running; wait for it (one at a time)")
+    job = Adaptation(
+        operator_id=operator_id,
+        created_at=utcnow(),
+        target=target,
+        state="queued",
+        stage="queued",
+        progress=0.0,
+        log="",
+        options=options,
+        frames=summary.count,
+        runner=runner_id(),
+    )
+    session.add(job)
+    session.commit()
+    session.refresh(job)
+    thread = threading.Thread(
+        target=_run, args=(session_factory, settings, job.id, base_dir), name=f"adapt-{job.id[:8]}", daemon=True
+    )
+    thread.start()
+    return job
+
+
+def _set(session_factory: Any, job_id: str, **values: Any) -> None:
+    with session_factory() as s:
+        s.execute(update(Adaptation).where(Adaptation.id == job_id).values(**values))
+        s.commit()
+
+
+def _run(session_factory: Any, settings: Settings, job_id: str, base_dir: Path) -> None:
+    """The job: the labelled frames into a folder, ``gsa adapt`` in a child process, the version stored."""
+    from app.services.labelled import frames_of
+    from inference.labelled import write_frame
+
+    work = Path(tempfile.mkdtemp(prefix="gsa-adaptation-"))
+    lines: list[str] = []
+    partial: Path | None = None
+    try:
+        with session_factory() as s:
+            job = s.get(Adaptation, job_id)
+            assert job is not None
+            target, operator_id, opts = job.target, job.operator_id, dict(job.options)
+            frames = frames_of(session=s, operator_id=operator_id, target=target, data_dir=settings.data_dir)
+            row = promoted(s, target)
+            base, base_version = (settings.data_dir / row.dir, row.version) if row else (base_dir, 0)
+            number = int(s.scalar(select(func.max(ModelVersion.version)).where(ModelVersion.target == target)) or 0) + 1
+        _set(session_factory, job_id, state="running", stage=f"writing {len(frames)} labelled frames")
+        folder = work / "frames"
+        folder.mkdir()
+        for k in range(len(frames)):
+            write_frame(
+                folder / f"{k:05d}.npz",
+                frames.frames[k],
+                angles_deg=frames.angles_deg[k],
+                scene=frames.scenes[k],
+                normalised=True,
+            )
+        rel = Path("model-sets") / target / f"v{number}"
+        out = settings.data_dir / rel
+        partial = out.with_name(out.name + ".partial")
+        shutil.rmtree(partial, ignore_errors=True)
+        cmd = [sys.executable, "-m", "inference.training.adapt", "--frames", str(folder), "--base", str(base)]
+        cmd += ["--out", str(partial), "--target", target]
+        for key in ("epochs", "max_minutes", "sim_ratio", "validation_share", "seed"):
+            if opts.get(key) is not None:
+                cmd += [f"--{key.replace('_', '-')}", str(opts[key])]
+        proc = subprocess.Popen(
+            cmd,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        )
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            line = line.rstrip()
+            lines = (lines + [line])[-LOG_LINES:]
+            update_values: dict[str, Any] = {"log": "\n".join(lines)}
+            if line.startswith("adapt: "):
+                update_values["stage"] = line[len("adapt: ") :][:300]
+                m = EPOCH.search(line)
+                if m:
+                    update_values["progress"] = round(0.1 + 0.75 * int(m.group(1)) / int(m.group(2)), 3)
+                elif "exporting" in line:
+                    update_values["progress"] = 0.88
+                elif "recalibrating" in line:
+                    update_values["progress"] = 0.93
+            _set(session_factory, job_id, **update_values)
+        code = proc.wait()
+        if code != 0:
+            raise RuntimeError(next((ln for ln in reversed(lines) if ln.strip()), f"gsa adapt exited with {code}"))
+        card_path = partial / "model_card.json"
+        card = json.loads(card_path.read_text())
+        card["version"] = {"target": target, "number": number, "base": base_version}
+        card_path.write_text(json.dumps(card, indent=1))
+        shutil.rmtree(out, ignore_errors=True)
+        partial.rename(out)
+        rec = card.get("adaptation", {})
+        summary = {
+            "labelled_frames": rec.get("labelled", {}).get("frames"),
+            "train_scenes": rec.get("labelled", {}).get("train_scenes"),
+            "validation_scenes": rec.get("labelled", {}).get("validation_scenes"),
+            "list_sha256": rec.get("labelled", {}).get("list_sha256"),
+            "before": rec.get("before"),
+            "after": rec.get("after"),
+            "calibration": rec.get("calibration"),
+            "cpu_minutes": rec.get("cpu_minutes"),
+            "export": rec.get("export"),
+        }
+        with session_factory() as s:
+            s.add(
+                ModelVersion(
+                    target=target,
+                    version=number,
+                    created_at=utcnow(),
+                    operator_id=operator_id,
+                    base_version=base_version,
+                    dir=str(rel),
+                    summary=summary,
+                    promoted=False,
+                )
+            )
+            s.commit()
+        _set(session_factory, job_id, state="done", stage="done", progress=1.0, version=number, finished_at=utcnow())
+    except Exception as exc:  # the job fails, the served set stays as it was
+        if partial is not None:
+            shutil.rmtree(partial, ignore_errors=True)
+        _set(session_factory, job_id, state="failed", error=str(exc)[:2000], finished_at=utcnow())
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
