@@ -401,3 +401,21 @@ def coverage(angles_deg: Vec, limit_deg: float = 45.0, cell_deg: float = COVERAG
         return 0.0
     idx = np.clip(np.floor((a[inside] + limit_deg) / (2 * limit_deg) * n).astype(int), 0, n - 1)
     return len({tuple(r) for r in idx}) / n**3
+
+
+def concatenated(parts: Sequence[LabelledFrames]) -> LabelledFrames:
+    """Several folders' frames as one set (names prefixed by their part's index where they would repeat)."""
+    if len(parts) == 1:
+        return parts[0]
+    names = [n for p in parts for n in p.names]
+    if len(set(names)) != len(names):
+        names = [f"{k}/{n}" for k, p in enumerate(parts) for n in p.names]
+    return LabelledFrames(
+        np.concatenate([p.frames for p in parts]),
+        np.concatenate([p.angles_deg for p in parts]),
+        tuple(s for p in parts for s in p.scenes),
+        tuple(names),
+        np.concatenate([p.snr_db for p in parts]),
+        np.concatenate([p.sigma_deg for p in parts]),
+        tuple(t for p in parts for t in p.observed_at),
+    )

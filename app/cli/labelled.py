@@ -61,7 +61,10 @@ def adapt_with_plan(command: Any) -> Any:
             base = Path(args.base) if args.base else DEFAULT_MODEL_DIR
             size = int(read_card(base)["config"]["img_size"])
             radar, _ = card_radar_and_target(base, size)
-            args.labelled = read_with_plan(args.frames, args.plan, size, (radar.range_cell_m, radar.cross_range_cell_m))
+            from inference.labelled import concatenated
+
+            cells = (radar.range_cell_m, radar.cross_range_cell_m)
+            args.labelled = concatenated([read_with_plan(f, args.plan, size, cells) for f in args.frames])
         return int(command(args))
 
     return run

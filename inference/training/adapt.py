@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 from inference.errors import DatasetError, InferenceError, module_main
 from inference.files import write_json
 from inference.frames import ANGLE_SCALE_DEG
-from inference.labelled import LabelledFrames, read_folder, scene_split
+from inference.labelled import LabelledFrames, concatenated, read_folder, scene_split
 from inference.networks.swin import angle_loss
 from inference.networks.unetpp import relative_frobenius_loss
 from inference.rotations import geodesic_deg
@@ -179,7 +179,7 @@ def _say(text: str) -> None:
 
 def adapt(
     base_dir: str | Path,
-    frames: LabelledFrames | str | Path,
+    frames: LabelledFrames | str | Path | list[str | Path],
     out_dir: str | Path,
     opts: AdaptOptions | None = None,
     target: str | None = None,
@@ -187,7 +187,7 @@ def adapt(
 ) -> dict[str, Any]:
     """Adapt ``base_dir``'s networks to the labelled frames; write the adapted set to ``out_dir``; return its record.
 
-    ``frames``: a folder in the labelled format, or frames already read. ``target``: the target the
+    ``frames``: a folder in the labelled format (or several), or frames already read. ``target``: the target the
     frames show (default and only choice so far: the base set's). A failure leaves ``out_dir`` as it was.
     """
     from inference.export import export
@@ -213,7 +213,9 @@ def adapt(
     model = builtin_target(trained_target)
     max_angle = float(card.get("max_angle_deg") or 45.0)
     if not isinstance(frames, LabelledFrames):  # bad frames are refused before any work
-        frames = read_folder(frames, size, (radar.range_cell_m, radar.cross_range_cell_m))
+        folders = [frames] if isinstance(frames, str | Path) else list(frames)
+        cells = (radar.range_cell_m, radar.cross_range_cell_m)
+        frames = concatenated([read_folder(f, size, cells) for f in folders])
     inside = np.all(np.abs(frames.angles_deg) <= max_angle, axis=1)
     left_out = int(np.count_nonzero(~inside))
     frames = frames.subset(np.flatnonzero(inside))
@@ -413,7 +415,12 @@ def recalibrate(model_dir: Path, val: LabelledFrames, radar: Any, model: Any) ->
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     d = AdaptOptions()
-    p.add_argument("--frames", required=True, help="folder of labelled frames (one .npz each; see inference.labelled)")
+    p.add_argument(
+        "--frames",
+        required=True,
+        nargs="+",
+        help="folder(s) of labelled frames (one .npz each; see inference.labelled)",
+    )
     p.add_argument("--base", default=None, help="model folder to start from (default: the shipped models)")
     p.add_argument("--out", required=True, help="where to write the adapted model folder (GSA_MODEL_DIR serves it)")
     p.add_argument("--target", default=None, help="the target the frames show (default: the base set's)")

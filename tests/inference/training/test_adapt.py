@@ -93,7 +93,7 @@ def smoke_base(tmp_path_factory):
 
 
 def _labelled(folder, scenes, per, seed):
-    """Frames of another radar's look (the robust preset's scattering), scene by scene."""
+    """Frames of another radar's look (the robust preset's scattering), scene by scene (named by the folder)."""
     folder.mkdir()
     spec = DatasetSpec(n=scenes * per, seed=seed, variety="robust")
     arr = render_frames(spec, SMOKE_RADAR, 0, scenes * per)
@@ -102,7 +102,7 @@ def _labelled(folder, scenes, per, seed):
             folder / f"f{k:03d}.npz",
             arr["image"][k].astype(np.float32),
             angles_deg=arr["angles_deg"][k],
-            scene=f"pass-{k // per}",
+            scene=f"{folder.name}-pass-{k // per}",
             normalised=True,
         )
     return folder
@@ -138,6 +138,10 @@ def test_adapt_refusals_leave_nothing(smoke_base, tmp_path, capsys):
     with pytest.raises(DatasetError, match="base set's networks know"):
         adapt(smoke_base, one, tmp_path / "o", AdaptOptions(epochs=1), target="comsat-like")
     assert not (tmp_path / "o").exists()
+    # two folders of one scene each make two scenes: read as one set (names kept apart), split between them
+    two = _labelled(tmp_path / "two", scenes=1, per=6, seed=3)
+    rec = adapt(smoke_base, [one, two], tmp_path / "both", AdaptOptions(epochs=1, sim_ratio=0.0))
+    assert rec["labelled"]["frames"] == 12 and len(rec["labelled"]["train_scenes"]) == 1
     capsys.readouterr()
     code = gsa(
         ["adapt", "--frames", str(tmp_path / "missing"), "--base", str(smoke_base), "--out", str(tmp_path / "o")]
