@@ -8,7 +8,10 @@ service's whole answer (networks, fit, checks, bounds) on held-out scenes.
 
 Stand-in radars, since no real frames exist here:
 
-* ``po``: physical optics on the target's facets (inference/simulation/po.py), smooth (no roughness);
+* ``po``: physical optics on the target's facets (inference/simulation/po.py), smooth (no roughness): bright
+  specular returns and little else, the hardest case;
+* ``po-rough``: the same with roughness 0.3 (a diffuse term per facet: what blankets and edges give a real
+  target);
 * ``harsh``: scattering centres outside every range of the robust preset the networks' data varied
   (specular lobes x3, edge returns x2, 8 dominant point returns, 1.5 px blur).
 
@@ -44,10 +47,12 @@ from inference.simulation.targets import tiangong_like
 TITLE = "Adapting to another radar"
 STANDINS = {
     "po": Scattering(physics="po"),
+    "po-rough": Scattering(physics="po", roughness=0.3),
     "harsh": Scattering(lobe_scale=3.0, edge_gain=2.0, dominant=8, blur_px=1.5),
 }
 DESCRIBE = {
     "po": "physical optics, smooth (facets, ray-traced shadows)",
+    "po-rough": "physical optics, roughness 0.3 (Lambert's diffuse term per facet)",
     "harsh": "scattering centres outside the robust preset (lobes x3, edges x2, 8 dominant returns, 1.5 px blur)",
     "own": "our own simulator's default frames",
 }

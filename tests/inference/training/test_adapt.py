@@ -116,9 +116,11 @@ def test_adapt_splits_by_scene_keeps_the_best_weights_and_serves(smoke_base, tmp
     assert not set(lab["train_scenes"]) & set(lab["validation_scenes"])
     assert lab["train_frames"] + lab["validation_frames"] == 60 and lab["validation_frames"] >= 20
     # The weights kept are the validation-best of every epoch, the starting ones included.
-    losses = [h["loss"] for h in rec["history"]]
-    assert rec["after"]["loss"] == pytest.approx(min(losses), rel=1e-4)
-    assert rec["history"][rec["chosen_epoch"]]["loss"] == min(losses)
+    # (the score: the held-out scenes' loss plus fresh own frames' loss, what must not be lost)
+    scores = [h["score"] for h in rec["history"]]
+    assert rec["after"]["score"] == pytest.approx(min(scores), rel=1e-4)
+    assert rec["history"][rec["chosen_epoch"]]["score"] == min(scores)
+    assert all(h["score"] == pytest.approx(h["loss"] + h["own_loss"]) for h in rec["history"])
     # A folder the service serves, its card saying how it was made, trust fitted on the held-out frames.
     card = json.loads((out / "model_card.json").read_text())
     assert card["adaptation"]["labelled"]["list_sha256"] == lab["list_sha256"]
