@@ -16,6 +16,19 @@ from planner.errors import PlannerError, PlanningStopped
 from scene.errors import SceneError
 
 
+class SafeJSONResponse(JSONResponse):
+    """JSON as starlette writes it, or, where a text holds a lone surrogate that UTF-8 cannot encode, with every
+    non-ASCII character escaped (valid JSON either way): an answer that echoes odd input is never a 500."""
+
+    def render(self, content: Any) -> bytes:
+        try:
+            return super().render(content)
+        except UnicodeEncodeError:
+            import json
+
+            return json.dumps(content, ensure_ascii=True, allow_nan=False, separators=(",", ":")).encode("ascii")
+
+
 class InputError(ValueError):
     """A request that passed the schema but that the planner cannot use; ``loc`` is the JSON path."""
 
@@ -54,6 +67,7 @@ def _safe(value: Any, depth: int = 0) -> Any:
     if isinstance(value, bytes):
         return value[:200].decode("utf-8", errors="replace")
     if isinstance(value, str):
+        value = value.encode("utf-8", "backslashreplace").decode("utf-8")  # a lone surrogate as its escape
         return value if len(value) <= 200 else value[:200] + "..."
     if value is None or isinstance(value, bool | int):
         return value
@@ -119,19 +133,19 @@ def install_error_handlers(app: FastAPI) -> None:
     async def _domain_error(_request: Request, exc: Exception) -> JSONResponse:
         assert isinstance(exc, ValueError)
         loc, message = input_error(exc)
-        return JSONResponse(status_code=422, content=_body([getattr(exc, "where", "body"), *loc], message))
+        return SafeJSONResponse(status_code=422, content=_body([getattr(exc, "where", "body"), *loc], message))
 
     for kind in DOMAIN_ERRORS:
         app.add_exception_handler(kind, _domain_error)
 
     @app.exception_handler(Conflict)
     async def _conflict(_request: Request, exc: Conflict) -> JSONResponse:
-        return JSONResponse(status_code=409, content={"detail": str(exc), "request_id": current_request_id()})
+        return SafeJSONResponse(status_code=409, content={"detail": str(exc), "request_id": current_request_id()})
 
     @app.exception_handler(PlanningStopped)
     async def _planning_stopped(_request: Request, exc: PlanningStopped) -> JSONResponse:
         # Not the caller's input: the service's budget (GSA_PLAN_TIMEOUT_S). Retry later or plan less.
-        return JSONResponse(status_code=503, content={"detail": str(exc), "request_id": current_request_id()})
+        return SafeJSONResponse(status_code=503, content={"detail": str(exc), "request_id": current_request_id()})
 
     @app.exception_handler(RequestValidationError)
     async def _validation_error(_request: Request, exc: RequestValidationError) -> JSONResponse:
@@ -144,7 +158,7 @@ def install_error_handlers(app: FastAPI) -> None:
             }
             for e in _without_null_branches(list(exc.errors()))
         ]
-        return JSONResponse(status_code=422, content={"detail": errors, "request_id": current_request_id()})
+        return SafeJSONResponse(status_code=422, content={"detail": errors, "request_id": current_request_id()})
 
     @app.exception_handler(StarletteHTTPException)
     async def _http_error(request: Request, exc: StarletteHTTPException) -> JSONResponse:

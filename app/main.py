@@ -74,7 +74,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # operations networks have no internet, and /docs was a blank page there.
     from fastapi_offline import FastAPIOffline
 
+    from app.errors import SafeJSONResponse
+
     app = FastAPIOffline(
+        default_response_class=SafeJSONResponse,
         title="GSA-ISAR",
         version="0.1.0",
         description="Ground-and-space-access scene planning (Hou et al. 2023, Algorithm 1) and ISAR attitude estimation.",

@@ -54,8 +54,31 @@ async def reject_unknown_form_fields(request: Request, _operator: CurrentOperato
         )
 
 
+async def reject_invalid_unicode(request: Request, _operator: CurrentOperator) -> None:
+    """Refuse a JSON body whose text holds a lone UTF-16 surrogate (``"\\ud800"``), naming where, before any model
+    reads it: no database stores one and no answer can echo it (it was a 500)."""
+    import json
+
+    from app.schemas.common import SURROGATE_MESSAGE, surrogate_path
+
+    if not request.headers.get("content-type", "").startswith("application/json"):
+        return
+    try:
+        body = json.loads(await request.body())
+    except ValueError:
+        return  # not JSON: the route's own validation says so
+    where = surrogate_path(body)
+    if where is not None:
+        raise InputError(list(where), f"{'.'.join(str(p) for p in where) or 'the body'} {SURROGATE_MESSAGE}")
+
+
 api_router = APIRouter(
-    responses=ERROR_RESPONSES, dependencies=[Depends(reject_unknown_query), Depends(reject_unknown_form_fields)]
+    responses=ERROR_RESPONSES,
+    dependencies=[
+        Depends(reject_unknown_query),
+        Depends(reject_unknown_form_fields),
+        Depends(reject_invalid_unicode),
+    ],
 )
 api_router.include_router(plans.router)
 api_router.include_router(campaigns.router)

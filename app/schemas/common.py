@@ -7,7 +7,7 @@ import re
 from datetime import datetime
 from typing import TYPE_CHECKING, Annotated, Any, overload
 
-from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
 from planner.propagation import as_utc
 
@@ -50,12 +50,38 @@ def _as_utc_in_range(moment: datetime) -> datetime:
 IsoDateTime = Annotated[datetime, BeforeValidator(_iso_only), AfterValidator(_as_utc_in_range)]
 
 CONTROL_CHARACTERS = re.compile(r"[\x00-\x1f\x7f]")
+# A lone UTF-16 surrogate ("\ud800" in JSON) is no character: no database stores it, no answer can echo it.
+SURROGATES = re.compile(r"[\ud800-\udfff]")
+SURROGATE_MESSAGE = (
+    "holds a lone UTF-16 surrogate (an escape like \\ud800 that is half a character); send valid Unicode"
+)
 
 
 def _no_control(value: str | None) -> str | None:
     if value is not None and CONTROL_CHARACTERS.search(value):
         raise ValueError("must not contain control characters (NUL, tab, newline, ...); remove them")
+    if value is not None and SURROGATES.search(value):
+        raise ValueError(SURROGATE_MESSAGE)
     return value
+
+
+def surrogate_path(value: Any, path: tuple[str | int, ...] = ()) -> tuple[str | int, ...] | None:
+    """Where in a JSON value a string (or a key) holds a lone surrogate, or None."""
+    if isinstance(value, str):
+        return path if SURROGATES.search(value) else None
+    if isinstance(value, dict):
+        for k, v in value.items():
+            if isinstance(k, str) and SURROGATES.search(k):
+                return (*path, k)
+            found = surrogate_path(v, (*path, k))
+            if found is not None:
+                return found
+    if isinstance(value, list | tuple):
+        for i, v in enumerate(value):
+            found = surrogate_path(v, (*path, i))
+            if found is not None:
+                return found
+    return None
 
 
 # An id, filter or name from a path, a query or a form: NUL and other control characters are
@@ -100,6 +126,14 @@ class StoredResult(Described):
 
 class Strict(Described):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _valid_unicode(cls, data: Any) -> Any:
+        where = surrogate_path(data)
+        if where is not None:
+            raise ValueError(f"{'.'.join(str(p) for p in where) or 'the text'} {SURROGATE_MESSAGE}")
+        return data
 
 
 class ErrorMessage(Described):

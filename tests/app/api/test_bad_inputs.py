@@ -149,6 +149,31 @@ class Case:
 
 PLANS, EST = "/v1/plans", "/v1/estimates"
 CASES = [
+    # A lone surrogate in JSON text (issue 46: a 500 on stations, plans and access windows, on both databases)
+    Case(
+        "surrogate_station_name",
+        "POST",
+        "/v1/stations",
+        _raw('{"name": "a\\ud800b", "latitude_deg": 10, "longitude_deg": 20}'),
+        422,
+        "name holds a lone UTF-16 surrogate",
+    ),
+    Case(
+        "surrogate_plan_target_name",
+        "POST",
+        PLANS,
+        lambda: _raw(json.dumps({**PAPER_EXAMPLE, "search": {"duration_days": 1}}).replace('"GS"', '"G\\udc00S"'))(),
+        422,
+        "ground_station.name holds a lone UTF-16 surrogate",
+    ),
+    Case(
+        "surrogate_access_key",
+        "POST",
+        "/v1/access-windows",
+        _raw('{"target": {"name": "T", "tle": ["a", "b"]}, "ground_station": {"name": "g", "\\ud800": 1}}'),
+        422,
+        "lone UTF-16 surrogate",
+    ),
     # A date-time UTC cannot hold (found by make fuzz: it was a 500)
     Case(
         "epoch_beyond_utc",
