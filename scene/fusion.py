@@ -118,6 +118,11 @@ def pass_span(observed_at: Sequence[datetime], sweeps: Sweeps | None) -> tuple[d
     )
 
 
+# The fastest line-of-sight sweep through a target a pass can hold: a LEO pass turns it at most ~2 deg/s, a fast
+# tumbler some tens; beyond this a frame's integration time is a mistake, not a measurement.
+MAX_SWEEP_DEG_S = 90.0
+
+
 def sweeps_from(
     integration_s: Sequence[float] | None, aperture_deg: float | None, n_frames: int, default_aperture_deg: float | None
 ) -> Sweeps | None:
@@ -151,6 +156,14 @@ def sweeps_from(
         )
     if not (math.isfinite(aperture) and 0.0 < aperture <= 30.0):
         raise SceneError(["aperture_deg"], f"aperture_deg must be in (0, 30] deg, not {aperture!r}")
+    for k, t in enumerate(integration_s):
+        rate = aperture / float(t)
+        if rate > MAX_SWEEP_DEG_S:  # 1e-300 s was stored as 5.1e300 deg/s
+            raise SceneError(
+                ["integration_s", k],
+                f"frame {k}'s {aperture:g} deg over {t!r} s is a sweep of {rate:.3g} deg/s; the line of sight turns "
+                f"through a target at most {MAX_SWEEP_DEG_S:g} deg/s (a fast tumble): check the integration time",
+            )
     return [(math.radians(aperture) / float(t), float(t)) for t in integration_s]
 
 

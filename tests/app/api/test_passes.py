@@ -101,6 +101,7 @@ def test_a_pass_is_fused_and_stored(client, plan):
         ("time_not_a_date", "observed_at"),
         ("integration_count", "integration_s"),
         ("integration_not_positive", "integration_s"),
+        ("integration_1e-300", "integration_s"),
         ("aperture_without_integration", "integration_s"),
         ("cells_without_aperture", "aperture_deg"),
         ("aperture_too_wide", "aperture_deg"),
@@ -122,6 +123,9 @@ def test_bad_passes_are_422_and_store_nothing(client, settings, plan, case, fiel
         r = _post(client, plan["id"], times, form={"integration_s": ["10", "10", "10"]})
     elif case == "integration_not_positive":
         r = _post(client, plan["id"], times, form={"integration_s": ["10", "10", "-1", "10"]})
+    elif case == "integration_1e-300":  # was stored as a sweep of 5.1e300 deg/s (issue 46)
+        r = _post(client, plan["id"], times, form={"integration_s": ["10", "10", "1e-300", "10"]})
+        assert "deg/s" in r.json()["detail"][0]["msg"]
     elif case == "aperture_without_integration":
         r = _post(client, plan["id"], times, form={"aperture_deg": "5.1"})
     elif case == "cells_without_aperture":  # the frames' own radar: its aperture is not the models'
