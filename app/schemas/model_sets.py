@@ -26,6 +26,8 @@ class AdaptationCreate(Strict):
     """share of the frames held out for validation and trust calibration, by whole scenes (default 0.3)"""
     seed: int | None = Field(default=None, ge=0, le=2**31)
     """the split's and training's seed (default 0)"""
+    train_swin: bool | None = None
+    """also fine-tune Swin's last stage (default: UNet++ alone, where a radar's look enters)"""
 
 
 class AdaptationPublic(Described):

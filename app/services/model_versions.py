@@ -220,6 +220,8 @@ def _run(session_factory: Any, settings: Settings, job_id: str, base_dir: Path) 
         for key in ("epochs", "max_minutes", "sim_ratio", "validation_share", "seed"):
             if opts.get(key) is not None:
                 cmd += [f"--{key.replace('_', '-')}", str(opts[key])]
+        if opts.get("train_swin"):
+            cmd.append("--train-swin")
         proc = subprocess.Popen(
             cmd,
             stdout=subprocess.PIPE,

@@ -8,8 +8,9 @@ scene's optical observer labels the radar's frames, and the networks learn that 
 2. The labelled frames (``inference.labelled``) are split **by scene**: whole scenes are held out
    for validation, never frames of one scene on both sides. Frames outside the networks' angle
    range (the card's ``max_angle_deg``) are left out and counted.
-3. UNet++ (where a radar's look enters) and Swin (its reading of the silhouette) train together,
-   as ``gsa train``'s joint mode, on the labelled training frames mixed with simulated frames of
+3. UNet++ (where a radar's look enters) trains, and with ``train_swin`` Swin's last stage (its reading
+   of the silhouette; left as it is by default, see ``AdaptOptions``), on the labelled training frames
+   mixed with simulated frames of
    the base set's kind (``sim_ratio`` of them per labelled frame), at rates no higher than the base
    networks' own last ones, so what the simulator taught is kept. Augmented only in ways that keep
    the label true: a small translation of frame and label alike (the attitude does not change), and
@@ -69,7 +70,11 @@ class AdaptOptions:
     # 2.4e-5): fine-tuning faster than they ended makes them forget our own frames (at 1e-4 the default
     # frames' median went from 0.29 to 9 deg in 20 minutes on physical-optics frames).
     lr_unet: float = 3e-5
-    lr_swin: float = 2e-5
+    lr_swin: float = 5e-6
+    # Swin's reading of the silhouette is left as it is unless asked: on small sets it forgets more than it learns
+    # (measured: 12 steps on 48 of our own frames moved its median 1.26 -> 1.5-2.1 deg at every rate and optimiser
+    # tried, Adam 5e-6..2e-5, SGD 1e-3; UNet++ alone 1.26 -> 1.31-1.47). With it, only its last stage, norm and head.
+    train_swin: bool = False
     validation_share: float = 0.3
     shift_px: int = 6  # translations up to this many pixels (frame and label alike)
     noise_share: float = 0.5  # share of frames given extra noise
@@ -254,7 +259,8 @@ def adapt(
     gen = torch.Generator().manual_seed(opts.seed)
     rng = np.random.default_rng(opts.seed)
     opt_u = torch.optim.Adam(unet.parameters(), lr=opts.lr_unet)
-    opt_s = torch.optim.Adam(swin.parameters(), lr=opts.lr_swin)
+    tail = swin.tail_modules(1).parameters() if opts.train_swin else iter(())
+    opt_s = torch.optim.Adam(list(tail) or [torch.zeros(1, requires_grad=True)], lr=opts.lr_swin)
     # What must not be lost: fresh frames of our own kind, scored beside the held-out labelled ones; the weights
     # kept are those with the lowest sum of both losses.
     own = simulated_frames(max(16, len(val)), max_angle, radar, SIM_SEED + 1)
@@ -293,10 +299,14 @@ def adapt(
             with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
                 enh = unet(x)
                 loss_u = relative_frobenius_loss(enh.float(), y)
-                loss_s = angle_loss(swin(enh.detach()).float(), a)
-            opt_s.zero_grad(set_to_none=True)
-            loss_s.backward()  # type: ignore[no-untyped-call]
-            opt_s.step()
+                if opts.train_swin:
+                    loss_s = angle_loss(swin(enh.detach()).float(), a)
+                else:
+                    loss_s = torch.zeros(())
+            if opts.train_swin:
+                opt_s.zero_grad(set_to_none=True)
+                loss_s.backward()  # type: ignore[no-untyped-call]
+                opt_s.step()
             opt_u.zero_grad(set_to_none=True)
             loss_u.backward()  # type: ignore[no-untyped-call]
             opt_u.step()
@@ -460,6 +470,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--validation-share", type=float, default=d.validation_share, help="share of frames held out, by whole scenes"
     )
     p.add_argument("--batch-size", type=int, default=d.batch_size)
+    p.add_argument("--train-swin", action="store_true", help="also fine-tune Swin's last stage (default: UNet++ only)")
     p.add_argument("--seed", type=int, default=d.seed)
 
 
@@ -473,6 +484,7 @@ def run(args: argparse.Namespace) -> int:
         validation_share=args.validation_share,
         batch_size=args.batch_size,
         seed=args.seed,
+        train_swin=args.train_swin,
     )
     out = Path(args.out)
     base = Path(args.base) if args.base else DEFAULT_MODEL_DIR

@@ -125,6 +125,13 @@ def test_adapt_splits_by_scene_keeps_the_best_weights_and_serves(smoke_base, tmp
     card = json.loads((out / "model_card.json").read_text())
     assert card["adaptation"]["labelled"]["list_sha256"] == lab["list_sha256"]
     assert card["radar"]["n_range"] == 64
+    # Swin is left as it was (UNet++ alone adapts by default): its weights read back unchanged (float16's rounding)
+    _, swin_base, _, _ = recover(smoke_base)
+    _, swin_out, _, _ = recover(out)
+    diffs = [
+        float((a - b).abs().max()) for a, b in zip(swin_base.state_dict().values(), swin_out.state_dict().values())
+    ]
+    assert max(diffs) < 2e-3
     est = Estimator.load(out)
     assert est.estimate(np.zeros((1, 64, 64), np.float32)).angles_deg.shape == (1, 3)
     trust = json.loads((out / "trust.json").read_text())
@@ -142,8 +149,9 @@ def test_adapt_refusals_leave_nothing(smoke_base, tmp_path, capsys):
     assert not (tmp_path / "o").exists()
     # two folders of one scene each make two scenes: read as one set (names kept apart), split between them
     two = _labelled(tmp_path / "two", scenes=1, per=6, seed=3)
-    rec = adapt(smoke_base, [one, two], tmp_path / "both", AdaptOptions(epochs=1, sim_ratio=0.0))
+    rec = adapt(smoke_base, [one, two], tmp_path / "both", AdaptOptions(epochs=1, sim_ratio=0.0, train_swin=True))
     assert rec["labelled"]["frames"] == 12 and len(rec["labelled"]["train_scenes"]) == 1
+    assert rec["history"][1]["train_swin_loss"] > 0  # with train_swin, Swin's last stage trains too
     capsys.readouterr()
     code = gsa(
         ["adapt", "--frames", str(tmp_path / "missing"), "--base", str(smoke_base), "--out", str(tmp_path / "o")]
