@@ -129,7 +129,8 @@ def test_adapt_splits_by_scene_keeps_the_best_weights_and_serves(smoke_base, tmp
     _, swin_base, _, _ = recover(smoke_base)
     _, swin_out, _, _ = recover(out)
     diffs = [
-        float((a - b).abs().max()) for a, b in zip(swin_base.state_dict().values(), swin_out.state_dict().values())
+        float((a - b).abs().max())
+        for a, b in zip(swin_base.state_dict().values(), swin_out.state_dict().values(), strict=True)
     ]
     assert max(diffs) < 2e-3
     est = Estimator.load(out)
