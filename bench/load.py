@@ -21,7 +21,7 @@ from inference.runtime import DEFAULT_MODEL_DIR  # noqa: E402
 from tests.utils.databases import database_url  # noqa: E402
 from tests.utils.server import Server, run_load, stored_ids  # noqa: E402
 
-KEYS = ["bench-load-key-a", "bench-load-key-b"]
+KEYS = ["bench-load-key-a-0123", "bench-load-key-b-0123"]
 N_FRAMES, FRAME_SEED = 48, 85_000  # fresh simulated frames, drawn like a data set, sent in turn
 CLIENTS, EACH = 16, 50
 

@@ -46,7 +46,7 @@ def bench_service(model_dir: Path, clients: int = 8, per_client: int = 12) -> li
     tmp = Path(tempfile.mkdtemp())
     env = {
         "GSA_DATA_DIR": str(tmp),
-        "GSA_API_KEYS": "bench-key",
+        "GSA_API_KEYS": "bench-service-key-0",
         "GSA_MODEL_DIR": str(model_dir),
         "GSA_MAX_UPLOAD_BYTES": str(32 * 1024 * 1024),
         "GSA_LOG_LEVEL": "warning",
@@ -54,7 +54,7 @@ def bench_service(model_dir: Path, clients: int = 8, per_client: int = 12) -> li
     server = Server(env, workers=1).start()
     url = server.url
     try:
-        headers = {"X-API-Key": "bench-key"}
+        headers = {"X-API-Key": "bench-service-key-0"}
 
         model_s: list[float] = []  # the model time each answer reports, for the overhead of that same request
 

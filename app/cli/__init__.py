@@ -228,3 +228,12 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         return 130
+    except Exception as exc:  # the service's settings (GSA_*) that cannot be used: one line, naming the setting
+        from pydantic import ValidationError
+
+        if not (isinstance(exc, ValidationError) and exc.title == "Settings"):
+            raise
+        err = exc.errors()[0]
+        where = "GSA_" + "_".join(str(p) for p in err.get("loc", ())).upper() if err.get("loc") else "settings"
+        print(f"gsa: error: {where}: {err['msg'].removeprefix('Value error, ')}", file=sys.stderr)
+        return 2

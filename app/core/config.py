@@ -9,6 +9,8 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from inference.runtime import DEFAULT_MODEL_DIR, DEFAULT_RUN_BATCH  # the shipped models and their run size
 
+MIN_KEY_LENGTH = 16  # an environment key shorter than this is refused at start (issue 46: 7 were taken)
+
 
 class Settings(BaseSettings):
     """Service settings, read from ``GSA_*`` environment variables (and a ``.env`` file if present).
@@ -69,6 +71,16 @@ class Settings(BaseSettings):
     def _default_database(self) -> Settings:
         if not self.database_url:
             self.database_url = f"sqlite:///{(self.data_dir / 'gsa.db').as_posix()}"
+        return self
+
+    @model_validator(mode="after")
+    def _keys_long_enough(self) -> Settings:
+        short = [k for k in self.env_api_keys if len(k) < MIN_KEY_LENGTH]
+        if short:
+            raise ValueError(
+                f"GSA_API_KEYS holds a key of {len(short[0])} characters; each key needs at least {MIN_KEY_LENGTH} "
+                "(a short key is guessed): make one with `gsa keys create` or `openssl rand -hex 16`"
+            )
         return self
 
     @property

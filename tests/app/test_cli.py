@@ -298,3 +298,11 @@ def test_simulate_a_scene_as_labelled_frames_and_place_j2000_labels_by_the_plan(
     assert missing.returncode == 2 and "no such file" in missing.stderr and missing.stderr.count("\n") == 1, (
         missing.stderr
     )
+
+
+def test_settings_that_cannot_be_used_are_one_line_naming_them(tmp_path):
+    short = _gsa("serve", cwd=tmp_path, env_extra={"GSA_API_KEYS": "short", "GSA_DATA_DIR": str(tmp_path)})
+    assert short.returncode == 2 and short.stderr.count("\n") == 1, short.stderr
+    assert "GSA_API_KEYS holds a key of 5 characters" in short.stderr
+    page = _gsa("serve", cwd=tmp_path, env_extra={"GSA_MAX_PAGE_SIZE": "0", "GSA_DATA_DIR": str(tmp_path)})
+    assert page.returncode == 2 and "GSA_MAX_PAGE_SIZE" in page.stderr and page.stderr.count("\n") == 1, page.stderr

@@ -111,7 +111,9 @@ def test_an_unmigrated_database_answers_503_naming_the_fix(url, tmp_path, smoke_
     from app.core.db import upgrade_database
     from app.main import create_app
 
-    settings = Settings(data_dir=tmp_path / "data", api_keys="k-unmigrated", model_dir=smoke_models, database_url=url)
+    settings = Settings(
+        data_dir=tmp_path / "data", api_keys="k-unmigrated-0123456", model_dir=smoke_models, database_url=url
+    )
     with TestClient(create_app(settings)) as client:
         for method, path in [
             ("GET", "/v1/plans"),
@@ -119,11 +121,11 @@ def test_an_unmigrated_database_answers_503_naming_the_fix(url, tmp_path, smoke_
             ("POST", "/v1/plans"),
             ("GET", "/v1/scenes"),
         ]:
-            for headers in ({"X-API-Key": "k-unmigrated"}, {}):
+            for headers in ({"X-API-Key": "k-unmigrated-0123456"}, {}):
                 r = client.request(method, path, headers=headers)
                 assert r.status_code == 503, (path, r.text)
                 assert "gsa db upgrade" in r.text
         assert client.get("/readyz").status_code == 503
         assert client.get("/healthz").status_code == 200
         upgrade_database(url)
-        assert client.get("/v1/plans", headers={"X-API-Key": "k-unmigrated"}).status_code == 200
+        assert client.get("/v1/plans", headers={"X-API-Key": "k-unmigrated-0123456"}).status_code == 200

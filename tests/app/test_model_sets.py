@@ -19,7 +19,7 @@ from inference.errors import ModelFileError
 from inference.runtime import UNNAMED_CARD_TARGET, ModelSets
 from inference.simulation.targets import DEFAULT_TARGET
 
-KEY = {"X-API-Key": "k-model-sets"}
+KEY = {"X-API-Key": "k-model-sets-0123456"}
 BOX = """# a 4 x 2 x 1.5 m box
 v -2 -1 -0.75
 v 2 -1 -0.75
@@ -78,7 +78,7 @@ def test_the_card_records_the_target_it_was_trained_on(box_set):
 def test_the_service_answers_each_target_with_its_own_set(box_set, smoke_models, tmp_path):
     settings = Settings(
         data_dir=tmp_path,
-        api_keys="k-model-sets",
+        api_keys="k-model-sets-0123456",
         model_dir=smoke_models,
         extra_model_dirs=str(box_set / "models"),
         target_model=box_set / "box.obj",
@@ -105,7 +105,7 @@ def test_the_service_answers_each_target_with_its_own_set(box_set, smoke_models,
 def test_a_set_of_a_target_the_service_does_not_know_stops_it_naming_the_folder(box_set, smoke_models, tmp_path):
     settings = Settings(
         data_dir=tmp_path,
-        api_keys="k",
+        api_keys="k-0123456789abcdef",
         model_dir=smoke_models,
         extra_model_dirs=str(box_set / "models"),
         database_url=f"sqlite:///{tmp_path / 'gsa.db'}",

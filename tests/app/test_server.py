@@ -127,12 +127,16 @@ def test_the_data_directory_is_private(tmp_path, smoke_models):
     from app.main import create_app
 
     data = tmp_path / "fresh" / "data"
-    s = Settings(data_dir=data, api_keys="k-files", model_dir=smoke_models, database_url=f"sqlite:///{data}/gsa.db")
+    s = Settings(
+        data_dir=data, api_keys="k-files-0123456789", model_dir=smoke_models, database_url=f"sqlite:///{data}/gsa.db"
+    )
     upgrade_database(s.database_url)
     buf = io.BytesIO()
     np.save(buf, np.random.default_rng(0).random((64, 64)) + 0.1)
     with TestClient(create_app(s)) as client:
-        r = client.post("/v1/estimates", files={"file": ("f.npy", buf.getvalue())}, headers={"X-API-Key": "k-files"})
+        r = client.post(
+            "/v1/estimates", files={"file": ("f.npy", buf.getvalue())}, headers={"X-API-Key": "k-files-0123456789"}
+        )
         assert r.status_code == 201, r.text
     paths = [data, *data.rglob("*")]
     assert any(p.name == "gsa.db" for p in paths) and any(p.name == "key-secret" for p in paths)
@@ -252,3 +256,16 @@ def test_a_client_that_leaves_stops_its_plan(tmp_path, smoke_models):
         assert r.status_code == 201, r.text
     finally:
         srv.stop()
+
+
+def test_a_short_environment_key_stops_the_service_at_start(tmp_path):
+    """GSA_API_KEYS took 7-character keys silently (issue 46): a key under 16 characters is refused by name."""
+    import pydantic
+
+    from app.core.config import MIN_KEY_LENGTH, Settings
+
+    with pytest.raises(
+        pydantic.ValidationError, match=f"key of 7 characters; each key needs at least {MIN_KEY_LENGTH}"
+    ):
+        Settings(data_dir=tmp_path, api_keys="long-enough-key-0123,short-k")
+    assert Settings(data_dir=tmp_path, api_keys="x" * MIN_KEY_LENGTH).env_api_keys == ["x" * MIN_KEY_LENGTH]
