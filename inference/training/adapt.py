@@ -40,7 +40,7 @@ import time
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -259,7 +259,7 @@ def adapt(
     gen = torch.Generator().manual_seed(opts.seed)
     rng = np.random.default_rng(opts.seed)
     opt_u = torch.optim.Adam(unet.parameters(), lr=opts.lr_unet)
-    tail = swin.tail_modules(1).parameters() if opts.train_swin else iter(())
+    tail = cast(Any, swin).tail_modules(1).parameters() if opts.train_swin else iter(())
     opt_s = torch.optim.Adam(list(tail) or [torch.zeros(1, requires_grad=True)], lr=opts.lr_swin)
     # What must not be lost: fresh frames of our own kind, scored beside the held-out labelled ones; the weights
     # kept are those with the lowest sum of both losses.
