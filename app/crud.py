@@ -350,9 +350,17 @@ def labelled_targets_of_plan(*, session: Session, operator_id: str, plan_id: str
 
 
 def create_labelled(*, session: Session, rows: list[LabelledFrame]) -> list[LabelledFrame]:
-    """Store labelled frames together (all or none)."""
+    """Store labelled frames together (all or none); a file another request stored meanwhile is a Conflict."""
+    from sqlalchemy.exc import IntegrityError
+
+    from app.errors import Conflict
+
     session.add_all(rows)
-    session.commit()
+    try:
+        session.commit()
+    except IntegrityError:
+        session.rollback()
+        raise Conflict("a file of this upload was stored by another request meanwhile; send the upload again") from None
     for r in rows:
         session.refresh(r)
     return rows

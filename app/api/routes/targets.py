@@ -37,7 +37,10 @@ FILES = (
     "/{target}/labelled-frames",
     status_code=201,
     response_model=LabelledUpload,
-    responses={413: {"description": "file too large"}},
+    responses={
+        409: {"description": "a file of the upload was stored by another request meanwhile; send it again"},
+        413: {"description": "file too large"},
+    },
 )
 async def add_labelled_frames(
     session: SessionDep,

@@ -135,3 +135,28 @@ def test_times_outside_the_plan_and_a_plan_of_another_target(client, settings, p
     assert other.status_code == 422 and "images one target" in other.json()["detail"][0]["msg"]
     unknown = client.get("/v1/targets/no-such-target/labelled-frames", headers=A)
     assert unknown.status_code == 422 and "unknown target" in unknown.json()["detail"][0]["msg"]
+
+
+def test_a_file_stored_meanwhile_by_another_request_is_a_conflict_not_a_500(client):
+    """Two uploads of one file at once both pass the 'already stored' check; the second commit is refused."""
+    from app import crud
+    from app.db.models import LabelledFrame
+    from app.errors import Conflict
+
+    def row(owner):
+        return LabelledFrame(
+            operator_id=owner,
+            target=T,
+            scene="race",
+            input_name="r.npz",
+            input_sha256="f" * 64,
+            angles_deg=[0.0, 0.0, 0.0],
+            frame_sha256="0" * 64,
+        )
+
+    with client.app.state.session_factory() as session:
+        owner = session.scalar(select(LabelledFrame.operator_id).limit(1))
+        crud.create_labelled(session=session, rows=[row(owner)])
+        with pytest.raises(Conflict, match="meanwhile"):
+            crud.create_labelled(session=session, rows=[row(owner)])
+        assert len(crud.labelled_inputs(session=session, operator_id=owner, target=T, digests=["f" * 64])) == 1
