@@ -128,6 +128,22 @@ def parse_time(text: str, path: Path) -> datetime:
     return t.replace(tzinfo=UTC) if t.tzinfo is None else t.astimezone(UTC)
 
 
+def observed_times(sources: Sequence[tuple[str, bytes | Path]]) -> list[datetime]:
+    """Every readable file's ``observed_at`` (name and bytes, or name and path), read before the frames so a
+    plan's scene can span them; a file that cannot be read is skipped here (``read_frame`` names what is wrong)."""
+    import io
+
+    times = []
+    for name, source in sources:
+        try:
+            with np.load(io.BytesIO(source) if isinstance(source, bytes) else source, allow_pickle=False) as z:
+                if "observed_at" in z.files:
+                    times.append(parse_time(str(z["observed_at"]), Path(name)))
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile):
+            continue
+    return times
+
+
 def check_angles(angles: Any, where: str = "angles_deg") -> tuple[float, float, float]:
     """Euler z, y, x (deg) as the service writes them: 3 finite numbers, z and x within +-180, y within +-90."""
     a = np.asarray(angles, np.float64)

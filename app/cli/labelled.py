@@ -29,18 +29,16 @@ def plan_request_of(source: str) -> dict[str, Any]:
 
 def read_with_plan(folder: str, plan: str, size: int, model_cells_m: tuple[float, float]) -> Any:
     """Read a labelled folder, its J2000 labels placed by the plan's geometry over the frames' span."""
-    import numpy as np
 
     from app.errors import DOMAIN_ERRORS
     from app.services.scenes import scene_for
-    from inference.labelled import frame_files, parse_time, read_folder
+    from inference.labelled import frame_files, observed_times, read_folder
     from scene.labels import plan_resolver
 
-    times = []
-    for f in frame_files(folder):
-        with np.load(f, allow_pickle=False) as z:
-            if "observed_at" in z.files:
-                times.append(parse_time(str(z["observed_at"]), f))
+    try:
+        times = observed_times([(f.name, f) for f in frame_files(folder)])
+    except DOMAIN_ERRORS as exc:
+        raise CliError(input_line(exc)) from None
     if not times:
         raise CliError(f"--plan: no frame of {folder} has an observed_at to place")
     try:

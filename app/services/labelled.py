@@ -19,25 +19,10 @@ from app.schemas import LabelledFramePublic, LabelledSummary, LabelledUpload
 from app.services import images
 from app.services.scenes import scene_for, windows_of
 from inference.errors import InferenceError
-from inference.labelled import MAX_SIGMA_DEG, FrameRead, coverage, parse_time, read_frame
+from inference.labelled import MAX_SIGMA_DEG, FrameRead, coverage, observed_times, read_frame
 from scene.errors import SceneError
 from scene.geometry import check_times
 from scene.labels import plan_resolver
-
-
-def _times_of(files: list[tuple[str, bytes]]) -> list[datetime]:
-    """Every file's observed_at, read before the frames (the plan's scene spans them)."""
-    times = []
-    for name, data in files:
-        try:
-            import io
-
-            with np.load(io.BytesIO(data), allow_pickle=False) as z:
-                if "observed_at" in z.files:
-                    times.append(parse_time(str(z["observed_at"]), Path(name)))
-        except (OSError, ValueError, EOFError):
-            continue  # the reader says what is wrong with this file, by name
-    return times
 
 
 def _plan(session: Session, operator_id: str, plan_id: str | None, target: str) -> Plan | None:
@@ -66,7 +51,7 @@ def read_labelled(
     """Read every file (all before anything is stored); J2000 labels placed by the plan's geometry."""
     resolve = None
     if plan is not None:
-        times = _times_of(files)
+        times = observed_times(files)
         try:
             if times:
                 check_times(windows_of(plan.result), times)
