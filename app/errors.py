@@ -5,12 +5,13 @@ from __future__ import annotations
 import re
 from typing import Any
 
+import sqlalchemy.exc
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from app.core.observability import current_request_id
+from app.core.observability import current_request_id, errors_log
 from inference.errors import InferenceError
 from planner.errors import PlannerError, PlanningStopped
 from scene.errors import SceneError
@@ -129,6 +130,18 @@ class Conflict(Exception):
     """A request the service's present state refuses (HTTP 409): ask again once that state has passed."""
 
 
+# What SQLAlchemy raises when the database cannot be reached or holds no connection for us: 503, never 500.
+DATABASE_DOWN: tuple[type[Exception], ...] = (
+    sqlalchemy.exc.OperationalError,
+    sqlalchemy.exc.InterfaceError,
+    sqlalchemy.exc.TimeoutError,
+)
+
+
+class TooLarge(Exception):
+    """A request over one of the service's size limits, found while reading it (HTTP 413): send less."""
+
+
 def install_error_handlers(app: FastAPI) -> None:
     async def _domain_error(_request: Request, exc: Exception) -> JSONResponse:
         assert isinstance(exc, ValueError)
@@ -141,6 +154,27 @@ def install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(Conflict)
     async def _conflict(_request: Request, exc: Conflict) -> JSONResponse:
         return SafeJSONResponse(status_code=409, content={"detail": str(exc), "request_id": current_request_id()})
+
+    async def _database_down(request: Request, exc: Exception) -> JSONResponse:
+        # The database stopped answering after start (restarted, unreachable, out of connections): not a bug and
+        # not the caller's input. The schema is checked again on the next request (deps.require_schema).
+        request.app.state.schema_ok = False
+        errors_log.warning("the database does not answer: %s", type(exc).__name__)
+        return SafeJSONResponse(
+            status_code=503,
+            content={
+                "detail": "the database does not answer; retry shortly (the service recovers by itself once it is back)",
+                "request_id": current_request_id(),
+            },
+            headers={"Retry-After": "5"},
+        )
+
+    for down in DATABASE_DOWN:
+        app.add_exception_handler(down, _database_down)
+
+    @app.exception_handler(TooLarge)
+    async def _too_large(_request: Request, exc: TooLarge) -> JSONResponse:
+        return SafeJSONResponse(status_code=413, content={"detail": str(exc), "request_id": current_request_id()})
 
     @app.exception_handler(PlanningStopped)
     async def _planning_stopped(_request: Request, exc: PlanningStopped) -> JSONResponse:

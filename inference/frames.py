@@ -9,6 +9,7 @@ Euler angles (z, y, x) in degrees of R = Rz(z) Ry(y) Rx(x), body to observation 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -86,3 +87,22 @@ def resample_metres(
         mag, scale, offset=offset, output_shape=(size, size), order=1, mode="constant", cval=float(np.median(mag))
     )
     return np.asarray(out, np.float64)
+
+
+def npy_header(fh: Any) -> tuple[tuple[int, ...], np.dtype[Any]]:
+    """A .npy file's shape and dtype read from its header alone (``fh`` at the file's start, left after the header).
+
+    ``np.load`` allocates what the header promises before reading a byte of data; this is what a reader checks
+    first (sizes, counts, budgets). Raises ValueError for anything that is not a readable .npy header.
+    """
+    try:
+        version = np.lib.format.read_magic(fh)
+        if version == (1, 0):
+            shape, _fortran, dtype = np.lib.format.read_array_header_1_0(fh)
+        elif version in ((2, 0), (3, 0)):
+            shape, _fortran, dtype = np.lib.format.read_array_header_2_0(fh)
+        else:
+            raise ValueError(f"unsupported .npy version {version}")
+    except (OSError, EOFError, SyntaxError, TypeError) as exc:
+        raise ValueError(str(exc)) from None
+    return tuple(int(d) for d in shape), dtype

@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from inference.errors import DatasetError, InferenceError
-from inference.frames import normalise_frame, normalised_problem, resample_metres
+from inference.frames import normalise_frame, normalised_problem, npy_header, resample_metres
 
 Vec = NDArray[np.float64]
 
@@ -235,13 +235,27 @@ def read_frame(
     model_cells_m: tuple[float, float] | None = None,
     resolve: Resolver | None = None,
     data: bytes | None = None,
+    charge: Callable[[tuple[int, ...], str], None] | None = None,
 ) -> FrameRead:
     """Read and check one labelled frame file (see the module's text); ``data``: its bytes, when not on disk
-    (``path`` then only names it)."""
+    (``path`` then only names it). ``charge(shape, name)`` is told the image's shape from its header before the
+    image is read (a request's budget; it raises to refuse)."""
     z = _open_npz(data if data is not None else path, path)
     with z:
         if "image" not in z.files:
             raise _bad(path, "image", f"missing (the file holds {', '.join(sorted(z.files)) or 'nothing'})")
+        if charge is not None:
+            try:
+                member = "image.npy" if "image.npy" in z.zip.namelist() else "image"
+                with z.zip.open(member) as fh:
+                    shape, _dtype = npy_header(fh)
+            except (ValueError, KeyError, zipfile.BadZipFile) as exc:
+                raise _bad(path, "image", f"not a readable .npy array ({exc})") from None
+            if len(shape) != 2:
+                raise _bad(path, "image", f"a 2-D array of numbers [range, cross-range]; got shape {list(shape)}")
+            if max(shape) > MAX_SIDE:
+                raise _bad(path, "image", f"{list(shape)} is over {MAX_SIDE} pixels a side")
+            charge(shape, path.name)
         cells = [_scalar(z, path, m, 1e-4, 100.0) for m in ("range_cell_m", "cross_range_cell_m")]
         if (cells[0] is None) != (cells[1] is None):
             raise _bad(path, "range_cell_m", "give range_cell_m and cross_range_cell_m together (metres)")

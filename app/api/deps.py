@@ -49,10 +49,16 @@ def require_schema(request: Request) -> None:
 
     status = database_status(request.app.state.engine)
     if not status["ok"]:
+        error = status.get("error", "the database does not answer")
         raise HTTPException(
             status_code=503,
-            detail=status.get("error", "the database does not answer")
-            + ("" if "upgrade" in status.get("error", "") else "; check GSA_DATABASE_URL, then run `gsa db upgrade`"),
+            detail=error
+            + (
+                ""
+                if "upgrade" in error
+                else "; retry shortly, and if it stays so check GSA_DATABASE_URL and the server"
+            ),
+            headers={"Retry-After": "5"},
         )
     request.app.state.schema_ok = True
 
@@ -169,16 +175,34 @@ async def read_upload(upload: UploadFile, limit: int) -> bytes:
     return data
 
 
+def check_file_count(files: list[UploadFile], settings: Settings) -> None:
+    """Refuse a request of more files than it may hold frames, before any file is read (each holds one or more)."""
+    if len(files) > settings.max_batch_frames:
+        raise InputError(
+            ["files"],
+            f"{len(files)} files is over the limit of {settings.max_batch_frames} frames a request "
+            "(GSA_MAX_BATCH_FRAMES); send the rest in another request",
+        )
+
+
 async def read_uploads(files: list[UploadFile], settings: Settings) -> list[Any]:
-    """Read and decode every uploaded file (stacks allowed) into frames, each file checked against the limits."""
+    """Read and decode every uploaded file (stacks allowed) into frames, each file checked against the limits.
+
+    The count of files, and each file's frames and decoded size from its header, are checked against the request's
+    budget (GSA_MAX_BATCH_FRAMES, GSA_MAX_DECODED_MB) before its pixels are decoded.
+    """
     from fastapi.concurrency import run_in_threadpool
 
-    from app.services.uploads import decode
+    from app.services.uploads import DecodeBudget, decode
 
+    check_file_count(files, settings)
+    budget = DecodeBudget.of(settings)
     uploads: list[Any] = []
     for f in files:
         data = await read_upload(f, settings.max_upload_bytes)
-        uploads += await run_in_threadpool(decode, data, f.filename or "upload", max_side=settings.max_image_side)
+        uploads += await run_in_threadpool(
+            decode, data, f.filename or "upload", max_side=settings.max_image_side, budget=budget
+        )
     return uploads
 
 

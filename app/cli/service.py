@@ -70,9 +70,11 @@ def cmd_serve(args: argparse.Namespace) -> int:
         print(f"  it is also in {Path(settings.data_dir) / 'dev-api-key.txt'}")
     sys.stdout.flush()
     log_config = uvicorn_log_config(settings.log_level, json_lines)
-    from app.core.server import raise_descriptor_limit, uvicorn_limits
+    from app.core.server import descriptor_warning, raise_descriptor_limit, uvicorn_limits
 
-    raise_descriptor_limit(settings.max_connections)
+    warning = descriptor_warning(raise_descriptor_limit(settings.max_connections), settings.max_connections)
+    if warning:
+        print(f"gsa: warning: {warning}", file=sys.stderr, flush=True)
     uvicorn.run(
         "app.main:create_app",
         factory=True,

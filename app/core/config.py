@@ -40,6 +40,7 @@ class Settings(BaseSettings):
     campaign_timeout_s: float = Field(default=120.0, gt=0, le=3600.0)
     plan_memory_mb: float = Field(default=1024.0, gt=0, le=1_000_000.0)
     header_timeout_s: float = Field(default=10.0, gt=0, le=600.0)
+    body_timeout_s: float = Field(default=120.0, gt=0, le=3600.0)
     keep_alive_timeout_s: float = Field(default=5.0, gt=0, le=600.0)
     shutdown_grace_s: float = Field(default=10.0, ge=0, le=600.0)
     max_connections: int = Field(default=2048, ge=16, le=1_000_000)
@@ -50,6 +51,7 @@ class Settings(BaseSettings):
     max_batch_bytes: int = Field(default=64 * 1024 * 1024, ge=1024)
     max_image_side: int = Field(default=4096, ge=8, le=65_536)
     max_batch_frames: int = Field(default=64, ge=1, le=4096)
+    max_decoded_mb: int = Field(default=256, ge=1, le=1_048_576)
     model_dir: Path = DEFAULT_MODEL_DIR
     extra_model_dirs: str = Field(
         default="", description="more model sets, comma-separated folders, each trained on another target"

@@ -89,7 +89,12 @@ def database_status(engine: Engine) -> dict[str, Any]:
             conn.execute(text("SELECT 1"))
             revision = MigrationContext.configure(conn).get_current_revision()
     except SQLAlchemyError as exc:
-        return {"ok": False, "dialect": engine.dialect.name, "error": type(exc).__name__, "head": head}
+        return {
+            "ok": False,
+            "dialect": engine.dialect.name,
+            "error": f"the database does not answer ({type(exc).__name__})",
+            "head": head,
+        }
     ok = revision == head
     out: dict[str, Any] = {"ok": ok, "dialect": engine.dialect.name, "revision": revision, "head": head}
     if not ok:

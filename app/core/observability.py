@@ -11,9 +11,11 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import os
 import re
 import sys
+import threading
 import time
 import traceback
 import uuid
@@ -96,10 +98,43 @@ def json_lines_wanted(setting: bool | None) -> bool:
     return (not sys.stderr.isatty()) if setting is None else setting
 
 
+class RepeatFilter(logging.Filter):
+    """Lets a warning or error through once per ``window_s`` for each (logger, level, message template); the
+    first one after the window says how many like it were held back. Info lines (the access log) all pass.
+
+    Under a flood (thousands of connections over the open-file limit, each accept failing) one line repeated
+    grew the log 341 MB in 70 s; held back here, it is one line every ``window_s``.
+    """
+
+    def __init__(self, window_s: float = 10.0) -> None:
+        super().__init__()
+        self.window_s = window_s
+        self._seen: dict[tuple[str, int, str], tuple[float, int]] = {}
+        self._lock = threading.Lock()
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno < logging.WARNING:
+            return True
+        key = (record.name, record.levelno, str(record.msg))
+        now = time.monotonic()
+        with self._lock:
+            first, held = self._seen.get(key, (-math.inf, 0))
+            if now - first < self.window_s:
+                self._seen[key] = (first, held + 1)
+                return False
+            self._seen[key] = (now, 0)
+            if len(self._seen) > 4096:  # forget templates quiet for a window
+                self._seen = {k: v for k, v in self._seen.items() if now - v[0] < self.window_s}
+        if held:
+            record.msg = f"{record.msg} [{held} more like it in the last {self.window_s:g} s not logged]"
+        return True
+
+
 def configure_logging(level: str = "info", json_lines: bool = True) -> None:
     """Send every logger (ours and uvicorn's) to stderr, as JSON lines, or readable text where ``json_lines`` is false."""
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(JsonFormatter() if json_lines else TextFormatter())
+    handler.addFilter(RepeatFilter())
     root = logging.getLogger()
     root.handlers[:] = [handler]
     root.setLevel(level.upper())
@@ -118,7 +153,15 @@ def uvicorn_log_config(level: str = "info", json_lines: bool = True) -> dict[str
         "version": 1,
         "disable_existing_loggers": False,
         "formatters": {"line": {"()": formatter}},
-        "handlers": {"stderr": {"class": "logging.StreamHandler", "formatter": "line", "stream": "ext://sys.stderr"}},
+        "filters": {"repeats": {"()": "app.core.observability.RepeatFilter"}},
+        "handlers": {
+            "stderr": {
+                "class": "logging.StreamHandler",
+                "formatter": "line",
+                "filters": ["repeats"],
+                "stream": "ext://sys.stderr",
+            }
+        },
         "root": {"handlers": ["stderr"], "level": level.upper()},
         "loggers": {
             "uvicorn": {"handlers": [], "propagate": True},

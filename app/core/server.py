@@ -1,4 +1,4 @@
-"""The HTTP front: uvicorn's h11 protocol with a deadline on request headers, and the server's limits.
+"""The HTTP front: uvicorn's h11 protocol with deadlines on request headers and bodies, and the server's limits.
 
 uvicorn closes a keep-alive connection that stays idle after a response
 (``timeout_keep_alive``), but not one that never sends a request, nor one that sends its
@@ -6,6 +6,12 @@ headers a byte at a time (slowloris): both held a socket for ever, and 1,100 of 
 the service down. ``GuardedH11Protocol`` gives every request's headers ``header_timeout_s``
 from the connection's first byte (or from its opening, for the first request) and closes
 the connection when they are not complete by then.
+
+Complete headers and then a body that never comes (or comes a byte at a time) held the
+socket too: one such connection was still open at 90 s. A request's body must arrive whole
+within ``body_timeout_s`` of its headers, with no pause over ``header_timeout_s`` between
+two reads (time the server itself stops reading, while the app has not taken what came,
+does not count); else the client is answered 408 and the connection closed.
 """
 
 from __future__ import annotations
@@ -19,11 +25,23 @@ from uvicorn.protocols.http.h11_impl import H11Protocol
 
 
 @lru_cache(maxsize=1)
-def _header_timeout_s() -> float:
-    """``GSA_HEADER_TIMEOUT_S``, read once per process (each uvicorn worker loads the environment)."""
+def _timeouts_s() -> tuple[float, float]:
+    """``GSA_HEADER_TIMEOUT_S`` and ``GSA_BODY_TIMEOUT_S``, read once per process (each uvicorn worker loads the
+    environment)."""
     from app.core.config import get_settings
 
-    return float(get_settings().header_timeout_s)
+    s = get_settings()
+    return float(s.header_timeout_s), float(s.body_timeout_s)
+
+
+def _header_timeout_s() -> float:
+    return _timeouts_s()[0]
+
+
+REQUEST_TIMEOUT = (
+    b"HTTP/1.1 408 Request Timeout\r\ncontent-type: application/json\r\nconnection: close\r\ncontent-length: %d"
+    b"\r\n\r\n%s"
+)
 
 
 class GuardedH11Protocol(H11Protocol):
@@ -32,6 +50,8 @@ class GuardedH11Protocol(H11Protocol):
     def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
         super().connection_made(transport)
         self._header_timer: asyncio.TimerHandle | None = None
+        self._body_timer: asyncio.TimerHandle | None = None
+        self._body_deadline: float | None = None
         self._arm_header_timer()
 
     def _arm_header_timer(self) -> None:
@@ -54,19 +74,71 @@ class GuardedH11Protocol(H11Protocol):
                 pass
             self.transport.close()
 
+    def _receiving_body(self) -> bool:
+        return (
+            self.cycle is not None
+            and not self.cycle.response_complete
+            and self.conn.their_state is h11.SEND_BODY
+            and not self.transport.is_closing()
+        )
+
+    def _watch_body(self) -> None:
+        """While a request's body arrives: the next read is due within the pause allowed, the whole by its deadline."""
+        self._disarm_body_timer()
+        if not self._receiving_body():
+            self._body_deadline = None
+            return
+        now = self.loop.time()
+        gap_s, whole_s = _timeouts_s()
+        if self._body_deadline is None:
+            self._body_deadline = now + whole_s
+        self._body_timer = self.loop.call_at(min(self._body_deadline, now + gap_s), self._body_timeout)
+
+    def _disarm_body_timer(self) -> None:
+        if self._body_timer is not None:
+            self._body_timer.cancel()
+            self._body_timer = None
+
+    def _body_timeout(self) -> None:
+        self._body_timer = None
+        if not self._receiving_body() or self.cycle is None:
+            return
+        late = self._body_deadline is not None and self.loop.time() >= self._body_deadline
+        if self.flow.read_paused and not late:  # the server stopped reading (the app has not taken the body yet)
+            self._watch_body()
+            return
+        gap_s, whole_s = _timeouts_s()
+        why = (
+            f"the request body did not arrive whole within {whole_s:g} s (GSA_BODY_TIMEOUT_S)"
+            if late
+            else f"no byte of the request body for {gap_s:g} s (GSA_HEADER_TIMEOUT_S)"
+        )
+        if not self.cycle.response_started:
+            payload = b'{"detail": "%s"}' % why.encode()
+            self.transport.write(REQUEST_TIMEOUT % (len(payload), payload))
+            self.cycle.response_started = True
+        # The app waiting for the body is told the client has gone; what it sends is dropped.
+        self.cycle.disconnected = True
+        self.cycle.message_event.set()
+        self.transport.close()
+
     def data_received(self, data: bytes) -> None:
         super().data_received(data)
         if self.cycle is not None and not self.cycle.response_complete:
             self._disarm_header_timer()  # the headers are complete: the request runs
+            self._watch_body()
         elif not self.transport.is_closing():
             self._arm_header_timer()  # part of a request: its headers have until the deadline
 
     def on_response_complete(self) -> None:
         self._disarm_header_timer()  # idle again: uvicorn's keep-alive timeout takes over
+        self._disarm_body_timer()
+        self._body_deadline = None
         super().on_response_complete()
 
     def connection_lost(self, exc: Exception | None) -> None:
         self._disarm_header_timer()
+        self._disarm_body_timer()
         super().connection_lost(exc)
 
 
@@ -80,12 +152,36 @@ def uvicorn_limits(settings: Any) -> dict[str, Any]:
     }
 
 
-def raise_descriptor_limit(connections: int) -> None:
-    """Raise the soft open-file limit toward the hard one, so ``connections`` sockets fit beside the files."""
+DESCRIPTORS_BESIDE_SOCKETS = 256  # files, the database, spooled uploads, the models
+
+
+def raise_descriptor_limit(connections: int) -> int:
+    """Raise the soft open-file limit toward the hard one, so ``connections`` sockets fit beside the files;
+    return the soft limit now in force."""
     import resource
 
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
-    want = connections + 256
+    want = connections + DESCRIPTORS_BESIDE_SOCKETS
     if soft != resource.RLIM_INFINITY and soft < want:
         new = want if hard == resource.RLIM_INFINITY else min(want, hard)
         resource.setrlimit(resource.RLIMIT_NOFILE, (new, hard))
+        soft = new
+    return int(soft)
+
+
+def descriptor_warning(soft_limit: int, connections: int) -> str | None:
+    """What to tell the operator when the open-file limit cannot hold ``connections`` sockets and the files.
+
+    With the limit short, connections past it are not refused with a 503: accepting fails (and used to flood the
+    log), and the service stops answering; 1,100 held connections did that at a limit of 1024.
+    """
+    import resource
+
+    want = connections + DESCRIPTORS_BESIDE_SOCKETS
+    if soft_limit == resource.RLIM_INFINITY or soft_limit >= want:
+        return None
+    return (
+        f"the open-file limit is {soft_limit} (its hard limit) but GSA_MAX_CONNECTIONS={connections} needs {want}: "
+        f"raise it (ulimit -Hn {want}, LimitNOFILE= in systemd, --ulimit nofile= in docker) or set "
+        f"GSA_MAX_CONNECTIONS={max(16, soft_limit - DESCRIPTORS_BESIDE_SOCKETS)}"
+    )

@@ -23,7 +23,7 @@ from app.schemas import CONTROL_CHARACTERS
 from app.schemas.estimates import EstimateResult
 from app.services import images
 from app.services.scenes import scene_for, windows_of
-from app.services.uploads import Upload, decode, prepare
+from app.services.uploads import DecodeBudget, Upload, decode, prepare
 from inference.rotations import rotation_matrix
 from scene.errors import SceneError
 from scene.geometry import check_times
@@ -181,7 +181,8 @@ def estimate_file(
     snr_db: float | None = None,
 ) -> Estimate:
     """Decode one uploaded frame (a stack is refused: the batch route takes it), estimate it and store it."""
-    uploads = decode(data, filename, allow_stack=False, max_side=settings.max_image_side)
+    budget = DecodeBudget.of(settings, "file")
+    uploads = decode(data, filename, allow_stack=False, max_side=settings.max_image_side, budget=budget)
     if len(uploads) != 1:
         raise InputError(["file"], f"the file holds {len(uploads)} frames; send stacks to /v1/estimates/batch")
     return estimate_and_store(

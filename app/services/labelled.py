@@ -18,6 +18,7 @@ from app.errors import InputError
 from app.schemas import LabelledFramePublic, LabelledSummary, LabelledUpload
 from app.services import images
 from app.services.scenes import scene_for, windows_of
+from app.services.uploads import DecodeBudget
 from inference.errors import InferenceError
 from inference.labelled import MAX_SIGMA_DEG, FrameRead, coverage, observed_times, read_frame
 from scene.errors import SceneError
@@ -47,8 +48,10 @@ def read_labelled(
     size: int,
     model_cells_m: tuple[float, float],
     plan: Plan | None,
+    budget: DecodeBudget | None = None,
 ) -> list[FrameRead]:
-    """Read every file (all before anything is stored); J2000 labels placed by the plan's geometry."""
+    """Read every file (all before anything is stored); J2000 labels placed by the plan's geometry; each image's
+    size charged to ``budget`` from its header before it is read."""
     resolve = None
     if plan is not None:
         times = observed_times(files)
@@ -63,7 +66,8 @@ def read_labelled(
     out = []
     for name, data in files:
         try:
-            out.append(read_frame(Path(name), size, model_cells_m, resolve, data=data))
+            charge = budget.charge if budget is not None else None
+            out.append(read_frame(Path(name), size, model_cells_m, resolve, data=data, charge=charge))
         except InferenceError as exc:
             raise InputError(["files", name, exc.field or "file"], str(exc)) from None
         except SceneError as exc:
@@ -92,7 +96,8 @@ def create_labelled(
     if attitude_sigma_deg is not None and not 0.0 <= attitude_sigma_deg <= MAX_SIGMA_DEG:
         raise InputError(["attitude_sigma_deg"], f"between 0 and {MAX_SIGMA_DEG:g} deg")
     plan = _plan(session, operator_id, plan_id, target)
-    reads = read_labelled(files=files, size=size, model_cells_m=model_cells_m, plan=plan)
+    budget = DecodeBudget.of(settings)
+    reads = read_labelled(files=files, size=size, model_cells_m=model_cells_m, plan=plan, budget=budget)
     for (name, _), r in zip(files, reads, strict=True):
         if r.quaternion_j2000 is not None and plan is None:  # the reader refuses these without a plan
             raise InputError(["files", name, "plan_id"], "a label in J2000 needs plan_id")

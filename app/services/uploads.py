@@ -13,9 +13,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from app.errors import InputError
+from app.errors import InputError, TooLarge
 from inference.errors import InferenceError
-from inference.frames import normalise_frame, normalised_problem
+from inference.frames import normalise_frame, normalised_problem, npy_header
 from inference.frames import resample_metres as _resample_metres
 
 MAX_NPZ_MEMBER_BYTES = 64 * 1024 * 1024  # decompressed; refuses zip bombs before reading them
@@ -40,6 +40,43 @@ def _loc(name: str) -> list[str | int]:
 DEFAULT_MAX_SIDE = 4096
 # What marks a `gsa simulate` shard (inference.simulation.dataset): normalised frames beside their truths.
 SHARD_MEMBERS = {"image.npy", "label.npy", "angles_deg.npy"}
+
+
+@dataclass(slots=True)
+class DecodeBudget:
+    """What one request may decode, charged from each file's header before its pixels are read: frames, and
+    bytes counted as the float64 magnitudes the service holds (8 bytes a pixel, whatever the file's dtype).
+
+    A 16 kB PNG of 4096 x 4096 is 128 MiB decoded; without a budget every file of a request was decoded before
+    the frame limit was checked.
+    """
+
+    max_frames: int
+    max_bytes: int
+    field: str = "files"  # the form field the frames came in
+    frames: int = 0
+    bytes: int = 0
+
+    @classmethod
+    def of(cls, settings: Any, field: str = "files") -> DecodeBudget:
+        """The budget of one request under the service's settings (GSA_MAX_BATCH_FRAMES, GSA_MAX_DECODED_MB)."""
+        return cls(int(settings.max_batch_frames), int(settings.max_decoded_mb) * 2**20, field)
+
+    def charge(self, shape: tuple[int, ...], name: str) -> None:
+        """Count an array of ``shape`` (a frame, or a stack [N, H, W]) of file ``name``; refuse it over the budget."""
+        self.frames += int(shape[0]) if len(shape) == 3 else 1
+        self.bytes += 8 * int(np.prod(shape, dtype=np.int64))
+        if self.frames > self.max_frames:
+            raise InputError(
+                [self.field],
+                f"the request holds over {self.max_frames} frames (the limit, GSA_MAX_BATCH_FRAMES) by {name!r}; "
+                "send the rest in another request",
+            )
+        if self.bytes > self.max_bytes:
+            raise TooLarge(
+                f"decoded, the request's frames take over {self.max_bytes // 2**20} MiB by {name!r} (8 bytes "
+                "a pixel; the limit is GSA_MAX_DECODED_MB): send fewer or smaller frames",
+            )
 
 
 def _check_side(shape: tuple[int, ...], name: str, max_side: int) -> None:
@@ -68,30 +105,27 @@ def _check_array(arr: NDArray[Any], name: str) -> NDArray[np.float64]:
     return np.asarray(mag, np.float64)
 
 
-def _npy(data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE) -> NDArray[Any]:
-    """Read a .npy array after checking its header against the bytes that follow (numpy allocates first)."""
+def _npy(data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE, budget: DecodeBudget | None = None) -> NDArray[Any]:
+    """Read a .npy array after checking its header against the bytes that follow and the request's budget
+    (numpy allocates what the header promises first)."""
     buf = io.BytesIO(data)
     try:
-        version = np.lib.format.read_magic(buf)
-        if version == (1, 0):
-            shape, _fortran, dtype = np.lib.format.read_array_header_1_0(buf)
-        elif version in ((2, 0), (3, 0)):
-            shape, _fortran, dtype = np.lib.format.read_array_header_2_0(buf)
-        else:
-            raise ValueError(f"unsupported .npy version {version}")
-    except (ValueError, OSError, EOFError, SyntaxError, TypeError) as exc:
+        shape, dtype = npy_header(buf)
+    except ValueError as exc:
         raise InputError(_loc(name), f"not a readable .npy array: {exc}") from None
     if dtype.hasobject:
         raise InputError(_loc(name), f"unsupported dtype {dtype}; send real or complex numbers")
     if len(shape) > 3 or any(int(d) < 0 for d in shape):
         raise InputError(_loc(name), f"a frame must be a 2-D array (or a 3-D stack); this one has shape {list(shape)}")
-    _check_side(tuple(int(d) for d in shape), name, max_side)
+    _check_side(shape, name, max_side)
     need = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
     if need != len(data) - buf.tell():
         raise InputError(
             _loc(name),
             f"the .npy header promises {need} bytes of {dtype} {list(shape)} but {len(data) - buf.tell()} follow",
         )
+    if budget is not None:
+        budget.charge(shape, name)
     try:
         buf.seek(0)
         return np.load(buf, allow_pickle=False)
@@ -100,7 +134,7 @@ def _npy(data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE) -> NDArray[An
 
 
 def _npz_arrays(
-    data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE
+    data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE, budget: DecodeBudget | None = None
 ) -> tuple[list[tuple[str, NDArray[Any]]], bool]:
     """The archive's arrays by member name, checked against the limits, and whether it is a ``gsa simulate``
     shard (then its frames alone)."""
@@ -124,6 +158,15 @@ def _npz_arrays(
             shard = SHARD_MEMBERS <= {m.filename for m in members}
             if shard:  # a gsa simulate shard: its frames, not its labels and truths
                 members = [m for m in members if m.filename == "image.npy"]
+            if budget is not None:  # every member's header against the budget before any member is read
+                for m in members:
+                    with zf.open(m) as fh:
+                        try:
+                            shape, _dtype = npy_header(fh)
+                        except ValueError as exc:
+                            raise InputError(_loc(name), f"{m.filename}: not a readable .npy array: {exc}") from None
+                    _check_side(shape, name, max_side)
+                    budget.charge(shape, name)
             return [(m.filename.removesuffix(".npy"), _npy(zf.read(m), name, max_side)) for m in members], shard
     except (
         zipfile.BadZipFile,
@@ -137,12 +180,16 @@ def _npz_arrays(
         raise InputError(_loc(name), f"not a readable .npz archive: {exc}") from None
 
 
-def _image(data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE) -> NDArray[Any]:
+def _image(
+    data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE, budget: DecodeBudget | None = None
+) -> NDArray[Any]:
     from PIL import Image, UnidentifiedImageError
 
     try:
         img = Image.open(io.BytesIO(data))
         _check_side((img.size[1], img.size[0]), name, max_side)  # before decoding a single pixel
+        if budget is not None:
+            budget.charge((img.size[1], img.size[0]), name)
         img.load()
     except (UnidentifiedImageError, OSError, ValueError, SyntaxError, Image.DecompressionBombError) as exc:
         raise InputError(_loc(name), f"not a readable PNG or TIFF image: {exc}") from None
@@ -161,19 +208,28 @@ def _image(data: bytes, name: str, max_side: int = DEFAULT_MAX_SIDE) -> NDArray[
     return arr
 
 
-def decode(data: bytes, name: str, allow_stack: bool = True, max_side: int = DEFAULT_MAX_SIDE) -> list[Upload]:
-    """Decode an upload (.npy, .npz, .png, .tif/.tiff) into frames; with ``allow_stack``, arrays [N, H, W] too."""
+def decode(
+    data: bytes,
+    name: str,
+    allow_stack: bool = True,
+    max_side: int = DEFAULT_MAX_SIDE,
+    budget: DecodeBudget | None = None,
+) -> list[Upload]:
+    """Decode an upload (.npy, .npz, .png, .tif/.tiff) into frames; with ``allow_stack``, arrays [N, H, W] too.
+
+    ``budget``: the request's frames and decoded bytes so far, charged from each file's header before its pixels
+    are decoded (several files of one request share it)."""
     if not data:
         raise InputError(_loc(name), "the file is empty")
     digest = hashlib.sha256(data).hexdigest()
     head = data[:8]
     shard = False
     if head.startswith(b"\x93NUMPY"):
-        arrays = [(name, _npy(data, name, max_side))]
+        arrays = [(name, _npy(data, name, max_side, budget))]
     elif head.startswith(b"PK"):
-        arrays, shard = _npz_arrays(data, name, max_side)
+        arrays, shard = _npz_arrays(data, name, max_side, budget)
     elif head.startswith(b"\x89PNG") or head[:4] in (b"II*\x00", b"MM\x00*"):
-        arrays = [(name, _image(data, name, max_side))]
+        arrays = [(name, _image(data, name, max_side, budget))]
     else:
         raise InputError(_loc(name), "unknown format: send .npy, .npz, or 8/16-bit grayscale PNG or TIFF")
     out = []

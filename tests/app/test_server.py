@@ -216,6 +216,65 @@ def test_idle_and_slow_connections_are_closed_and_1000_held_do_not_block(tmp_pat
         srv.stop()
 
 
+def test_a_body_that_never_comes_or_trickles_is_answered_408_and_closed(tmp_path, smoke_models):
+    """GSA_BODY_TIMEOUT_S: complete headers and then no body (no key needed to try it) are answered 408 after
+    GSA_HEADER_TIMEOUT_S without a byte; a body sent a byte at a time, inside that pause, is answered 408 at the
+    body's deadline; the log holds one line each, no traceback; the service answers meanwhile."""
+    import socket
+
+    env = {
+        "GSA_DATA_DIR": str(tmp_path / "data"),
+        "GSA_MODEL_DIR": str(smoke_models),
+        "GSA_API_KEYS": KEY_A,
+        "GSA_ORT_THREADS": "1",
+        "GSA_LOG_LEVEL": "info",
+        "GSA_HEADER_TIMEOUT_S": "2",
+        "GSA_BODY_TIMEOUT_S": "5",
+    }
+    log = tmp_path / "server.log"
+    srv = Server(env, workers=1, log_path=log).start()
+    head = (
+        b"POST /v1/estimates HTTP/1.1\r\nHost: x\r\nContent-Type: multipart/form-data; boundary=b\r\n"
+        b"Content-Length: 100000\r\n\r\n"
+    )
+
+    def answer_after(trickle: bytes) -> tuple[float, bytes]:
+        """Seconds until the server closes the connection, and what it answered (a byte of ``trickle`` every 0.5 s)."""
+        sock = socket.create_connection(("127.0.0.1", srv.port))
+        sock.sendall(head)
+        sock.settimeout(0.5)
+        start, got, sent = time.monotonic(), b"", 0
+        try:
+            while time.monotonic() - start < 20.0:
+                try:
+                    chunk = sock.recv(4096)
+                    if not chunk:
+                        break
+                    got += chunk
+                except TimeoutError:
+                    if sent < len(trickle):
+                        sock.sendall(trickle[sent : sent + 1])
+                        sent += 1
+                except OSError:
+                    break
+            return time.monotonic() - start, got
+        finally:
+            sock.close()
+
+    try:
+        waited, got = answer_after(b"")
+        assert 1.5 < waited < 4.0, waited
+        assert got.startswith(b"HTTP/1.1 408") and b"GSA_HEADER_TIMEOUT_S" in got, got
+        waited, got = answer_after(b"--b\r\n" + b"x" * 100)
+        assert 4.5 < waited < 7.0, waited
+        assert got.startswith(b"HTTP/1.1 408") and b"GSA_BODY_TIMEOUT_S" in got, got
+        assert httpx.get(srv.url + "/healthz", timeout=5.0).status_code == 200
+    finally:
+        srv.stop()
+    text = log.read_text()
+    assert "Traceback" not in text, text[-3000:]
+
+
 def test_a_client_that_leaves_stops_its_plan(tmp_path, smoke_models):
     """A 30-day plan (about 2 s of work) whose client disconnects after 0.3 s is stopped: nothing is stored,
     and the server answers the next request at once."""

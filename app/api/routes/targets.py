@@ -16,6 +16,7 @@ from app.api.deps import (
     PageDep,
     SessionDep,
     SettingsDep,
+    check_file_count,
     checker_for,
     models_for,
     read_upload,
@@ -71,6 +72,7 @@ async def add_labelled_frames(
     """
     checker = checker_for(checkers, target)
     est = models_for(model_sets, checker)
+    check_file_count(files, settings)
     data = [
         (f.filename or f"frame-{k}.npz", await read_upload(f, settings.max_upload_bytes)) for k, f in enumerate(files)
     ]

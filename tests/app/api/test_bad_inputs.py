@@ -443,7 +443,7 @@ CASES = [
         EST + "/batch",
         lambda: {"files": [("files", (f"f{k}.npy", _npy(_frame()))) for k in range(3)]},
         422,
-        "batch limit",
+        "GSA_MAX_BATCH_FRAMES",
     ),
     # listings
     Case("page_size_over_limit", "GET", PLANS + "?limit=10", lambda: {}, 422, "limit"),
