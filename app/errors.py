@@ -12,7 +12,7 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from app.core.observability import current_request_id, errors_log
-from inference.errors import InferenceError
+from inference.errors import Cancelled, InferenceError
 from planner.errors import PlannerError, PlanningStopped
 from scene.errors import SceneError
 
@@ -171,6 +171,13 @@ def install_error_handlers(app: FastAPI) -> None:
 
     for down in DATABASE_DOWN:
         app.add_exception_handler(down, _database_down)
+
+    @app.exception_handler(Cancelled)
+    async def _cancelled(_request: Request, exc: Cancelled) -> JSONResponse:
+        # The client went away and its work was stopped; nobody reads this answer (499: nginx's "client closed").
+        return SafeJSONResponse(
+            status_code=499, content={"detail": f"the client went away: {exc}", "request_id": current_request_id()}
+        )
 
     @app.exception_handler(TooLarge)
     async def _too_large(_request: Request, exc: TooLarge) -> JSONResponse:

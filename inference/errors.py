@@ -27,6 +27,10 @@ class DatasetError(InferenceError):
     """A data set request or directory that cannot be used."""
 
 
+class Cancelled(Exception):
+    """Work stopped because whoever asked for it no longer waits (a client that went away); not bad input."""
+
+
 def module_main(
     module: str,
     name: str,

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from datetime import datetime, timedelta
 from typing import TYPE_CHECKING
@@ -239,15 +239,19 @@ def fit_and_fuse(
     sweeps: Sweeps | None = None,
     preprocess_s: float = 0.0,
     progress: Progress | None = None,
+    cancelled: Callable[[], bool] | None = None,
 ) -> FusedPass:
     """Read every frame of a pass (the networks, then the fit, no library search), place each and fuse them.
 
     ``frames``: the pass's frames as the models take them [N, H, W]; ``scene``: over the pass's span
     (``pass_span``); ``sweeps``: each frame's measured sweep rate and integration time (``sweeps_from``), or None.
     ``progress(stage, done, total)``: "estimated", "fitted" per frame, then "fused" when the answer is made.
+    ``cancelled()``: asked before each frame's fit; yes stops the work (``inference.errors.Cancelled``).
     """
     t0 = time.perf_counter()
-    read = read_frames(est, checker, frames, search=False, preprocess_s=preprocess_s, progress=progress)
+    read = read_frames(
+        est, checker, frames, search=False, preprocess_s=preprocess_s, progress=progress, cancelled=cancelled
+    )
     t1 = time.perf_counter()
     attitude, checks = fuse_pass(
         est=est,

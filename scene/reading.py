@@ -37,11 +37,13 @@ def read_frames(
     search: bool = True,
     preprocess_s: float = 0.0,
     progress: Progress | None = None,
+    cancelled: Callable[[], bool] | None = None,
 ) -> Readings:
     """Run the networks on the frames [N, H, W] as one batch, then fit and check each (``Checker.check_many``).
 
     ``preprocess_s``: what preparing the frames took (s, the whole batch), kept in the timings.
     ``progress(stage, done, total)``: "estimated" once the networks have read the batch, then "fitted" per frame.
+    ``cancelled()``: asked before each frame's fit; yes stops the work (``inference.errors.Cancelled``).
     """
     res = est.estimate(frames)
     n = len(frames)
@@ -55,6 +57,7 @@ def read_frames(
         refine,
         search,
         None if progress is None else (lambda done, total: progress("fitted", done, total)),
+        cancelled,
     )
     t_fit = time.perf_counter() - t1
     per_frame = {"preprocess": preprocess_s / n, **{k: v / n for k, v in res.timings_s.items()}, "fit": t_fit / n}

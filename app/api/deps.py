@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import AsyncIterator, Callable, Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Annotated, Any, TypeVar, cast
 
@@ -274,20 +275,28 @@ async def plan_in_worker(
 ) -> T:
     """Run planning ``work(settings=..., stop=..., **kwargs)`` in a worker thread under its budget (``planning_budget``), stopped
     when the caller disconnects, and count it in the metrics as ``kind``: what a plan and a campaign route share."""
+    started = time.perf_counter()
+    async with client_watch(request) as gone:
+        stop = planning_budget(settings, gone, timeout_s, budget_name)
+        result = await run_in_threadpool(work, settings=settings, stop=stop, **kwargs)
+    observe_work(request, kind, started)
+    return result
+
+
+@contextlib.asynccontextmanager
+async def client_watch(request: Request, every_s: float = 0.2) -> AsyncIterator[threading.Event]:
+    """An event set once the client has gone (polled every ``every_s``), for work in a worker thread to stop on:
+    a plan's budget, a batch's or a pass's fit between frames (``inference.errors.Cancelled``)."""
     gone = threading.Event()
-    stop = planning_budget(settings, gone, timeout_s, budget_name)
 
     async def watch() -> None:
         while not gone.is_set():
             if await request.is_disconnected():
                 gone.set()
-            await asyncio.sleep(0.2)
+            await asyncio.sleep(every_s)
 
     watcher = asyncio.create_task(watch())
-    started = time.perf_counter()
     try:
-        result = await run_in_threadpool(work, settings=settings, stop=stop, **kwargs)
+        yield gone
     finally:
         watcher.cancel()
-    observe_work(request, kind, started)
-    return result

@@ -7,6 +7,7 @@ read (the networks, the fit, the checks) by ``scene.reading`` and placed by the 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import datetime
 from typing import TYPE_CHECKING
@@ -60,12 +61,13 @@ def check_frames(
     cells_m: tuple[float, float] | None,
     refine: bool = True,
     search: bool = True,
+    cancelled: Callable[[], bool] | None = None,
 ) -> Readings:
     """Prepare uploads, run the models on them as one batch and fit and check each (``scene.reading``)."""
     frames, prep_s = prepare_frames(
         est=est, checker=checker, uploads=uploads, resample=resample, normalised=normalised, cells_m=cells_m
     )
-    return read_frames(est, checker, frames, refine, search, preprocess_s=prep_s)
+    return read_frames(est, checker, frames, refine, search, preprocess_s=prep_s, cancelled=cancelled)
 
 
 @dataclass(frozen=True)
@@ -91,8 +93,11 @@ def estimate_and_store(
     uploads: list[Upload],
     asked: EstimateRequest,
     snr_db: float | None = None,
+    cancelled: Callable[[], bool] | None = None,
 ) -> list[Estimate]:
     """Validate everything, run the models on one batch, store the images, then the rows in one transaction.
+
+    ``cancelled()`` (the client gone) stops the fit between frames; nothing is stored then.
 
     The single and batch upload routes both end here; the images are stored before their rows, and
     again after them, because a concurrent delete of an estimate with the same image may remove it.
@@ -125,6 +130,7 @@ def estimate_and_store(
         normalised=normalised,
         cells_m=cells_m,
         refine=refine,
+        cancelled=cancelled,
     )
     frames, enhanced, checks = read.frames, read.network.enhanced, read.checks
     in_frames: list[tuple[NDArray[np.float64], NDArray[np.float64]] | None] = [None] * len(uploads)
@@ -179,6 +185,7 @@ def estimate_file(
     filename: str,
     asked: EstimateRequest,
     snr_db: float | None = None,
+    cancelled: Callable[[], bool] | None = None,
 ) -> Estimate:
     """Decode one uploaded frame (a stack is refused: the batch route takes it), estimate it and store it."""
     budget = DecodeBudget.of(settings, "file")
@@ -194,4 +201,5 @@ def estimate_file(
         uploads=uploads,
         asked=asked,
         snr_db=snr_db,
+        cancelled=cancelled,
     )[0]

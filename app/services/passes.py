@@ -8,6 +8,7 @@ stored plan to a ``scene.Scene`` once (``app.services.scenes``) and stores the t
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from datetime import datetime
 from typing import TYPE_CHECKING, Any
 
@@ -49,8 +50,11 @@ def create_pass(
     normalised: bool,
     integration_s: list[float] | None = None,
     aperture_deg: float | None = None,
+    cancelled: Callable[[], bool] | None = None,
 ) -> Pass:
-    """Fit every frame of a pass, place each in the plan target's LVLH frame at its time, fuse them, and store it."""
+    """Fit every frame of a pass, place each in the plan target's LVLH frame at its time, fuse them, and store it.
+
+    ``cancelled()`` (the client gone) stops the fit between frames; nothing is stored then."""
     if len(uploads) < 2:
         raise InputError(["files"], f"a pass needs at least two frames; this upload holds {len(uploads)}")
     if len(uploads) > settings.max_batch_frames:
@@ -78,6 +82,7 @@ def create_pass(
         names=[u.name for u in uploads],
         sweeps=sweeps,
         preprocess_s=prep_s,
+        cancelled=cancelled,
     )
     result = PassResult.from_pass(fused.attitude, target=checker.model.name, timings_s=fused.timings_s)
     return crud.create_pass(session=session, operator_id=operator_id, plan_id=plan_id, result=result)

@@ -11,9 +11,11 @@ from __future__ import annotations
 import sqlite3
 import threading
 import time
+from datetime import datetime
 from pathlib import Path
 
 import httpx
+import numpy as np
 import pytest
 from sqlalchemy import create_engine, select
 
@@ -313,6 +315,84 @@ def test_a_client_that_leaves_stops_its_plan(tmp_path, smoke_models):
             headers={"X-API-Key": KEY_A, "Content-Type": "application/json"},
         )
         assert r.status_code == 201, r.text
+    finally:
+        srv.stop()
+
+
+@pytest.mark.parametrize("route", ["/v1/estimates/batch", "/v1/passes"])
+def test_a_client_that_leaves_stops_its_batch_or_pass_between_frames(tmp_path, smoke_models, route):
+    """A 48-frame batch or pass whose client disconnects after 0.5 s stops between frames: its request ends in
+    a 499 well before the whole work would, and nothing is stored; the same request waited for is stored."""
+    import io
+    import json
+    import socket
+    import uuid
+
+    from app.schemas import PAPER_EXAMPLE
+
+    data = tmp_path / "data"
+    env = {
+        "GSA_DATA_DIR": str(data),
+        "GSA_MODEL_DIR": str(smoke_models),
+        "GSA_API_KEYS": KEY_A,
+        "GSA_ORT_THREADS": "1",
+        "GSA_FIT_THREADS": "1",
+        "GSA_LOG_LEVEL": "info",
+        "GSA_LOG_JSON": "true",
+    }
+    log = tmp_path / "server.log"
+    srv = Server(env, workers=1, log_path=log).start()
+    auth = {"X-API-Key": KEY_A}
+    try:
+        n = 48
+        buf = io.BytesIO()
+        np.savez(buf, frames=np.random.default_rng(2).random((n, 64, 64)) + 0.05)
+        form: list[tuple[str, str]] = [("resample", "true")]
+        if route == "/v1/passes":
+            plan = httpx.post(srv.url + "/v1/plans", json=PAPER_EXAMPLE, headers=auth, timeout=60.0).json()
+            w = plan["access_windows"][0]
+            rise, end = datetime.fromisoformat(w["rise"]), datetime.fromisoformat(w["set"])
+            form = [("plan_id", plan["id"])] + [
+                ("observed_at", (rise + (end - rise) * (k + 1) / (n + 1)).isoformat()) for k in range(n)
+            ]
+        boundary = uuid.uuid4().hex
+        parts = [f'--{boundary}\r\nContent-Disposition: form-data; name="{k}"\r\n\r\n{v}\r\n'.encode() for k, v in form]
+        parts.append(
+            f'--{boundary}\r\nContent-Disposition: form-data; name="files"; filename="pass.npz"\r\n'
+            "Content-Type: application/octet-stream\r\n\r\n".encode()
+            + buf.getvalue()
+            + b"\r\n"
+        )
+        body = b"".join(parts) + f"--{boundary}--\r\n".encode()
+        head = (
+            f"POST {route} HTTP/1.1\r\nHost: x\r\nX-API-Key: {KEY_A}\r\n"
+            f"Content-Type: multipart/form-data; boundary={boundary}\r\nContent-Length: {len(body)}\r\n\r\n"
+        ).encode()
+        sock = socket.create_connection(("127.0.0.1", srv.port))
+        sock.sendall(head + body)
+        time.sleep(0.5)
+        sock.close()
+        ended = None
+        deadline = time.monotonic() + 60.0
+        while ended is None and time.monotonic() < deadline:
+            time.sleep(0.2)
+            for line in log.read_text().splitlines():
+                if line.startswith("{") and (rec := json.loads(line)).get("path") == route:
+                    ended = rec
+        assert ended is not None and ended["status"] == 499, ended
+        listing = "/v1/estimates" if route == "/v1/estimates/batch" else "/v1/passes"
+        assert httpx.get(srv.url + listing, headers=auth, timeout=5.0).json()["count"] == 0
+        # The same request waited for is stored, and takes far longer than the abandoned one ran.
+        t0 = time.monotonic()
+        r = httpx.post(
+            srv.url + route,
+            content=body,
+            headers={**auth, "Content-Type": f"multipart/form-data; boundary={boundary}"},
+            timeout=300.0,
+        )
+        whole_s = time.monotonic() - t0
+        assert r.status_code == 201, r.text[:500]
+        assert ended["duration_ms"] / 1000.0 < 0.5 * whole_s, (ended["duration_ms"], whole_s)
     finally:
         srv.stop()
 

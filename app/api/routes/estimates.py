@@ -24,6 +24,7 @@ from app.api.deps import (
     answering,
     as_utc,
     cells_from_form,
+    client_watch,
     observe_work,
     read_upload,
     read_uploads,
@@ -113,18 +114,20 @@ async def create_estimate(
     started = time.perf_counter()
     data = await read_upload(file, settings.max_upload_bytes)
     # Decoding, the models and the database run in a worker thread, so the event loop keeps serving meanwhile.
-    row = await run_in_threadpool(
-        svc.estimate_file,
-        session=session,
-        operator_id=operator.id,
-        settings=settings,
-        est=est,
-        checker=checker,
-        data=data,
-        filename=file.filename or "upload",
-        asked=asked,
-        snr_db=snr_db,
-    )
+    async with client_watch(request) as gone:
+        row = await run_in_threadpool(
+            svc.estimate_file,
+            session=session,
+            operator_id=operator.id,
+            settings=settings,
+            est=est,
+            checker=checker,
+            data=data,
+            filename=file.filename or "upload",
+            asked=asked,
+            snr_db=snr_db,
+            cancelled=gone.is_set,
+        )
     observe_work(request, "estimate", started, frames=1)
     return EstimatePublic.from_row(row)
 
@@ -146,16 +149,18 @@ async def create_estimates_batch(
     est, checker = answering(request, session, model_sets, checkers, asked.target)
     started = time.perf_counter()
     uploads = await read_uploads(files, settings)
-    rows = await run_in_threadpool(
-        svc.estimate_and_store,
-        session=session,
-        operator_id=operator.id,
-        settings=settings,
-        est=est,
-        checker=checker,
-        uploads=uploads,
-        asked=asked,
-    )
+    async with client_watch(request) as gone:  # the client gone: the fit stops between frames, nothing stored
+        rows = await run_in_threadpool(
+            svc.estimate_and_store,
+            session=session,
+            operator_id=operator.id,
+            settings=settings,
+            est=est,
+            checker=checker,
+            uploads=uploads,
+            asked=asked,
+            cancelled=gone.is_set,
+        )
     observe_work(request, "estimate_batch", started, frames=len(rows))
     return EstimatesPublic(data=[EstimatePublic.from_row(r) for r in rows], count=len(rows))
 

@@ -19,6 +19,7 @@ from app.api.deps import (
     SettingsDep,
     answering,
     cells_from_form,
+    client_watch,
     observe_work,
     read_uploads,
 )
@@ -68,21 +69,23 @@ async def create_pass(
     est, checker = answering(request, session, model_sets, checkers, target)
     started = time.perf_counter()
     uploads = await read_uploads(files, settings)
-    row = await run_in_threadpool(
-        pass_svc.create_pass,
-        session=session,
-        operator_id=operator.id,
-        settings=settings,
-        est=est,
-        checker=checker,
-        uploads=uploads,
-        plan_id=plan_id,
-        observed_at=observed_at,
-        cells_m=cells_m,
-        normalised=normalised,
-        integration_s=integration_s,
-        aperture_deg=aperture_deg,
-    )
+    async with client_watch(request) as gone:  # the client gone: the fit stops between frames, nothing stored
+        row = await run_in_threadpool(
+            pass_svc.create_pass,
+            session=session,
+            operator_id=operator.id,
+            settings=settings,
+            est=est,
+            checker=checker,
+            uploads=uploads,
+            plan_id=plan_id,
+            observed_at=observed_at,
+            cells_m=cells_m,
+            normalised=normalised,
+            integration_s=integration_s,
+            aperture_deg=aperture_deg,
+            cancelled=gone.is_set,
+        )
     observe_work(request, "pass", started, frames=len(uploads))
     return PassPublic.from_row(row)
 
