@@ -5,12 +5,14 @@ from __future__ import annotations
 from datetime import datetime
 from typing import TYPE_CHECKING, Any
 
+from sqlalchemy import delete as sa_delete
 from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from app.core.security import HMAC_SCHEME, LEGACY_SCHEME, digests_equal, key_digest, key_prefix, new_api_key
 from app.db.models import ApiKey, Campaign, Estimate, GroundStation, LabelledFrame, Operator, Pass, Plan, utcnow
+from app.schemas.common import name_key
 
 if TYPE_CHECKING:
     from app.schemas import CampaignCreate, CampaignResult, PassResult, PlanCreate, PlanResult
@@ -294,8 +296,11 @@ def list_passes(
 
 
 def create_station(*, session: Session, operator_id: str, station: dict[str, Any]) -> GroundStation | None:
-    """Store a named station; None where the operator already has one of that name (nothing changes)."""
-    row = GroundStation(operator_id=operator_id, name=station["name"], station=station)
+    """Store a named station; None where the operator already has one of that name, compared by ``name_key``
+    (nothing changes)."""
+    row = GroundStation(
+        operator_id=operator_id, name=station["name"], name_key=name_key(station["name"]), station=station
+    )
     session.add(row)
     try:
         session.commit()
@@ -306,8 +311,13 @@ def create_station(*, session: Session, operator_id: str, station: dict[str, Any
 
 
 def get_station(*, session: Session, operator_id: str, name: str) -> GroundStation | None:
+    """The operator's station of this name, compared by ``name_key`` (case, width, surrounding spaces aside)."""
+    try:
+        key = name_key(name)
+    except ValueError:
+        return None  # no stored name holds what normalising refuses
     return session.scalar(
-        select(GroundStation).where(GroundStation.operator_id == operator_id, GroundStation.name == name)
+        select(GroundStation).where(GroundStation.operator_id == operator_id, GroundStation.name_key == key)
     )
 
 
@@ -320,9 +330,11 @@ def list_stations(*, session: Session, operator_id: str, limit: int, offset: int
     return list(rows), total
 
 
-def delete_station(*, session: Session, station: GroundStation) -> None:
-    session.delete(station)
+def delete_station(*, session: Session, station: GroundStation) -> bool:
+    """Delete the station; False where another request deleted it first (so exactly one DELETE answers 204)."""
+    gone = session.execute(sa_delete(GroundStation).where(GroundStation.id == station.id))
     session.commit()
+    return bool(getattr(gone, "rowcount", 0))
 
 
 def labelled_inputs(*, session: Session, operator_id: str, target: str, digests: list[str]) -> set[str]:

@@ -114,11 +114,16 @@ class GroundStation(Base):
     """A named radar site an operator stores once and names in plans (``/v1/stations``)."""
 
     __tablename__ = "stations"
-    __table_args__ = (UniqueConstraint("operator_id", "name", name="uq_stations_operator_name"),)
+    __table_args__ = (
+        UniqueConstraint("operator_id", "name", name="uq_stations_operator_name"),
+        UniqueConstraint("operator_id", "name_key", name="uq_stations_operator_name_key"),
+    )
 
     id: Mapped[str] = mapped_column(String(36), primary_key=True, default=new_id)
     operator_id: Mapped[str] = mapped_column(ForeignKey("operators.id", ondelete="CASCADE"))
     name: Mapped[str] = mapped_column(String(200))
+    # What names are compared by (app.schemas.common.name_key): "GS", "gs" and full-width "GS" are one station.
+    name_key: Mapped[str] = mapped_column(String(800))
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     station: Mapped[dict[str, Any]] = mapped_column(JSON)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import re
+import unicodedata
 from datetime import datetime
 from typing import TYPE_CHECKING, Annotated, Any, overload
 
@@ -87,7 +88,36 @@ def surrogate_path(value: Any, path: tuple[str | int, ...] = ()) -> tuple[str | 
 # An id, filter or name from a path, a query or a form: NUL and other control characters are
 # refused at the edge (PostgreSQL cannot store NUL in text, and no id or name holds one).
 Text = Annotated[str, AfterValidator(_no_control)]
-Name = Annotated[str, Field(min_length=1, max_length=200, pattern=r"^[^/\\\x00-\x1f]+$")]
+
+
+def normalise_name(value: str) -> str:
+    """A name as stored: Unicode NFC, surrounding spaces trimmed; control, format (zero-width, bidi) and
+    separator characters refused, and the path segments "." and "..". Names differing only in case or width
+    are one name (``name_key``)."""
+    name = unicodedata.normalize("NFC", value).strip()
+    bad = next((c for c in name if unicodedata.category(c) in ("Cc", "Cf", "Cs", "Co", "Cn", "Zl", "Zp")), None)
+    if bad is not None:
+        raise ValueError(
+            f"must not contain control, invisible or unassigned characters (U+{ord(bad):04X} "
+            f"{unicodedata.name(bad, 'unnamed')}); remove it"
+        )
+    if not name:
+        raise ValueError("must hold a visible character")
+    if name in (".", ".."):
+        raise ValueError(f"{name!r} is a path segment, not a name (it could not be read or deleted by its URL)")
+    return name
+
+
+def name_key(name: str) -> str:
+    """What two names are compared by: NFKC (full-width and other compatibility forms folded) and case folded.
+
+    "GS", "gs", "GS " and "\uff27\uff33" (full width) are one station."""
+    return unicodedata.normalize("NFKC", normalise_name(name)).casefold()
+
+
+Name = Annotated[
+    str, Field(min_length=1, max_length=200, pattern=r"^[^/\\\x00-\x1f]+$"), AfterValidator(normalise_name)
+]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 
 

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 from pydantic import AfterValidator, ConfigDict, Discriminator, Field, Tag
 
-from app.schemas.common import Described, Finite, Name, Strict, utc_or_none
+from app.schemas.common import Described, Finite, Name, Strict, normalise_name, utc_or_none
 from planner.access import validate_mask
 from planner.errors import PlannerError
 
@@ -76,6 +76,7 @@ StationName = Annotated[
         pattern=r"^[^/\\\x00-\x1f]+$",
         description="the name of a station stored under /v1/stations",
     ),
+    AfterValidator(normalise_name),
 ]
 
 

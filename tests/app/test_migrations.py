@@ -103,6 +103,37 @@ def test_keys_from_before_0003_keep_working_and_hmac_keys_are_revoked_on_downgra
     assert rows == {"k1": False, "k2": True}
 
 
+def test_lookalike_stations_from_before_0009_are_kept_and_the_first_keeps_the_name(url):
+    """Before 0009 "GS" and "gs " could both be stored; after it the older owns the name key (found by any
+    spelling), the younger stays stored under a key of its own, and new lookalikes are refused by the database."""
+    cfg = _cfg(url)
+    command.upgrade(cfg, "0008")
+    engine = create_engine(url)
+    with engine.begin() as conn:
+        conn.execute(text("INSERT INTO operators (id, name, created_at) VALUES ('op1', 'old', CURRENT_TIMESTAMP)"))
+        for sid, name, t in (("s1", "GS", "2026-01-01"), ("s2", "gs ", "2026-01-02"), ("s3", "Other", "2026-01-03")):
+            conn.execute(
+                text(
+                    "INSERT INTO stations (id, operator_id, name, created_at, station) VALUES (:i, 'op1', :n, :t, '{}')"
+                ),
+                {"i": sid, "n": name, "t": t},
+            )
+    command.upgrade(cfg, "head")
+    with engine.begin() as conn:
+        keys = dict(conn.execute(text("SELECT id, name_key FROM stations")).all())
+    assert keys == {"s1": "gs", "s2": "gs#s2", "s3": "other"}
+    with pytest.raises(Exception, match="(?i)unique|duplicate"), engine.begin() as conn:
+        conn.execute(
+            text(
+                "INSERT INTO stations (id, operator_id, name, name_key, created_at, station) "
+                "VALUES ('s4', 'op1', 'GS2', 'gs', CURRENT_TIMESTAMP, '{}')"
+            )
+        )
+    command.downgrade(cfg, "0008")
+    command.upgrade(cfg, "head")
+    engine.dispose()
+
+
 def test_an_unmigrated_database_answers_503_naming_the_fix(url, tmp_path, smoke_models):
     """Every /v1 route answers 503 "run gsa db upgrade" (not 500) until the schema is there, key or no key."""
     from fastapi.testclient import TestClient

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from typing import Annotated, Any
+from urllib.parse import quote
 
 from fastapi import APIRouter, HTTPException, Path, Response
 
@@ -34,10 +35,12 @@ def create_station(session: SessionDep, operator: CurrentOperator, station_in: S
     """
     row = crud.create_station(session=session, operator_id=operator.id, station=station_in.model_dump(mode="json"))
     if row is None:
+        same = crud.get_station(session=session, operator_id=operator.id, name=station_in.name)
+        stored = same.name if same is not None else station_in.name
         raise HTTPException(
             status_code=409,
-            detail=f"a station named {station_in.name!r} is already stored: DELETE /v1/stations/{station_in.name} "
-            "first, or choose another name",
+            detail=f"a station named {stored!r} is already stored (names are compared ignoring case, width and "
+            f"surrounding spaces): DELETE /v1/stations/{quote(stored, safe='')} first, or choose another name",
         )
     return StationPublic.from_row(row)
 
@@ -66,7 +69,6 @@ def get_station(session: SessionDep, operator: CurrentOperator, name: StationPat
 def delete_station(session: SessionDep, operator: CurrentOperator, name: StationPath) -> Response:
     """Delete one of the caller's stations (plans made with it keep their copy)."""
     row = crud.get_station(session=session, operator_id=operator.id, name=name)
-    if row is None:
+    if row is None or not crud.delete_station(session=session, station=row):
         raise HTTPException(status_code=404, detail="Station not found")
-    crud.delete_station(session=session, station=row)
     return Response(status_code=204)

@@ -89,3 +89,56 @@ def test_a_bad_mask_is_a_422_naming_the_mask(client, mask, words):
         detail = r.json()["detail"][0]
         assert "mask" in detail["loc"] and words in detail["msg"], detail
     assert client.get("/v1/stations/bad", headers=A).status_code == 404
+
+
+LOOKALIKES = ["gs-lookalike", "GS-LOOKALIKE", "Gs-Lookalike ", " gs-lookalike", "\uff47\uff53-lookalike"]
+
+
+def test_lookalike_names_are_one_station_found_by_any_of_them(client):
+    """Case, width (full-width letters) and surrounding spaces aside, a name is one station: the second is a 409
+    naming the one stored, and any spelling reads it (independent reference: unicodedata's NFKC and casefold)."""
+    import unicodedata
+
+    first = client.post("/v1/stations", json={**SITE, "name": LOOKALIKES[0]}, headers=A)
+    assert first.status_code == 201, first.text
+    for name in LOOKALIKES[1:]:
+        assert unicodedata.normalize("NFKC", name.strip()).casefold() == LOOKALIKES[0]
+        r = client.post("/v1/stations", json={**SITE, "name": name}, headers=A)
+        assert r.status_code == 409, (name, r.text)
+        assert "'gs-lookalike'" in r.json()["detail"]
+        got = client.get(f"/v1/stations/{name}", headers=A)
+        assert got.status_code == 200 and got.json()["name"] == LOOKALIKES[0]
+    # NFD and NFC spellings of one name are one station too, stored in NFC
+    nfd = "Cafe\u0301 radar"
+    r = client.post("/v1/stations", json={**SITE, "name": nfd}, headers=A)
+    assert r.status_code == 201 and r.json()["name"] == unicodedata.normalize("NFC", nfd)
+    assert client.post("/v1/stations", json={**SITE, "name": "CAF\u00c9 RADAR"}, headers=A).status_code == 409
+    plan = client.post("/v1/plans", json={**PAPER_EXAMPLE, "ground_station": " GS-lookalike"}, headers=A)
+    assert plan.status_code == 201, plan.text
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["a\x7fb", "G\u200bS", "G\u200fS", "G\u2028S", ".", "..", "   "],
+    ids=["DEL", "zero-width", "bidi", "line-separator", "dot", "dot-dot", "blank"],
+)
+def test_names_that_could_not_be_read_back_are_refused(client, name):
+    before = client.get("/v1/stations", headers=A).json()["count"]
+    r = client.post("/v1/stations", json={**SITE, "name": name}, headers=A)
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"][0]["loc"] == ["body", "name"]
+    assert client.get("/v1/stations", headers=A).json()["count"] == before
+
+
+def test_concurrent_deletes_of_one_station_answer_one_204(client):
+    from concurrent.futures import ThreadPoolExecutor
+
+    def delete(name: str) -> int:
+        return client.delete(f"/v1/stations/{name}", headers=A).status_code
+
+    for round_ in range(3):
+        name = f"deleted-{round_}"
+        assert client.post("/v1/stations", json={**SITE, "name": name}, headers=A).status_code == 201
+        with ThreadPoolExecutor(8) as pool:
+            codes = sorted(pool.map(delete, [name] * 8))
+        assert codes == [204] + [404] * 7, codes
