@@ -15,6 +15,7 @@ from sqlalchemy.exc import SQLAlchemyError
 from app.api.main import api_router
 from app.core.config import Settings, get_settings
 from app.core.db import database_status, make_engine, make_session_factory
+from app.core.headers import SecurityHeadersMiddleware
 from app.core.observability import RequestContextMiddleware
 from app.core.security import load_key_secret
 from app.errors import install_error_handlers
@@ -139,6 +140,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     app.state.metrics = Metrics()
     app.add_middleware(RequestContextMiddleware, body_limit=body_limit, metrics=app.state.metrics)
+    app.add_middleware(SecurityHeadersMiddleware)  # outermost: the 413s and 500s of the one above get them too
 
     @app.get("/metrics", tags=["health"], response_class=Response)
     def metrics() -> Response:

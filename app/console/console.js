@@ -147,10 +147,10 @@ function mapSvg(geo, coastLines) {
     ${line("target_in_view", "#0b5cad", 3.5)}
     <path d="M${sx},${sy - 8}L${sx + 7},${sy + 5}L${sx - 7},${sy + 5}Z" fill="#c0392b" stroke="#fff"/>
     ${access}</svg>
-    <div class="legend"><span><i style="background:#7f8c8d"></i>target ground track</span>
-    <span><i style="background:#0b5cad"></i>target in view of the station</span>
-    <span><i style="background:#8e44ad"></i>observer ground track</span>
-    <span><i style="background:#c0392b"></i>station and where it sees the target (its mask, at ${num(by.visibility_circle.properties.height_km, 0)} km)</span>
+    <div class="legend"><span><i class="sw-target"></i>target ground track</span>
+    <span><i class="sw-inview"></i>target in view of the station</span>
+    <span><i class="sw-observer"></i>observer ground track</span>
+    <span><i class="sw-station"></i>station and where it sees the target (its mask, at ${num(by.visibility_circle.properties.height_km, 0)} km)</span>
     <span>★ target at T_access</span></div>`;
 }
 
