@@ -17,7 +17,7 @@ from app.core.config import Settings, get_settings
 from app.core.db import database_status, make_engine, make_session_factory
 from app.core.headers import SecurityHeadersMiddleware
 from app.core.observability import RequestContextMiddleware
-from app.core.security import load_key_secret
+from app.core.security import AuthThrottle, load_key_secret
 from app.errors import install_error_handlers
 
 LANDING_HTML = """<!doctype html>
@@ -127,6 +127,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         pass  # a database not yet migrated: /readyz says so
     app.state.settings = settings
     app.state.key_secret = load_key_secret(settings.key_secret, settings.data_dir)
+    app.state.auth_throttle = AuthThrottle(settings.auth_failures_per_minute)
     app.state.engine = engine
     app.state.session_factory = make_session_factory(engine)
     install_error_handlers(app)

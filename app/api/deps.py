@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
 import threading
 import time
 from collections.abc import AsyncIterator, Callable, Iterator
@@ -18,7 +19,7 @@ from sqlalchemy.orm import Session
 from app import crud
 from app.core.config import Settings
 from app.core.observability import resident_mb
-from app.core.security import digests_equal, key_fingerprint
+from app.core.security import AuthThrottle, digests_equal, key_fingerprint
 from app.db.models import Operator
 from app.errors import InputError
 from app.schemas import CONTROL_CHARACTERS, utc_or_none
@@ -71,9 +72,18 @@ SettingsDep = Annotated[Settings, Depends(get_settings_dep)]
 def get_current_operator(
     request: Request, session: SessionDep, settings: SettingsDep, key: Annotated[str | None, Security(api_key_header)]
 ) -> Operator:
-    """Return the operator whose key made the request; 401 without a valid, unrevoked key."""
+    """Return the operator whose key made the request; 401 without a valid, unrevoked key; 429 from an address
+    that sent too many wrong keys lately (GSA_AUTH_FAILURES_PER_MINUTE)."""
     if not key:
         raise HTTPException(status_code=401, detail="missing API key: send it in the X-API-Key header")
+    throttle: AuthThrottle | None = getattr(request.app.state, "auth_throttle", None)
+    client = request.client.host if request.client is not None else "unknown"
+    if throttle is not None and (wait := throttle.wait_s(client)) > 0:
+        raise HTTPException(
+            status_code=429,
+            detail=f"too many wrong API keys from this address (GSA_AUTH_FAILURES_PER_MINUTE); retry in {wait:.0f} s",
+            headers={"Retry-After": str(max(1, math.ceil(wait)))},
+        )
     op = crud.operator_for_key(session=session, secret=request.app.state.key_secret, key=key)
     matches = [digests_equal(key, k) for k in settings.env_api_keys]  # every one compared: constant time
     if op is None and any(matches):
@@ -81,6 +91,8 @@ def get_current_operator(
         op = crud.get_or_create_operator(session=session, name=f"env-{key_fingerprint(key)}")
         session.commit()
     if op is None:
+        if throttle is not None:
+            throttle.failed(client)
         raise HTTPException(status_code=401, detail="invalid or revoked API key")
     return op
 

@@ -41,6 +41,7 @@ class Settings(BaseSettings):
     plan_memory_mb: float = Field(default=1024.0, gt=0, le=1_000_000.0)
     header_timeout_s: float = Field(default=10.0, gt=0, le=600.0)
     body_timeout_s: float = Field(default=120.0, gt=0, le=3600.0)
+    auth_failures_per_minute: int = Field(default=20, ge=1, le=1_000_000)
     keep_alive_timeout_s: float = Field(default=5.0, gt=0, le=600.0)
     shutdown_grace_s: float = Field(default=10.0, ge=0, le=600.0)
     max_connections: int = Field(default=2048, ge=16, le=1_000_000)

@@ -87,3 +87,47 @@ def load_key_secret(configured: str, data_dir: Path) -> bytes:
     if len(secret) < 32:
         raise ValueError(f"{path} holds a secret shorter than 32 characters; delete it or set GSA_KEY_SECRET")
     return secret.encode("utf-8")
+
+
+class AuthThrottle:
+    """Back-off for clients that send wrong API keys: after ``limit`` wrong keys from one address within
+    ``window_s``, that address is answered 429 (any key, right or wrong, so the answers stop telling keys apart)
+    until its oldest failure leaves the window. Per worker process; at most ``max_clients`` addresses are
+    remembered (the quietest forgotten first)."""
+
+    def __init__(self, limit: int, window_s: float = 60.0, max_clients: int = 10_000) -> None:
+        import threading
+        from collections import OrderedDict
+
+        self.limit, self.window_s, self.max_clients = limit, window_s, max_clients
+        self._fails: OrderedDict[str, list[float]] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def _recent(self, client: str, now: float) -> list[float]:
+        times = [t for t in self._fails.get(client, ()) if now - t < self.window_s]
+        if times:
+            self._fails[client] = times
+        else:
+            self._fails.pop(client, None)
+        return times
+
+    def wait_s(self, client: str, now: float | None = None) -> float:
+        """Seconds ``client`` must wait before a key of its is looked at again (0: go ahead)."""
+        import time
+
+        now = time.monotonic() if now is None else now
+        with self._lock:
+            times = self._recent(client, now)
+            return max(0.0, times[0] + self.window_s - now) if len(times) >= self.limit else 0.0
+
+    def failed(self, client: str, now: float | None = None) -> None:
+        """Count a wrong key from ``client``."""
+        import time
+
+        now = time.monotonic() if now is None else now
+        with self._lock:
+            times = self._recent(client, now)
+            self._fails[client] = [*times, now][-self.limit :]
+            self._fails.move_to_end(client)
+            while len(self._fails) > self.max_clients:
+                self._fails.popitem(last=False)

@@ -12,6 +12,7 @@ import io
 import json
 import logging
 import re
+import time
 from datetime import datetime
 
 import numpy as np
@@ -21,7 +22,7 @@ from sqlalchemy import create_engine, func, select, text
 from app import crud
 from app.core.db import head_revision, make_engine, make_session_factory
 from app.core.observability import JsonFormatter, TextFormatter, json_lines_wanted
-from app.core.security import LEGACY_SCHEME, key_digest, load_key_secret
+from app.core.security import LEGACY_SCHEME, AuthThrottle, key_digest, load_key_secret
 from app.db.models import Adaptation, ApiKey, Campaign, Estimate, GroundStation, Pass, Plan
 from app.schemas import CAMPAIGN_EXAMPLE, PAPER_EXAMPLE
 from tests.conftest import KEY_A, KEY_B
@@ -132,12 +133,48 @@ def _path(path, records):
 def test_every_v1_route_answers_401_without_a_valid_key(client, records, revoked_key):
     routes = _v1_routes(client.app)
     assert len(routes) >= 11
-    for method, path in routes:
-        url = _path(path, records)
-        for headers in ({}, {"X-API-Key": revoked_key}, {"X-API-Key": "gsa_" + "x" * 43}, {"X-API-Key": KEY_A[:-1]}):
-            r = client.request(method, url, headers=headers)
-            assert r.status_code == 401, (method, path, headers, r.text)
-            assert r.json()["request_id"] == r.headers["X-Request-ID"]
+    throttle = client.app.state.auth_throttle
+    client.app.state.auth_throttle = AuthThrottle(10**6)  # hundreds of wrong keys on purpose: no back-off here
+    try:
+        for method, path in routes:
+            url = _path(path, records)
+            for headers in (
+                {},
+                {"X-API-Key": revoked_key},
+                {"X-API-Key": "gsa_" + "x" * 43},
+                {"X-API-Key": KEY_A[:-1]},
+            ):
+                r = client.request(method, url, headers=headers)
+                assert r.status_code == 401, (method, path, headers, r.text)
+                assert r.json()["request_id"] == r.headers["X-Request-ID"]
+    finally:
+        client.app.state.auth_throttle = throttle
+
+
+def test_an_address_that_sends_wrong_keys_is_backed_off_whatever_key_it_sends(settings):
+    """GSA_AUTH_FAILURES_PER_MINUTE wrong keys from one address: the next request is a 429 with Retry-After, the
+    right key included (else the answers would still tell keys apart); a missing key is not a guess; once the
+    window has passed the address is heard again."""
+    from fastapi.testclient import TestClient
+
+    from app.main import create_app
+
+    s = settings.model_copy(update={"auth_failures_per_minute": 5})
+    with TestClient(create_app(s)) as c:
+        throttle = c.app.state.auth_throttle
+        for _ in range(3):
+            assert c.get("/v1/plans").status_code == 401  # no key: not counted
+        for k in range(5):
+            assert c.get("/v1/plans", headers={"X-API-Key": f"wrong-key-{k:016d}"}).status_code == 401
+        for headers in ({"X-API-Key": "wrong-key-again-0123"}, A):
+            r = c.get("/v1/plans", headers=headers)
+            assert r.status_code == 429, r.text
+            assert "GSA_AUTH_FAILURES_PER_MINUTE" in r.json()["detail"] and 1 <= int(r.headers["Retry-After"]) <= 60
+        # another address is not held back; the window passing frees this one
+        assert throttle.wait_s("10.0.0.9") == 0.0
+        assert throttle.wait_s("testclient", now=time.monotonic() + 61.0) == 0.0
+        throttle._fails.clear()
+        assert c.get("/v1/plans", headers=A).status_code == 200
 
 
 def test_another_operators_records_are_404_and_unchanged(client, settings, records):
