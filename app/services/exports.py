@@ -23,7 +23,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.errors import InputError
-from planner.plan import Plan
+from planner.errors import PlanningStopped
+from planner.plan import Plan, StopCheck
 from planner.propagation import utc
 
 Vec = NDArray[np.float64]
@@ -447,9 +448,10 @@ POINTING_COLUMNS = (
 )
 
 
-def pointing_csv(plan: Plan, windows: list[dict[str, Any]]) -> str:
+def pointing_csv(plan: Plan, windows: list[dict[str, Any]], stop: StopCheck | None = None) -> str:
     """The radar's pointing over each pass, 1-s steps: azimuth (from north, through east), elevation, range and its
-    rate, and the azimuth's and elevation's rates the antenna turns at."""
+    rate, and the azimuth's and elevation's rates the antenna turns at. ``stop()`` is asked before each pass (a
+    reason stops the work: ``PlanningStopped``)."""
     from planner.access import look_angles, pointing_rates
 
     assert plan.target_trajectory is not None and plan.frames is not None and plan.station is not None
@@ -457,6 +459,8 @@ def pointing_csv(plan: Plan, windows: list[dict[str, Any]]) -> str:
     buf.write(",".join(POINTING_COLUMNS) + "\n")
     epoch = plan.epoch
     for k, w in enumerate(windows):
+        if stop is not None and (why := stop()) is not None:
+            raise PlanningStopped(f"writing pass {k} of {len(windows)} of pointing.csv: {why}")
         rise = (datetime.fromisoformat(w["rise"]) - epoch).total_seconds()
         end = (datetime.fromisoformat(w["set"]) - epoch).total_seconds()
         t = np.arange(math.ceil(rise), math.floor(end) + 1e-9, POINTING_STEP_S)
@@ -603,3 +607,37 @@ def geojson(plan: Plan, names: dict[str, str], windows: list[dict[str, Any]]) ->
                 )
             )
     return json.dumps({"type": "FeatureCollection", "features": features}, indent=1)
+
+
+NEEDS_BURN = ("opm", "oem", "czml")  # the exports of the planned arc: a plan without a burn has none
+
+
+def plan_export(kind: str, row: Any, settings: Any, stop: StopCheck | None = None) -> str:
+    """A stored plan as the export ``kind`` (``EXPORT_TYPES`` of the plans' routes): the plan is recomputed from its
+    stored request under ``stop`` (the plan budget: GSA_PLAN_TIMEOUT_S, GSA_PLAN_MEMORY_MB, the client gone), which
+    the writing obeys too. A plan without a burn is refused before anything is computed for the arc's exports."""
+    from app.schemas import PlanCreate
+    from app.services.planning import run_plan
+
+    if kind in NEEDS_BURN and not row.result.get("phasing"):
+        raise InputError(
+            ["plan"],
+            "the plan has no phasing burn (no candidate was planned), so there is no manoeuvre or planned arc to "
+            "export; the access report still is",
+            where="path",
+        )
+    plan, _ = run_plan(PlanCreate.model_validate(row.request), max_grid_points=settings.max_grid_points, stop=stop)
+    names = {"target": row.target_name, "observer": row.observer_name, "station": row.station_name}
+    windows = row.result.get("access_windows", [])
+    if kind == "pointing.csv":
+        return pointing_csv(plan, windows, stop)
+    if kind == "geojson":
+        return geojson(plan, names, windows)
+    arc = plan_arc(plan, row.result)
+    if kind == "opm":
+        return opm(arc, row.id, row.observer_name)
+    if kind == "oem":
+        return oem(arc, row.id, row.target_name, row.observer_name)
+    if kind == "czml":
+        return czml(arc, row.id, names, row.request["ground_station"], windows)
+    raise ValueError(f"unknown export {kind!r}")

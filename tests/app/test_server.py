@@ -397,6 +397,50 @@ def test_a_client_that_leaves_stops_its_batch_or_pass_between_frames(tmp_path, s
         srv.stop()
 
 
+def test_a_client_that_leaves_stops_its_export(tmp_path, smoke_models):
+    """A 30-day plan's pointing.csv (seconds of recomputing and writing) whose client leaves after 0.3 s stops:
+    its request ends well before the whole export would."""
+    import json
+    import socket
+
+    from app.schemas import PAPER_EXAMPLE
+
+    env = {
+        "GSA_DATA_DIR": str(tmp_path / "data"),
+        "GSA_MODEL_DIR": str(smoke_models),
+        "GSA_API_KEYS": KEY_A,
+        "GSA_ORT_THREADS": "1",
+        "GSA_LOG_LEVEL": "info",
+        "GSA_LOG_JSON": "true",
+    }
+    log = tmp_path / "server.log"
+    srv = Server(env, workers=1, log_path=log).start()
+    auth = {"X-API-Key": KEY_A}
+    try:
+        body = {**PAPER_EXAMPLE, "search": {"duration_days": 30}}
+        plan = httpx.post(srv.url + "/v1/plans", json=body, headers=auth, timeout=120.0).json()
+        path = f"/v1/plans/{plan['id']}/export/pointing.csv"
+        sock = socket.create_connection(("127.0.0.1", srv.port))
+        sock.sendall(f"GET {path} HTTP/1.1\r\nHost: x\r\nX-API-Key: {KEY_A}\r\n\r\n".encode())
+        time.sleep(0.3)
+        sock.close()
+        ended = None
+        deadline = time.monotonic() + 60.0
+        while ended is None and time.monotonic() < deadline:
+            time.sleep(0.2)
+            for line in log.read_text().splitlines():
+                if line.startswith("{") and (rec := json.loads(line)).get("path") == path:
+                    ended = rec
+        assert ended is not None, "the abandoned export never ended"
+        t0 = time.monotonic()
+        r = httpx.get(srv.url + path, headers=auth, timeout=120.0)
+        whole_s = time.monotonic() - t0
+        assert r.status_code == 200 and r.text.count("\n") > 1000
+        assert ended["duration_ms"] / 1000.0 < 0.5 * whole_s, (ended, whole_s)
+    finally:
+        srv.stop()
+
+
 def test_a_short_environment_key_stops_the_service_at_start(tmp_path):
     """GSA_API_KEYS took 7-character keys silently (issue 46): a key under 16 characters is refused by name."""
     import pydantic

@@ -5,12 +5,22 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, HTTPException, Path, Query, Request, Response
+from fastapi.concurrency import run_in_threadpool
 
 from app import crud
 from app.api import examples
-from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep, check_span, plan_in_worker, planning_budget
+from app.api.deps import (
+    CurrentOperator,
+    PageDep,
+    SessionDep,
+    SettingsDep,
+    check_span,
+    client_watch,
+    plan_in_worker,
+    planning_budget,
+)
 from app.schemas import PAPER_EXAMPLE, IsoDateTime, PlanCreate, PlanPublic, PlansPublic, PlanSummary, Text
-from app.services.planning import access_csv, plan_and_store, run_plan
+from app.services.planning import access_csv, plan_and_store
 
 router = APIRouter(prefix="/plans", tags=["plans"])
 
@@ -115,29 +125,17 @@ EXPORT_TYPES = {
 }
 
 
-def _export(kind: str, plan_id: str, session: SessionDep, operator: CurrentOperator, settings: SettingsDep) -> Response:
+async def _export(
+    kind: str, plan_id: str, request: Request, session: SessionDep, operator: CurrentOperator, settings: SettingsDep
+) -> Response:
     from app.services import exports
 
     row = crud.get_plan(session=session, operator_id=operator.id, plan_id=plan_id)
     if row is None:
         raise HTTPException(status_code=404, detail="Plan not found")
-    plan, _ = run_plan(
-        PlanCreate.model_validate(row.request), max_grid_points=settings.max_grid_points, stop=planning_budget(settings)
-    )
-    names = {"target": row.target_name, "observer": row.observer_name, "station": row.station_name}
-    windows = row.result.get("access_windows", [])
-    if kind == "pointing.csv":
-        body = exports.pointing_csv(plan, windows)
-    elif kind == "geojson":
-        body = exports.geojson(plan, names, windows)
-    else:
-        arc = exports.plan_arc(plan, row.result)
-        if kind == "opm":
-            body = exports.opm(arc, row.id, row.observer_name)
-        elif kind == "oem":
-            body = exports.oem(arc, row.id, row.target_name, row.observer_name)
-        else:
-            body = exports.czml(arc, row.id, names, row.request["ground_station"], windows)
+    # Recomputing and writing run in a worker thread under the plan budget, stopped when the client leaves.
+    async with client_watch(request) as gone:
+        body = await run_in_threadpool(exports.plan_export, kind, row, settings, planning_budget(settings, gone))
     media, _, suffix = EXPORT_TYPES[kind]
     name = f"plan-{row.id}.{suffix}"
     return Response(body, media_type=media, headers={"Content-Disposition": f'attachment; filename="{name}"'})
@@ -146,19 +144,30 @@ def _export(kind: str, plan_id: str, session: SessionDep, operator: CurrentOpera
 def _export_route(kind: str) -> None:
     media, what, _ = EXPORT_TYPES[kind]
 
-    def export(
-        session: SessionDep, operator: CurrentOperator, settings: SettingsDep, plan_id: Annotated[Text, Path()]
+    async def export(
+        request: Request,
+        session: SessionDep,
+        operator: CurrentOperator,
+        settings: SettingsDep,
+        plan_id: Annotated[Text, Path()],
     ) -> Response:
-        return _export(kind, plan_id, session, operator, settings)
+        return await _export(kind, plan_id, request, session, operator, settings)
 
-    export.__doc__ = f"The plan as {what}. Recomputed from the stored request; 422 if the plan has no burn."
+    export.__doc__ = (
+        f"The plan as {what}. Recomputed from the stored request under the plan budget (GSA_PLAN_TIMEOUT_S: 503 "
+        "over it), stopped if the client leaves; 422 at once if the plan has no burn and the export needs one."
+    )
     export.__name__ = f"export_{kind.replace('.', '_')}"
     router.add_api_route(
         f"/{{plan_id}}/export/{kind}",
         export,
         methods=["GET"],
         response_class=Response,
-        responses={**NOT_FOUND, 200: {"content": {media: {}}, "description": what}},
+        responses={
+            **NOT_FOUND,
+            200: {"content": {media: {}}, "description": what},
+            503: {"description": "recomputing the plan ran over GSA_PLAN_TIMEOUT_S and was stopped"},
+        },
     )
 
 

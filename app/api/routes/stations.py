@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from typing import Annotated, Any
-from urllib.parse import quote
 
 from fastapi import APIRouter, HTTPException, Path, Response
 
@@ -11,6 +10,7 @@ from app import crud
 from app.api import examples
 from app.api.deps import CurrentOperator, PageDep, SessionDep
 from app.schemas import StationCreate, StationPublic, StationsPublic, Text
+from app.services.stations import store_station
 
 router = APIRouter(prefix="/stations", tags=["stations"])
 
@@ -33,15 +33,7 @@ def create_station(session: SessionDep, operator: CurrentOperator, station_in: S
     A plan keeps a copy of the station it was planned for, so deleting or replacing a station
     later changes no stored plan.
     """
-    row = crud.create_station(session=session, operator_id=operator.id, station=station_in.model_dump(mode="json"))
-    if row is None:
-        same = crud.get_station(session=session, operator_id=operator.id, name=station_in.name)
-        stored = same.name if same is not None else station_in.name
-        raise HTTPException(
-            status_code=409,
-            detail=f"a station named {stored!r} is already stored (names are compared ignoring case, width and "
-            f"surrounding spaces): DELETE /v1/stations/{quote(stored, safe='')} first, or choose another name",
-        )
+    row = store_station(session=session, operator_id=operator.id, station=station_in.model_dump(mode="json"))
     return StationPublic.from_row(row)
 
 
