@@ -39,6 +39,7 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.physics
 	$(BIN)/python -m bench.passes
 	$(BIN)/python -m bench.load
+	$(BIN)/python -m bench.reliability
 
 # 5000+ generated requests per database (313 per route); the counts go to BENCHMARKS.md.
 fuzz: $(STAMP)
@@ -48,6 +49,7 @@ fuzz: $(STAMP)
 # A real server with 2 workers under 16 clients, on SQLite and PostgreSQL; figures to BENCHMARKS.md.
 load: $(STAMP)
 	$(BIN)/python -m bench.load
+	$(BIN)/python -m bench.reliability
 
 # The house rules CI holds before the tests: lint, format and types (mypy strict on app, planner, inference, scene).
 lint: $(STAMP)

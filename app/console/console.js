@@ -208,15 +208,26 @@ async function planPage(id) {
     <th class="num">dHp (km)</th><th class="num">miss (km)</th><th class="num">dv (m/s)</th><th class="num">stand-off (km)</th>
     <th class="num">rate (deg/s)</th><th>sunlit</th><th>feasible</th></tr></thead><tbody>${candidates ||
       '<tr><td colspan="10" class="muted">No pass has an alignment inside the box.</td></tr>'}</tbody></table>
-    <h2>Exports</h2><p>${exportsList}</p>`;
+    <h2>Exports</h2><p>${exportsList} <span id="exporting" class="muted"></span></p>
+    <h2>Frames of this plan</h2>
+    <p id="planwork">${(p.pass_ids || []).map((x) => `<a href="#/passes/${esc(x)}">pass ${esc(x.slice(0, 8))}</a>`).join(" · ") || "no pass"};
+    ${(p.estimate_ids || []).map((x) => `<a href="#/estimates/${esc(x)}">estimate ${esc(x.slice(0, 8))}</a>`).join(" · ") || "no estimate"}</p>`;
   view.querySelectorAll("[data-export]").forEach((a) => a.addEventListener("click", async (ev) => {
     ev.preventDefault();
     const kind = a.dataset.export;
-    const blob = await api(`/v1/plans/${encodeURIComponent(id)}/export/${kind}`, "blob");
-    const link = document.createElement("a");
-    link.href = URL.createObjectURL(blob);
-    link.download = `plan-${id}.${kind}`;
-    link.click();
+    const note = document.getElementById("exporting");
+    note.textContent = `preparing ${kind} (the plan is recomputed: a few seconds)...`;
+    try {
+      const blob = await api(`/v1/plans/${encodeURIComponent(id)}/export/${kind}`, "blob");
+      const link = document.createElement("a");
+      link.href = URL.createObjectURL(blob);
+      link.download = `plan-${id}.${kind}`;
+      link.click();
+      note.textContent = `${kind} ready`;
+    } catch (err) {
+      note.textContent = "";
+      fail(err.message);
+    }
   }));
 }
 
@@ -341,6 +352,99 @@ async function estimatePage(id) {
   canvas.dataset.drawn = "1";
 }
 
+async function passesPage() {
+  const body = await api("/v1/passes?limit=50");
+  const rows = body.data.map((p) => `<tr><td><a href="#/passes/${esc(p.id)}">${esc(p.id.slice(0, 8))}</a></td>
+      <td>${utc(p.created_at)}</td><td>${esc(p.target)}</td><td class="num">${p.used} / ${p.frames}</td>
+      <td>${p.trusted ? "yes" : "no"}</td><td>${p.stable === null ? "-" : p.stable ? "still" : "turning"}</td>
+      <td>${p.plan_id ? `<a href="#/plans/${esc(p.plan_id)}">${esc(p.plan_id.slice(0, 8))}</a>` : "-"}</td></tr>`).join("");
+  view.innerHTML = `<h1>Passes <span class="muted">(${body.count})</span></h1>
+    <table id="passes"><thead><tr><th>pass</th><th>created (UTC)</th><th>target</th><th class="num">frames used</th>
+    <th>trusted</th><th>attitude</th><th>plan</th></tr></thead><tbody>${rows ||
+      '<tr><td colspan="7" class="muted">No passes yet: POST /v1/passes, or gsa pass --server.</td></tr>'}</tbody></table>`;
+}
+
+// Continuous through +-180 deg about a reference value.
+function near(v, ref) {
+  return ref + ((((v - ref + 180) % 360) + 360) % 360) - 180;
+}
+
+// One SVG panel: each frame's angle on one axis over the pass with its 90 % bound, rejected frames (clipped to
+// the panel), and the fused answer with its bound where the attitude held still.
+function passPanel(p, axis, name) {
+  const W = 1100, H = 190, L = 64, R = 16, T = 12, B = 28;
+  const t0 = Date.parse(p.frames[0].observed_at);
+  const ts = p.frames.map((f) => (Date.parse(f.observed_at) - t0) / 1000);
+  const ref = p.attitude_lvlh.euler_zyx_deg[axis];
+  const vals = p.frames.map((f) => near(f.attitude_lvlh.euler_zyx_deg[axis], ref));
+  const bnd = p.frames.map((f) => f.quality.uncertainty_deg[axis]);
+  const used = p.frames.map((f) => f.used);
+  const keep = vals.filter((_, i) => used[i]);
+  const span = keep.length ? keep : vals;
+  const widest = Math.max(1, ...bnd.filter((b, i) => used[i] && b !== null && isFinite(b)).map((b) => 3 * b));
+  const pad = Math.max(1, 0.5 * (Math.max(...span) - Math.min(...span)), widest);
+  let lo = Math.min(...span) - pad, hi = Math.max(...span) + pad;
+  if (p.stable) { lo = Math.min(lo, ref - 1.5 * p.uncertainty_deg[axis]); hi = Math.max(hi, ref + 1.5 * p.uncertainty_deg[axis]); }
+  const tmax = Math.max(1, ...ts);
+  const X = (t) => L + (t / tmax) * (W - L - R);
+  const Y = (v) => T + (1 - (Math.min(hi, Math.max(lo, v)) - lo) / (hi - lo)) * (H - T - B);
+  let g = `<rect x="${L}" y="${T}" width="${W - L - R}" height="${H - T - B}" class="plotbg"/>`;
+  for (let k = 0; k <= 4; k++) {
+    const v = lo + (k / 4) * (hi - lo);
+    g += `<line x1="${L}" x2="${W - R}" y1="${Y(v)}" y2="${Y(v)}" class="gridline"/><text x="${L - 6}" y="${Y(v) + 4}" class="tick" text-anchor="end">${num(v, 1)}</text>`;
+    const t = (k / 4) * tmax;
+    g += `<text x="${X(t)}" y="${H - 8}" class="tick" text-anchor="middle">${num(t, 0)} s</text>`;
+  }
+  if (p.stable) {
+    const b = p.uncertainty_deg[axis];
+    g += `<rect x="${L}" y="${Y(ref + b)}" width="${W - L - R}" height="${Y(ref - b) - Y(ref + b)}" class="fusedband"/>`;
+    g += `<line x1="${L}" x2="${W - R}" y1="${Y(ref)}" y2="${Y(ref)}" class="fusedline"/>`;
+  } else if (p.attitude_at) {
+    const ta = (Date.parse(p.attitude_at) - t0) / 1000, b = p.uncertainty_deg[axis];
+    g += `<line x1="${X(ta)}" x2="${X(ta)}" y1="${Y(ref - b)}" y2="${Y(ref + b)}" class="fusedline"/><circle cx="${X(ta)}" cy="${Y(ref)}" r="5" class="fusedpoint"/>`;
+  }
+  p.frames.forEach((f, i) => {
+    const x = X(ts[i]), y = Y(vals[i]);
+    if (used[i]) {
+      const b = bnd[i];
+      if (b !== null && isFinite(b)) g += `<line x1="${x}" x2="${x}" y1="${Y(vals[i] + b)}" y2="${Y(vals[i] - b)}" class="errbar"/>`;
+      g += `<circle cx="${x}" cy="${y}" r="3.5" class="framepoint"><title>frame ${f.index}: ${num(vals[i], 2)} deg</title></circle>`;
+    } else {
+      g += `<path d="M${x - 4},${y - 4}L${x + 4},${y + 4}M${x - 4},${y + 4}L${x + 4},${y - 4}" class="rejected"><title>frame ${f.index} rejected: ${esc(f.rejected_because || "")}</title></path>`;
+    }
+  });
+  g += `<text x="14" y="${T + (H - T - B) / 2}" class="axisname" transform="rotate(-90 14 ${T + (H - T - B) / 2})" text-anchor="middle">${name}</text>`;
+  return `<svg class="panel" viewBox="0 0 ${W} ${H}" role="img" aria-label="${name} over the pass">${g}</svg>`;
+}
+
+async function passPage(id) {
+  const p = await api(`/v1/passes/${encodeURIComponent(id)}`);
+  const verdict = p.trusted
+    ? `<p class="verdict good">Trusted: ${esc(p.stability)}.</p>`
+    : `<p class="verdict bad">Not trusted: ${esc(p.stability)}.</p>`;
+  const fused = p.attitude_lvlh.euler_zyx_deg.map((v, i) => `${num(v, 2)} &plusmn; ${num(p.uncertainty_deg[i], 2)}`).join(", ");
+  const rows = p.frames.map((f) => `<tr class="${f.used ? "" : "rejectedrow"}"><td class="num">${f.index}</td>
+      <td>${esc(f.name)}</td><td>${utc(f.observed_at)}</td><td>${euler(f.attitude_lvlh)}</td>
+      <td>${f.quality.uncertainty_deg.map((v) => (v === null ? "-" : num(v, 2))).join(" / ")}</td>
+      <td>${esc(f.branch)}</td><td class="num">${num(f.residual_deg, 2)}</td>
+      <td class="reasons">${f.used ? "used" : "rejected: " + esc(f.rejected_because || "")}</td></tr>`).join("");
+  view.innerHTML = `<h1>Pass ${esc(p.id.slice(0, 8))} <span class="muted">${esc(p.target)}</span></h1>
+    <p class="muted">${esc(p.id)} · created ${utc(p.created_at)}
+    ${p.plan_id ? ` · plan <a href="#/plans/${esc(p.plan_id)}">${esc(p.plan_id.slice(0, 8))}</a>` : ""}
+    · ${p.used} frames used, ${p.rejected} rejected${p.attitude_at ? ` · attitude at ${utc(p.attitude_at)}` : ""}</p>
+    ${verdict}
+    <div class="card"><b>Fused attitude, body to LVLH</b> (Euler z, y, x with 90 % bounds, deg): ${fused}
+    ${p.alternative_lvlh ? `<br><span class="muted">other branch as many frames agree with: ${euler(p.alternative_lvlh)} deg</span>` : ""}
+    ${p.stable === false ? `<br>turning at ${p.rate_deg_s.map((v) => num(v, 3)).join(", ")} deg/s (body axes)` : ""}</div>
+    <h2>Each frame's attitude over the pass</h2>
+    <div class="legend"><span><i class="sw-frame"></i>frame, with its 90 % bound</span><span><i class="sw-rejected"></i>rejected (drawn at the edge when off scale)</span>
+    <span><i class="sw-fused"></i>fused answer and its bound</span></div>
+    <div id="panels">${[["z (yaw)", 0], ["y (pitch)", 1], ["x (roll)", 2]].map(([n, a]) => passPanel(p, a, n)).join("")}</div>
+    <h2>Frames</h2>
+    <div class="scroll"><table id="passframes"><thead><tr><th class="num">#</th><th>name</th><th>observed (UTC)</th><th>LVLH z, y, x (deg)</th>
+    <th>90 % bound z / y / x</th><th>branch</th><th class="num">residual (deg)</th><th>verdict</th></tr></thead><tbody>${rows}</tbody></table></div>`;
+}
+
 async function route() {
   takeKeyFromAddress();
   if (!key()) return askForKey();
@@ -356,6 +460,8 @@ async function route() {
     else if (parts[0] === "campaigns") await campaignsPage();
     else if (parts[0] === "estimates" && parts[1]) await estimatePage(decodeURIComponent(parts[1]));
     else if (parts[0] === "estimates") await estimatesPage();
+    else if (parts[0] === "passes" && parts[1]) await passPage(decodeURIComponent(parts[1]));
+    else if (parts[0] === "passes") await passesPage();
     else await plansPage(params);
   } catch (err) {
     fail(err.message);

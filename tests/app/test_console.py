@@ -12,6 +12,7 @@ import json
 import re
 import shutil
 import subprocess
+from datetime import datetime
 from pathlib import Path
 
 import httpx
@@ -59,7 +60,20 @@ def served(tmp_path_factory, smoke_models):
         srv.url + "/v1/estimates", files={"file": ("frame.npy", buf.getvalue())}, headers=headers, timeout=120
     ).json()
     campaign = httpx.post(srv.url + "/v1/campaigns", json=CAMPAIGN_EXAMPLE, headers=headers, timeout=300).json()
-    yield srv, plan, est, campaign, data / "server.log"
+    w = plan["access_windows"][0]
+    rise, end = datetime.fromisoformat(w["rise"]), datetime.fromisoformat(w["set"])
+    stack = io.BytesIO()
+    np.savez(stack, frames=np.random.default_rng(3).random((6, 64, 64)).astype(np.float32) + 0.05)
+    times = [(rise + (end - rise) * (k + 1) / 7).isoformat() for k in range(6)]
+    passed = httpx.post(
+        srv.url + "/v1/passes",
+        files={"files": ("pass.npz", stack.getvalue())},
+        data={"plan_id": plan["id"], "observed_at": times},
+        headers=headers,
+        timeout=300,
+    )
+    assert passed.status_code == 201, passed.text
+    yield srv, plan, est, campaign, passed.json(), data / "server.log"
     srv.stop()
 
 
@@ -84,7 +98,7 @@ def _status(dom: str) -> tuple[int, int]:
 
 
 def test_console_pages_in_chromium(served, tmp_path):
-    srv, plan, est, campaign, log = served
+    srv, plan, est, campaign, fused, log = served
     console = f"{srv.url}/console/#key={KEY_A}&"
     pages = {
         "plans": (f"{console}/plans", [plan["id"][:8], "Sat_Target"]),
@@ -109,6 +123,11 @@ def test_console_pages_in_chromium(served, tmp_path):
         "estimate": (
             f"{console}/estimates/{est['id']}",
             ['id="original" alt="original frame" hidden="" src="blob:', 'data-drawn="1"', "observation frame (fitted)"],
+        ),
+        "passes": (f"{console}/passes", [fused["id"][:8], "frames used"]),
+        "pass": (
+            f"{console}/passes/{fused['id']}",
+            ['<svg class="panel"', 'class="framepoint"', 'id="passframes"', "Fused attitude, body to LVLH"],
         ),
         "no-key": (f"{srv.url}/console/", ["Use this key"]),
     }

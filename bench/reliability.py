@@ -1,0 +1,262 @@
+"""Hostile clients (issue 46): what a decompression bomb, a flood of bodies that never come, and abandoned work
+cost a real `gsa serve` (one worker, shipped models, SQLite, default limits).
+
+Run with ``python -m bench.reliability`` (``make bench`` runs it); replaces the "Hostile clients" section of
+BENCHMARKS.md. Memory is the worker's peak resident set (VmHWM), CPU its user + system time (/proc), both read
+from the server process itself.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import socket
+import statistics
+import sys
+import tempfile
+import time
+import uuid
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+from PIL import Image
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench.common import machine  # noqa: E402
+from bench.sections import replace_section  # noqa: E402
+from inference.runtime import DEFAULT_MODEL_DIR  # noqa: E402
+from tests.utils.server import Server  # noqa: E402
+
+TITLE = "Hostile clients"
+KEY = "bench-reliability-key-0123"
+AUTH = {"X-API-Key": KEY}
+SIDE = 4096
+FLOOD = 1000
+
+
+def _log(msg: str) -> None:
+    print(f"bench.reliability: {msg}", file=sys.stderr, flush=True)
+
+
+def _status(pid: int) -> dict[str, int]:
+    out = {}
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        k, _, v = line.partition(":")
+        if k in ("VmHWM", "VmRSS"):
+            out[k] = int(v.split()[0]) // 1024  # MB
+    return out
+
+
+def _cpu_s(pid: int) -> float:
+    import os
+
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _gradient_png(seed: int) -> bytes:
+    """A 4096 x 4096 8-bit frame that PNG compresses to tens of kB: 16 MiB of pixels, 128 MiB as float64."""
+    y, x = np.mgrid[0:SIDE, 0:SIDE]
+    img = ((x // 64 + y // 64 + seed) % 200 + 20).astype(np.uint8)
+    buf = io.BytesIO()
+    Image.fromarray(img, mode="L").save(buf, format="PNG", optimize=True)
+    return buf.getvalue()
+
+
+def _multipart(fields: list[tuple[str, str]], files: list[tuple[str, str, bytes]]) -> tuple[bytes, str]:
+    boundary = uuid.uuid4().hex
+    parts = [f'--{boundary}\r\nContent-Disposition: form-data; name="{k}"\r\n\r\n{v}\r\n'.encode() for k, v in fields]
+    for field, name, data in files:
+        parts.append(
+            f'--{boundary}\r\nContent-Disposition: form-data; name="{field}"; filename="{name}"\r\n'
+            "Content-Type: application/octet-stream\r\n\r\n".encode()
+            + data
+            + b"\r\n"
+        )
+    return b"".join(parts) + f"--{boundary}--\r\n".encode(), f"multipart/form-data; boundary={boundary}"
+
+
+def decoded(srv: Server, pid: int) -> list[str]:
+    one = _gradient_png(0)
+    base = _status(pid)
+    body, ctype = _multipart([("resample", "true")], [("files", f"bomb-{k}.png", one) for k in range(16)])
+    t0 = time.monotonic()
+    r = httpx.post(srv.url + "/v1/estimates/batch", content=body, headers={**AUTH, "Content-Type": ctype}, timeout=120)
+    bomb_ms = (time.monotonic() - t0) * 1000.0
+    after_bomb = _status(pid)
+    _log(f"bomb: {r.status_code} in {bomb_ms:.0f} ms, peak {base['VmHWM']} -> {after_bomb['VmHWM']} MB")
+    body2, ctype2 = _multipart([("resample", "true")], [("files", f"big-{k}.png", _gradient_png(k)) for k in range(2)])
+    t0 = time.monotonic()
+    r2 = httpx.post(
+        srv.url + "/v1/estimates/batch", content=body2, headers={**AUTH, "Content-Type": ctype2}, timeout=600
+    )
+    big_s = time.monotonic() - t0
+    after_big = _status(pid)
+    _log(f"largest allowed: {r2.status_code} in {big_s:.1f} s, peak {after_bomb['VmHWM']} -> {after_big['VmHWM']} MB")
+    return [
+        f"- **Decompression bomb**: 16 PNGs of 4096 x 4096 in one {len(body) / 1024:.0f}-kB request (2 GiB as the "
+        f"float64 frames the service holds): answered {r.status_code} in {bomb_ms:.0f} ms from the files' headers; "
+        f"the worker's peak resident memory went {base['VmHWM']} -> {after_bomb['VmHWM']} MB (it was +2.2 GB before "
+        "the budget).",
+        f"- **The largest request the budget allows** (GSA_MAX_DECODED_MB 256): 2 such frames ({len(body2) / 1024:.0f} "
+        f"kB), resampled and estimated: {r2.status_code} in {big_s:.1f} s; peak resident memory "
+        f"{after_bomb['VmHWM']} -> {after_big['VmHWM']} MB.",
+    ]
+
+
+def flood(srv: Server) -> list[str]:
+    head = (
+        b"POST /v1/estimates HTTP/1.1\r\nHost: x\r\nContent-Type: multipart/form-data; boundary=b\r\n"
+        b"Content-Length: 100000\r\n\r\n"
+    )
+    held = []
+    for _ in range(FLOOD):
+        s = socket.create_connection(("127.0.0.1", srv.port))
+        s.sendall(head)
+        held.append(s)
+    opened = time.monotonic()
+    lat, codes = [], []
+    with httpx.Client(timeout=30.0, headers=AUTH) as client:
+        for _ in range(20):
+            t0 = time.monotonic()
+            codes.append(client.get(srv.url + "/v1/plans").status_code)
+            lat.append((time.monotonic() - t0) * 1000.0)
+            time.sleep(0.1)
+    answered_408, closed_s = 0, []
+    for s in held:
+        s.settimeout(max(0.1, opened + 15.0 - time.monotonic()))
+        try:
+            got = s.recv(4096)
+            if got.startswith(b"HTTP/1.1 408"):
+                answered_408 += 1
+            closed_s.append(time.monotonic() - opened)
+        except OSError:
+            pass
+        finally:
+            s.close()
+    _log(f"flood: normal p50 {statistics.median(lat):.0f} ms max {max(lat):.0f} ms, {answered_408} answered 408")
+    ok = sum(c == 200 for c in codes)
+    return [
+        f"- **Bodies that never come**: {FLOOD} connections sent complete headers of an upload and no body (no key "
+        f"needed); meanwhile {ok} of {len(codes)} normal requests (`GET /v1/plans`) were answered 200, median "
+        f"{statistics.median(lat):.0f} ms, slowest {max(lat):.0f} ms; {answered_408} of the {FLOOD} were answered 408 "
+        f"and closed, the last {max(closed_s or [0.0]):.1f} s after they opened (GSA_HEADER_TIMEOUT_S, 10 s, without "
+        "a byte of body; GSA_BODY_TIMEOUT_S, 120 s, for the whole body). Before, one such connection was still open "
+        "at 90 s.",
+    ]
+
+
+def _frames_npz(n: int) -> bytes:
+    from inference.simulation.catalogue import good_frames
+
+    buf = io.BytesIO()
+    np.savez(buf, frames=good_frames(n, 86_000)[0])
+    return buf.getvalue()
+
+
+def abandoned(srv: Server, pid: int, log: Path) -> list[str]:
+    plan = httpx.post(srv.url + "/v1/plans", json=_plan_30_days(), headers=AUTH, timeout=300).json()
+    w = plan["access_windows"][0]
+    rise, end = datetime.fromisoformat(w["rise"]), datetime.fromisoformat(w["set"])
+    n = 48
+    npz = _frames_npz(n)
+    times = [("observed_at", (rise + (end - rise) * (k + 1) / (n + 1)).isoformat()) for k in range(n)]
+    cases = {
+        "48-frame batch": (
+            "POST",
+            "/v1/estimates/batch",
+            _multipart([("normalised", "true")], [("files", "f.npz", npz)]),
+        ),
+        "48-frame pass": (
+            "POST",
+            "/v1/passes",
+            _multipart([("plan_id", plan["id"]), ("normalised", "true"), *times], [("files", "f.npz", npz)]),
+        ),
+        "30-day plan's pointing.csv": ("GET", f"/v1/plans/{plan['id']}/export/pointing.csv", (b"", "")),
+    }
+    lines = []
+    for name, (method, path, (body, ctype)) in cases.items():
+        extra = f"Content-Type: {ctype}\r\nContent-Length: {len(body)}\r\n" if body else ""
+        head = f"{method} {path} HTTP/1.1\r\nHost: x\r\nX-API-Key: {KEY}\r\n{extra}\r\n".encode()
+        seen = log.read_text().count(f'"path": "{path}"')
+        cpu0 = _cpu_s(pid)
+        s = socket.create_connection(("127.0.0.1", srv.port))
+        s.sendall(head + body)
+        time.sleep(0.5)
+        s.close()
+        deadline = time.monotonic() + 300.0
+        while log.read_text().count(f'"path": "{path}"') == seen and time.monotonic() < deadline:
+            time.sleep(0.1)
+        time.sleep(0.3)
+        left_cpu = _cpu_s(pid) - cpu0
+        status = [json.loads(x) for x in log.read_text().splitlines() if x.startswith("{") and path in x][-1]["status"]
+        cpu0 = _cpu_s(pid)
+        r = httpx.request(
+            method,
+            srv.url + path,
+            content=body or None,
+            headers={**AUTH, **({"Content-Type": ctype} if ctype else {})},
+            timeout=600,
+        )
+        whole_cpu = _cpu_s(pid) - cpu0
+        _log(f"{name}: abandoned {left_cpu:.1f} CPU-s ({status}), whole {whole_cpu:.1f} CPU-s ({r.status_code})")
+        lines.append(f"| {name} | {left_cpu:.1f} (ended {status}) | {whole_cpu:.1f} ({r.status_code}) |")
+    return [
+        "- **Abandoned work**: the client leaves 0.5 s after sending; the worker's CPU time until the request ended, "
+        "against the same request waited for (nothing of the abandoned one is stored):",
+        "",
+        "| request | abandoned: CPU-s | waited for: CPU-s |",
+        "|---|---|---|",
+        *lines,
+    ]
+
+
+def _plan_30_days() -> dict[str, Any]:
+    from app.schemas import PAPER_EXAMPLE
+
+    return {**PAPER_EXAMPLE, "search": {"duration_days": 30}}
+
+
+def main() -> None:
+    today = datetime.now(UTC).strftime("%Y-%m-%d")
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        log = root / "server.log"
+        env = {
+            "GSA_DATA_DIR": str(root / "data"),
+            "GSA_MODEL_DIR": str(DEFAULT_MODEL_DIR),
+            "GSA_API_KEYS": KEY,
+            "GSA_LOG_LEVEL": "info",
+            "GSA_LOG_JSON": "true",
+        }
+        srv = Server(env, workers=1, log_path=log).start()
+        try:
+            assert srv.proc is not None
+            pid = srv.proc.pid
+            _log("decoded sizes")
+            lines = decoded(srv, pid)
+            _log("slow-body flood")
+            lines += flood(srv)
+            _log("abandoned work")
+            lines += abandoned(srv, pid, log)
+        finally:
+            srv.stop()
+    section = [
+        f"## {TITLE}",
+        "",
+        f"Machine: {machine()}. Date: {today}. Command: `python -m bench.reliability` (bench/reliability.py). "
+        "One `gsa serve` worker, shipped models, SQLite, default limits.",
+        "",
+        *lines,
+        "",
+    ]
+    replace_section(TITLE, section)
+    print("\n".join(section))
+
+
+if __name__ == "__main__":
+    main()
