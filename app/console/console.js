@@ -304,23 +304,30 @@ async function estimatesPage() {
 async function estimatePage(id) {
   const e = await api(`/v1/estimates/${encodeURIComponent(id)}`);
   const q = e.quality;
-  const frames = [["attitude", "observation frame (fitted)"], ["attitude_network", "observation frame (Swin alone)"],
-    ["attitude_lvlh", "LVLH (the target's orbital frame)"], ["attitude_j2000", "J2000"]]
-    .filter(([k]) => e[k]).map(([k, name]) => `<tr><td>${name}</td><td>${euler(e[k])}</td>
-      <td>${e[k].quaternion_wxyz.map((v) => num(v, 5)).join(", ")}</td></tr>`).join("");
+  // The 90 % bound is stated on the fitted answer's Euler angles (its frame's and, as one rotation, the others').
+  const bound = q ? q.uncertainty_deg.map((v) => (v === null ? "-" : num(v, 2))).join(" / ") : "-";
+  const frames = [["attitude", "observation frame (fitted)", true], ["attitude_network", "observation frame (Swin alone)", false],
+    ["attitude_lvlh", "LVLH (the target's orbital frame)", true], ["attitude_j2000", "J2000", true]]
+    .filter(([k]) => e[k]).map(([k, name, fitted]) => `<tr><td>${name}</td><td>${euler(e[k])}</td>
+      <td>${fitted ? bound : "-"}</td><td>${e[k].quaternion_wxyz.map((v) => num(v, 5)).join(", ")}</td></tr>`).join("");
+  const cells = e.model_cells_m;
+  const scale = cells ? `1 pixel = ${num(cells[0], 3)} m in range (down) x ${num(cells[1], 3)} m in cross-range (across)` : "scale not kept for this estimate";
+  const sent = e.cells_m ? `; sent with cells ${num(e.cells_m[0], 3)} x ${num(e.cells_m[1], 3)} m and resampled` : "";
+  const snr = e.snr_db === null || e.snr_db === undefined ? "SNR not given" : `SNR ${num(e.snr_db, 1)} dB`;
   const verdict = !q ? "" : q.trusted
     ? `<p class="verdict good">Trusted: silhouette IoU ${num(q.silhouette_iou, 3)}, 90 % bound z / y / x ${q.uncertainty_deg.map((v) => num(v, 2)).join(" / ")} deg.</p>`
     : `<p class="verdict bad">Not trusted: ${esc(q.reasons.join("; "))}.</p>`;
   const alts = (e.alternatives || []).map((a) => `<li>${euler(a)} deg (IoU ${num(a.silhouette_iou, 3)}, ${num(a.distance_deg, 1)} deg away)</li>`).join("");
   view.innerHTML = `<h1>Estimate ${esc(e.input_name)}</h1>
-    <p class="muted">${esc(e.id)} · created ${utc(e.created_at)} · target ${esc(e.target || "-")} · frame ${e.shape.join(" x ")}
+    <p class="muted">${esc(e.id)} · created ${utc(e.created_at)} · target ${esc(e.target || "-")} · frame ${e.shape.join(" x ")} · ${snr}
     ${e.plan_id ? ` · plan <a href="#/plans/${esc(e.plan_id)}">${esc(e.plan_id.slice(0, 8))}</a> observed ${utc(e.observed_at)}` : ""}</p>
     ${verdict}
+    <p id="scale" class="muted">Frames as the models read them: ${scale}${sent}; the bar is 10 m.</p>
     <div class="grid frames"><div class="card"><b>Original frame</b> <span class="muted">with the fitted outline</span>
     <canvas id="overlay" class="frame"></canvas><img id="original" alt="original frame" hidden></div>
     <div class="card"><b>Enhanced by UNet++</b><img id="enhanced" alt="enhanced frame"></div></div>
     <h2>Attitude in each frame</h2>
-    <table id="attitudes"><thead><tr><th>frame</th><th>Euler z, y, x (deg)</th><th>quaternion w, x, y, z</th></tr></thead><tbody>${frames}</tbody></table>
+    <table id="attitudes"><thead><tr><th>frame</th><th>Euler z, y, x (deg)</th><th>90 % bound z / y / x (deg)</th><th>quaternion w, x, y, z</th></tr></thead><tbody>${frames}</tbody></table>
     ${alts ? `<h2>Attitudes that fit nearly as well</h2><ul>${alts}</ul>` : ""}`;
   for (const which of ["original", "enhanced"]) {
     const blob = await api(`/v1/estimates/${encodeURIComponent(id)}/${which}.png`, "blob");
@@ -349,6 +356,15 @@ async function estimatePage(id) {
     if (mask[i] > 127) picture.data.set([255, 127, 14, 255], i);
   }
   ctx.putImageData(picture, 0, 0);
+  if (cells) {  // a 10-m bar across (cross-range), bottom left
+    const px = 10 / cells[1];
+    ctx.fillStyle = "#000";  // a dark edge, so the bar shows on bright frames too
+    ctx.fillRect(3, canvas.height - 10, px + 2, 10);
+    ctx.fillStyle = "#fff";
+    ctx.fillRect(4, canvas.height - 6, px, 2);
+    ctx.fillRect(4, canvas.height - 9, 1, 8);
+    ctx.fillRect(4 + px - 1, canvas.height - 9, 1, 8);
+  }
   canvas.dataset.drawn = "1";
 }
 

@@ -131,6 +131,9 @@ class EstimateResult(CheckedPublic, StoredResult):
     )
     cells_m: list[float] | None = None
     """the frame's range and cross-range cells (m) as sent, or null: the models' own"""
+    model_cells_m: list[float] | None = None
+    """the range and cross-range cells (m) of the frame the models read, as stored (original.png, enhanced.png,
+    outline.png): those images' scale; null on estimates made before it was kept"""
 
     @classmethod
     def from_checked(
@@ -143,6 +146,7 @@ class EstimateResult(CheckedPublic, StoredResult):
         input_normalised: bool,
         cells_m: tuple[float, float] | None,
         in_frames: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
+        model_cells_m: tuple[float, float] | None = None,
     ) -> EstimateResult:
         """Return a checked frame as the estimate's result; ``in_frames``: its attitude as body to LVLH and J2000."""
         return cls(
@@ -154,6 +158,7 @@ class EstimateResult(CheckedPublic, StoredResult):
             timings_s=timings_s,
             input_normalised=input_normalised,
             cells_m=None if cells_m is None else list(cells_m),
+            model_cells_m=None if model_cells_m is None else list(model_cells_m),
         )
 
     @classmethod

@@ -151,6 +151,7 @@ def estimate_and_store(
             input_normalised=normalised or u.normalised,
             cells_m=cells_m,
             in_frames=in_frames[k],
+            model_cells_m=(checker.radar.range_cell_m, checker.radar.cross_range_cell_m),
         )
         rows.append(
             Estimate(
