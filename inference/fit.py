@@ -351,11 +351,15 @@ def fit(
     starts: dict[str, Vec],
     options: FitOptions | None = None,
     prior_at: Vec | None = None,
+    keep: tuple[str, ...] = (),
 ) -> list[Fit]:
     """Refine each start (name -> (z, y, x) deg) against the enhanced frame; return the fits, best first.
 
     The prior pulls each hypothesis toward its own start, or toward ``prior_at`` for all of
     them (what the network saw: its near-mirror then has to fit clearly better to win).
+    The starts named in ``keep`` are refined whatever their first cost: with the prior at Swin's answer, its
+    near-mirror (z, -y, -x) starts 0.00008 (y^2 + x^2) behind on the prior alone, so pruning dropped it
+    beyond sqrt(y^2 + x^2) = 19 deg before it was refined, whatever its silhouette's fit.
     """
     opt = options or FitOptions()
     target = np.clip(np.asarray(enhanced, np.float32), 0.0, 1.0)
@@ -367,6 +371,7 @@ def fit(
     best_cost = np.full(len(names), np.inf)
     best_iou = np.zeros(len(names))
     alive = np.ones(len(names), bool)
+    kept = np.array([n in keep for n in names], bool)
     silhouette = target > 0.5
     pooled = pool(target, COARSE_FACTOR) if opt.coarse else target
 
@@ -385,7 +390,7 @@ def fit(
     c0, iou0 = cost(best[:, None, :], np.arange(len(names)))
     best_cost, best_iou = c0[:, 0].copy(), iou0[:, 0].copy()
     if opt.prune > 0:
-        alive &= best_cost <= best_cost.min() + opt.prune
+        alive &= (best_cost <= best_cost.min() + opt.prune) | kept
     for step_no, h in enumerate(opt.steps_deg):
         for _ in range(opt.max_iter[min(step_no, len(opt.max_iter) - 1)]):
             live = np.flatnonzero(alive)
@@ -408,7 +413,7 @@ def fit(
             best[live[better]] = proposals[better]
             best_cost[live[better]], best_iou[live[better]] = c2[better, 0], iou2[better, 0]
             if step_no == 0 and opt.prune > 0:
-                alive &= best_cost <= best_cost.min() + opt.prune
+                alive &= (best_cost <= best_cost.min() + opt.prune) | kept
             if not np.any(moved | better):
                 break
     order = np.argsort(np.where(alive, best_cost, np.inf))

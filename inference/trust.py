@@ -268,7 +268,9 @@ class Checker:
             if net is not None:
                 # The prior sits on Swin's answer for both: Swin saw the brightness, which tells the
                 # near-mirror apart where the silhouettes are alike, so the mirror must fit clearly better.
-                fits = fit(self.renderer, enh, {"network": net, "mirror": mirror(net)}, prior_at=net)
+                # The mirror is refined whatever its prior (``keep``): both branches reach the answer's alternatives
+                # and the brightness tie-break.
+                fits = fit(self.renderer, enh, {"network": net, "mirror": mirror(net)}, prior_at=net, keep=("mirror",))
             if net is None or (search and self._hard_iou(fits[0].angles_deg, enh) < cal.iou_min):
                 # No networks, or their answer does not fit: search the library too.
                 fits = sorted(fits + self.search(enh), key=lambda f: f.cost)

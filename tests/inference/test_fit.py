@@ -153,3 +153,28 @@ def test_a_still_pass_fitted_to_all_its_frames_at_once_finds_the_attitude_they_s
     assert err < 0.1, err
     assert out.frames == 5 and out.iou > 0.98
     assert 0.8 < out.moved_deg < 1.3  # it walked back the 1 deg it was put off
+
+
+def test_the_near_mirror_start_is_refined_however_far_the_prior_puts_it(tiangong):
+    """Swin answers on the wrong branch (near the truth's near-mirror) for frames with y and x far from 0: the mirror
+    start, 2 (y, x) from Swin's answer, starts behind on the prior at Swin's answer alone and was pruned before it
+    was refined (issue 43). It must come back at the truth, and the checker must hold the truth side."""
+    checker = Checker(tiangong_like(), RADAR, networks=True)
+    rng = np.random.default_rng(6)
+    tried = 0
+    while tried < 4:
+        truth = rng.uniform(-45, 45, 3)
+        if np.hypot(truth[1], truth[2]) < 28:
+            continue
+        tried += 1
+        net = mirror(truth) + rng.normal(0.0, 1.0, 3)
+        label = _label(tiangong.model, truth).astype(float)
+        fits = fit(tiangong, label, {"network": net, "mirror": mirror(net)}, prior_at=net, keep=("mirror",))
+        found = {f.start: f for f in fits}
+        assert "mirror" in found, (truth, [f.start for f in fits])
+        assert geodesic_deg(found["mirror"].angles_deg, truth)[0] < 1.0
+        checked = checker.check(label, label, net)
+        sides = [checked.angles_deg, *(np.array(a.angles_deg) for a in checked.alternatives)]
+        assert min(geodesic_deg(s, truth)[0] for s in sides) < 5.0, (truth, checked.angles_deg)
+        if geodesic_deg(checked.angles_deg, truth)[0] > 5.0:
+            assert not checked.quality.trusted

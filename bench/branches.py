@@ -1,0 +1,120 @@
+"""The near-mirror branch (issue 43): how often the answer lands on the wrong branch, whether such answers are
+trusted, and whether the truth side is among the alternatives; with the mirror start kept to the end (today) and
+pruned by the prior as it was ("before", the same code with ``keep`` ignored).
+
+Run with ``python -m bench.branches [--frames N]``; replaces the "Near-mirror branches" section of BENCHMARKS.md.
+Frames: fresh simulated frames of the default target in the networks' +-45 deg cube (inference.simulation.catalogue
+good_frames, a seed nothing was trained on), the shipped models, the service's whole answer (networks, fit,
+checks, alternatives).
+
+A wrong-branch answer: more than 5 deg from the truth and nearer the truth's near-mirror (z, -y, -x) than the truth.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench.common import machine  # noqa: E402
+from bench.sections import replace_section  # noqa: E402
+
+TITLE = "Near-mirror branches"
+SEED = 43_000
+CLOSE_DEG = 5.0
+
+
+def score(frames: np.ndarray, truth: np.ndarray, keep: bool) -> dict[str, Any]:
+    import inference.trust as trust
+    from inference.fit import fit as real_fit
+    from inference.fit import mirror
+    from inference.rotations import geodesic_deg
+    from inference.runtime import DEFAULT_MODEL_DIR, Estimator
+    from inference.trust import load_checkers
+
+    def fit_without_keep(*args: Any, **kwargs: Any) -> Any:
+        kwargs.pop("keep", None)
+        return real_fit(*args, **kwargs)
+
+    trust.fit = real_fit if keep else fit_without_keep  # type: ignore[attr-defined]
+    try:
+        est = Estimator.load(DEFAULT_MODEL_DIR)
+        checker = load_checkers(DEFAULT_MODEL_DIR, est.img_size).get("tiangong-like")
+        t0 = time.perf_counter()
+        res = est.estimate(frames)
+        checks = checker.check_many(frames, res.enhanced, res.angles_deg)
+        seconds = time.perf_counter() - t0
+    finally:
+        trust.fit = real_fit  # type: ignore[attr-defined]
+    answers = np.array([c.angles_deg for c in checks])
+    err = geodesic_deg(answers, truth)
+    mirrored = np.array([mirror(t) for t in truth])
+    wrong = (err > CLOSE_DEG) & (geodesic_deg(answers, mirrored) < err)
+    trusted = np.array([c.quality.trusted for c in checks])
+    listed = np.array(
+        [
+            any(geodesic_deg(np.array(a.angles_deg), truth[k])[0] <= CLOSE_DEG for a in checks[k].alternatives)
+            for k in range(len(checks))
+        ]
+    )
+    n_wrong = int(wrong.sum())
+    return {
+        "frames": len(frames),
+        "median_deg": float(np.median(err)),
+        "beyond_10": float(np.mean(err > 10.0)),
+        "wrong": n_wrong,
+        "wrong_trusted": int((wrong & trusted).sum()),
+        "wrong_listing_truth": int((wrong & listed).sum()),
+        "trusted": float(trusted.mean()),
+        "ms_per_frame": 1000.0 * seconds / len(frames),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m bench.branches", description=__doc__.split("\n")[0])
+    p.add_argument("--frames", type=int, default=300)
+    args = p.parse_args(argv)
+    from inference.simulation.catalogue import good_frames
+
+    frames, truth, _ = good_frames(args.frames, SEED)
+    rows = {}
+    for keep in (False, True):
+        name = "kept to the end" if keep else "pruned by the prior (before)"
+        print(f"bench.branches: {name} ...", file=sys.stderr, flush=True)
+        rows[name] = score(frames, truth, keep)
+        print(f"bench.branches: {rows[name]}", file=sys.stderr, flush=True)
+    lines = [
+        f"## {TITLE}",
+        "",
+        f"Machine: {machine()}. Date: {datetime.now(UTC).date().isoformat()}. Command: `python -m bench.branches "
+        f"--frames {args.frames}` (bench/branches.py). {args.frames} fresh frames of the default target in the +-45 deg "
+        "cube (SNR -3..15 dB), shipped models, the service's whole answer. Wrong branch: over 5 deg from the truth and "
+        "nearer its near-mirror (z, -y, -x). Goal (issue 43): no wrong-branch answer trusted, at least 90 % of them "
+        "listing the truth side (within 5 deg) among the alternatives.",
+        "",
+        "| near-mirror start | median (deg) | beyond 10 deg | wrong branch | of them trusted | of them listing the truth | "
+        "trusted (all) | ms a frame |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for name, r in rows.items():
+        w = max(r["wrong"], 1)
+        lines.append(
+            f"| {name} | {r['median_deg']:.2f} | {100 * r['beyond_10']:.1f} % | {r['wrong']} | {r['wrong_trusted']} | "
+            f"{r['wrong_listing_truth']} ({100 * r['wrong_listing_truth'] / w:.0f} %) | {100 * r['trusted']:.0f} % | "
+            f"{r['ms_per_frame']:.0f} |"
+        )
+    lines.append("")
+    replace_section(TITLE, lines)
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
