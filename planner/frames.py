@@ -122,3 +122,23 @@ def visibility_circle(station: Station, height_km: float, n: int = 361) -> tuple
     lat2 = np.arcsin(np.sin(lat1) * np.cos(lam) + np.cos(lat1) * np.sin(lam) * np.cos(a))
     lon2 = lon1 + np.arctan2(np.sin(a) * np.sin(lam) * np.cos(lat1), np.cos(lam) - np.sin(lat1) * np.sin(lat2))
     return np.degrees(lat2), (np.degrees(lon2) + 180.0) % 360.0 - 180.0
+
+
+def terminator(sun_itrs_km: Vec, n: int = 361) -> tuple[Vec, Vec, float, float]:
+    """The day-night line for the Sun at ``sun_itrs_km`` (ITRS, km): the great circle 90 deg from the subsolar point,
+    as ground points (lat, lon deg) by azimuth from the antisolar point (north through east, as
+    ``visibility_circle``), and that point (lat, lon deg).
+
+    Geocentric directions on a sphere, geometric (no refraction, the Sun's centre): where the Sun's elevation,
+    seen from the ground, is 0 to within the Earth's flattening (about 0.2 deg).
+    """
+    s = np.asarray(sun_itrs_km, float).reshape(3)
+    s = s / np.linalg.norm(s)
+    lat1 = -np.arcsin(s[2])  # the antisolar point
+    lon1 = np.arctan2(-s[1], -s[0])
+    a = np.radians(np.linspace(0.0, 360.0, n))
+    lam = np.pi / 2.0
+    lat2 = np.arcsin(np.sin(lat1) * np.cos(lam) + np.cos(lat1) * np.sin(lam) * np.cos(a))
+    lon2 = lon1 + np.arctan2(np.sin(a) * np.sin(lam) * np.cos(lat1), np.cos(lam) - np.sin(lat1) * np.sin(lat2))
+    wrap = (np.degrees(lon2) + 180.0) % 360.0 - 180.0
+    return np.degrees(lat2), wrap, float(np.degrees(lat1)), float((np.degrees(lon1) + 180.0) % 360.0 - 180.0)

@@ -130,6 +130,13 @@ function mapSvg(geo, coastLines) {
   for (let lat = -60; lat <= 60; lat += 30) labels += `<text x="4" y="${xy(0, lat)[1] - 3}">${lat}°</text>`;
   const line = (kind, color, width, dash) => by[kind] ?
     `<path class="${kind}" d="${path(by[kind].geometry.coordinates)}" fill="none" stroke="${color}" stroke-width="${width}"${dash ? ` stroke-dasharray="${dash}"` : ""}/>` : "";
+  // The night side at the chosen moment (a polygon, cut at the antimeridian by the service), shaded.
+  let night = "";
+  if (by.night) {
+    const g = by.night.geometry;
+    const rings = g.type === "Polygon" ? g.coordinates : g.coordinates.flat();
+    night = `<path class="night" d="${rings.map((r) => path([r]) + "Z").join("")}" fill="#14213d" fill-opacity="0.16" fill-rule="evenodd"/>`;
+  }
   const st = by.station.geometry.coordinates;
   const [sx, sy] = xy(st[0], st[1]);
   let access = "";
@@ -138,6 +145,7 @@ function mapSvg(geo, coastLines) {
     access = `<path d="M${ax},${ay - 9}L${ax + 3},${ay - 3}L${ax + 9},${ay - 3}L${ax + 4},${ay + 2}L${ax + 6},${ay + 9}L${ax},${ay + 5}L${ax - 6},${ay + 9}L${ax - 4},${ay + 2}L${ax - 9},${ay - 3}L${ax - 3},${ay - 3}Z" fill="#111"/>`;
   }
   return `<svg class="map" id="map" viewBox="0 0 ${W} ${H}" role="img" aria-label="ground tracks">
+    ${night}
     <g stroke="#b7c8da" stroke-width="0.8">${grid}</g>
     <path class="coast" d="${path(coastLines)}" fill="none" stroke="#5d6d7e" stroke-width="0.7"/>
     <g fill="#6a7c90" font-size="11">${labels}</g>
@@ -151,7 +159,7 @@ function mapSvg(geo, coastLines) {
     <span><i class="sw-inview"></i>target in view of the station</span>
     <span><i class="sw-observer"></i>observer ground track</span>
     <span><i class="sw-station"></i>station and where it sees the target (its mask, at ${num(by.visibility_circle.properties.height_km, 0)} km)</span>
-    <span>★ target at T_access</span></div>`;
+    <span>★ target at T_access</span>${by.night ? `<span><i class="sw-night"></i>night at ${utc(by.night.properties.time)}</span>` : ""}</div>`;
 }
 
 async function planPage(id) {

@@ -526,7 +526,8 @@ def geojson(plan: Plan, names: dict[str, str], windows: list[dict[str, Any]]) ->
     """GeoJSON (RFC 7946, WGS-84 longitude/latitude): the station, where it sees the target, both ground tracks
     around the chosen moment (the target's in-view part apart), and the target under T_access."""
     from planner.access import look_angles, mask_deg
-    from planner.frames import ground_track, visibility_circle
+    from planner.frames import ground_track, terminator, visibility_circle
+    from planner.illumination import sun_position_km
 
     assert plan.target_trajectory is not None and plan.frames is not None and plan.station is not None
     st, epoch = plan.station, plan.epoch
@@ -587,6 +588,18 @@ def geojson(plan: Plan, names: dict[str, str], windows: list[dict[str, Any]]) ->
                 **span,
             )
         )
+    # The night side at the chosen moment: the Sun (de421) below the horizon there (geometric).
+    sun = plan.frames.to_itrs(np.array([t_c]), sun_position_km(epoch, [t_c]))
+    n_lat, n_lon, anti_lat, anti_lon = terminator(sun[:, 0])
+    features.append(
+        _feature(
+            "night",
+            footprint_polygon(n_lat, n_lon),
+            time=z_time(utc(epoch, t_c)),
+            antisolar_point=[round(anti_lon, 5), round(anti_lat, 5)],
+            edge="the Sun's centre on the horizon (geometric, no refraction)",
+        )
+    )
     if chosen is not None:
         a_lat, a_lon, _ = ground_track(plan.target_trajectory, plan.frames, np.array([t_c]))
         features.append(

@@ -227,6 +227,7 @@ def test_geojson_tracks_station_and_where_it_sees_the_target(client, plan):
         "observer_track",
         "t_access",
         "observer_at_t_access",
+        "night",
     }
     for f in doc["features"]:
         if f["geometry"]["type"] in ("Polygon", "MultiPolygon"):
@@ -263,6 +264,35 @@ def test_geojson_tracks_station_and_where_it_sees_the_target(client, plan):
     o_lon, o_lat = kinds["observer_at_t_access"]["geometry"]["coordinates"]
     standoff_deg = np.degrees(plan["chosen"]["standoff_km"] / 6378.137)
     assert _central_deg(a_lat, a_lon, np.array([o_lat]), np.array([o_lon]))[0] < standoff_deg + 0.05
+
+
+def test_geojson_night_side_against_skyfield(client, plan):
+    """The night polygon at T_access holds the ground points where skyfield puts the Sun's centre below the
+    horizon (its own topocentric altitude, de421), and none where it is above, away from a 1-deg band at the line."""
+    from shapely.geometry import Point, shape
+    from skyfield.api import wgs84
+
+    from planner.propagation import ephemeris, skyfield_times
+
+    doc = client.get(f"/v1/plans/{plan['id']}/export/geojson", headers=A).json()
+    night = next(f for f in doc["features"] if f["properties"]["kind"] == "night")
+    poly = shape(night["geometry"])
+    assert poly.is_valid
+    when = datetime.fromisoformat(night["properties"]["time"].replace("Z", "+00:00"))
+    assert when == datetime.fromisoformat(plan["chosen"]["t_access"])
+    eph = ephemeris()
+    t = skyfield_times(when, np.array([0.0]))[0]
+    rng = np.random.default_rng(11)
+    checked = 0
+    for lat, lon in zip(np.degrees(np.arcsin(rng.uniform(-1, 1, 400))), rng.uniform(-180, 180, 400), strict=True):
+        alt = (eph["earth"] + wgs84.latlon(lat, lon)).at(t).observe(eph["sun"]).apparent().altaz()[0].degrees
+        if abs(alt) < 1.0:
+            continue
+        assert poly.contains(Point(lon, lat)) == (alt < 0.0), (lat, lon, alt)
+        checked += 1
+    assert checked > 350
+    a_lon, a_lat = night["properties"]["antisolar_point"]
+    assert poly.contains(Point(a_lon, a_lat))
 
 
 def test_the_opm_goes_back_in_as_an_observer(client, plan):
