@@ -162,6 +162,50 @@ function mapSvg(geo, coastLines) {
     <span>★ target at T_access</span>${by.night ? `<span><i class="sw-night"></i>night at ${utc(by.night.properties.time)}</span>` : ""}</div>`;
 }
 
+// The radar's sky over the pass nearest the chosen moment: zenith at the centre, the horizon at the rim, north up
+// and east to the right (as GNSS sky plots draw it); the station's mask shaded.
+function skySvg(geo, station) {
+  const inview = geo.features.find((f) => f.properties.kind === "target_in_view");
+  const sky = inview && inview.properties.sky_time_az_el_deg;
+  if (!sky || !sky.length) return "";
+  const S = 320, C = S / 2, Rr = C - 24;
+  const at = (az, el) => {
+    const r = Rr * (90 - Math.max(0, el)) / 90, a = (az * Math.PI) / 180;
+    return [C + r * Math.sin(a), C - r * Math.cos(a)];
+  };
+  let g = "";
+  for (const el of [0, 30, 60]) g += `<circle cx="${C}" cy="${C}" r="${Rr * (90 - el) / 90}" class="skyring"/><text x="${C + 3}" y="${C - Rr * (90 - el) / 90 + 12}" class="tick">${el}°</text>`;
+  for (const [label, az] of [["N", 0], ["E", 90], ["S", 180], ["W", 270]]) {
+    const [x, y] = at(az, -8);
+    g += `<text x="${x}" y="${y + 4}" class="tick" text-anchor="middle">${label}</text>`;
+  }
+  const mask = (station && station.mask) || [];
+  if (mask.length) {  // the mask, linear between its points and around north
+    const pts = [];
+    for (let az = 0; az <= 360; az += 5) {
+      const m = maskAt(mask, az);
+      pts.push(at(az, Math.max(m, station.min_elevation_deg || 0)));
+    }
+    g += `<path class="skymask" d="M${pts.map((p) => p.map((v) => v.toFixed(1)).join(",")).join("L")}Z M${C - Rr},${C}a${Rr},${Rr} 0 1,0 ${2 * Rr},0a${Rr},${Rr} 0 1,0 ${-2 * Rr},0Z" fill-rule="evenodd"/>`;
+  }
+  const track = sky.map(([, az, el]) => at(az, el).map((v) => v.toFixed(1)).join(",")).join("L");
+  const [x0, y0] = at(sky[0][1], sky[0][2]);
+  g += `<path class="skytrack" d="M${track}"/><circle cx="${x0}" cy="${y0}" r="4" class="skystart"><title>rise ${utc(sky[0][0])}</title></circle>`;
+  const top = sky.reduce((a, b) => (b[2] > a[2] ? b : a));
+  return `<div class="card sky"><b>The pass in the radar's sky</b> <span class="muted">(from ${utc(sky[0][0])}; highest ${num(top[2], 1)}° at azimuth ${num(top[1], 1)}°; the dot is where it rises)</span>
+    <svg id="sky" viewBox="0 0 ${S} ${S}" role="img" aria-label="sky plot">${g}</svg></div>`;
+}
+function maskAt(mask, az) {
+  const pts = mask.map(([a, e]) => [a, e]).sort((p, q) => p[0] - q[0]);
+  if (pts.length === 1) return pts[0][1];
+  const ext = [[pts[pts.length - 1][0] - 360, pts[pts.length - 1][1]], ...pts, [pts[0][0] + 360, pts[0][1]]];
+  for (let k = 0; k < ext.length - 1; k++) {
+    const [a0, e0] = ext[k], [a1, e1] = ext[k + 1];
+    if (a0 <= az && az <= a1) return e0 + ((e1 - e0) * (az - a0)) / (a1 - a0 || 1);
+  }
+  return pts[0][1];
+}
+
 async function planPage(id) {
   const p = await api(`/v1/plans/${encodeURIComponent(id)}`);
   view.innerHTML = `<h1>Plan ${esc(p.target_name)} / ${esc(p.observer_name)} / ${esc(p.station_name)}</h1><p class="muted">Loading the pass...</p>`;
@@ -205,7 +249,7 @@ async function planPage(id) {
     .map((k) => `<a href="#" data-export="${k}">${k}</a>`).join(" · ");
   view.innerHTML = `<h1>Plan ${esc(p.target_name)} / ${esc(p.observer_name)} / ${esc(p.station_name)}</h1>
     <p class="muted">${esc(p.id)} · created ${utc(p.created_at)} · ${p.duration_days} days from ${utc(p.epoch)} · elements ${esc(p.reading)}</p>
-    ${verdict}${(p.notes || []).map((n) => `<p class="muted">note: ${esc(n)}</p>`).join("")}${mapSvg(geo, coastLines)}${scene}
+    ${verdict}${(p.notes || []).map((n) => `<p class="muted">note: ${esc(n)}</p>`).join("")}${mapSvg(geo, coastLines)}${skySvg(geo, (geo.features.find((x) => x.properties.kind === "station") || {}).properties)}${scene}
     <h2>Access windows (${p.access_windows.length}, every one; the chosen pass highlighted)</h2>
     <div class="scroll"><table id="windows"><thead><tr><th class="num">#</th><th>rise (UTC)</th><th>culmination (UTC)</th><th>set (UTC)</th>
     <th class="num">az rise (deg)</th><th class="num">az culm. (deg)</th><th class="num">az set (deg)</th>

@@ -544,12 +544,27 @@ def geojson(plan: Plan, names: dict[str, str], windows: list[dict[str, Any]]) ->
     look = look_angles(r, t, st, plan.frames)
     seen = look.elevation_deg >= mask_deg(st, look.azimuth_deg)
     span = {"start": z_time(utc(epoch, float(t[0]))), "end": z_time(utc(epoch, float(t[-1])))}
+    # The radar's sky over the pass nearest the chosen moment: (time, azimuth, elevation) of the in-view samples.
+    sky = []
+    if seen.any():
+        runs = np.split(np.flatnonzero(seen), np.flatnonzero(np.diff(np.flatnonzero(seen)) > 1) + 1)
+        run = min(runs, key=lambda r: float(np.min(np.abs(t[r] - t_c))))
+        sky = [
+            [
+                z_time(utc(epoch, float(t[k]))),
+                round(float(look.azimuth_deg[k]), 4),
+                round(float(look.elevation_deg[k]), 4),
+            ]
+            for k in run
+        ]
     features = [
         _feature(
             "station",
             {"type": "Point", "coordinates": [st.longitude_deg, st.latitude_deg]},
             name=names["station"],
             altitude_m=st.altitude_m,
+            min_elevation_deg=st.min_elevation_deg,
+            mask=[list(p) for p in st.mask],
         ),
         _feature(
             "target_track", {"type": "MultiLineString", "coordinates": _lines(lat, lon)}, name=names["target"], **span
@@ -558,6 +573,9 @@ def geojson(plan: Plan, names: dict[str, str], windows: list[dict[str, Any]]) ->
             "target_in_view",
             {"type": "MultiLineString", "coordinates": _lines(lat, lon, keep=seen)},
             name=names["target"],
+            sky_time_az_el_deg=sky,
+            sky_note="the pass nearest the chosen moment as the radar sees it: azimuth from north through east, "
+            "elevation above the horizon (WGS-84, geometric), 20-s steps",
         ),
     ]
     height = float(np.interp(t_c, t, h))

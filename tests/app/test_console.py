@@ -108,6 +108,8 @@ def test_console_pages_in_chromium(served, tmp_path):
                 'class="target_in_view"',
                 'class="visibility_circle"',
                 'class="night" d="M',
+                '<svg id="sky"',
+                'class="skytrack" d="M',
                 'class="coast" d="M',
                 "Not feasible",
                 "Phasing burn",

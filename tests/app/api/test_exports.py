@@ -199,6 +199,17 @@ def test_pointing_file_against_skyfield(client):
     d_az = (np.array([float(x["azimuth_deg"]) for x in sample]) - az.degrees + 180) % 360 - 180
     assert np.max(np.abs(d_az * np.cos(alt.radians))) < 2e-3
     np.testing.assert_allclose([float(x["range_km"]) for x in sample], dist.km, atol=2e-3)
+    # The GeoJSON's sky track of the chosen pass (what the console's sky plot draws): the same look angles
+    geo = client.get(f"/v1/plans/{plan['id']}/export/geojson", headers=A).json()
+    inview = next(f for f in geo["features"] if f["properties"]["kind"] == "target_in_view")
+    sky = inview["properties"]["sky_time_az_el_deg"]
+    assert len(sky) > 10 and all(row[2] >= -1e-6 for row in sky)
+    when = [datetime.fromisoformat(row[0].replace("Z", "+00:00")) for row in sky]
+    t = skyfield_times(ISS_EPOCH, np.array([(w - ISS_EPOCH).total_seconds() for w in when]))
+    alt, az, _ = (sat - site).at(t).altaz()
+    np.testing.assert_allclose([row[2] for row in sky], alt.degrees, atol=2e-3)
+    d_az = (np.array([row[1] for row in sky]) - az.degrees + 180) % 360 - 180
+    assert np.max(np.abs(d_az * np.cos(alt.radians))) < 2e-3
 
 
 def test_exports_are_the_operators_own(client, plan):
