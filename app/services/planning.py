@@ -204,7 +204,7 @@ def plan_options(req: PlanCreate) -> PlanOptions:
             max_dv_m_s=s.max_dv_m_s,
         )
     except PlannerError as exc:
-        raise InputError(["search", exc.field or "search"], str(exc)) from None
+        raise InputError(planner_loc(exc.field), str(exc)) from None
 
 
 def check_epoch_gap(
@@ -257,9 +257,20 @@ def run_plan(
     except PlanningStopped:
         raise
     except PlannerError as exc:
-        side = exc.field if exc.field in ("target", "observer") else None
-        raise InputError([side] if side else ["search", exc.field or "search"], str(exc)) from None
+        raise InputError(planner_loc(exc.field), str(exc)) from None
     return plan, PlanResult.from_plan(plan)
+
+
+def planner_loc(field: str | None) -> list[str | int]:
+    """Where in a plan request a planner's refusal points: the orbit it names, a field of ``search`` that exists,
+    else the ``search`` block itself (the planner's own names, ``t_s`` and the like, are no field of the request)."""
+    from app.schemas.plans import SearchIn
+
+    if field in ("target", "observer", "ground_station"):
+        return [field]
+    if field is not None and field in SearchIn.model_fields:
+        return ["search", field]
+    return ["search"]
 
 
 def plan_and_store(

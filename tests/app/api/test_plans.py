@@ -391,3 +391,29 @@ def test_access_report_csv_matches_the_plan(client, paper_plan):
     assert (
         client.get(f"/v1/plans/{paper_plan['id']}/export/access.csv", headers={"X-API-Key": KEY_B}).status_code == 404
     )
+
+
+@pytest.mark.parametrize(
+    ("field", "loc"),
+    [
+        ("t_s", ["search"]),  # the planner's own name: an equatorial target from latitude 89.9 was told 'search.t_s'
+        ("grid_s", ["search"]),
+        (None, ["search"]),
+        ("max_miss_km", ["search", "max_miss_km"]),
+        ("target", ["target"]),
+        ("ground_station", ["ground_station"]),
+    ],
+)
+def test_a_planner_refusal_names_a_field_of_the_request(field, loc):
+    from app.schemas import PlanCreate
+    from app.services.planning import planner_loc
+
+    assert planner_loc(field) == loc
+    node = PlanCreate.model_json_schema()
+    defs = node.get("$defs", {})
+    for part in loc:  # every name it gives is a field the request has
+        props = node.get("properties", {})
+        assert part in props, (loc, part)
+        node = props[part]
+        ref = node.get("$ref") or next((x.get("$ref") for x in node.get("anyOf", []) if "$ref" in x), None)
+        node = defs[ref.split("/")[-1]] if ref else node
