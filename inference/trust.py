@@ -274,6 +274,7 @@ class Checker:
             if net is None or (search and self._hard_iou(fits[0].angles_deg, enh) < cal.iou_min):
                 # No networks, or their answer does not fit: search the library too.
                 fits = sorted(fits + self.search(enh), key=lambda f: f.cost)
+            fits = self._with_other_branch(enh, fits)
             fits = self._by_brightness(frame, enh, fits)
             best = fits[0]
             angles = best.angles_deg
@@ -295,9 +296,16 @@ class Checker:
             for f in fits[1:]:
                 dist = float(geodesic_deg(f.angles_deg, angles)[0])
                 gap = fits[0].iou - f.iou  # the fits alone, without the prior
+                # The other branch of the near-mirror pair is always listed (with how much worse it fits): it is the
+                # ambiguity ISAR cannot rule out from a silhouette, and a pass resolves it across frames.
+                other_branch = (
+                    f.start in ("mirror", "other-branch")
+                    or (fits[0].start == "mirror" and f.start == "network")
+                    or geodesic_deg(f.angles_deg, mirror(fits[0].angles_deg))[0] < DISTINCT_DEG
+                )
                 if (
                     dist >= DISTINCT_DEG
-                    and gap <= ALTERNATIVE_MARGIN
+                    and (gap <= ALTERNATIVE_MARGIN or other_branch)
                     and all(geodesic_deg(f.angles_deg, np.array(a.angles_deg))[0] >= DISTINCT_DEG for a in alternatives)
                 ):
                     alternatives.append(
@@ -317,6 +325,16 @@ class Checker:
         if raw_cov is not None and np.all(np.isfinite(bound)):
             cov = bound_covariance(raw_cov, np.asarray(cal.scale), np.asarray(cal.floor_deg))
         return Checked(angles, net, bool(fits), quality, alternatives, features, cov)
+
+    def _with_other_branch(self, enhanced: Vec, fits: list[Fit]) -> list[Fit]:
+        """The best fit's near-mirror, refined from there where no fit already lies near it: both branches of the
+        pair reach the brightness tie-break and the alternatives (an answer found by the library search, or a
+        network answer whose own mirror start went elsewhere, had none)."""
+        other = mirror(fits[0].angles_deg)
+        if any(geodesic_deg(f.angles_deg, other)[0] < DISTINCT_DEG for f in fits):
+            return fits
+        refined = fit(self.renderer, enhanced, {"other-branch": other})
+        return sorted(fits + refined, key=lambda f: f.cost)
 
     def _by_brightness(self, frame: NDArray[np.floating], enhanced: Vec, fits: list[Fit]) -> list[Fit]:
         """Where a distinct attitude's silhouette fits within ``BRIGHTNESS_MARGIN``, let the bright parts choose."""

@@ -116,7 +116,9 @@ class EstimateResult(CheckedPublic, StoredResult):
     target: str | None = Field(None, description="the target model the frame was fitted to")
     quality: QualityPublic | None = Field(None, description="how sure the answer is (null on estimates made before it)")
     alternatives: list[AlternativePublic] = Field(
-        default_factory=list, description="other attitudes that fit nearly as well, e.g. the near-mirror (z, -y, -x)"
+        default_factory=list,
+        description="other attitudes that fit nearly as well, and always the other branch of the near-mirror pair "
+        "(z, -y, -x), fitted, with how much worse it fits (fit_gap)",
     )
     attitude_lvlh: AttitudePublic | None = None
     """the attitude in the target's LVLH frame (with plan_id and observed_at)"""
