@@ -206,16 +206,19 @@ async def read_uploads(files: list[UploadFile], settings: Settings) -> list[Any]
     """
     from fastapi.concurrency import run_in_threadpool
 
-    from app.services.uploads import DecodeBudget, decode
+    from app.services.uploads import DecodeBudget, charge_headers, decode
 
     check_file_count(files, settings)
     budget = DecodeBudget.of(settings)
-    uploads: list[Any] = []
-    for f in files:
+    read = []
+    for f in files:  # every file's headers against the request's budget before any file is decoded
         data = await read_upload(f, settings.max_upload_bytes)
-        uploads += await run_in_threadpool(
-            decode, data, f.filename or "upload", max_side=settings.max_image_side, budget=budget
-        )
+        charge_headers(data, f.filename or "upload", budget, settings.max_image_side)
+        read.append((f.filename or "upload", data))
+    uploads: list[Any] = []
+    again = DecodeBudget.of(settings)  # what decoding finds is charged too (a header the pre-pass could not read)
+    for name, data in read:
+        uploads += await run_in_threadpool(decode, data, name, max_side=settings.max_image_side, budget=again)
     return uploads
 
 
