@@ -46,7 +46,7 @@ fuzz: $(STAMP)
 	GSA_FUZZ_EXAMPLES_PER_ROUTE=313 GSA_FUZZ_REPORT=/tmp/gsa-fuzz.json $(BIN)/python -m pytest -q -p no:cacheprovider tests/app/api/test_fuzz.py
 	$(BIN)/python -m bench.fuzz /tmp/gsa-fuzz.json
 
-# A real server with 2 workers under 16 clients, on SQLite and PostgreSQL; figures to BENCHMARKS.md.
+# A real server with 2 workers under 16 clients, on SQLite and PostgreSQL, then hostile clients (bench/reliability.py); figures to BENCHMARKS.md.
 load: $(STAMP)
 	$(BIN)/python -m bench.load
 	$(BIN)/python -m bench.reliability
