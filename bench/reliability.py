@@ -15,7 +15,6 @@ import statistics
 import sys
 import tempfile
 import time
-import uuid
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -29,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.common import machine  # noqa: E402
 from bench.sections import replace_section  # noqa: E402
 from inference.runtime import DEFAULT_MODEL_DIR  # noqa: E402
-from tests.utils.server import Server  # noqa: E402
+from tests.utils.server import Server, access_line, leave_after, multipart  # noqa: E402
 
 TITLE = "Hostile clients"
 KEY = "bench-reliability-key-0123"
@@ -67,29 +66,16 @@ def _gradient_png(seed: int) -> bytes:
     return buf.getvalue()
 
 
-def _multipart(fields: list[tuple[str, str]], files: list[tuple[str, str, bytes]]) -> tuple[bytes, str]:
-    boundary = uuid.uuid4().hex
-    parts = [f'--{boundary}\r\nContent-Disposition: form-data; name="{k}"\r\n\r\n{v}\r\n'.encode() for k, v in fields]
-    for field, name, data in files:
-        parts.append(
-            f'--{boundary}\r\nContent-Disposition: form-data; name="{field}"; filename="{name}"\r\n'
-            "Content-Type: application/octet-stream\r\n\r\n".encode()
-            + data
-            + b"\r\n"
-        )
-    return b"".join(parts) + f"--{boundary}--\r\n".encode(), f"multipart/form-data; boundary={boundary}"
-
-
 def decoded(srv: Server, pid: int) -> list[str]:
     one = _gradient_png(0)
     base = _status(pid)
-    body, ctype = _multipart([("resample", "true")], [("files", f"bomb-{k}.png", one) for k in range(16)])
+    body, ctype = multipart([("resample", "true")], [("files", f"bomb-{k}.png", one) for k in range(16)])
     t0 = time.monotonic()
     r = httpx.post(srv.url + "/v1/estimates/batch", content=body, headers={**AUTH, "Content-Type": ctype}, timeout=120)
     bomb_ms = (time.monotonic() - t0) * 1000.0
     after_bomb = _status(pid)
     _log(f"bomb: {r.status_code} in {bomb_ms:.0f} ms, peak {base['VmHWM']} -> {after_bomb['VmHWM']} MB")
-    body2, ctype2 = _multipart([("resample", "true")], [("files", f"big-{k}.png", _gradient_png(k)) for k in range(2)])
+    body2, ctype2 = multipart([("resample", "true")], [("files", f"big-{k}.png", _gradient_png(k)) for k in range(2)])
     t0 = time.monotonic()
     r2 = httpx.post(
         srv.url + "/v1/estimates/batch", content=body2, headers={**AUTH, "Content-Type": ctype2}, timeout=600
@@ -169,12 +155,12 @@ def abandoned(srv: Server, pid: int, log: Path) -> list[str]:
         "24-frame batch": (
             "POST",
             "/v1/estimates/batch",
-            _multipart([("normalised", "true")], [("files", "f.npz", npz)]),
+            multipart([("normalised", "true")], [("files", "f.npz", npz)]),
         ),
         "24-frame pass": (
             "POST",
             "/v1/passes",
-            _multipart([("plan_id", plan["id"]), ("normalised", "true"), *times], [("files", "f.npz", npz)]),
+            multipart([("plan_id", plan["id"]), ("normalised", "true"), *times], [("files", "f.npz", npz)]),
         ),
         "30-day plan's pointing.csv": ("GET", f"/v1/plans/{plan['id']}/export/pointing.csv", (b"", "")),
     }
@@ -182,18 +168,14 @@ def abandoned(srv: Server, pid: int, log: Path) -> list[str]:
     for name, (method, path, (body, ctype)) in cases.items():
         extra = f"Content-Type: {ctype}\r\nContent-Length: {len(body)}\r\n" if body else ""
         head = f"{method} {path} HTTP/1.1\r\nHost: x\r\nX-API-Key: {KEY}\r\n{extra}\r\n".encode()
-        seen = log.read_text().count(f'"path": "{path}"')
+        lines_now = [json.loads(x) for x in log.read_text().splitlines() if x.startswith("{")]
+        seen = sum(1 for x in lines_now if x.get("path") == path and "status" in x)
         cpu0 = _cpu_s(pid)
-        s = socket.create_connection(("127.0.0.1", srv.port))
-        s.sendall(head + body)
-        time.sleep(0.5)
-        s.close()
-        deadline = time.monotonic() + 300.0
-        while log.read_text().count(f'"path": "{path}"') == seen and time.monotonic() < deadline:
-            time.sleep(0.1)
+        leave_after(srv.port, head + body, 0.5)
+        line = access_line(log, path, seen, timeout_s=300.0)
         time.sleep(0.3)
         left_cpu = _cpu_s(pid) - cpu0
-        status = [json.loads(x) for x in log.read_text().splitlines() if x.startswith("{") and path in x][-1]["status"]
+        status = line["status"] if line else "never ended"
         cpu0 = _cpu_s(pid)
         r = httpx.request(
             method,

@@ -230,17 +230,27 @@ def cmd_simulate_pass(args: argparse.Namespace) -> int:
     return 0
 
 
+CAMPAIGN_SCENE_HALF_SPAN_S = 1800.0  # a campaign scene's pass: the access search half an hour either side of T_access
+
+
 def _stored_plan_request(plan_id: str) -> tuple[dict[str, Any], str]:
-    """A plan stored in this machine's database (the service's, GSA_DATABASE_URL): its request and its id."""
+    """A plan stored in this machine's database (the service's, GSA_DATABASE_URL): its request and its id.
+
+    A campaign's id (``ID`` for its first scene, ``ID:K`` for scene K) gives a plan request of its target, observer
+    and station over the hour about that scene's T_access, so the pass simulated is the scene's."""
     from sqlalchemy.exc import SQLAlchemyError
 
     from app.cli.common import open_session
-    from app.db.models import Plan
+    from app.db.models import Campaign, Plan
 
+    ident, _, k_text = plan_id.partition(":")
     try:
         with open_session() as session:
-            plan = session.get(Plan, plan_id)
+            plan = session.get(Plan, ident) if not k_text else None
             request = None if plan is None else (dict(plan.request), plan.id)
+            campaign = session.get(Campaign, ident) if request is None else None
+            if campaign is not None:
+                request = _campaign_scene_request(campaign.request, campaign.result, campaign.id, k_text)
     except SQLAlchemyError as exc:
         raise CliError(
             f"{plan_id}: no such file, and this machine's database cannot be read for plans "
@@ -248,10 +258,34 @@ def _stored_plan_request(plan_id: str) -> tuple[dict[str, Any], str]:
         ) from None
     if request is None:
         raise CliError(
-            f"{plan_id}: no such plan in this machine's database, and no such file; give a plan id "
-            "(gsa plans list) or a plan request file"
+            f"{plan_id}: no such plan or campaign in this machine's database, and no such file; give a plan id "
+            "(gsa plans list), a campaign id (gsa campaigns list; ID:K for its scene K) or a plan request file"
         )
     return request
+
+
+def _campaign_scene_request(
+    request: dict[str, Any], result: dict[str, Any], campaign_id: str, k_text: str
+) -> tuple[dict[str, Any], str]:
+    from datetime import datetime, timedelta
+
+    scenes = result.get("scenes") or []
+    if not scenes:
+        raise CliError(f"campaign {campaign_id} flew no scene: there is no pass of it to simulate")
+    try:
+        k = int(k_text) if k_text else 0
+    except ValueError:
+        raise CliError(f"{campaign_id}:{k_text}: write the scene's number, 0 to {len(scenes) - 1}") from None
+    if not 0 <= k < len(scenes):
+        raise CliError(f"campaign {campaign_id} has scenes 0 to {len(scenes) - 1}; {k} is not one of them")
+    t_access = datetime.fromisoformat(scenes[k]["t_access"].replace("Z", "+00:00"))
+    start = t_access - timedelta(seconds=CAMPAIGN_SCENE_HALF_SPAN_S)
+    plan_like = {key: request[key] for key in ("target", "observer", "ground_station")}
+    plan_like["search"] = {
+        "start": start.isoformat(),
+        "duration_days": 2 * CAMPAIGN_SCENE_HALF_SPAN_S / 86400.0,
+    }
+    return plan_like, f"{campaign_id}-scene-{k}"
 
 
 def cmd_simulate_scene(args: argparse.Namespace) -> int:

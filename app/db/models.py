@@ -147,6 +147,9 @@ class LabelledFrame(Base):
     target: Mapped[str] = mapped_column(String(200))
     scene: Mapped[str] = mapped_column(String(200), index=True)
     plan_id: Mapped[str | None] = mapped_column(ForeignKey("plans.id", ondelete="SET NULL"), nullable=True, index=True)
+    campaign_id: Mapped[str | None] = mapped_column(
+        ForeignKey("campaigns.id", ondelete="SET NULL"), nullable=True, index=True
+    )
     station_name: Mapped[str | None] = mapped_column(String(200), nullable=True)
     observed_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
     input_name: Mapped[str] = mapped_column(String(255))

@@ -30,8 +30,10 @@ class LabelledFramePublic(Described):
     """when the frame was observed (UTC), where given"""
     plan_id: str | None = None
     """the plan whose geometry placed it, where one did"""
+    campaign_id: str | None = None
+    """the campaign whose geometry placed it, where one did"""
     station_name: str | None = None
-    """the plan's station"""
+    """the plan's (or campaign's) station"""
     attitude_sigma_deg: float | None = None
     """the optical estimate's own 1-sigma (deg), where given"""
     snr_db: float | None = None
@@ -53,6 +55,7 @@ class LabelledFramePublic(Described):
             quaternion_j2000=list(row.quaternion_j2000) if row.quaternion_j2000 else None,
             observed_at=utc_or_none(row.observed_at),
             plan_id=row.plan_id,
+            campaign_id=row.campaign_id,
             station_name=row.station_name,
             attitude_sigma_deg=row.attitude_sigma_deg,
             snr_db=row.snr_db,

@@ -4,6 +4,7 @@ where it is given in J2000, checked as a whole, then stored (frames as blobs, th
 from __future__ import annotations
 
 import hashlib
+from dataclasses import dataclass
 from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
@@ -13,7 +14,7 @@ from sqlalchemy.orm import Session
 
 from app import crud
 from app.core.config import Settings
-from app.db.models import LabelledFrame, Plan, utcnow
+from app.db.models import LabelledFrame, utcnow
 from app.errors import InputError
 from app.schemas import LabelledFramePublic, LabelledSummary, LabelledUpload
 from app.services import images
@@ -22,24 +23,48 @@ from app.services.uploads import DecodeBudget
 from inference.errors import InferenceError
 from inference.labelled import MAX_SIGMA_DEG, FrameRead, coverage, observed_times, read_frame
 from scene.errors import SceneError
-from scene.geometry import check_times
+from scene.geometry import Window, check_times
 from scene.labels import plan_resolver
 
 
-def _plan(session: Session, operator_id: str, plan_id: str | None, target: str) -> Plan | None:
-    if plan_id is None:
-        return None
-    plan = crud.get_plan(session=session, operator_id=operator_id, plan_id=plan_id)
-    if plan is None:
-        raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
-    others = crud.labelled_targets_of_plan(session=session, operator_id=operator_id, plan_id=plan_id) - {target}
-    if others:
-        raise InputError(
-            ["plan_id"],
-            f"plan {plan_id} already labels frames of target {sorted(others)[0]!r}: a plan's scene images one "
-            f"target, not {target!r}",
-        )
-    return plan
+@dataclass(frozen=True)
+class Placing:
+    """What places labels given in J2000: a plan's or a campaign's target and station (the scene's geometry) and the
+    access windows the frames' times must fall in."""
+
+    request: dict[str, Any]  # plan-shaped: target, observer, ground_station
+    windows: list[Window]
+    station_name: str
+    plan_id: str | None = None
+    campaign_id: str | None = None
+
+
+def _placing(
+    session: Session, operator_id: str, plan_id: str | None, campaign_id: str | None, target: str
+) -> Placing | None:
+    if plan_id is not None and campaign_id is not None:
+        raise InputError(["campaign_id"], "give plan_id or campaign_id, not both: one scene's geometry places labels")
+    if plan_id is not None:
+        plan = crud.get_plan(session=session, operator_id=operator_id, plan_id=plan_id)
+        if plan is None:
+            raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
+        others = crud.labelled_targets_of_plan(session=session, operator_id=operator_id, plan_id=plan_id) - {target}
+        if others:
+            raise InputError(
+                ["plan_id"],
+                f"plan {plan_id} already labels frames of target {sorted(others)[0]!r}: a plan's scene images one "
+                f"target, not {target!r}",
+            )
+        return Placing(plan.request, windows_of(plan.result), plan.station_name, plan_id=plan.id)
+    if campaign_id is not None:
+        campaign = crud.get_campaign(session=session, operator_id=operator_id, campaign_id=campaign_id)
+        if campaign is None:
+            raise InputError(["campaign_id"], f"no campaign {campaign_id} belongs to you")
+        # A campaign's scenes image its target from its station: the scene's geometry is the plan's, over any of
+        # the campaign's access windows (the observer, which the campaign moves, plays no part in it).
+        req = {k: campaign.request[k] for k in ("target", "observer", "ground_station")}
+        return Placing(req, windows_of(campaign.result), campaign.station_name, campaign_id=campaign.id)
+    return None
 
 
 def read_labelled(
@@ -47,17 +72,17 @@ def read_labelled(
     files: list[tuple[str, bytes]],
     size: int,
     model_cells_m: tuple[float, float],
-    plan: Plan | None,
+    plan: Placing | None,
     budget: DecodeBudget | None = None,
 ) -> list[FrameRead]:
-    """Read every file (all before anything is stored); J2000 labels placed by the plan's geometry; each image's
-    size charged to ``budget`` from its header before it is read."""
+    """Read every file (all before anything is stored); J2000 labels placed by the plan's (or campaign's) geometry;
+    each image's size charged to ``budget`` from its header before it is read."""
     resolve = None
     if plan is not None:
         times = observed_times(files)
         try:
             if times:
-                check_times(windows_of(plan.result), times)
+                check_times(plan.windows, times)
                 resolve = plan_resolver(
                     scene_for(plan.request, min(times) - timedelta(seconds=1), max(times) + timedelta(seconds=1))
                 )
@@ -87,6 +112,7 @@ def create_labelled(
     plan_id: str | None = None,
     scene: str | None = None,
     attitude_sigma_deg: float | None = None,
+    campaign_id: str | None = None,
 ) -> LabelledUpload:
     """Store the uploaded labelled frames of ``target`` (see the module's text); return what was stored."""
     if not files:
@@ -95,12 +121,12 @@ def create_labelled(
         raise InputError(["files"], f"{len(files)} files is over the batch limit of {settings.max_batch_frames}")
     if attitude_sigma_deg is not None and not 0.0 <= attitude_sigma_deg <= MAX_SIGMA_DEG:
         raise InputError(["attitude_sigma_deg"], f"between 0 and {MAX_SIGMA_DEG:g} deg")
-    plan = _plan(session, operator_id, plan_id, target)
+    plan = _placing(session, operator_id, plan_id, campaign_id, target)
     budget = DecodeBudget.of(settings)
     reads = read_labelled(files=files, size=size, model_cells_m=model_cells_m, plan=plan, budget=budget)
     for (name, _), r in zip(files, reads, strict=True):
         if r.quaternion_j2000 is not None and plan is None:  # the reader refuses these without a plan
-            raise InputError(["files", name, "plan_id"], "a label in J2000 needs plan_id")
+            raise InputError(["files", name, "plan_id"], "a label in J2000 needs plan_id (or campaign_id)")
     digests = [hashlib.sha256(data).hexdigest() for _, data in files]
     known = crud.labelled_inputs(session=session, operator_id=operator_id, target=target, digests=digests)
     station = plan.station_name if plan is not None else None
@@ -117,7 +143,8 @@ def create_labelled(
                 created_at=utcnow(),
                 target=target,
                 scene=(r.scene if r.scene_given or scene is None else scene)[:200],
-                plan_id=plan.id if plan is not None else None,
+                plan_id=plan.plan_id if plan is not None else None,
+                campaign_id=plan.campaign_id if plan is not None else None,
                 station_name=station,
                 observed_at=datetime.fromisoformat(r.observed_at) if r.observed_at else None,
                 input_name=name[:255],

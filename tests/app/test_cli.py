@@ -300,6 +300,54 @@ def test_simulate_a_scene_as_labelled_frames_and_place_j2000_labels_by_the_plan(
     )
 
 
+def test_simulate_a_campaign_scene_from_this_machines_database(tmp_path):
+    """gsa simulate --scene CAMPAIGN:K simulates the pass of the campaign's scene K (its T_access inside it); a scene
+    number it does not have is one line."""
+    from datetime import UTC, datetime, timedelta
+
+    from sqlalchemy import create_engine
+
+    from app.db.models import Campaign, Operator
+    from app.schemas import AccessCreate
+    from app.services.planning import run_access
+
+    assert _gsa("db", "upgrade", cwd=tmp_path).returncode == 0
+    windows = run_access(
+        AccessCreate(target=PAPER_EXAMPLE["target"], ground_station=PAPER_EXAMPLE["ground_station"], duration_days=2)
+    ).model_dump(mode="json")["access_windows"]
+    w = windows[2]
+    t_access = datetime.fromisoformat(w["culmination"])
+    engine = create_engine(f"sqlite:///{tmp_path / 'data' / 'gsa.db'}")
+    with engine.begin() as conn:
+        conn.execute(Operator.__table__.insert().values(id="op-1", name="cli", created_at=datetime.now(UTC)))
+        conn.execute(
+            Campaign.__table__.insert().values(
+                id="camp-1",
+                operator_id="op-1",
+                created_at=datetime.now(UTC),
+                target_name="Sat_Target",
+                observer_name="Sat_Obs",
+                station_name="GS",
+                scenes=1,
+                dv_total_m_s=0.0,
+                first_access=t_access,
+                request={k: PAPER_EXAMPLE[k] for k in ("target", "observer", "ground_station")},
+                result={"access_windows": windows, "scenes": [{"t_access": t_access.isoformat()}]},
+            )
+        )
+    engine.dispose()
+    radar = ["--n-range", "64", "--n-azimuth", "64", "--bandwidth-hz", "0.4e9", "--aperture-deg", str(5.1 / 4)]
+    out = _gsa("simulate", "--scene", "camp-1:0", "--out", "lab", "--frames", "4", *radar, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    rec = json.loads((tmp_path / "lab" / "scene.json").read_text())
+    assert rec["scene"].startswith("camp-1-scene-0")
+    rise = datetime.fromisoformat(rec["window"]["rise"].replace("Z", "+00:00"))
+    end = datetime.fromisoformat(rec["window"]["set"].replace("Z", "+00:00"))
+    assert rise - timedelta(seconds=1) <= t_access <= end + timedelta(seconds=1)  # the scene's own pass
+    bad = _gsa("simulate", "--scene", "camp-1:3", "--out", "x", cwd=tmp_path)
+    assert bad.returncode == 2 and "scenes 0 to 0" in bad.stderr and bad.stderr.count("\n") == 1, bad.stderr
+
+
 def test_settings_that_cannot_be_used_are_one_line_naming_them(tmp_path):
     short = _gsa("serve", cwd=tmp_path, env_extra={"GSA_API_KEYS": "short", "GSA_DATA_DIR": str(tmp_path)})
     assert short.returncode == 2 and short.stderr.count("\n") == 1, short.stderr

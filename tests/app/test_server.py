@@ -22,7 +22,7 @@ from sqlalchemy import create_engine, select
 from app.db.models import Estimate
 from tests.conftest import KEY_A, KEY_B
 from tests.utils.databases import database_url
-from tests.utils.server import Server, run_load, stored_ids
+from tests.utils.server import Server, access_line, leave_after, multipart, run_load, stored_ids
 
 # 480 requests: about 72 plans and 150 estimates, over the floors below (bench.load goes further)
 CLIENTS, REQUESTS_EACH = 16, 30
@@ -319,20 +319,16 @@ def test_a_client_that_leaves_stops_its_plan(tmp_path, smoke_models):
         srv.stop()
 
 
-@pytest.mark.parametrize("route", ["/v1/estimates/batch", "/v1/passes"])
-def test_a_client_that_leaves_stops_its_batch_or_pass_between_frames(tmp_path, smoke_models, route):
-    """A 48-frame batch or pass whose client disconnects after 0.5 s stops between frames: its request ends in
-    a 499 well before the whole work would, and nothing is stored; the same request waited for is stored."""
+def test_a_client_that_leaves_stops_its_batch_pass_and_export(tmp_path, smoke_models):
+    """A 48-frame batch or pass whose client disconnects after 0.5 s stops between frames: its request ends in a 499
+    well before the whole work would, and nothing is stored; the same request waited for is stored. A 30-day
+    plan's pointing.csv (seconds of recomputing and writing) whose client leaves after 0.3 s stops too."""
     import io
-    import json
-    import socket
-    import uuid
 
     from app.schemas import PAPER_EXAMPLE
 
-    data = tmp_path / "data"
     env = {
-        "GSA_DATA_DIR": str(data),
+        "GSA_DATA_DIR": str(tmp_path / "data"),
         "GSA_MODEL_DIR": str(smoke_models),
         "GSA_API_KEYS": KEY_A,
         "GSA_ORT_THREADS": "1",
@@ -347,90 +343,34 @@ def test_a_client_that_leaves_stops_its_batch_or_pass_between_frames(tmp_path, s
         n = 48
         buf = io.BytesIO()
         np.savez(buf, frames=np.random.default_rng(2).random((n, 64, 64)) + 0.05)
-        form: list[tuple[str, str]] = [("resample", "true")]
-        if route == "/v1/passes":
-            plan = httpx.post(srv.url + "/v1/plans", json=PAPER_EXAMPLE, headers=auth, timeout=60.0).json()
-            w = plan["access_windows"][0]
-            rise, end = datetime.fromisoformat(w["rise"]), datetime.fromisoformat(w["set"])
-            form = [("plan_id", plan["id"])] + [
-                ("observed_at", (rise + (end - rise) * (k + 1) / (n + 1)).isoformat()) for k in range(n)
-            ]
-        boundary = uuid.uuid4().hex
-        parts = [f'--{boundary}\r\nContent-Disposition: form-data; name="{k}"\r\n\r\n{v}\r\n'.encode() for k, v in form]
-        parts.append(
-            f'--{boundary}\r\nContent-Disposition: form-data; name="files"; filename="pass.npz"\r\n'
-            "Content-Type: application/octet-stream\r\n\r\n".encode()
-            + buf.getvalue()
-            + b"\r\n"
-        )
-        body = b"".join(parts) + f"--{boundary}--\r\n".encode()
-        head = (
-            f"POST {route} HTTP/1.1\r\nHost: x\r\nX-API-Key: {KEY_A}\r\n"
-            f"Content-Type: multipart/form-data; boundary={boundary}\r\nContent-Length: {len(body)}\r\n\r\n"
-        ).encode()
-        sock = socket.create_connection(("127.0.0.1", srv.port))
-        sock.sendall(head + body)
-        time.sleep(0.5)
-        sock.close()
-        ended = None
-        deadline = time.monotonic() + 60.0
-        while ended is None and time.monotonic() < deadline:
-            time.sleep(0.2)
-            for line in log.read_text().splitlines():
-                if line.startswith("{") and (rec := json.loads(line)).get("path") == route:
-                    ended = rec
-        assert ended is not None and ended["status"] == 499, ended
-        listing = "/v1/estimates" if route == "/v1/estimates/batch" else "/v1/passes"
-        assert httpx.get(srv.url + listing, headers=auth, timeout=5.0).json()["count"] == 0
-        # The same request waited for is stored, and takes far longer than the abandoned one ran.
-        t0 = time.monotonic()
-        r = httpx.post(
-            srv.url + route,
-            content=body,
-            headers={**auth, "Content-Type": f"multipart/form-data; boundary={boundary}"},
-            timeout=300.0,
-        )
-        whole_s = time.monotonic() - t0
-        assert r.status_code == 201, r.text[:500]
-        assert ended["duration_ms"] / 1000.0 < 0.5 * whole_s, (ended["duration_ms"], whole_s)
-    finally:
-        srv.stop()
-
-
-def test_a_client_that_leaves_stops_its_export(tmp_path, smoke_models):
-    """A 30-day plan's pointing.csv (seconds of recomputing and writing) whose client leaves after 0.3 s stops:
-    its request ends well before the whole export would."""
-    import json
-    import socket
-
-    from app.schemas import PAPER_EXAMPLE
-
-    env = {
-        "GSA_DATA_DIR": str(tmp_path / "data"),
-        "GSA_MODEL_DIR": str(smoke_models),
-        "GSA_API_KEYS": KEY_A,
-        "GSA_ORT_THREADS": "1",
-        "GSA_LOG_LEVEL": "info",
-        "GSA_LOG_JSON": "true",
-    }
-    log = tmp_path / "server.log"
-    srv = Server(env, workers=1, log_path=log).start()
-    auth = {"X-API-Key": KEY_A}
-    try:
-        body = {**PAPER_EXAMPLE, "search": {"duration_days": 30}}
-        plan = httpx.post(srv.url + "/v1/plans", json=body, headers=auth, timeout=120.0).json()
-        path = f"/v1/plans/{plan['id']}/export/pointing.csv"
-        sock = socket.create_connection(("127.0.0.1", srv.port))
-        sock.sendall(f"GET {path} HTTP/1.1\r\nHost: x\r\nX-API-Key: {KEY_A}\r\n\r\n".encode())
-        time.sleep(0.3)
-        sock.close()
-        ended = None
-        deadline = time.monotonic() + 60.0
-        while ended is None and time.monotonic() < deadline:
-            time.sleep(0.2)
-            for line in log.read_text().splitlines():
-                if line.startswith("{") and (rec := json.loads(line)).get("path") == path:
-                    ended = rec
+        plan = httpx.post(srv.url + "/v1/plans", json=PAPER_EXAMPLE, headers=auth, timeout=60.0).json()
+        w = plan["access_windows"][0]
+        rise, end = datetime.fromisoformat(w["rise"]), datetime.fromisoformat(w["set"])
+        times = [("observed_at", (rise + (end - rise) * (k + 1) / (n + 1)).isoformat()) for k in range(n)]
+        for route, form, listing in (
+            ("/v1/estimates/batch", [("resample", "true")], "/v1/estimates"),
+            ("/v1/passes", [("plan_id", plan["id"]), *times], "/v1/passes"),
+        ):
+            body, ctype = multipart(form, [("files", "pass.npz", buf.getvalue())])
+            head = (
+                f"POST {route} HTTP/1.1\r\nHost: x\r\nX-API-Key: {KEY_A}\r\n"
+                f"Content-Type: {ctype}\r\nContent-Length: {len(body)}\r\n\r\n"
+            ).encode()
+            leave_after(srv.port, head + body, 0.5)
+            ended = access_line(log, route)
+            assert ended is not None and ended["status"] == 499, (route, ended)
+            assert httpx.get(srv.url + listing, headers=auth, timeout=5.0).json()["count"] == 0
+            # The same request waited for is stored, and takes far longer than the abandoned one ran.
+            t0 = time.monotonic()
+            r = httpx.post(srv.url + route, content=body, headers={**auth, "Content-Type": ctype}, timeout=300.0)
+            whole_s = time.monotonic() - t0
+            assert r.status_code == 201, r.text[:500]
+            assert ended["duration_ms"] / 1000.0 < 0.5 * whole_s, (route, ended["duration_ms"], whole_s)
+        month = {**PAPER_EXAMPLE, "search": {"duration_days": 30}}
+        long_plan = httpx.post(srv.url + "/v1/plans", json=month, headers=auth, timeout=120.0).json()
+        path = f"/v1/plans/{long_plan['id']}/export/pointing.csv"
+        leave_after(srv.port, f"GET {path} HTTP/1.1\r\nHost: x\r\nX-API-Key: {KEY_A}\r\n\r\n".encode(), 0.3)
+        ended = access_line(log, path)
         assert ended is not None, "the abandoned export never ended"
         t0 = time.monotonic()
         r = httpx.get(srv.url + path, headers=auth, timeout=120.0)

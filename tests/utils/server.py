@@ -90,6 +90,44 @@ def npy_bytes(arr: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
+def multipart(fields: list[tuple[str, str]], files: list[tuple[str, str, bytes]]) -> tuple[bytes, str]:
+    """A multipart/form-data body written out by hand (for raw sockets): the body and its Content-Type."""
+    import uuid
+
+    boundary = uuid.uuid4().hex
+    parts = [f'--{boundary}\r\nContent-Disposition: form-data; name="{k}"\r\n\r\n{v}\r\n'.encode() for k, v in fields]
+    for name, filename, data in files:
+        parts.append(
+            f'--{boundary}\r\nContent-Disposition: form-data; name="{name}"; filename="{filename}"\r\n'
+            "Content-Type: application/octet-stream\r\n\r\n".encode()
+            + data
+            + b"\r\n"
+        )
+    return b"".join(parts) + f"--{boundary}--\r\n".encode(), f"multipart/form-data; boundary={boundary}"
+
+
+def leave_after(port: int, request: bytes, after_s: float) -> None:
+    """Send a whole request on a raw socket and close it ``after_s`` later, without reading the answer."""
+    sock = socket.create_connection(("127.0.0.1", port))
+    sock.sendall(request)
+    time.sleep(after_s)
+    sock.close()
+
+
+def access_line(log: Path, path: str, seen: int = 0, timeout_s: float = 60.0) -> dict[str, Any] | None:
+    """The server's JSON access line of request number ``seen`` + 1 to ``path`` once it is written, or None."""
+    import json
+
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        lines = [json.loads(x) for x in log.read_text().splitlines() if x.startswith("{")]
+        mine = [x for x in lines if x.get("path") == path and "status" in x]
+        if len(mine) > seen:
+            return mine[seen]
+        time.sleep(0.2)
+    return None
+
+
 def plan_body(k: int) -> dict[str, Any]:
     """A one-day plan of the paper's scene (about 0.1 s of planner time), varied by ``k``."""
     from app.schemas import PAPER_EXAMPLE

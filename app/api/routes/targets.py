@@ -64,6 +64,14 @@ async def add_labelled_frames(
     attitude_sigma_deg: Annotated[
         float | None, Form(ge=0, le=10, description="the optical estimate's 1-sigma (deg), for frames that give none")
     ] = None,
+    campaign_id: Annotated[
+        Text | None,
+        Form(
+            max_length=36,
+            description="instead of plan_id: the campaign whose target and station place labels given in J2000 "
+            "(its frames' times within its access windows)",
+        ),
+    ] = None,
 ) -> LabelledUpload:
     """Store labelled frames of a target: each frame, its label in the frame's observation frame, and where it came from.
 
@@ -88,6 +96,7 @@ async def add_labelled_frames(
         plan_id=plan_id,
         scene=scene,
         attitude_sigma_deg=attitude_sigma_deg,
+        campaign_id=campaign_id,
     )
 
 

@@ -29,6 +29,12 @@ HEAP_LIMIT = 6 * 2**20  # a decoded 4096 x 4096 frame is 16 MiB even as uint8
 
 
 @pytest.fixture(scope="module")
+def backend() -> str:
+    """What this module tests does not depend on the database: SQLite alone (the suite's time is kept for the rest)."""
+    return "sqlite"
+
+
+@pytest.fixture(scope="module")
 def small_budget(settings):
     s = settings.model_copy(update={"max_decoded_mb": 16, "max_batch_frames": 4})
     with TestClient(create_app(s)) as c:

@@ -18,6 +18,12 @@ A = {"X-API-Key": KEY_A}
 
 
 @pytest.fixture(scope="module")
+def backend() -> str:
+    """What this module tests does not depend on the database: SQLite alone (the suite's time is kept for the rest)."""
+    return "sqlite"
+
+
+@pytest.fixture(scope="module")
 def plans(client):
     """A plan with a burn and one without (a station at the pole never sees a 43-deg orbit's target)."""
     with_burn = client.post("/v1/plans", json=PAPER_EXAMPLE, headers=A).json()

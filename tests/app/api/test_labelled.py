@@ -1,6 +1,7 @@
 """POST/GET /v1/targets/{target}/labelled-frames: frames with the optical observer's attitude, stored and listed."""
 
 import io
+from datetime import UTC, datetime, timedelta
 
 import numpy as np
 import pytest
@@ -84,6 +85,50 @@ def test_a_j2000_label_is_placed_by_the_plan(client, plan):
     assert geodesic_deg(np.array(got["angles_deg"]), np.array([12.0, -7.0, 3.0]))[0] < 0.01
     assert got["plan_id"] == plan["id"] and got["station_name"] == plan["station_name"]
     assert np.allclose(got["quaternion_j2000"], q)
+
+
+def test_a_j2000_label_is_placed_by_a_campaign(client, settings, plan):
+    """A campaign's target and station place J2000 labels as a plan's do (its observer plays no part): a campaign
+    row of the paper's target and station with the plan's windows stands in for one the campaign planner flew."""
+    from app.core.security import key_fingerprint
+    from app.db.models import Campaign, Operator
+
+    engine = create_engine(settings.database_url)
+    with engine.begin() as conn:
+        op_id = conn.scalar(select(Operator.id).where(Operator.name == f"env-{key_fingerprint(KEY_A)}"))
+        conn.execute(
+            Campaign.__table__.insert().values(
+                id="camp-labels-1",
+                operator_id=op_id,
+                created_at=datetime.now(UTC),
+                target_name="Sat_Target",
+                observer_name="Sat_Obs",
+                station_name="GS",
+                scenes=0,
+                dv_total_m_s=0.0,
+                first_access=None,
+                request={k: PAPER_EXAMPLE[k] for k in ("target", "observer", "ground_station")},
+                result={"access_windows": plan["access_windows"], "scenes": []},
+            )
+        )
+    engine.dispose()
+    w = windows_of(plan)[1]
+    when = w.rise + (w.set - w.rise) / 3
+    observation = scene_for(PAPER_EXAMPLE, when, when).placements([when]).observation[0]
+    q = euler_to_quaternion(*euler_from_matrix(observation @ rotation_matrix(-20.0, 11.0, 4.0)))
+    files = [("c.npz", _npz(8, quaternion_j2000=q, observed_at=when.isoformat(), scene="c"))]
+    both = _post(client, files, plan_id=plan["id"], campaign_id="camp-labels-1")
+    assert both.status_code == 422 and both.json()["detail"][0]["loc"][-1] == "campaign_id"
+    assert _post(client, files, campaign_id="no-such-campaign").status_code == 422
+    assert _post(client, files, headers=B, campaign_id="camp-labels-1").status_code == 422  # not B's
+    r = _post(client, files, campaign_id="camp-labels-1")
+    assert r.status_code == 201, r.text
+    got = r.json()["stored"][0]
+    assert geodesic_deg(np.array(got["angles_deg"]), np.array([-20.0, 11.0, 4.0]))[0] < 0.01
+    assert got["campaign_id"] == "camp-labels-1" and got["plan_id"] is None and got["station_name"] == "GS"
+    late = (w.set + timedelta(minutes=30)).isoformat()
+    outside = _post(client, [("l.npz", _npz(9, quaternion_j2000=q, observed_at=late))], campaign_id="camp-labels-1")
+    assert outside.status_code == 422 and outside.json()["detail"][0]["loc"][-1] == "observed_at"
 
 
 @pytest.mark.parametrize(

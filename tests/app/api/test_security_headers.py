@@ -6,11 +6,19 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import pytest
+
 from app.core.headers import CONSOLE_CSP
 from tests.conftest import KEY_A
 
 A = {"X-API-Key": KEY_A}
 CONSOLE = Path(__file__).resolve().parents[3] / "app" / "console"
+
+
+@pytest.fixture(scope="module")
+def backend() -> str:
+    """What this module tests does not depend on the database: SQLite alone (the suite's time is kept for the rest)."""
+    return "sqlite"
 
 
 def _directives(csp: str) -> dict[str, list[str]]:
