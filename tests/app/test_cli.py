@@ -307,9 +307,10 @@ def test_simulate_a_campaign_scene_from_this_machines_database(tmp_path):
 
     from sqlalchemy import create_engine
 
-    from app.db.models import Campaign, Operator
+    from app.db.models import Operator
     from app.schemas import AccessCreate
     from app.services.planning import run_access
+    from tests.utils.databases import store_campaign_row
 
     assert _gsa("db", "upgrade", cwd=tmp_path).returncode == 0
     windows = run_access(
@@ -317,25 +318,14 @@ def test_simulate_a_campaign_scene_from_this_machines_database(tmp_path):
     ).model_dump(mode="json")["access_windows"]
     w = windows[2]
     t_access = datetime.fromisoformat(w["culmination"])
-    engine = create_engine(f"sqlite:///{tmp_path / 'data' / 'gsa.db'}")
+    url = f"sqlite:///{tmp_path / 'data' / 'gsa.db'}"
+    engine = create_engine(url)
     with engine.begin() as conn:
         conn.execute(Operator.__table__.insert().values(id="op-1", name="cli", created_at=datetime.now(UTC)))
-        conn.execute(
-            Campaign.__table__.insert().values(
-                id="camp-1",
-                operator_id="op-1",
-                created_at=datetime.now(UTC),
-                target_name="Sat_Target",
-                observer_name="Sat_Obs",
-                station_name="GS",
-                scenes=1,
-                dv_total_m_s=0.0,
-                first_access=t_access,
-                request={k: PAPER_EXAMPLE[k] for k in ("target", "observer", "ground_station")},
-                result={"access_windows": windows, "scenes": [{"t_access": t_access.isoformat()}]},
-            )
-        )
     engine.dispose()
+    store_campaign_row(
+        url, campaign_id="camp-1", operator_id="op-1", windows=windows, scenes=[{"t_access": t_access.isoformat()}]
+    )
     radar = ["--n-range", "64", "--n-azimuth", "64", "--bandwidth-hz", "0.4e9", "--aperture-deg", str(5.1 / 4)]
     out = _gsa("simulate", "--scene", "camp-1:0", "--out", "lab", "--frames", "4", *radar, cwd=tmp_path)
     assert out.returncode == 0, out.stderr

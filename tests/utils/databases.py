@@ -40,3 +40,35 @@ def database_url(kind: str, data_dir: Path, pg_root: Path) -> str:
     if kind == "postgresql":
         return postgres_url(pg_root)
     raise ValueError(kind)
+
+
+def store_campaign_row(
+    url: str, *, campaign_id: str, operator_id: str, windows: list[dict[str, Any]], scenes: list[dict[str, Any]]
+) -> None:
+    """A campaign row of the paper's target, observer and station with these access windows and scenes, written
+    straight to the database: it stands in for one the campaign planner flew where only its geometry matters."""
+    from datetime import UTC, datetime
+
+    from sqlalchemy import create_engine
+
+    from app.db.models import Campaign
+    from app.schemas import PAPER_EXAMPLE
+
+    engine = create_engine(url)
+    with engine.begin() as conn:
+        conn.execute(
+            Campaign.__table__.insert().values(
+                id=campaign_id,
+                operator_id=operator_id,
+                created_at=datetime.now(UTC),
+                target_name=PAPER_EXAMPLE["target"]["name"],
+                observer_name=PAPER_EXAMPLE["observer"]["name"],
+                station_name=PAPER_EXAMPLE["ground_station"]["name"],
+                scenes=len(scenes),
+                dv_total_m_s=0.0,
+                first_access=None,
+                request={k: PAPER_EXAMPLE[k] for k in ("target", "observer", "ground_station")},
+                result={"access_windows": windows, "scenes": scenes},
+            )
+        )
+    engine.dispose()

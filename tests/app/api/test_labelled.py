@@ -1,7 +1,7 @@
 """POST/GET /v1/targets/{target}/labelled-frames: frames with the optical observer's attitude, stored and listed."""
 
 import io
-from datetime import UTC, datetime, timedelta
+from datetime import timedelta
 
 import numpy as np
 import pytest
@@ -13,6 +13,7 @@ from app.services.scenes import scene_for, windows_of
 from inference.labelled import coverage, write_frame
 from inference.rotations import euler_from_matrix, euler_to_quaternion, geodesic_deg, rotation_matrix
 from tests.conftest import KEY_A, KEY_B
+from tests.utils.databases import store_campaign_row
 
 A = {"X-API-Key": KEY_A}
 B = {"X-API-Key": KEY_B}
@@ -91,27 +92,15 @@ def test_a_j2000_label_is_placed_by_a_campaign(client, settings, plan):
     """A campaign's target and station place J2000 labels as a plan's do (its observer plays no part): a campaign
     row of the paper's target and station with the plan's windows stands in for one the campaign planner flew."""
     from app.core.security import key_fingerprint
-    from app.db.models import Campaign, Operator
+    from app.db.models import Operator
 
     engine = create_engine(settings.database_url)
-    with engine.begin() as conn:
+    with engine.connect() as conn:
         op_id = conn.scalar(select(Operator.id).where(Operator.name == f"env-{key_fingerprint(KEY_A)}"))
-        conn.execute(
-            Campaign.__table__.insert().values(
-                id="camp-labels-1",
-                operator_id=op_id,
-                created_at=datetime.now(UTC),
-                target_name="Sat_Target",
-                observer_name="Sat_Obs",
-                station_name="GS",
-                scenes=0,
-                dv_total_m_s=0.0,
-                first_access=None,
-                request={k: PAPER_EXAMPLE[k] for k in ("target", "observer", "ground_station")},
-                result={"access_windows": plan["access_windows"], "scenes": []},
-            )
-        )
     engine.dispose()
+    store_campaign_row(
+        settings.database_url, campaign_id="camp-labels-1", operator_id=op_id, windows=plan["access_windows"], scenes=[]
+    )
     w = windows_of(plan)[1]
     when = w.rise + (w.set - w.rise) / 3
     observation = scene_for(PAPER_EXAMPLE, when, when).placements([when]).observation[0]
