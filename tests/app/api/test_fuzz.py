@@ -25,7 +25,7 @@ from schemathesis.specs.openapi import checks as oa
 from app.main import create_app
 from tests.conftest import KEY_A
 
-EXAMPLES = int(os.environ.get("GSA_FUZZ_EXAMPLES_PER_ROUTE", "25"))
+EXAMPLES = int(os.environ.get("GSA_FUZZ_EXAMPLES_PER_ROUTE", "20"))
 REPORT = os.environ.get("GSA_FUZZ_REPORT")
 # Small limits so that no generated request can tie the worker up (they are what an operator would set).
 LIMITS = {
