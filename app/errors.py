@@ -159,7 +159,7 @@ def install_error_handlers(app: FastAPI) -> None:
         # The database stopped answering after start (restarted, unreachable, out of connections): not a bug and
         # not the caller's input. The schema is checked again on the next request (deps.require_schema).
         request.app.state.schema_ok = False
-        errors_log.warning("the database does not answer: %s", type(exc).__name__)
+        errors_log.warning("the database does not answer: %s: %s", type(exc).__name__, str(exc).splitlines()[0][:300])
         return SafeJSONResponse(
             status_code=503,
             content={

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+from collections.abc import AsyncIterator
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -77,7 +79,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     from app.errors import SafeJSONResponse
 
+    @contextlib.asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        yield
+        app.state.jobs.stop()  # stop claiming jobs; running ones go on in their own processes
+
     app = FastAPIOffline(
+        lifespan=lifespan,
         default_response_class=SafeJSONResponse,
         title="GSA-ISAR",
         version="0.1.0",
@@ -118,11 +126,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     from app.services.model_versions import Served
 
     app.state.served = Served(settings.data_dir, threads=settings.ort_threads or None, fit_threads=settings.fit_threads)
-    try:  # adaptations a stopped process of this host left "running" fail, saying why
-        from app.services.model_versions import fail_interrupted
+    from app.services import jobs
 
+    app.state.jobs = jobs.Dispatcher(settings, make_session_factory(engine))
+    try:  # jobs a stopped process of this host left "running" are queued again (or fail, saying why)
         with make_session_factory(engine)() as s:
-            fail_interrupted(s)
+            jobs.recover(s)
+            waiting = jobs.any_active(s)
+        if waiting:
+            app.state.jobs.nudge()
     except SQLAlchemyError:
         pass  # a database not yet migrated: /readyz says so
     app.state.settings = settings

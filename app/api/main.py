@@ -3,7 +3,19 @@ from fastapi.dependencies.models import Dependant
 from fastapi.routing import APIRoute
 
 from app.api.deps import CurrentOperator
-from app.api.routes import access, campaigns, estimates, model_sets, passes, plans, scenes, stations, targets
+from app.api.routes import (
+    access,
+    campaigns,
+    datasets,
+    estimates,
+    jobs,
+    model_sets,
+    passes,
+    plans,
+    scenes,
+    stations,
+    targets,
+)
 from app.errors import InputError
 from app.schemas import ERROR_RESPONSES
 
@@ -89,3 +101,5 @@ api_router.include_router(passes.router)
 api_router.include_router(stations.router)
 api_router.include_router(targets.router)
 api_router.include_router(model_sets.router)
+api_router.include_router(jobs.router)
+api_router.include_router(datasets.router)

@@ -24,6 +24,8 @@ class Settings(BaseSettings):
     ``GSA_TARGET_MODEL``: an operator's own target mesh (OBJ or PLY, metres times
     ``GSA_TARGET_SCALE``), offered beside the built-in targets under its file's stem;
     ``GSA_DEFAULT_TARGET`` names the target an estimate fits when it names none.
+    ``GSA_JOB_WORKERS``: jobs (``/v1/jobs``) running at once on this host, each in its own process;
+    ``GSA_RAY_ADDRESS``: run the work inside jobs (and ``gsa simulate``) on that Ray cluster.
     """
 
     model_config = SettingsConfigDict(env_prefix="GSA_", env_file=".env", env_ignore_empty=True, extra="ignore")
@@ -69,6 +71,15 @@ class Settings(BaseSettings):
     orphan_grace_s: float = Field(default=0.0, ge=0.0)
     log_level: str = Field(default="info", pattern="^(debug|info|warning|error)$")
     log_json: bool | None = None  # unset: JSON lines unless stderr is a terminal
+    job_workers: int = Field(default=1, ge=1, le=256, description="jobs running at once on this host")
+    job_simulation_workers: int = Field(
+        default=0, ge=0, le=256, description="processes one data-set job simulates with on this host; 0: all cores"
+    )
+    ray_address: str = Field(
+        default="",
+        max_length=300,
+        description="a Ray cluster for jobs and gsa simulate: HOST:PORT of its head, ray://HOST:PORT, or local",
+    )
 
     @model_validator(mode="after")
     def _default_database(self) -> Settings:

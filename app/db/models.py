@@ -6,7 +6,7 @@ import uuid
 from datetime import UTC, datetime
 from typing import Any
 
-from sqlalchemy import JSON, Boolean, DateTime, Float, ForeignKey, Index, Integer, String, Text, UniqueConstraint
+from sqlalchemy import JSON, Boolean, DateTime, Float, ForeignKey, Index, Integer, String, Text, UniqueConstraint, text
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 
@@ -180,23 +180,48 @@ class ModelVersion(Base):
     promoted: Mapped[bool] = mapped_column(Boolean, default=False)
 
 
-class Adaptation(Base):
-    """An adaptation job (``POST /v1/model-sets/{target}/adaptations``): its state, stage, progress and log."""
+JOB_ACTIVE = ("queued", "running")
+JOB_FINAL = ("done", "failed", "cancelled")
 
-    __tablename__ = "adaptations"
-    __table_args__ = (Index("ix_adaptations_operator_created", "operator_id", "created_at"),)
+
+class Job(Base):
+    """Long work (``/v1/jobs``): an adaptation, a data set, a campaign... its state, stage, progress and log.
+
+    ``key`` names what must not run twice at once (``adaptation:TARGET``): one active job per key, enforced by a
+    partial unique index, so two requests at the same instant cannot both start one. ``runner`` is the
+    ``host:pid`` of the worker process running it, ``updated_at`` its last word (a heartbeat).
+    """
+
+    __tablename__ = "jobs"
+    __table_args__ = (
+        Index("ix_jobs_operator_created", "operator_id", "created_at"),
+        Index(
+            "uq_jobs_active_key",
+            "key",
+            unique=True,
+            sqlite_where=text("state IN ('queued', 'running')"),
+            postgresql_where=text("state IN ('queued', 'running')"),
+        ),
+    )
 
     id: Mapped[str] = mapped_column(String(36), primary_key=True, default=new_id)
     operator_id: Mapped[str] = mapped_column(ForeignKey("operators.id", ondelete="CASCADE"))
-    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
-    finished_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
-    target: Mapped[str] = mapped_column(String(200), index=True)
-    state: Mapped[str] = mapped_column(String(16))
+    kind: Mapped[str] = mapped_column(String(32), index=True)
+    key: Mapped[str | None] = mapped_column(String(300), nullable=True)
+    state: Mapped[str] = mapped_column(String(16), index=True)
     stage: Mapped[str] = mapped_column(String(300), default="")
     progress: Mapped[float] = mapped_column(Float, default=0.0)
-    log: Mapped[str] = mapped_column(Text, default="")
-    options: Mapped[dict[str, Any]] = mapped_column(JSON)
-    frames: Mapped[int] = mapped_column(Integer, default=0)
-    version: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    done: Mapped[int] = mapped_column(Integer, default=0)
+    total: Mapped[int] = mapped_column(Integer, default=0)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    started_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+    updated_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+    finished_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+    params: Mapped[dict[str, Any]] = mapped_column(JSON)
+    result: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
     error: Mapped[str | None] = mapped_column(Text, nullable=True)
-    runner: Mapped[str] = mapped_column(String(120), default="")  # host:pid of the process that runs it
+    log: Mapped[str] = mapped_column(Text, default="")
+    runner: Mapped[str] = mapped_column(String(120), default="")
+    engine: Mapped[str] = mapped_column(String(16), default="local")
+    attempts: Mapped[int] = mapped_column(Integer, default=0)
+    cancel_requested: Mapped[bool] = mapped_column(Boolean, default=False)

@@ -38,6 +38,7 @@ from app.schemas.estimates import (
     ScenePublic,
     ScenesPublic,
 )
+from app.schemas.jobs import DatasetCreate, DatasetRadar, JobPublic, JobsPublic
 from app.schemas.labelled import LabelledFramePublic, LabelledFramesPublic, LabelledSummary, LabelledUpload
 from app.schemas.model_sets import (
     AdaptationCreate,
@@ -85,6 +86,10 @@ from app.schemas.stations import (
 
 __all__ = [
     "AdaptationCreate",
+    "DatasetCreate",
+    "DatasetRadar",
+    "JobPublic",
+    "JobsPublic",
     "AdaptationPublic",
     "ModelSetPublic",
     "ModelSetsPublic",

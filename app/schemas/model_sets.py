@@ -10,7 +10,7 @@ from pydantic import Field
 from app.schemas.common import Described, Strict, utc_or_none
 
 if TYPE_CHECKING:
-    from app.db.models import Adaptation, ModelVersion
+    from app.db.models import Job, ModelVersion
 
 
 class AdaptationCreate(Strict):
@@ -32,11 +32,13 @@ class AdaptationCreate(Strict):
 
 class AdaptationPublic(Described):
     id: str
-    """the job's id"""
+    """the job's id (the adaptation is a job: ``GET /v1/jobs/{id}``, cancelled by ``DELETE /v1/jobs/{id}``)"""
+    job_url: str
+    """the job's own page in the API"""
     target: str
     """the target whose set is adapted"""
     state: str
-    """queued, running, done or failed"""
+    """queued, running, done, failed or cancelled"""
     stage: str
     """what it is doing now, in words"""
     progress: float
@@ -57,18 +59,20 @@ class AdaptationPublic(Described):
     """the last lines of the adaptation's output"""
 
     @classmethod
-    def from_row(cls, row: Adaptation) -> AdaptationPublic:
+    def from_row(cls, row: Job) -> AdaptationPublic:
+        params, result = dict(row.params), dict(row.result or {})
         return cls(
             id=row.id,
-            target=row.target,
+            job_url=f"/v1/jobs/{row.id}",
+            target=str(params.get("target", "")),
             state=row.state,
             stage=row.stage,
             progress=row.progress,
             created_at=utc_or_none(row.created_at) or row.created_at,
             finished_at=utc_or_none(row.finished_at),
-            frames=row.frames,
-            options=dict(row.options),
-            version=row.version,
+            frames=int(params.get("frames", 0)),
+            options=dict(params.get("options") or {}),
+            version=result.get("version"),
             error=row.error,
             log=row.log,
         )

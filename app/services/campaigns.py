@@ -120,6 +120,7 @@ def plan_and_store_campaign(
     campaign_in: CampaignCreate,
     settings: Settings,
     stop: StopCheck | None = None,
+    progress: Progress | None = None,
 ) -> CampaignRow:
     """Plan a campaign within the service's limits (``run_campaign``) and store it with its result."""
     campaign_in = with_stored_station(campaign_in, stored_station_lookup(session, operator_id))
@@ -128,8 +129,51 @@ def plan_and_store_campaign(
         max_grid_points=settings.max_grid_points,
         max_epoch_gap_days=settings.max_epoch_gap_days,
         stop=stop,
+        progress=progress,
     )
     return crud.create_campaign(session=session, operator_id=operator_id, request=campaign_in, result=result)
+
+
+def submit_campaign(*, session: Session, settings: Settings, operator_id: str, campaign_in: CampaignCreate) -> Any:
+    """Queue the campaign as a job (``Prefer: respond-async``): checked now as the planner will see it (a bad
+    request is a 422 here, not a failed job), planned by a worker process without the request's time limit."""
+    from app.services import jobs
+
+    checked = with_stored_station(campaign_in, stored_station_lookup(session, operator_id))
+    to_orbit(checked.target, "target")
+    to_orbit(checked.observer, "observer")
+    to_station(checked.ground_station)
+    campaign_options(checked, settings.max_grid_points)
+    return jobs.submit(
+        session,
+        operator_id=operator_id,
+        kind="campaign",
+        params=campaign_in.model_dump(mode="json"),
+        stage=f"queued: a campaign over {campaign_in.duration_days:g} days",
+        engine="local",
+    )
+
+
+def run_campaign_job(ctx: Any) -> dict[str, Any]:
+    """The job: plan and store the campaign, the planner's progress as the job's."""
+
+    def progress(share: float, text: str) -> None:
+        ctx.report(stage=text, progress=share)
+
+    def stop() -> str | None:
+        ctx.check()
+        return None
+
+    with ctx.session_factory() as session:
+        row = plan_and_store_campaign(
+            session=session,
+            operator_id=ctx.operator_id,
+            campaign_in=CampaignCreate.model_validate(ctx.params),
+            settings=ctx.settings,
+            stop=stop,
+            progress=progress,
+        )
+        return {"campaign_id": row.id, "scenes": row.scenes, "dv_total_m_s": row.dv_total_m_s}
 
 
 @dataclass(frozen=True)

@@ -24,11 +24,9 @@ from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
 from app.core.config import Settings
-from app.db.models import Adaptation, ModelVersion, utcnow
-from app.errors import Conflict, InputError
+from app.db.models import Job, ModelVersion, utcnow
+from app.errors import InputError
 
-STATES_ACTIVE = ("queued", "running")
-LOG_LINES = 80
 EPOCH = re.compile(r"epoch (\d+)/(\d+)")
 
 
@@ -92,53 +90,17 @@ class Served:
         return est, Checker(base_checker.model, radar, cal, networks=True, threads=self.fit_threads)
 
 
-def runner_id() -> str:
-    import socket
-
-    return f"{socket.gethostname()}:{os.getpid()}"
-
-
-def fail_interrupted(session: Session) -> int:
-    """Mark this host's adaptations whose process is gone (a restart) as failed, saying so; return how many.
-
-    A job another host runs, or another live worker of this host, is left alone.
-    """
-    import socket
-
-    host = socket.gethostname()
-    gone = []
-    for job in session.scalars(select(Adaptation).where(Adaptation.state.in_(STATES_ACTIVE))):
-        name, _, pid = job.runner.rpartition(":")
-        if name != host or not pid.isdigit():
-            continue
-        try:
-            os.kill(int(pid), 0)
-            alive = int(pid) != os.getpid()  # this very process starting up cannot be running it
-        except OSError:
-            alive = False
-        if not alive:
-            gone.append(job.id)
-    if gone:
-        session.execute(
-            update(Adaptation)
-            .where(Adaptation.id.in_(gone))
-            .values(state="failed", error="the service stopped while it ran; ask again", finished_at=utcnow())
-        )
-        session.commit()
-    return len(gone)
-
-
 def start(
     *,
     session: Session,
-    session_factory: Any,
     settings: Settings,
     operator_id: str,
     target: str,
     base_dir: Path,
     options: dict[str, Any],
-) -> Adaptation:
-    """Check the request, store the job, and start it in a thread that runs ``gsa adapt`` as a child process."""
+) -> Job:
+    """Check the request and queue the adaptation as a job (``app.services.jobs``; one per target at a time)."""
+    from app.services import jobs
     from app.services.labelled import summarise
 
     summary = summarise(session=session, operator_id=operator_id, target=target)
@@ -148,59 +110,37 @@ def start(
             f"you have {summary.count} labelled frames of {target} from {len(summary.per_scene)} scene(s); an "
             "adaptation needs at least 4, from 2 scenes or more (POST /v1/targets/{target}/labelled-frames)",
         )
-    busy = session.scalar(
-        select(func.count())
-        .select_from(Adaptation)
-        .where(Adaptation.target == target, Adaptation.state.in_(STATES_ACTIVE))
-    )
-    if busy:
-        raise Conflict(f"an adaptation of {target} is already queued or running; wait for it (one at a time)")
-    job = Adaptation(
+    return jobs.submit(
+        session,
         operator_id=operator_id,
-        created_at=utcnow(),
-        target=target,
-        state="queued",
-        stage="queued",
-        progress=0.0,
-        log="",
-        options=options,
-        frames=summary.count,
-        runner=runner_id(),
+        kind="adaptation",
+        key=f"adaptation:{target}",
+        busy_message=f"an adaptation of {target} is already queued or running; wait for it (one at a time)",
+        params={"target": target, "options": options, "frames": summary.count, "base_dir": str(base_dir)},
+        engine="ray" if settings.ray_address else "local",
     )
-    session.add(job)
-    session.commit()
-    session.refresh(job)
-    thread = threading.Thread(
-        target=_run, args=(session_factory, settings, job.id, base_dir), name=f"adapt-{job.id[:8]}", daemon=True
-    )
-    thread.start()
-    return job
 
 
-def _set(session_factory: Any, job_id: str, **values: Any) -> None:
-    with session_factory() as s:
-        s.execute(update(Adaptation).where(Adaptation.id == job_id).values(**values))
-        s.commit()
-
-
-def _run(session_factory: Any, settings: Settings, job_id: str, base_dir: Path) -> None:
-    """The job: the labelled frames into a folder, ``gsa adapt`` in a child process, the version stored."""
+def run_adaptation(ctx: Any) -> dict[str, Any]:
+    """The job (``app.services.job_worker``): the labelled frames into a folder, ``gsa adapt`` in a child process,
+    the version stored. A failure or a cancel leaves the served set as it was."""
     from app.services.labelled import frames_of
     from inference.labelled import write_frame
 
+    settings = ctx.settings
+    target, operator_id = ctx.params["target"], ctx.operator_id
+    opts = dict(ctx.params.get("options") or {})
     work = Path(tempfile.mkdtemp(prefix="gsa-adaptation-"))
-    lines: list[str] = []
     partial: Path | None = None
+    proc: subprocess.Popen[str] | None = None
     try:
-        with session_factory() as s:
-            job = s.get(Adaptation, job_id)
-            assert job is not None
-            target, operator_id, opts = job.target, job.operator_id, dict(job.options)
+        with ctx.session_factory() as s:
             frames = frames_of(session=s, operator_id=operator_id, target=target, data_dir=settings.data_dir)
             row = promoted(s, target)
+            base_dir = Path(ctx.params["base_dir"])
             base, base_version = (settings.data_dir / row.dir, row.version) if row else (base_dir, 0)
             number = int(s.scalar(select(func.max(ModelVersion.version)).where(ModelVersion.target == target)) or 0) + 1
-        _set(session_factory, job_id, state="running", stage=f"writing {len(frames)} labelled frames")
+        ctx.report(stage=f"writing {len(frames)} labelled frames", progress=0.02)
         folder = work / "frames"
         folder.mkdir()
         for k in range(len(frames)):
@@ -230,29 +170,35 @@ def _run(session_factory: Any, settings: Settings, job_id: str, base_dir: Path) 
             env={**os.environ, "PYTHONUNBUFFERED": "1"},
         )
         assert proc.stdout is not None
+        last = ""
         for line in proc.stdout:
             line = line.rstrip()
-            lines = (lines + [line])[-LOG_LINES:]
-            update_values: dict[str, Any] = {"log": "\n".join(lines)}
+            if line.strip():
+                last = line
+            ctx.say(line)
             if line.startswith("adapt: "):
-                update_values["stage"] = line[len("adapt: ") :][:300]
+                stage = line[len("adapt: ") :]
                 m = EPOCH.search(line)
                 if m:
-                    update_values["progress"] = round(0.1 + 0.75 * int(m.group(1)) / int(m.group(2)), 3)
+                    ctx.report(stage, int(m.group(1)), int(m.group(2)), 0.1 + 0.75 * int(m.group(1)) / int(m.group(2)))
                 elif "exporting" in line:
-                    update_values["progress"] = 0.88
+                    ctx.report(stage, progress=0.88)
                 elif "recalibrating" in line:
-                    update_values["progress"] = 0.93
-            _set(session_factory, job_id, **update_values)
+                    ctx.report(stage, progress=0.93)
+                else:
+                    ctx.report(stage)
+            else:
+                ctx.check()
         code = proc.wait()
         if code != 0:
-            raise RuntimeError(next((ln for ln in reversed(lines) if ln.strip()), f"gsa adapt exited with {code}"))
+            raise RuntimeError(last or f"gsa adapt exited with {code}")
         card_path = partial / "model_card.json"
         card = json.loads(card_path.read_text())
         card["version"] = {"target": target, "number": number, "base": base_version}
         card_path.write_text(json.dumps(card, indent=1))
         shutil.rmtree(out, ignore_errors=True)
         partial.rename(out)
+        partial = None
         rec = card.get("adaptation", {})
         summary = {
             "labelled_frames": rec.get("labelled", {}).get("frames"),
@@ -265,7 +211,7 @@ def _run(session_factory: Any, settings: Settings, job_id: str, base_dir: Path) 
             "cpu_minutes": rec.get("cpu_minutes"),
             "export": rec.get("export"),
         }
-        with session_factory() as s:
+        with ctx.session_factory() as s:
             s.add(
                 ModelVersion(
                     target=target,
@@ -279,10 +225,14 @@ def _run(session_factory: Any, settings: Settings, job_id: str, base_dir: Path) 
                 )
             )
             s.commit()
-        _set(session_factory, job_id, state="done", stage="done", progress=1.0, version=number, finished_at=utcnow())
-    except Exception as exc:  # the job fails, the served set stays as it was
+        return {"version": number, "target": target, "url": f"/v1/model-sets/{target}"}
+    finally:
+        if proc is not None and proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
         if partial is not None:
             shutil.rmtree(partial, ignore_errors=True)
-        _set(session_factory, job_id, state="failed", error=str(exc)[:2000], finished_at=utcnow())
-    finally:
         shutil.rmtree(work, ignore_errors=True)

@@ -21,7 +21,7 @@ import os
 import shutil
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from inference.engine import Engine, LocalEngine, engine_for
 from inference.errors import DatasetError, module_main
 from inference.files import read_json, sha256_file, write_json
 from inference.frames import normalise_frame
@@ -221,48 +222,86 @@ def render_frames(
     }
 
 
-def _write_shard(args: tuple[DatasetSpec, Radar, int, int, str]) -> tuple[str, str, int]:
-    spec, radar, start, stop, path = args
-    arrays = render_frames(spec, radar, start, stop)
-    np.savez(path, **arrays)  # type: ignore[arg-type]  # numpy's stub reserves allow_pickle
-    return Path(path).name, sha256_file(path), stop - start
+SHARD_TIME = (1980, 1, 1, 0, 0, 0)  # every member's zip time: a shard's bytes are its arrays' alone
+
+
+def shard_bytes(arrays: dict[str, NDArray[Any]]) -> bytes:
+    """An ``.npz`` of ``arrays`` (``np.load`` reads it) whose bytes depend on the arrays alone.
+
+    ``np.savez`` stamps each member with the wall-clock time, so the same frames written a second apart hashed
+    differently; here every member carries the same fixed time.
+    """
+    import io
+    import zipfile
+
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_STORED, allowZip64=True) as zf:
+        for key, value in arrays.items():
+            info = zipfile.ZipInfo(key + ".npy", date_time=SHARD_TIME)
+            with zf.open(info, "w", force_zip64=True) as fid:
+                np.lib.format.write_array(fid, np.asanyarray(value), allow_pickle=False)
+    return buf.getvalue()
+
+
+def _render_shard(args: tuple[DatasetSpec, Radar, int, int]) -> bytes:
+    """One shard's file contents: a pure function of its arguments (run here, in a process pool or as a Ray task)."""
+    spec, radar, start, stop = args
+    return shard_bytes(render_frames(spec, radar, start, stop))
+
+
+def _write_atomic(path: Path, data: bytes) -> str:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_bytes(data)
+    tmp.rename(path)
+    return hashlib.sha256(data).hexdigest()
 
 
 def generate(
-    spec: DatasetSpec, out: str | Path, radar: Radar | None = None, workers: int | None = None, progress: bool = True
+    spec: DatasetSpec,
+    out: str | Path,
+    radar: Radar | None = None,
+    workers: int | None = None,
+    progress: bool = True,
+    engine: Engine | None = None,
+    on_shard: Callable[[int, int], None] | None = None,
+    resume: bool = False,
 ) -> dict[str, Any]:
-    """Generate the data set into ``out`` (which must not exist) and return its manifest."""
+    """Generate the data set into ``out`` (which must not exist) and return its manifest.
+
+    ``engine`` runs the shards (default: ``workers`` local processes; a Ray cluster gives the same bytes);
+    ``on_shard(done, total)`` hears of each shard written (it may raise to stop the work). With ``resume``, the
+    shards a stopped run already wrote to ``OUT.partial`` are kept (each was written whole, then renamed).
+    """
     radar = radar or Radar()
     out = Path(out)
     if out.exists():
         raise DatasetError(f"{out} already exists; choose a new directory", field="out")
     model = build_model(spec, radar)  # fail on a bad model before any work
     partial = out.with_name(out.name + ".partial")
-    if partial.exists():
+    if partial.exists() and not resume:
         shutil.rmtree(partial)
-    partial.mkdir(parents=True)
+    partial.mkdir(parents=True, exist_ok=True)
     bounds = [(s, min(s + spec.shard_size, spec.n)) for s in range(0, spec.n, spec.shard_size)]
-    jobs = [(spec, radar, s, e, str(partial / f"shard-{k:05d}.npz")) for k, (s, e) in enumerate(bounds)]
-    workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
+    names = [f"shard-{k:05d}.npz" for k in range(len(bounds))]
+    kept = {name: sha256_file(partial / name) for name in names if (partial / name).is_file()}
+    todo = [k for k, name in enumerate(names) if name not in kept]
+    engine = engine or LocalEngine(max(1, min(workers or os.cpu_count() or 1, len(todo) or 1)))
     t0 = time.perf_counter()
-    done = 0
-    shards: list[dict[str, Any]] = []
+    done = sum(e - s for name, (s, e) in zip(names, bounds, strict=True) if name in kept)
+    already = done
     try:
-        if workers == 1:
-            results = map(_write_shard, jobs)
-            for name, digest, count in results:
-                done += count
-                shards.append({"file": name, "sha256": digest, "frames": count})
-                _progress(progress, done, spec.n, t0)
-        else:
-            with ProcessPoolExecutor(workers) as pool:
-                for name, digest, count in pool.map(_write_shard, jobs):
-                    done += count
-                    shards.append({"file": name, "sha256": digest, "frames": count})
-                    _progress(progress, done, spec.n, t0)
+        pieces = engine.map(_render_shard, [(spec, radar, *bounds[k]) for k in todo])
+        for k, data in zip(todo, pieces, strict=True):
+            kept[names[k]] = _write_atomic(partial / names[k], data)
+            done += bounds[k][1] - bounds[k][0]
+            _progress(progress, done, spec.n, t0)
+            if on_shard is not None:
+                on_shard(done, spec.n)
     except BaseException:
-        shutil.rmtree(partial, ignore_errors=True)
+        if not resume:
+            shutil.rmtree(partial, ignore_errors=True)
         raise
+    shards = [{"file": name, "sha256": kept[name], "frames": e - s} for name, (s, e) in zip(names, bounds, strict=True)]
     elapsed = time.perf_counter() - t0
     manifest = {
         "format_version": FORMAT_VERSION,
@@ -283,10 +322,11 @@ def generate(
         "split": {"train": [0, spec.n_train], "test": [spec.n_train, spec.n]} if spec.n_train is not None else None,
         "normalisation": "inference.frames.normalise_frame (40 dB below the 99.5th percentile)",
         "shards": shards,
-        "content_sha256": hashlib.sha256("".join(s["sha256"] for s in shards).encode()).hexdigest(),
+        "content_sha256": hashlib.sha256("".join(str(s["sha256"]) for s in shards).encode()).hexdigest(),
         "generated_in_s": round(elapsed, 2),
-        "frames_per_s": round(spec.n / elapsed, 1),
-        "workers": workers,
+        "frames_per_s": round((spec.n - already) / elapsed, 1),
+        "workers": engine.workers,
+        "engine": engine.name,
     }
     write_json(partial / "manifest.json", manifest)
     partial.rename(out)
@@ -550,7 +590,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if not args.out:
         raise DatasetError("give --out DIR for the data set (or --preview PNG)", field="out")
-    m = generate(spec, args.out, radar, args.workers)
+    m = generate(spec, args.out, radar, engine=engine_for(workers=args.workers))
     print(
         f"{m['frames']} frames in {args.out} ({m['frames_per_s']} frames/s, content sha256 {m['content_sha256'][:16]})"
     )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import json
 
 import pytest
 from alembic import command
@@ -45,7 +46,7 @@ def test_upgrade_downgrade_upgrade(url):
         "campaigns",
         "labelled_frames",
         "model_versions",
-        "adaptations",
+        "jobs",
     }
     command.downgrade(cfg, "base")
     assert _tables(url) == set()
@@ -60,7 +61,7 @@ def test_upgrade_downgrade_upgrade(url):
         "campaigns",
         "labelled_frames",
         "model_versions",
-        "adaptations",
+        "jobs",
     }
     engine = create_engine(url)
     with engine.connect() as conn:
@@ -130,6 +131,47 @@ def test_lookalike_stations_from_before_0009_are_kept_and_the_first_keeps_the_na
             )
         )
     command.downgrade(cfg, "0008")
+    command.upgrade(cfg, "head")
+    engine.dispose()
+
+
+def test_adaptations_from_before_0011_become_jobs_and_come_back_on_downgrade(url):
+    """0011 moves each adaptation into ``jobs`` (kind adaptation, its target, options and version kept) and makes
+    the database refuse a second active job of one key; a downgrade puts them back."""
+    cfg = _cfg(url)
+    command.upgrade(cfg, "0010")
+    engine = create_engine(url)
+    with engine.begin() as conn:
+        conn.execute(text("INSERT INTO operators (id, name, created_at) VALUES ('op1', 'old', CURRENT_TIMESTAMP)"))
+        conn.execute(
+            text(
+                "INSERT INTO adaptations (id, operator_id, created_at, finished_at, target, state, stage, progress, "
+                "log, options, frames, version, error, runner) VALUES ('a1', 'op1', CURRENT_TIMESTAMP, "
+                "CURRENT_TIMESTAMP, 'tiangong-like', 'done', 'done', 1.0, 'adapt: done', '{\"epochs\": 3}', 24, 2, "
+                "NULL, 'h:1')"
+            )
+        )
+    command.upgrade(cfg, "head")
+    with engine.begin() as conn:
+        row = conn.execute(text("SELECT kind, key, state, params, result FROM jobs WHERE id = 'a1'")).one()
+    params = row.params if isinstance(row.params, dict) else json.loads(row.params)
+    result = row.result if isinstance(row.result, dict) else json.loads(row.result)
+    assert (row.kind, row.key, row.state) == ("adaptation", "adaptation:tiangong-like", "done")
+    assert params == {"target": "tiangong-like", "options": {"epochs": 3}, "frames": 24} and result == {"version": 2}
+    insert = text(
+        "INSERT INTO jobs (id, operator_id, kind, key, state, stage, progress, done, total, created_at, params, log, "
+        "runner, engine, attempts, cancel_requested) VALUES (:i, 'op1', 'adaptation', 'adaptation:x', :s, '', 0, 0, "
+        "0, CURRENT_TIMESTAMP, '{}', '', '', 'local', 0, false)"
+    )
+    with engine.begin() as conn:
+        conn.execute(insert, {"i": "j1", "s": "running"})
+        conn.execute(insert, {"i": "j2", "s": "done"})  # an ended job of the same key is no obstacle
+    with pytest.raises(Exception, match="(?i)unique|duplicate"), engine.begin() as conn:
+        conn.execute(insert, {"i": "j3", "s": "queued"})
+    command.downgrade(cfg, "0010")
+    with engine.begin() as conn:
+        back = conn.execute(text("SELECT target, version, frames FROM adaptations WHERE id = 'a1'")).one()
+    assert tuple(back) == ("tiangong-like", 2, 24)
     command.upgrade(cfg, "head")
     engine.dispose()
 

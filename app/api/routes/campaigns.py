@@ -5,12 +5,22 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, HTTPException, Path, Query, Request, Response
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import JSONResponse
 
 from app import crud
 from app.api import examples
 from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep, plan_in_worker
-from app.schemas import CAMPAIGN_EXAMPLE, CampaignCreate, CampaignPublic, CampaignsPublic, CampaignSummary, Text
-from app.services.campaigns import plan_and_store_campaign
+from app.schemas import (
+    CAMPAIGN_EXAMPLE,
+    CampaignCreate,
+    CampaignPublic,
+    CampaignsPublic,
+    CampaignSummary,
+    JobPublic,
+    Text,
+)
+from app.services.campaigns import plan_and_store_campaign, submit_campaign
 
 router = APIRouter(prefix="/campaigns", tags=["campaigns"])
 
@@ -23,6 +33,11 @@ NOT_FOUND: dict[int | str, dict[str, Any]] = {404: {"description": "no campaign 
     response_model=CampaignPublic,
     responses={
         201: {"content": {"application/json": {"example": examples.load("campaign")}}},
+        202: {
+            "model": JobPublic,
+            "description": "with Prefer: respond-async, queued as a job (GET /v1/jobs/{id}); its result_url is the "
+            "campaign once planned",
+        },
         503: {"description": "planning ran over GSA_CAMPAIGN_TIMEOUT_S and was stopped; nothing was stored"},
     },
 )
@@ -32,7 +47,7 @@ async def create_campaign(
     operator: CurrentOperator,
     settings: SettingsDep,
     campaign_in: Annotated[CampaignCreate, Body(openapi_examples={"paper_three_weeks": {"value": CAMPAIGN_EXAMPLE}})],
-) -> CampaignPublic:
+) -> CampaignPublic | JSONResponse:
     """Plan a campaign: GSA scenes one after another, the observer carried from each to the next, within a budget.
 
     Each stretch of ``scene_span_days`` is planned as a plan is (Algorithm 1 from where the last scene left the
@@ -40,7 +55,21 @@ async def create_campaign(
     the whole burn sequence is then flown again and each scene measured on it. Runs in a worker thread under
     ``GSA_CAMPAIGN_TIMEOUT_S`` and ``GSA_PLAN_MEMORY_MB``, and stops when the caller disconnects; then nothing
     is stored.
+
+    With the header ``Prefer: respond-async`` (RFC 7240) the campaign is checked, queued as a job and answered 202
+    at once: a worker process plans it without the request's time limit, and a client that goes away loses
+    nothing (``GET /v1/jobs/{id}`` follows it).
     """
+    if "respond-async" in request.headers.get("prefer", "").lower():
+        job = await run_in_threadpool(
+            submit_campaign, session=session, settings=settings, operator_id=operator.id, campaign_in=campaign_in
+        )
+        request.app.state.jobs.nudge()
+        return JSONResponse(
+            status_code=202,
+            content=JobPublic.from_row(job).model_dump(mode="json"),
+            headers={"Location": f"/v1/jobs/{job.id}", "Preference-Applied": "respond-async"},
+        )
     row = await plan_in_worker(
         request,
         "campaign",

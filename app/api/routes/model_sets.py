@@ -8,8 +8,8 @@ from fastapi import APIRouter, Body, HTTPException, Request
 from fastapi import Path as PathParam
 
 from app.api.deps import CheckersDep, CurrentOperator, ModelSetsDep, SessionDep, SettingsDep, checker_for
-from app.db.models import Adaptation
 from app.schemas import AdaptationCreate, AdaptationPublic, ModelSetPublic, ModelSetsPublic, ModelVersionPublic, Text
+from app.services import jobs as jobs_svc
 from app.services import model_versions as mv
 
 router = APIRouter(prefix="/model-sets", tags=["model sets"])
@@ -66,13 +66,13 @@ def create_adaptation(
     name = _trained_target(checkers, model_sets, target)
     job = mv.start(
         session=session,
-        session_factory=request.app.state.session_factory,
         settings=settings,
         operator_id=operator.id,
         target=name,
         base_dir=model_sets.for_target(name).model_dir,
         options=(body or AdaptationCreate()).model_dump(exclude_none=True),
     )
+    request.app.state.jobs.nudge()
     return AdaptationPublic.from_row(job)
 
 
@@ -88,8 +88,8 @@ def read_adaptation(
     adaptation_id: Annotated[Text, PathParam(max_length=36)],
 ) -> AdaptationPublic:
     """One of the caller's adaptations: state, stage, progress, log, and the version it made."""
-    job = session.get(Adaptation, adaptation_id)
-    if job is None or job.operator_id != operator.id or job.target != target:
+    job = jobs_svc.own(session, operator.id, adaptation_id)
+    if job is None or job.kind != "adaptation" or job.params.get("target") != target:
         raise HTTPException(status_code=404, detail="Adaptation not found")
     return AdaptationPublic.from_row(job)
 

@@ -23,7 +23,7 @@ from app import crud
 from app.core.db import head_revision, make_engine, make_session_factory
 from app.core.observability import JsonFormatter, TextFormatter, json_lines_wanted
 from app.core.security import LEGACY_SCHEME, AuthThrottle, key_digest, load_key_secret
-from app.db.models import Adaptation, ApiKey, Campaign, Estimate, GroundStation, Pass, Plan
+from app.db.models import ApiKey, Campaign, Estimate, GroundStation, Job, Pass, Plan
 from app.schemas import CAMPAIGN_EXAMPLE, PAPER_EXAMPLE
 from tests.conftest import KEY_A, KEY_B
 from tests.utils.server import npy_bytes
@@ -38,10 +38,11 @@ ID_PARAMS = {
     "name": "station",
     "campaign_id": "campaign",
     "adaptation_id": "adaptation",
+    "job_id": "job",
 }
 # Path parameters that name something every operator shares (a target model), not a stored record: such a
 # route answers each operator with their own records of it, so it is checked for keys, not for 404s.
-SHARED_PARAMS = {"target": "tiangong-like", "version": "0"}
+SHARED_PARAMS = {"target": "tiangong-like", "version": "0", "file_name": "manifest.json"}
 # Listings of what every operator shares (the service's model sets), not of an operator's records.
 SHARED_LISTINGS = {"/v1/model-sets"}
 COLLECTIONS = {
@@ -51,6 +52,7 @@ COLLECTIONS = {
     "station": "stations",
     "campaign": "campaigns",
     "adaptation": "model-sets/tiangong-like/adaptations",
+    "job": "jobs",
 }
 
 
@@ -98,14 +100,19 @@ def records(client):
     assert st.status_code == 201, st.text
     campaign = client.post("/v1/campaigns", json={**CAMPAIGN_EXAMPLE, "duration_days": 8}, headers=A)
     assert campaign.status_code == 201, campaign.text
-    with client.app.state.session_factory() as session:  # an adaptation of A's, finished (no job runs)
+    with client.app.state.session_factory() as session:  # an adaptation and a data set of A's, ended (none runs)
         owner = session.scalar(select(Estimate.operator_id).where(Estimate.id == est.json()["id"]))
-        job = Adaptation(operator_id=owner, target="tiangong-like", state="failed", stage="", options={}, runner="")
-        session.add(job)
+        params = {"adaptation": {"target": "tiangong-like", "options": {}, "frames": 4}, "dataset": {"n": 4}}
+        jobs = {
+            kind: Job(operator_id=owner, kind=kind, state="failed", stage="", params=params[kind], log="", runner="")
+            for kind in ("adaptation", "dataset")
+        }
+        session.add_all(jobs.values())
         session.commit()
-        adaptation = job.id
+        ids = {kind: job.id for kind, job in jobs.items()}
     return {
-        "adaptation": adaptation,
+        "adaptation": ids["adaptation"],
+        "job": ids["dataset"],
         "plan": plan.json()["id"],
         "estimate": est.json()["id"],
         "pass": ps.json()["id"],
@@ -199,11 +206,11 @@ def test_listings_never_show_another_operators_records(client, records):
             continue
         r = client.get(path, headers=B)
         assert r.status_code == 200, (path, r.text)
-        assert all(records[k] not in r.text for k in ("plan", "estimate", "station", "campaign")), path
+        assert all(records[k] not in r.text for k in ("plan", "estimate", "station", "campaign", "job")), path
         if path in SHARED_LISTINGS:
             continue
         mine = client.get(path, headers=A).text
-        own = {"/v1/stations": "station", "/v1/campaigns": "campaign"}.get(path, "plan")
+        own = {"/v1/stations": "station", "/v1/campaigns": "campaign", "/v1/jobs": "job"}.get(path, "plan")
         assert records[own] in mine or path == "/v1/estimates", path
     listed = client.get("/v1/estimates", headers=A).json()["data"]
     assert records["estimate"] in [e["id"] for e in listed]

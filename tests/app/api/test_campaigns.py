@@ -170,3 +170,32 @@ def test_a_campaign_over_its_time_budget_is_503_and_stores_nothing(settings):
         assert r.status_code == 503, r.text
         assert "GSA_CAMPAIGN_TIMEOUT_S" in r.text
         assert c.get("/v1/campaigns", headers=A).json()["count"] == before
+
+
+def test_a_campaign_asked_for_asynchronously_is_a_job_whose_result_is_the_same_campaign(client, campaign):
+    """``Prefer: respond-async``: 202 and a job at once; the worker process plans the same campaign as the
+    synchronous request did (every scene and burn), stored and linked from the job."""
+    import time
+
+    r = client.post("/v1/campaigns", json=CAMPAIGN_EXAMPLE, headers={**A, "Prefer": "respond-async"})
+    assert r.status_code == 202, r.text
+    assert r.headers["preference-applied"] == "respond-async" and r.json()["kind"] == "campaign"
+    job_id = r.json()["id"]
+    deadline = time.monotonic() + 240
+    seen_progress = set()
+    while True:
+        job = client.get(f"/v1/jobs/{job_id}", headers=A).json()
+        seen_progress.add(job["progress"])
+        if job["state"] not in ("queued", "running") or time.monotonic() > deadline:
+            break
+        time.sleep(0.3)
+    assert job["state"] == "done", job
+    assert job["result_url"] == f"/v1/campaigns/{job['result']['campaign_id']}"
+    assert len(seen_progress) >= 2  # the planner's progress reached the job as it went
+    planned = client.get(job["result_url"], headers=A).json()
+    assert planned["scenes"] == campaign["scenes"] and planned["dv_total_m_s"] == campaign["dv_total_m_s"]
+    assert client.get(f"/v1/jobs/{job_id}", headers=B).status_code == 404
+    bad = client.post(
+        "/v1/campaigns", json={**CAMPAIGN_EXAMPLE, "dv_budget_m_s": -1}, headers={**A, "Prefer": "respond-async"}
+    )
+    assert bad.status_code == 422  # checked before it is queued: no job

@@ -1,0 +1,368 @@
+"""Jobs: long work (adaptations, data sets, campaigns on request) as rows, run by worker processes beside the server.
+
+A request stores a ``queued`` row and answers 202 at once. A :class:`Dispatcher` thread in the server process
+(started when there is work, gone when there is none) claims queued rows, at most ``GSA_JOB_WORKERS`` running on
+this host at a time (a lock file under ``GSA_DATA_DIR`` makes the bound hold across the server's worker processes),
+and runs each in its own child process (``python -m app.services.job_worker JOB_ID``), so the API stays responsive
+while one trains, and a job that exhausts memory takes only itself down. The child writes its stage, counts,
+progress and log to the row (``app.services.job_worker``); where ``GSA_RAY_ADDRESS`` is set, the work inside runs
+on that Ray cluster.
+
+Cancel (``DELETE``): a queued job is cancelled at once; a running one is asked to stop (a flag the worker reads
+between steps, and SIGTERM where its process is on this host). A restart loses nothing: at start, a running job
+whose process is gone is queued again (``resumed``; a data set keeps the shards it wrote) unless it was already
+resumed twice; then it fails, saying why.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy import func, select, update
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session
+
+from app.core.config import Settings
+from app.db.models import JOB_ACTIVE, JOB_FINAL, Job, utcnow
+from app.errors import Conflict
+
+MAX_ATTEMPTS = 3  # a job is started at most this often (the first run and two resumptions after restarts)
+POLL_S = 0.5
+KINDS = ("adaptation", "dataset", "campaign")
+
+
+def _count(result: Any) -> int:
+    """Rows an UPDATE touched (``CursorResult.rowcount``; the generic Result type does not declare it)."""
+    return int(getattr(result, "rowcount", 0))
+
+
+def host() -> str:
+    return socket.gethostname()
+
+
+def pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except (OSError, ValueError):
+        return False
+    return True
+
+
+def runner_pid(job: Job) -> int | None:
+    """The pid of the process running ``job`` where that process is on this host."""
+    name, _, pid = job.runner.rpartition(":")
+    return int(pid) if name == host() and pid.isdigit() and int(pid) > 0 else None
+
+
+def submit(
+    session: Session,
+    *,
+    operator_id: str,
+    kind: str,
+    params: dict[str, Any],
+    key: str | None = None,
+    busy_message: str = "",
+    total: int = 0,
+    stage: str = "queued",
+    engine: str = "local",
+) -> Job:
+    """Store a queued job (its ``key`` must not be active already: else a 409 with ``busy_message``)."""
+    if kind not in KINDS:
+        raise ValueError(kind)
+    job = Job(
+        operator_id=operator_id,
+        kind=kind,
+        key=key,
+        state="queued",
+        stage=stage,
+        progress=0.0,
+        done=0,
+        total=total,
+        created_at=utcnow(),
+        params=params,
+        log="",
+        runner="",
+        engine=engine,
+        attempts=0,
+        cancel_requested=False,
+    )
+    session.add(job)
+    try:
+        session.commit()
+    except IntegrityError:
+        session.rollback()
+        raise Conflict(busy_message or f"a {kind} job for {key} is already queued or running") from None
+    session.refresh(job)
+    return job
+
+
+def own(session: Session, operator_id: str, job_id: str) -> Job | None:
+    job = session.get(Job, job_id)
+    return job if job is not None and job.operator_id == operator_id else None
+
+
+def listing(
+    session: Session, operator_id: str, limit: int, offset: int, kind: str | None = None, state: str | None = None
+) -> tuple[list[Job], int]:
+    """The operator's jobs, newest first, filtered by kind and state; and how many match."""
+    where = [Job.operator_id == operator_id]
+    if kind:
+        where.append(Job.kind == kind)
+    if state:
+        where.append(Job.state == state)
+    total = int(session.scalar(select(func.count()).select_from(Job).where(*where)) or 0)
+    rows = session.scalars(
+        select(Job).where(*where).order_by(Job.created_at.desc(), Job.id).limit(limit).offset(offset)
+    )
+    return list(rows), total
+
+
+def cancel(session: Session, job: Job) -> Job:
+    """Cancel ``job``: queued, at once; running, ask its worker to stop (it says ``cancelled`` when it has)."""
+    if job.state in JOB_FINAL:
+        raise Conflict(f"job {job.id} is already {job.state}; only a queued or running job can be cancelled")
+    now = utcnow()
+    gone = _count(
+        session.execute(
+            update(Job)
+            .where(Job.id == job.id, Job.state == "queued")
+            .values(state="cancelled", stage="cancelled before it started", finished_at=now, updated_at=now)
+        )
+    )
+    if not gone:
+        session.execute(update(Job).where(Job.id == job.id, Job.state == "running").values(cancel_requested=True))
+    session.commit()
+    session.refresh(job)
+    pid = runner_pid(job)
+    if job.state == "running" and pid is not None and pid != os.getpid():
+        try:
+            os.kill(pid, signal.SIGTERM)
+        except OSError:
+            pass
+    return job
+
+
+def append_log(log: str, lines: list[str], keep: int = 80) -> str:
+    return "\n".join([*(log.splitlines() if log else []), *lines][-keep:])
+
+
+def recover(session: Session, resume: bool = True) -> int:
+    """Each running job of this host whose process is gone: at start (``resume``), queued again, or failed after
+    MAX_ATTEMPTS starts, saying why; while serving, failed (its worker died: out of memory, killed). Return how
+    many were touched. Another host's jobs are left to it."""
+    touched = 0
+    for job in session.scalars(select(Job).where(Job.state == "running")):
+        name, _, pid = job.runner.rpartition(":")
+        if name != host() or not pid.isdigit():
+            continue
+        if int(pid) > 0 and int(pid) != os.getpid() and pid_alive(int(pid)):
+            continue
+        if not resume and int(pid) == 0:
+            continue  # being started by a dispatcher this very moment
+        now = utcnow()
+        if job.cancel_requested:
+            values: dict[str, Any] = {"state": "cancelled", "stage": "cancelled", "finished_at": now}
+        elif not resume:
+            values = {
+                "state": "failed",
+                "error": f"its worker process ({pid}) ended without a word",
+                "finished_at": now,
+            }
+        elif job.attempts >= MAX_ATTEMPTS:
+            values = {
+                "state": "failed",
+                "error": f"the service stopped while it ran, {job.attempts} times; not resumed again",
+                "finished_at": now,
+            }
+        else:
+            values = {"state": "queued", "stage": "resumed after the service restarted", "runner": ""}
+        what = "the service restarted while this ran" if resume else "its worker process is gone"
+        values["log"] = append_log(job.log, [f"jobs: {what}; {values['state']}"])
+        values["updated_at"] = now
+        touched += _count(session.execute(update(Job).where(Job.id == job.id, Job.state == "running").values(**values)))
+    session.commit()
+    return touched
+
+
+def any_active(session: Session) -> bool:
+    return bool(session.scalar(select(func.count()).select_from(Job).where(Job.state.in_(JOB_ACTIVE))))
+
+
+def eta_s(job: Job, now: datetime | None = None) -> float | None:
+    """Seconds left, from the time it has run and the share done; None until there is something to go on."""
+    if job.state != "running" or job.started_at is None or not 0.02 <= job.progress < 1.0:
+        return None
+    started = job.started_at if job.started_at.tzinfo else job.started_at.replace(tzinfo=UTC)
+    ran = ((now or utcnow()) - started).total_seconds()
+    return round(max(0.0, ran * (1.0 - job.progress) / job.progress), 1)
+
+
+@contextmanager
+def _file_lock(path: Path) -> Iterator[None]:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+class Dispatcher:
+    """Claims queued jobs and runs each in a child process, at most ``settings.job_workers`` on this host."""
+
+    def __init__(self, settings: Settings, session_factory: Any) -> None:
+        self.settings = settings
+        self.session_factory = session_factory
+        self.children: dict[str, subprocess.Popen[bytes]] = {}
+        self._thread: threading.Thread | None = None
+        self._lock = threading.Lock()
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+
+    def stop(self, timeout: float = 5.0) -> None:
+        """Stop claiming work (the server shutting down); running jobs go on in their own processes."""
+        self._stop.set()
+        self._wake.set()
+        thread = self._thread
+        if thread is not None:
+            thread.join(timeout)
+
+    def nudge(self) -> None:
+        """Say there is work: start the thread if it is not running, else wake it."""
+        self._stop.clear()
+        with self._lock:
+            if self._thread is None or not self._thread.is_alive():
+                self._thread = threading.Thread(target=self._loop, name="gsa-jobs", daemon=True)
+                self._thread.start()
+        self._wake.set()
+
+    def _loop(self) -> None:
+        idle = 0
+        while not self._stop.is_set():
+            try:
+                busy = self._step()
+            except Exception:  # a database that does not answer: try again, then give up until the next nudge
+                busy = True
+                idle += 1
+                if idle > 120:
+                    return
+            else:
+                idle = 0 if busy else idle + 1
+            if not busy and idle >= 4:
+                with self._lock:
+                    self._thread = None
+                return
+            self._wake.wait(POLL_S)
+            self._wake.clear()
+        with self._lock:
+            self._thread = None
+
+    def _step(self) -> bool:
+        """Reap finished children, claim what there is room for; say whether any work remains."""
+        for job_id, proc in list(self.children.items()):
+            code = proc.poll()
+            if code is None:
+                continue
+            del self.children[job_id]
+            with self.session_factory() as s:  # a worker that died without a word: say so
+                now = utcnow()
+                job = s.get(Job, job_id)
+                if job is not None and job.state == "running" and job.runner == f"{host()}:{proc.pid}":
+                    reason = f"the worker process ended with status {code} before finishing"
+                    if code < 0:
+                        reason += f" (signal {-code}; out of memory kills with 9)"
+                    s.execute(
+                        update(Job)
+                        .where(Job.id == job_id, Job.state == "running")
+                        .values(
+                            state="cancelled" if job.cancel_requested else "failed",
+                            error=None if job.cancel_requested else reason,
+                            stage="cancelled" if job.cancel_requested else job.stage,
+                            finished_at=now,
+                            updated_at=now,
+                        )
+                    )
+                    s.commit()
+        with _file_lock(Path(self.settings.data_dir) / "jobs" / "dispatch.lock"), self.session_factory() as s:
+            recover(s, resume=False)  # a worker of this host that died unseen no longer holds a place
+            running = [
+                j for j in s.scalars(select(Job).where(Job.state == "running")) if j.runner.rpartition(":")[0] == host()
+            ]
+            room = self.settings.job_workers - len(running)
+            queued = list(
+                s.scalars(select(Job).where(Job.state == "queued").order_by(Job.created_at).limit(max(room, 0)))
+            )
+            for job in queued:
+                now = utcnow()
+                claimed = _count(
+                    s.execute(
+                        update(Job)
+                        .where(Job.id == job.id, Job.state == "queued")
+                        .values(
+                            state="running",
+                            stage="starting",
+                            runner=f"{host()}:0",
+                            started_at=now,
+                            updated_at=now,
+                            attempts=Job.attempts + 1,
+                        )
+                    )
+                )
+                s.commit()
+                if claimed:
+                    proc = self._spawn(job.id)
+                    self.children[job.id] = proc
+                    s.execute(
+                        update(Job)
+                        .where(Job.id == job.id, Job.runner == f"{host()}:0")
+                        .values(runner=f"{host()}:{proc.pid}")
+                    )
+                    s.commit()
+            more = s.scalar(select(func.count()).select_from(Job).where(Job.state.in_(JOB_ACTIVE)))
+        return bool(self.children) or bool(more)
+
+    def _spawn(self, job_id: str) -> subprocess.Popen[bytes]:
+        env = {**os.environ, "PYTHONUNBUFFERED": "1", "GSA_JOB_SETTINGS": self.settings.model_dump_json()}
+        log = Path(self.settings.data_dir) / "jobs" / f"{job_id}.log"
+        log.parent.mkdir(parents=True, exist_ok=True)
+        with open(log, "ab") as out:
+            return subprocess.Popen(
+                [sys.executable, "-m", "app.services.job_worker", job_id],
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                env=env,
+                start_new_session=True,  # a Ctrl-C at the server's terminal is not the job's
+            )
+
+    def wait_idle(self, timeout: float) -> bool:
+        """For tests and shutdown: wait until no child runs; say whether none does."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if not any(p.poll() is None for p in self.children.values()):
+                return True
+            time.sleep(0.1)
+        return False
+
+
+def settings_from_env() -> Settings:
+    """The settings a worker was started with (``GSA_JOB_SETTINGS``, as the server had them), else the env's."""
+    text = os.environ.get("GSA_JOB_SETTINGS")
+    if not text:
+        from app.core.config import get_settings
+
+        return get_settings()
+    return Settings.model_validate(json.loads(text))
