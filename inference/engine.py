@@ -107,11 +107,16 @@ def _ray_init(address: str) -> int:
     except ImportError:
         raise EngineError(f"{RAY_ENV} is set but Ray is not installed here: pip install 'ray==2.60.0'") from None
     if not ray.is_initialized():
-        if address == "local":
-            ray.init(include_dashboard=False, log_to_driver=False, configure_logging=False)
-        else:
+        if address != "local":
             check_address(address)
-            ray.init(address=address, log_to_driver=False, configure_logging=False)
+        try:
+            if address == "local":
+                ray.init(include_dashboard=False, log_to_driver=False, configure_logging=False)
+            else:
+                ray.init(address=address, log_to_driver=False, configure_logging=False)
+        except Exception as exc:  # refused: a token that does not match (RAY_AUTH_TOKEN), another Ray release...
+            first = next((ln for ln in str(exc).splitlines() if ln.strip()), type(exc).__name__)
+            raise EngineError(f"{RAY_ENV}={address}: Ray would not connect: {first[:300]}") from None
     resources: dict[str, float] = ray.cluster_resources()  # type: ignore[no-untyped-call]
     return max(1, int(resources.get("CPU", 1)))
 

@@ -136,6 +136,30 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
         for q in (cl, cw):
             add_client_options(q, "the service")
         c.set_defaults(func=func)
+    jb = sub.add_parser(
+        "jobs", help="your long work on the service: adaptations, data sets, campaigns (list, show, cancel, wait)"
+    )
+    jbs = jb.add_subparsers(dest="jobs_cmd", required=True)
+    jbl = jbs.add_parser("list", help="your jobs, newest first")
+    jbl.add_argument("--limit", type=int, default=20)
+    jbl.add_argument("--kind", choices=["adaptation", "dataset", "campaign"], help="only jobs of this kind")
+    jbl.add_argument("--state", choices=["queued", "running", "done", "failed", "cancelled"], help="only in this state")
+    jbl.add_argument("--json", action="store_true")
+    jbw = jbs.add_parser("show", help="one job: state, progress, result, log tail")
+    jbw.add_argument("id")
+    jbw.add_argument("--json", action="store_true")
+    jbc = jbs.add_parser("cancel", help="cancel a queued or running job")
+    jbc.add_argument("id")
+    jbt = jbs.add_parser(
+        "wait", help="follow a job to its end with a progress bar (exit 0: done; 1: failed or cancelled)"
+    )
+    jbt.add_argument("id")
+    jbt.add_argument("--timeout", type=float, default=0, help="give up after this many seconds (default: never)")
+    jbt.add_argument("--every", type=float, default=1.0, help="seconds between looks (default 1)")
+    jbt.add_argument("--json", action="store_true", help="print the finished job as JSON")
+    for q in jbs.choices.values():
+        add_client_options(q, "the service")
+    jb.set_defaults(func=_lazy("jobs", "cmd_jobs"))
     lb = sub.add_parser("labelled", help="your labelled frames on the service (add a folder, list)")
     lbs = lb.add_subparsers(dest="labelled_cmd", required=True)
     lba = lbs.add_parser("add", help="store a folder of labelled frames (one .npz each, inference.labelled's format)")

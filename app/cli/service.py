@@ -53,6 +53,13 @@ def cmd_serve(args: argparse.Namespace) -> int:
     from app.services.images import sweep_blobs
 
     settings = load_settings()
+    if settings.ray_address and settings.ray_address.strip() != "local":  # a cluster that does not answer: now
+        from inference.engine import EngineError, check_address
+
+        try:
+            check_address(settings.ray_address)
+        except EngineError as exc:
+            raise CliError(str(exc)) from None
     json_lines = json_lines_wanted(settings.log_json)
     configure_logging(settings.log_level, json_lines)
     upgrade_database(settings.database_url)

@@ -116,3 +116,23 @@ def test_labelled_frames_through_the_command_line(served, capsys, tmp_path):
     assert rc == 2 and "unknown target" in err and err.count("\n") == 1
     rc, _, err = _run(capsys, "labelled", "add", str(tmp_path / "none"), "--target", "tiangong-like")
     assert rc == 2 and "not a folder" in err
+
+
+def test_jobs_through_the_command_line(served, capsys):
+    """A data set queued on the service, followed by `gsa jobs wait` to its end, listed, shown; a finished job's
+    cancel and an unknown id are one line each with the service's words."""
+    radar = {"n_range": 64, "n_azimuth": 64, "bandwidth_hz": 0.4e9, "aperture_deg": 1.275}
+    job = served.post("/v1/datasets", json={"n": 4, "shard_size": 2, "radar": radar}, headers={"X-API-Key": KEY_A})
+    assert job.status_code == 202, job.text
+    job_id = job.json()["id"]
+    rc, out, err = _run(capsys, "jobs", "wait", job_id, "--every", "0.2", "--timeout", "120")
+    assert rc == 0 and f"job {job_id} done" in out and "content_sha256" in out, (out, err)
+    assert "100.0% 4/4 done" in err  # the progress line, to the end
+    rc, out, _ = _run(capsys, "jobs", "list", "--kind", "dataset", "--state", "done")
+    assert rc == 0 and job_id in out and "dataset" in out
+    rc, out, _ = _run(capsys, "jobs", "show", job_id)
+    assert rc == 0 and "state     done" in out and f"see       /v1/jobs/{job_id}" in out and "jobs: done" in out
+    rc, _, err = _run(capsys, "jobs", "cancel", job_id)
+    assert rc == 2 and err.count("\n") == 1 and "409" in err and "already done" in err
+    rc, _, err = _run(capsys, "jobs", "show", "no-such-job")
+    assert rc == 2 and "404" in err
