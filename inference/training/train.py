@@ -19,12 +19,20 @@ bf16 autocast on a GPU and on a CPU that computes bf16 natively (``precision``; 
 AMX trains UNet++ 4.5x faster than in float32, design/measurements.md "bf16 training on the CPU"),
 and it stops cleanly after the epoch in which
 ``max_minutes`` runs out, so long runs fit in short commands.
+
+Several processes (GPUs, or machines) train one run under ``torchrun`` with PyTorch's DistributedDataParallel:
+``torchrun --nproc-per-node N -m inference.training.train ...`` (NCCL on GPUs, gloo on CPUs). Each optimiser step's
+batch of ``batch_size`` frames is split between the N processes and their gradients averaged, so N processes take
+the steps one process would (the losses are per-frame means; UNet++'s batch norm becomes synchronised batch norm
+on GPUs, and keeps per-process statistics on CPUs, where PyTorch has no synchronised one); process 0 scores,
+checkpoints and writes the result.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
 import platform
 import sys
 import time
@@ -79,7 +87,26 @@ def uses_bf16(dev: torch.device, precision: str) -> bool:
 def _device(name: str | None) -> torch.device:
     if name:
         return torch.device(name)
-    return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if torch.cuda.is_available():
+        return torch.device("cuda", int(os.environ.get("LOCAL_RANK", "0")))  # torchrun: one GPU a process
+    return torch.device("cpu")
+
+
+def distributed_world() -> tuple[int, int]:
+    """(rank, world size) of this process under torchrun (its RANK and WORLD_SIZE), else (0, 1)."""
+    try:
+        world = int(os.environ.get("WORLD_SIZE", "1"))
+        rank = int(os.environ.get("RANK", "0"))
+    except ValueError:
+        raise InferenceError("WORLD_SIZE and RANK must be whole numbers (torchrun sets them)", field="world") from None
+    return (rank, world) if world > 1 else (0, 1)
+
+
+def _start_distributed(dev: torch.device) -> None:
+    import torch.distributed as dist
+
+    if not dist.is_initialized():
+        dist.init_process_group("nccl" if dev.type == "cuda" else "gloo")
 
 
 def _batches(idx: np.ndarray, batch: int, rng: np.random.Generator | None) -> list[np.ndarray]:
@@ -192,6 +219,11 @@ class _Run:
     start_epoch: int = 0
     cache: np.ndarray | None = None  # UNet++ output for every frame once UNet++ is frozen
     gen: torch.Generator | None = None  # draws the perturbed silhouettes (silhouette_noise), on the run's device
+    rank: int = 0  # under torchrun: this process's rank and the number of processes (DDP); else 0 and 1
+    world: int = 1
+    ddp_u: torch.nn.Module | None = None  # the DistributedDataParallel wrappers the steps run through
+    ddp_s: torch.nn.Module | None = None
+    frames_seen: int = 0  # training frames this process stepped on
 
 
 def train(data_dir: str | Path, out_dir: str | Path, options: TrainOptions | None = None) -> dict[str, Any]:
@@ -211,16 +243,20 @@ def train(data_dir: str | Path, out_dir: str | Path, options: TrainOptions | Non
     ckpt_path = run.out / "checkpoint.pt"
     if opts.resume and ckpt_path.exists():
         _resume(run, ckpt_path)
-    run_u: Callable[[torch.Tensor], torch.Tensor] = run.unet
-    run_s: Callable[[torch.Tensor], torch.Tensor] = run.swin
+    run_u: Callable[[torch.Tensor], torch.Tensor] = run.ddp_u or run.unet
+    run_s: Callable[[torch.Tensor], torch.Tensor] = run.ddp_s or run.swin
     if opts.compile_models and run.dev.type == "cuda":
-        run_u, run_s = torch.compile(run.unet), torch.compile(run.swin)
+        run_u, run_s = torch.compile(run_u), torch.compile(run_s)
     rng = np.random.default_rng(opts.seed + run.start_epoch)
     run.gen = torch.Generator(device=run.dev).manual_seed(opts.seed + run.start_epoch)
     t_start = time.perf_counter()
     for epoch in range(run.start_epoch, opts.epochs):
         t_epoch = time.perf_counter()
         losses = _epoch(run, epoch, rng, run_u, run_s)
+        if run.rank != 0:  # process 0 scores, reports and checkpoints; the others step on with it
+            if _stop_agreed(run, False):
+                break
+            continue
         record: dict[str, Any] = {"epoch": epoch + 1, **losses, **_score(run), "seconds": time.perf_counter() - t_epoch}
         run.history.append(record)
         mae, ema_mae = record["test_mae_deg"], record.get("ema_test_mae_deg")
@@ -233,13 +269,32 @@ def train(data_dir: str | Path, out_dir: str | Path, options: TrainOptions | Non
             flush=True,
         )
         _checkpoint(run, epoch + 1, ckpt_path)
-        if opts.max_minutes is not None and (time.perf_counter() - t_start) / 60.0 > opts.max_minutes:
+        out_of_time = opts.max_minutes is not None and (time.perf_counter() - t_start) / 60.0 > opts.max_minutes
+        if _stop_agreed(run, out_of_time):
             print(
                 f"train: stopping after epoch {epoch + 1}: {opts.max_minutes} min used; --resume continues",
                 file=sys.stderr,
             )
             break
-    return _finish(run)
+    if run.world == 1:
+        return _finish(run)
+    import torch.distributed as dist
+
+    record = _finish(run) if run.rank == 0 else {}
+    dist.barrier()
+    dist.destroy_process_group()
+    return record
+
+
+def _stop_agreed(run: _Run, stop: bool) -> bool:
+    """Process 0's word on stopping, heard by every process (alone: its own)."""
+    if run.world == 1:
+        return stop
+    import torch.distributed as dist
+
+    flag = torch.tensor([1 if stop else 0], device=run.dev)
+    dist.broadcast(flag, 0)
+    return bool(flag.item())
 
 
 def _set_up(data_dir: Path, out: Path, opts: TrainOptions) -> _Run:
@@ -263,6 +318,14 @@ def _set_up(data_dir: Path, out: Path, opts: TrainOptions) -> _Run:
     out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(opts.seed)
     dev = _device(opts.device)
+    rank, world = distributed_world()
+    if world > 1:
+        if opts.batch_size < world:
+            raise InferenceError(
+                f"batch size {opts.batch_size} is smaller than the {world} processes that share each step",
+                field="batch_size",
+            )
+        _start_distributed(dev)
     unet, swin = build_models(cfg)
     for name, given, net in (("unet_from", opts.unet_from, unet), ("swin_from", opts.swin_from, swin)):
         if given is not None:
@@ -290,6 +353,14 @@ def _set_up(data_dir: Path, out: Path, opts: TrainOptions) -> _Run:
             k: AveragedModel(net, multi_avg_fn=get_ema_multi_avg_fn(opts.ema), use_buffers=True)  # type: ignore[no-untyped-call]
             for k, net in (("unet", unet), ("swin", swin))
         }
+    ddp_u = ddp_s = None
+    if world > 1:
+        from torch.nn.parallel import DistributedDataParallel as DDP
+
+        ids = [dev.index] if dev.type == "cuda" else None
+        if dev.type == "cuda":  # one batch's statistics across the processes (PyTorch has it on GPUs only)
+            unet = torch.nn.SyncBatchNorm.convert_sync_batchnorm(unet)  # type: ignore[no-untyped-call]
+        ddp_u, ddp_s = DDP(unet, device_ids=ids), DDP(swin, device_ids=ids)  # both start from process 0's weights
     two_stage = opts.mode == "two-stage"
     return _Run(
         opts=opts,
@@ -311,6 +382,10 @@ def _set_up(data_dir: Path, out: Path, opts: TrainOptions) -> _Run:
         averaged=averaged,
         bf16=bf16,
         stage_split=(opts.epochs // 2 if opts.unet_epochs is None else opts.unet_epochs) if two_stage else 0,
+        rank=rank,
+        world=world,
+        ddp_u=ddp_u,
+        ddp_s=ddp_s,
     )
 
 
@@ -357,8 +432,11 @@ def _epoch(
             run.cache = enhance_all(run.unet, run.data["image"], dev, rows=rows)
     sums = {"unet_loss": torch.zeros((), device=dev), "swin_loss": torch.zeros((), device=dev)}
     batches = _batches(run.train_idx, opts.batch_size, rng)
+    if run.world > 1:  # the same batches in every process (one seed); each takes its share of every one
+        batches = [b[run.rank :: run.world] for b in batches if len(b) >= run.world]
     t_epoch = time.perf_counter()
     for step, sel in enumerate(batches):
+        run.frames_seen += len(sel)
         images = run.dev_data["image"] if run.cache is None else run.cache
         x, y, a = _tensors(images, run.dev_data, np.sort(sel), dev)
         if dev.type == "cuda" or run.bf16:
@@ -389,7 +467,7 @@ def _epoch(
                 run.averaged["unet"].update_parameters(run.unet)
         sums["unet_loss"] += loss_u.detach().float()  # summed on the device: no sync per step
         sums["swin_loss"] += loss_s.detach().float()
-        if opts.log_every and (step + 1) % opts.log_every == 0:
+        if opts.log_every and (step + 1) % opts.log_every == 0 and run.rank == 0:
             print(
                 f"train: epoch {epoch + 1}/{opts.epochs} step {step + 1}/{len(batches)} "
                 f"unet {float(sums['unet_loss']) / (step + 1):.4f} swin {float(sums['swin_loss']) / (step + 1):.4f} "
@@ -499,6 +577,11 @@ def _record(run: _Run) -> dict[str, Any]:
             "threads": torch.get_num_threads(),
             "bf16_autocast": run.bf16,
         },
+        "distributed": {
+            "processes": run.world,
+            "backend": ("nccl" if dev.type == "cuda" else "gloo") if run.world > 1 else None,
+            "frames_per_process": run.frames_seen,
+        },
         "train_seconds": sum(h["seconds"] for h in run.history),
         "history": run.history,
     }
@@ -595,7 +678,7 @@ def run(args: argparse.Namespace) -> int:
         size = get_config(opts.config).img_size
         data = target_data(Path(args.out), args.model, args.model_scale, args.n, args.n_train, args.variety, size)
     rec = train(data, args.out, opts)
-    last = rec["history"][-1] if rec["history"] else None
+    last = rec["history"][-1] if rec.get("history") else None  # under torchrun, process 0 alone has the record
     if last:
         z, y, x = last["test_mae_deg"]
         print(f"trained {last['epoch']} epochs into {args.out}: test MAE z/y/x {z:.2f}/{y:.2f}/{x:.2f} deg")
