@@ -30,8 +30,8 @@ R = TypeVar("R")
 class EngineError(InferenceError):
     """A cluster that cannot be used: an address that does not answer, or Ray not installed."""
 
-    def __init__(self, message: str) -> None:
-        super().__init__(message, field="ray_address")
+    def __init__(self, message: str, field: str | None = "ray_address") -> None:
+        super().__init__(message, field=field)
 
 
 class Engine(Protocol):

@@ -40,11 +40,11 @@ function key() {
   return sessionStorage.getItem("gsaKey");
 }
 
-async function api(path, as = "json") {
+async function api(path, as = "json", method = "GET") {
   pending += 1;
   status.dataset.ready = "0";
   try {
-    const r = await fetch(path, { headers: { "X-API-Key": key() } });
+    const r = await fetch(path, { method, headers: { "X-API-Key": key() } });
     if (r.status === 401) {
       sessionStorage.removeItem("gsaKey");
       throw new Error("the API key was refused: enter a valid one");
@@ -432,6 +432,41 @@ async function passesPage() {
       '<tr><td colspan="7" class="muted">No passes yet: POST /v1/passes, or gsa pass --server.</td></tr>'}</tbody></table>`;
 }
 
+let jobsTimer = null;
+
+// Long work (/v1/jobs): each job's state, progress with counts and the time left, its result, its log's last lines;
+// a queued or running job can be cancelled. The list looks again every 2 s while any job is active.
+async function jobsPage() {
+  const body = await api("/v1/jobs?limit=50");
+  const active = body.data.some((j) => j.state === "queued" || j.state === "running");
+  const link = (j) => j.result_url && j.result_url.startsWith("/v1/campaigns/")
+    ? `<a href="#/campaigns/${esc(j.result_url.split("/").pop())}">campaign</a>`
+    : j.result_url && j.kind === "dataset"
+      ? `<a href="/v1/datasets/${esc(j.id)}/files/manifest.json" class="apilink">manifest</a>`
+      : j.result_url ? `<code>${esc(j.result_url)}</code>` : "-";
+  const rows = body.data.map((j) => `<tr class="job ${esc(j.state)}">
+      <td><code>${esc(j.id.slice(0, 8))}</code></td><td>${esc(j.kind)}</td><td>${esc(j.state)}${j.cancel_requested ? " (cancelling)" : ""}</td>
+      <td><progress max="1" value="${Number(j.progress)}"></progress> ${num(100 * j.progress, 0)} %${j.total ? ` · ${j.done}/${j.total}` : ""}${j.eta_s !== null ? ` · ${num(j.eta_s, 0)} s left` : ""}</td>
+      <td>${esc(j.stage)}${j.error ? `<br><span class="bad">${esc(j.error)}</span>` : ""}</td><td>${utc(j.created_at)}</td>
+      <td>${link(j)}</td>
+      <td>${j.state === "queued" || j.state === "running" ? `<button class="cancel" data-id="${esc(j.id)}">Cancel</button>` : ""}
+      ${j.log_tail ? `<details><summary>log</summary><pre>${esc(j.log_tail.split("\n").slice(-8).join("\n"))}</pre></details>` : ""}</td></tr>`).join("");
+  view.innerHTML = `<h1>Jobs <span class="muted">(${body.count})</span></h1>
+    <p class="muted">Adaptations, data sets and campaigns asked for with <code>Prefer: respond-async</code> run as jobs beside
+    the service (<code>gsa jobs list|show|cancel|wait</code>).${active ? " Updating every 2 s while one is active." : ""}</p>
+    <table id="jobs"><thead><tr><th>job</th><th>kind</th><th>state</th><th>progress</th><th>stage</th><th>created (UTC)</th>
+    <th>result</th><th></th></tr></thead><tbody>${rows ||
+      '<tr><td colspan="8" class="muted">No jobs yet: POST /v1/datasets, /v1/model-sets/{target}/adaptations, or a campaign with Prefer: respond-async.</td></tr>'}</tbody></table>`;
+  view.querySelectorAll("button.cancel").forEach((b) => b.addEventListener("click", async () => {
+    b.disabled = true;
+    b.textContent = "Cancelling...";
+    try { await api(`/v1/jobs/${encodeURIComponent(b.dataset.id)}`, "json", "DELETE"); } catch (err) { fail(err.message); }
+    route();
+  }));
+  clearTimeout(jobsTimer);
+  if (active) jobsTimer = setTimeout(() => { if (location.hash.startsWith("#/jobs")) route(); }, 2000);
+}
+
 // Continuous through +-180 deg about a reference value.
 function near(v, ref) {
   return ref + ((((v - ref + 180) % 360) + 360) % 360) - 180;
@@ -530,6 +565,7 @@ async function route() {
     else if (parts[0] === "estimates") await estimatesPage();
     else if (parts[0] === "passes" && parts[1]) await passPage(decodeURIComponent(parts[1]));
     else if (parts[0] === "passes") await passesPage();
+    else if (parts[0] === "jobs") await jobsPage();
     else await plansPage(params);
   } catch (err) {
     fail(err.message);

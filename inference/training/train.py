@@ -87,8 +87,9 @@ def uses_bf16(dev: torch.device, precision: str) -> bool:
 def _device(name: str | None) -> torch.device:
     if name:
         return torch.device(name)
-    if torch.cuda.is_available():
-        return torch.device("cuda", int(os.environ.get("LOCAL_RANK", "0")))  # torchrun: one GPU a process
+    if torch.cuda.is_available():  # torchrun: one GPU a process; Ray Train shows each worker its own GPU alone
+        local = int(os.environ.get("LOCAL_RANK", "0"))
+        return torch.device("cuda", local if local < torch.cuda.device_count() else 0)
     return torch.device("cpu")
 
 
@@ -634,6 +635,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     t.add_argument("--n-train", type=int, help="of which training frames (default 80 %%)")
     t.add_argument("--variety", help="vary each frame's scattering (a preset: robust)")
     add_option_arguments(p, TrainOptions)
+    p.add_argument(
+        "--ray-workers",
+        type=int,
+        help="with GSA_RAY_ADDRESS set: Ray Train workers (default: the cluster's GPUs, else 2); DDP across them",
+    )
 
 
 def target_data(
@@ -677,7 +683,15 @@ def run(args: argparse.Namespace) -> int:
     if args.model is not None:
         size = get_config(opts.config).img_size
         data = target_data(Path(args.out), args.model, args.model_scale, args.n, args.n_train, args.variety, size)
-    rec = train(data, args.out, opts)
+    address = os.environ.get("GSA_RAY_ADDRESS", "").strip()
+    if address:  # Ray Train's TorchTrainer: DistributedDataParallel over the cluster's workers
+        from inference.training.ray_train import train_on_ray
+
+        rec = train_on_ray(data, args.out, opts, address, args.ray_workers)
+    elif args.ray_workers is not None:
+        raise InferenceError("--ray-workers needs a cluster: set GSA_RAY_ADDRESS", field="ray_workers")
+    else:
+        rec = train(data, args.out, opts)
     last = rec["history"][-1] if rec.get("history") else None  # under torchrun, process 0 alone has the record
     if last:
         z, y, x = last["test_mae_deg"]

@@ -12,6 +12,7 @@ import json
 import re
 import shutil
 import subprocess
+import time
 from datetime import datetime
 from pathlib import Path
 
@@ -73,7 +74,13 @@ def served(tmp_path_factory, smoke_models):
         timeout=300,
     )
     assert passed.status_code == 201, passed.text
-    yield srv, plan, est, campaign, passed.json(), data / "server.log"
+    radar = {"n_range": 64, "n_azimuth": 64, "bandwidth_hz": 0.4e9, "aperture_deg": 1.275}
+    job = httpx.post(srv.url + "/v1/datasets", json={"n": 4, "radar": radar}, headers=headers, timeout=60).json()
+    for _ in range(600):  # finished before the pages are drawn (an active job's page looks again every 2 s)
+        if httpx.get(f"{srv.url}/v1/jobs/{job['id']}", headers=headers).json()["state"] not in ("queued", "running"):
+            break
+        time.sleep(0.2)
+    yield srv, plan, est, campaign, passed.json(), data / "server.log", job
     srv.stop()
 
 
@@ -98,7 +105,7 @@ def _status(dom: str) -> tuple[int, int]:
 
 
 def test_console_pages_in_chromium(served, tmp_path):
-    srv, plan, est, campaign, fused, log = served
+    srv, plan, est, campaign, fused, log, job = served
     console = f"{srv.url}/console/#key={KEY_A}&"
     pages = {
         "plans": (f"{console}/plans", [plan["id"][:8], "Sat_Target"]),
@@ -132,6 +139,7 @@ def test_console_pages_in_chromium(served, tmp_path):
             f"{console}/passes/{fused['id']}",
             ['<svg class="panel"', 'class="framepoint"', 'id="passframes"', "Fused attitude, body to LVLH"],
         ),
+        "jobs": (f"{console}/jobs", [job["id"][:8], 'id="jobs"', "<progress", ">done<", ">manifest</a>"]),
         "no-key": (f"{srv.url}/console/", ["Use this key"]),
     }
     for name, (url, expected) in pages.items():

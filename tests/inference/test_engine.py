@@ -116,6 +116,22 @@ def test_a_data_set_job_runs_on_the_cluster(cluster, settings, tmp_path):
     assert job["result"]["content_sha256"] == here["content_sha256"]
 
 
+def test_gsa_train_on_the_cluster_is_ray_trains_torchtrainer_with_ddp(cluster, smoke_data, tmp_path):
+    """Two Ray Train workers (TorchTrainer) train one run with DistributedDataParallel: worker 0 writes it."""
+    env = {**os.environ, "GSA_RAY_ADDRESS": cluster, "OMP_NUM_THREADS": "1"}
+    cmd = [sys.executable, "-m", "app.cli", "train", "--data", str(smoke_data), "--out", str(tmp_path / "run")]
+    cmd += ["--recipe", "smoke", "--epochs", "2", "--batch-size", "8", "--threads", "1", "--ray-workers", "2"]
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    import json
+
+    record = json.loads((tmp_path / "run" / "training.json").read_text())
+    assert record["complete"] and record["distributed"] == {"processes": 2, "backend": "gloo", "frames_per_process": 16}
+    assert (tmp_path / "run" / "swin.pt").is_file() and (tmp_path / "run" / "unetpp.pt").is_file()
+    assert "2 Ray Train workers" in done.stderr and "epoch 2/2 done on the cluster" in done.stderr
+    assert "trained 2 epochs" in done.stdout
+
+
 def test_an_address_where_no_head_answers_is_a_clear_error_in_seconds(tmp_path):
     port = _free_port()  # nothing listens there
     started = time.monotonic()
