@@ -142,7 +142,9 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
     jbs = jb.add_subparsers(dest="jobs_cmd", required=True)
     jbl = jbs.add_parser("list", help="your jobs, newest first")
     jbl.add_argument("--limit", type=int, default=20)
-    jbl.add_argument("--kind", choices=["adaptation", "dataset", "campaign"], help="only jobs of this kind")
+    jbl.add_argument(
+        "--kind", choices=["adaptation", "dataset", "campaign", "reestimate"], help="only jobs of this kind"
+    )
     jbl.add_argument("--state", choices=["queued", "running", "done", "failed", "cancelled"], help="only in this state")
     jbl.add_argument("--json", action="store_true")
     jbw = jbs.add_parser("show", help="one job: state, progress, result, log tail")

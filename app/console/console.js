@@ -442,7 +442,7 @@ async function jobsPage() {
   const link = (j) => j.result_url && j.result_url.startsWith("/v1/campaigns/")
     ? `<a href="#/campaigns/${esc(j.result_url.split("/").pop())}">campaign</a>`
     : j.result_url && j.kind === "dataset"
-      ? `<a href="/v1/datasets/${esc(j.id)}/files/manifest.json" class="apilink">manifest</a>`
+      ? `<a href="#/jobs" class="manifest" data-id="${esc(j.id)}">manifest</a>`
       : j.result_url ? `<code>${esc(j.result_url)}</code>` : "-";
   const rows = body.data.map((j) => `<tr class="job ${esc(j.state)}">
       <td><code>${esc(j.id.slice(0, 8))}</code></td><td>${esc(j.kind)}</td><td>${esc(j.state)}${j.cancel_requested ? " (cancelling)" : ""}</td>
@@ -456,7 +456,19 @@ async function jobsPage() {
     the service (<code>gsa jobs list|show|cancel|wait</code>).${active ? " Updating every 2 s while one is active." : ""}</p>
     <table id="jobs"><thead><tr><th>job</th><th>kind</th><th>state</th><th>progress</th><th>stage</th><th>created (UTC)</th>
     <th>result</th><th></th></tr></thead><tbody>${rows ||
-      '<tr><td colspan="8" class="muted">No jobs yet: POST /v1/datasets, /v1/model-sets/{target}/adaptations, or a campaign with Prefer: respond-async.</td></tr>'}</tbody></table>`;
+      '<tr><td colspan="8" class="muted">No jobs yet: POST /v1/datasets, /v1/model-sets/{target}/adaptations, or a campaign with Prefer: respond-async.</td></tr>'}</tbody></table>
+    <div id="manifest"></div>`;
+  view.querySelectorAll("a.manifest").forEach((a) => a.addEventListener("click", async (ev) => {
+    ev.preventDefault();
+    const box = document.getElementById("manifest");
+    box.innerHTML = "<p>Loading the manifest...</p>";
+    try {
+      const m = await api(`/v1/datasets/${encodeURIComponent(a.dataset.id)}/files/manifest.json`);
+      box.innerHTML = `<h2>Data set ${esc(a.dataset.id.slice(0, 8))}</h2><p>${m.frames} frames in ${m.shards.length} shards
+        (<code>GET /v1/datasets/${esc(a.dataset.id)}/files/shard-NNNNN.npz</code>), made on ${esc(m.engine || "local")}
+        at ${num(m.frames_per_s, 1)} frames/s; content sha256 <code>${esc(m.content_sha256)}</code></p>`;
+    } catch (err) { box.innerHTML = ""; fail(err.message); }
+  }));
   view.querySelectorAll("button.cancel").forEach((b) => b.addEventListener("click", async () => {
     b.disabled = true;
     b.textContent = "Cancelling...";

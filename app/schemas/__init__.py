@@ -38,7 +38,7 @@ from app.schemas.estimates import (
     ScenePublic,
     ScenesPublic,
 )
-from app.schemas.jobs import DatasetCreate, DatasetRadar, JobPublic, JobsPublic
+from app.schemas.jobs import DatasetCreate, DatasetRadar, JobPublic, JobsPublic, ReestimationCreate
 from app.schemas.labelled import LabelledFramePublic, LabelledFramesPublic, LabelledSummary, LabelledUpload
 from app.schemas.model_sets import (
     AdaptationCreate,
@@ -90,6 +90,7 @@ __all__ = [
     "DatasetRadar",
     "JobPublic",
     "JobsPublic",
+    "ReestimationCreate",
     "AdaptationPublic",
     "ModelSetPublic",
     "ModelSetsPublic",

@@ -16,6 +16,7 @@ RESULT_URLS = {
     "campaign": "/v1/campaigns/{campaign_id}",
     "adaptation": "/v1/model-sets/{target}",
     "dataset": "/v1/jobs/{job_id}",
+    "reestimate": "/v1/estimates",
 }
 
 
@@ -23,7 +24,7 @@ class JobPublic(Described):
     id: str
     """the job's id"""
     kind: str
-    """adaptation, dataset or campaign"""
+    """adaptation, dataset, campaign or reestimate"""
     state: str
     """queued, running, done, failed or cancelled"""
     stage: str
@@ -154,3 +155,14 @@ class DatasetCreate(Strict):
     """under po, the share of frames made by physical optics"""
     radar: DatasetRadar = Field(default_factory=DatasetRadar)
     """the radar"""
+
+
+class ReestimationCreate(Strict):
+    """Which stored estimates to read again, and with which version of the target's model set."""
+
+    version: int = Field(ge=0, le=100_000)
+    """the version to read them with (0: the configured set; GET /v1/model-sets lists them)"""
+    plan_id: str | None = Field(default=None, max_length=36)
+    """only the estimates tied to this plan"""
+    limit: int = Field(default=1000, ge=1, le=100_000)
+    """at most this many, oldest first"""

@@ -29,6 +29,7 @@ KINDS = {
     "adaptation": "app.services.model_versions:run_adaptation",
     "dataset": "app.services.datasets:run_dataset",
     "campaign": "app.services.campaigns:run_campaign_job",
+    "reestimate": "app.services.reestimation:run_reestimation",
 }
 WRITE_EVERY_S = 0.5
 

@@ -41,7 +41,7 @@ from app.errors import Conflict
 
 MAX_ATTEMPTS = 3  # a job is started at most this often (the first run and two resumptions after restarts)
 POLL_S = 0.5
-KINDS = ("adaptation", "dataset", "campaign")
+KINDS = ("adaptation", "dataset", "campaign", "reestimate")
 
 
 def _count(result: Any) -> int:

@@ -70,7 +70,10 @@ class Served:
 
     def resolve(self, session: Session, model_sets: Any, checker: Any) -> tuple[Any, Any]:
         """(Estimator, Checker) for the checker's target: its promoted version's where one is promoted."""
-        row = promoted(session, checker.model.name)
+        return self.version(promoted(session, checker.model.name), model_sets, checker)
+
+    def version(self, row: ModelVersion | None, model_sets: Any, checker: Any) -> tuple[Any, Any]:
+        """(Estimator, Checker) of one version of the checker's target (None: version 0, the configured set)."""
         if row is None:
             return model_sets.for_target(checker.model.name), checker
         key = (row.target, row.version)

@@ -6,11 +6,22 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, HTTPException, Request
 from fastapi import Path as PathParam
+from fastapi.responses import JSONResponse
 
 from app.api.deps import CheckersDep, CurrentOperator, ModelSetsDep, SessionDep, SettingsDep, checker_for
-from app.schemas import AdaptationCreate, AdaptationPublic, ModelSetPublic, ModelSetsPublic, ModelVersionPublic, Text
+from app.schemas import (
+    AdaptationCreate,
+    AdaptationPublic,
+    JobPublic,
+    ModelSetPublic,
+    ModelSetsPublic,
+    ModelVersionPublic,
+    ReestimationCreate,
+    Text,
+)
 from app.services import jobs as jobs_svc
 from app.services import model_versions as mv
+from app.services.reestimation import submit_reestimation
 
 router = APIRouter(prefix="/model-sets", tags=["model sets"])
 
@@ -92,6 +103,43 @@ def read_adaptation(
     if job is None or job.kind != "adaptation" or job.params.get("target") != target:
         raise HTTPException(status_code=404, detail="Adaptation not found")
     return AdaptationPublic.from_row(job)
+
+
+@router.post(
+    "/{target}/re-estimations",
+    status_code=202,
+    response_model=JobPublic,
+    responses={202: {"description": "queued: follow it at /v1/jobs/{id}"}},
+)
+def create_reestimation(
+    request: Request,
+    session: SessionDep,
+    operator: CurrentOperator,
+    settings: SettingsDep,
+    model_sets: ModelSetsDep,
+    checkers: CheckersDep,
+    target: Annotated[Text, PathParam(max_length=200, description="the target whose estimates to read again")],
+    body: ReestimationCreate,
+) -> JSONResponse:
+    """Read the caller's stored estimates of the target again with another version of its set, as a job: each
+    gets a new estimate (same plan, time and name, "re-estimate of ..."); the job's result says how far each
+    answer moved and how many are trusted before and after. The old estimates stay."""
+    name = _trained_target(checkers, model_sets, target)
+    job = submit_reestimation(
+        session=session,
+        settings=settings,
+        operator_id=operator.id,
+        target=name,
+        version=body.version,
+        plan_id=body.plan_id,
+        limit=body.limit,
+    )
+    request.app.state.jobs.nudge()
+    return JSONResponse(
+        status_code=202,
+        content=JobPublic.from_row(job).model_dump(mode="json"),
+        headers={"Location": f"/v1/jobs/{job.id}"},
+    )
 
 
 @router.post(

@@ -77,6 +77,41 @@ def test_adapt_list_promote_answer_and_roll_back(client, labelled):
     assert client.post(f"/v1/model-sets/{T}/versions/7/promote", headers=A).status_code == 404
 
 
+def test_stored_estimates_are_read_again_by_another_version_as_a_job(client, labelled):
+    """After the test above: A's estimates (3, made by versions 0, 1, 0) read again by version 1, each a new
+    estimate naming version 1, its old one kept; B's are not touched; a missing version is a 422."""
+    mine = client.get("/v1/estimates", params={"limit": 100}, headers=A).json()["data"]
+    theirs = client.get("/v1/estimates", headers=B).json()["count"]
+    r = client.post(f"/v1/model-sets/{T}/re-estimations", json={"version": 1}, headers=A)
+    assert r.status_code == 202, r.text
+    job = r.json()
+    assert job["kind"] == "reestimate" and job["total"] == len(mine) == 3
+    deadline = time.monotonic() + 240
+    while job["state"] in ("queued", "running") and time.monotonic() < deadline:
+        time.sleep(0.5)
+        job = client.get(f"/v1/jobs/{job['id']}", headers=A).json()
+    assert job["state"] == "done", job
+    res = job["result"]
+    assert res["estimates"] == 3 and res["version"] == 1 and len(res["pairs"]) == 3
+    assert {p["from"] for p in res["pairs"]} == {e["id"] for e in mine}
+    assert 0 <= res["trusted_after"] <= 3 and all(0 <= p["change_deg"] <= 180 for p in res["pairs"])
+    for pair in res["pairs"]:
+        old = client.get(f"/v1/estimates/{pair['from']}", headers=A).json()
+        new = client.get(f"/v1/estimates/{pair['to']}", headers=A).json()
+        assert new["model"]["version"] == 1 and new["input_name"] == "re-estimate of " + old["input_name"]
+        assert (new["plan_id"], new["observed_at"], new["input_sha256"]) == (
+            old["plan_id"],
+            old["observed_at"],
+            old["input_sha256"],
+        )
+    assert client.get("/v1/estimates", headers=A).json()["count"] == 6  # the old ones stay
+    assert client.get("/v1/estimates", headers=B).json()["count"] == theirs
+    missing = client.post(f"/v1/model-sets/{T}/re-estimations", json={"version": 7}, headers=A)
+    assert missing.status_code == 422 and "no version 7" in missing.json()["detail"][0]["msg"]
+    none = client.post(f"/v1/model-sets/{T}/re-estimations", json={"version": 0}, headers=B)
+    assert none.status_code == 422 and "no stored estimates" in none.json()["detail"][0]["msg"]
+
+
 def test_adaptation_refusals(client, labelled):
     few = client.post(f"/v1/model-sets/{T}/adaptations", json={"epochs": 1}, headers=B)  # B has no labelled frames
     assert few.status_code == 422 and "at least 4, from 2 scenes" in few.json()["detail"][0]["msg"]
