@@ -222,6 +222,18 @@ async def read_uploads(files: list[UploadFile], settings: Settings) -> list[Any]
     return uploads
 
 
+def job_limits(settings: Settings) -> Settings:
+    """The upload limits of a pass queued as a job: GSA_MAX_PASS_JOB_FRAMES frames, and the decoded budget grown
+    with them (at most 4 GiB)."""
+    scale = max(1, -(-settings.max_pass_job_frames // settings.max_batch_frames))
+    return settings.model_copy(
+        update={
+            "max_batch_frames": settings.max_pass_job_frames,
+            "max_decoded_mb": min(settings.max_decoded_mb * scale, 4096),
+        }
+    )
+
+
 def cells_from_form(range_cell_m: float | None, cross_range_cell_m: float | None) -> tuple[float, float] | None:
     if (range_cell_m is None) != (cross_range_cell_m is None):
         missing = "cross_range_cell_m" if cross_range_cell_m is None else "range_cell_m"

@@ -143,7 +143,7 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
     jbl = jbs.add_parser("list", help="your jobs, newest first")
     jbl.add_argument("--limit", type=int, default=20)
     jbl.add_argument(
-        "--kind", choices=["adaptation", "dataset", "campaign", "reestimate"], help="only jobs of this kind"
+        "--kind", choices=["adaptation", "dataset", "campaign", "reestimate", "pass"], help="only jobs of this kind"
     )
     jbl.add_argument("--state", choices=["queued", "running", "done", "failed", "cancelled"], help="only in this state")
     jbl.add_argument("--json", action="store_true")

@@ -72,6 +72,9 @@ class Settings(BaseSettings):
     log_level: str = Field(default="info", pattern="^(debug|info|warning|error)$")
     log_json: bool | None = None  # unset: JSON lines unless stderr is a terminal
     job_workers: int = Field(default=1, ge=1, le=256, description="jobs running at once on this host")
+    max_pass_job_frames: int = Field(
+        default=512, ge=2, le=100_000, description="frames of a pass sent with Prefer: respond-async (a job)"
+    )
     job_simulation_workers: int = Field(
         default=0, ge=0, le=256, description="processes one data-set job simulates with on this host; 0: all cores"
     )

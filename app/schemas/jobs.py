@@ -17,6 +17,7 @@ RESULT_URLS = {
     "adaptation": "/v1/model-sets/{target}",
     "dataset": "/v1/jobs/{job_id}",
     "reestimate": "/v1/estimates",
+    "pass": "/v1/passes/{pass_id}",
 }
 
 
@@ -24,7 +25,7 @@ class JobPublic(Described):
     id: str
     """the job's id"""
     kind: str
-    """adaptation, dataset, campaign or reestimate"""
+    """adaptation, dataset, campaign, reestimate or pass"""
     state: str
     """queued, running, done, failed or cancelled"""
     stage: str

@@ -30,6 +30,7 @@ KINDS = {
     "dataset": "app.services.datasets:run_dataset",
     "campaign": "app.services.campaigns:run_campaign_job",
     "reestimate": "app.services.reestimation:run_reestimation",
+    "pass": "app.services.passes:run_pass_job",
 }
 WRITE_EVERY_S = 0.5
 

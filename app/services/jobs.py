@@ -36,12 +36,12 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from app.core.config import Settings
-from app.db.models import JOB_ACTIVE, JOB_FINAL, Job, utcnow
+from app.db.models import JOB_ACTIVE, JOB_FINAL, Job, new_id, utcnow
 from app.errors import Conflict
 
 MAX_ATTEMPTS = 3  # a job is started at most this often (the first run and two resumptions after restarts)
 POLL_S = 0.5
-KINDS = ("adaptation", "dataset", "campaign", "reestimate")
+KINDS = ("adaptation", "dataset", "campaign", "reestimate", "pass")
 
 
 def _count(result: Any) -> int:
@@ -78,11 +78,13 @@ def submit(
     total: int = 0,
     stage: str = "queued",
     engine: str = "local",
+    job_id: str | None = None,
 ) -> Job:
     """Store a queued job (its ``key`` must not be active already: else a 409 with ``busy_message``)."""
     if kind not in KINDS:
         raise ValueError(kind)
     job = Job(
+        id=job_id or new_id(),
         operator_id=operator_id,
         kind=kind,
         key=key,
@@ -107,6 +109,11 @@ def submit(
         raise Conflict(busy_message or f"a {kind} job for {key} is already queued or running") from None
     session.refresh(job)
     return job
+
+
+def job_dir(settings: Settings, job_id: str) -> Path:
+    """Where a job keeps what it needs beyond its row (a pass's frames) and its worker's output."""
+    return Path(settings.data_dir) / "jobs" / job_id
 
 
 def own(session: Session, operator_id: str, job_id: str) -> Job | None:

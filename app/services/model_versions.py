@@ -93,6 +93,33 @@ class Served:
         return est, Checker(base_checker.model, radar, cal, networks=True, threads=self.fit_threads)
 
 
+def load_answering(settings: Settings, session: Session, target: str, version: int | None = None) -> tuple[Any, Any]:
+    """(Estimator, Checker) of ``target`` as the service answers it (its promoted version), or of ``version``
+    (0: the configured set), loaded from the settings alone: what a job's worker process uses."""
+    from inference.runtime import ModelSets
+    from inference.trust import load_checkers
+
+    sets = ModelSets.load(settings.model_dir, settings.extra_model_dir_list, threads=settings.ort_threads or None)
+    checkers = load_checkers(
+        settings.model_dir,
+        sets.default.img_size,
+        settings.target_model,
+        settings.target_scale,
+        settings.default_target,
+        threads=settings.fit_threads,
+    )
+    if version is None:
+        row = promoted(session, target)
+    elif version == 0:
+        row = None
+    else:
+        row = session.scalar(select(ModelVersion).where(ModelVersion.target == target, ModelVersion.version == version))
+        if row is None:
+            raise LookupError(version)
+    served = Served(settings.data_dir, threads=settings.ort_threads or None, fit_threads=settings.fit_threads)
+    return served.version(row, sets, checkers.get(target))
+
+
 def start(
     *,
     session: Session,

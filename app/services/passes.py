@@ -88,6 +88,131 @@ def create_pass(
     return crud.create_pass(session=session, operator_id=operator_id, plan_id=plan_id, result=result)
 
 
+def _check_pass(
+    session: Session,
+    operator_id: str,
+    limit: int,
+    uploads: list[Upload],
+    plan_id: str,
+    observed_at: list[datetime],
+    integration_s: list[float] | None,
+    aperture_deg: float | None,
+    model_aperture_deg: float | None,
+) -> None:
+    """What a pass request must be before any fitting (the synchronous route checks it too, in create_pass)."""
+    if len(uploads) < 2:
+        raise InputError(["files"], f"a pass needs at least two frames; this upload holds {len(uploads)}")
+    if len(uploads) > limit:
+        raise InputError(["files"], f"{len(uploads)} frames is over the limit of {limit}")
+    if len(observed_at) != len(uploads):
+        raise InputError(
+            ["observed_at"], f"{len(observed_at)} times for {len(uploads)} frames: send one time per frame"
+        )
+    plan = crud.get_plan(session=session, operator_id=operator_id, plan_id=plan_id)
+    if plan is None:
+        raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
+    check_times(windows_of(plan.result), observed_at)
+    sweeps_from(integration_s, aperture_deg, len(uploads), model_aperture_deg)
+
+
+def submit_pass(
+    *,
+    session: Session,
+    operator_id: str,
+    settings: Settings,
+    checker: Checker,
+    uploads: list[Upload],
+    plan_id: str,
+    observed_at: list[datetime],
+    cells_m: tuple[float, float] | None,
+    normalised: bool,
+    integration_s: list[float] | None = None,
+    aperture_deg: float | None = None,
+) -> Any:
+    """Queue a pass as a job (``Prefer: respond-async``; up to GSA_MAX_PASS_JOB_FRAMES frames): checked now as the
+    synchronous route checks it, its frames kept under ``GSA_DATA_DIR/jobs/ID`` until the worker has fused it."""
+    from app.db.models import new_id
+    from app.services import jobs
+
+    model_aperture = checker.radar.aperture_deg if cells_m is None else None
+    _check_pass(
+        session,
+        operator_id,
+        settings.max_pass_job_frames,
+        uploads,
+        plan_id,
+        observed_at,
+        integration_s,
+        aperture_deg,
+        model_aperture,
+    )
+    job_id = new_id()
+    folder = jobs.job_dir(settings, job_id)
+    folder.mkdir(parents=True, exist_ok=True)
+    np.savez(folder / "frames.npz", **{f"f{k:05d}": u.magnitude for k, u in enumerate(uploads)})  # type: ignore[arg-type]  # numpy's stub reserves allow_pickle
+    params = {
+        "plan_id": plan_id,
+        "observed_at": [t.isoformat() for t in observed_at],
+        "target": checker.model.name,
+        "names": [u.name for u in uploads],
+        "normalised": normalised,
+        "frame_normalised": [u.normalised for u in uploads],
+        "cells_m": list(cells_m) if cells_m else None,
+        "integration_s": integration_s,
+        "aperture_deg": aperture_deg,
+        "frames": len(uploads),
+    }
+    return jobs.submit(
+        session,
+        operator_id=operator_id,
+        kind="pass",
+        params=params,
+        total=len(uploads),
+        stage=f"queued: a pass of {len(uploads)} frames",
+        job_id=job_id,
+    )
+
+
+def run_pass_job(ctx: Any) -> dict[str, Any]:
+    """The job: the kept frames fitted and fused by the target's answering version, the pass stored."""
+    import shutil
+
+    from app.services import jobs
+    from app.services.model_versions import load_answering
+
+    p = ctx.params
+    folder = jobs.job_dir(ctx.settings, ctx.id)
+    try:
+        with np.load(folder / "frames.npz") as z:
+            arrays = [z[f"f{k:05d}"].astype(np.float64) for k in range(int(p["frames"]))]
+        uploads = [
+            Upload(name=n, sha256="", shape=a.shape, dtype="float32", magnitude=a, normalised=bool(fn))
+            for n, a, fn in zip(p["names"], arrays, p["frame_normalised"], strict=True)
+        ]
+        ctx.report(stage=f"loading the models of {p['target']}")
+        with ctx.session_factory() as session:
+            est, checker = load_answering(ctx.settings, session, p["target"])
+            ctx.report(stage=f"fitting and fusing {len(uploads)} frames", done=0, total=len(uploads))
+            row = create_pass(
+                session=session,
+                operator_id=ctx.operator_id,
+                settings=ctx.settings.model_copy(update={"max_batch_frames": ctx.settings.max_pass_job_frames}),
+                est=est,
+                checker=checker,
+                uploads=uploads,
+                plan_id=p["plan_id"],
+                observed_at=[datetime.fromisoformat(t) for t in p["observed_at"]],
+                cells_m=tuple(p["cells_m"]) if p.get("cells_m") else None,
+                normalised=bool(p["normalised"]),
+                integration_s=p.get("integration_s"),
+                aperture_deg=p.get("aperture_deg"),
+                cancelled=lambda: ctx.stopping,
+            )
+        return {"pass_id": row.id, "frames": len(uploads)}
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
 def pass_record(
     frames: list[SimulatedFrame],
     snrs: NDArray[np.float64],

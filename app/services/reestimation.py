@@ -86,28 +86,15 @@ def run_reestimation(ctx: Any) -> dict[str, Any]:
 
     from app.services import images
     from app.services.estimation import EstimateRequest, estimate_and_store
-    from app.services.model_versions import Served
+    from app.services.model_versions import load_answering
     from app.services.uploads import Upload
-    from inference.runtime import ModelSets
-    from inference.trust import load_checkers
 
     settings: Settings = ctx.settings
     target, version = ctx.params["target"], int(ctx.params["version"])
     ctx.report(stage=f"loading version {version} of {target}")
-    sets = ModelSets.load(settings.model_dir, settings.extra_model_dir_list, threads=settings.ort_threads or None)
-    checkers = load_checkers(
-        settings.model_dir,
-        sets.default.img_size,
-        settings.target_model,
-        settings.target_scale,
-        settings.default_target,
-        threads=settings.fit_threads,
-    )
     with ctx.session_factory() as session:
-        row = _version_row(session, target, version)
-        est, checker = Served(settings.data_dir, threads=settings.ort_threads or None).version(
-            row, sets, checkers.get(target)
-        )
+        _version_row(session, target, version)
+        est, checker = load_answering(settings, session, target, version)
         olds = _estimates(session, ctx.operator_id, target, ctx.params.get("plan_id"), int(ctx.params["limit"]))
         pairs: list[dict[str, Any]] = []
         before = after = 0

@@ -23,7 +23,8 @@ def list_jobs(
     operator: CurrentOperator,
     page: PageDep,
     kind: Annotated[
-        Literal["adaptation", "dataset", "campaign", "reestimate"] | None, Query(description="only jobs of this kind")
+        Literal["adaptation", "dataset", "campaign", "reestimate", "pass"] | None,
+        Query(description="only jobs of this kind"),
     ] = None,
     state: Annotated[
         Literal["queued", "running", "done", "failed", "cancelled"] | None, Query(description="only jobs in this state")

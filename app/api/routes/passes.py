@@ -8,6 +8,7 @@ from typing import Annotated
 from fastapi import APIRouter, File, Form, HTTPException, Query, Request, UploadFile
 from fastapi import Path as PathParam
 from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import JSONResponse
 
 from app import crud
 from app.api.deps import (
@@ -20,10 +21,11 @@ from app.api.deps import (
     answering,
     cells_from_form,
     client_watch,
+    job_limits,
     observe_work,
     read_uploads,
 )
-from app.schemas import IsoDateTime, PassesPublic, PassPublic, PassSummary, Text
+from app.schemas import IsoDateTime, JobPublic, PassesPublic, PassPublic, PassSummary, Text
 from app.services import passes as pass_svc
 
 router = APIRouter(prefix="/passes", tags=["passes"])
@@ -40,7 +42,15 @@ APERTURE_DEG = (
 )
 
 
-@router.post("", status_code=201, response_model=PassPublic, responses={413: {"description": "file too large"}})
+@router.post(
+    "",
+    status_code=201,
+    response_model=PassPublic,
+    responses={
+        413: {"description": "file too large"},
+        202: {"model": JobPublic, "description": "with Prefer: respond-async, queued as a job (GET /v1/jobs/{id})"},
+    },
+)
 async def create_pass(
     request: Request,
     session: SessionDep,
@@ -63,11 +73,38 @@ async def create_pass(
     ] = None,
     integration_s: Annotated[list[float] | None, Form(description=INTEGRATION_S)] = None,
     aperture_deg: Annotated[float | None, Form(gt=0, le=30, description=APERTURE_DEG)] = None,
-) -> PassPublic:
-    """Fit every frame of a pass, place each in the plan target's LVLH frame at its time, and fuse them; stored."""
+) -> PassPublic | JSONResponse:
+    """Fit every frame of a pass, place each in the plan target's LVLH frame at its time, and fuse them; stored.
+
+    With ``Prefer: respond-async`` the pass is checked, kept and queued as a job (202; up to
+    ``GSA_MAX_PASS_JOB_FRAMES`` frames rather than ``GSA_MAX_BATCH_FRAMES``): a worker process fits and fuses it,
+    and the job's ``result_url`` is the pass once stored."""
     cells_m = cells_from_form(range_cell_m, cross_range_cell_m)
     est, checker = answering(request, session, model_sets, checkers, target)
     started = time.perf_counter()
+    if "respond-async" in request.headers.get("prefer", "").lower():
+        limits = job_limits(settings)
+        uploads = await read_uploads(files, limits)
+        job = await run_in_threadpool(
+            pass_svc.submit_pass,
+            session=session,
+            operator_id=operator.id,
+            settings=limits,
+            checker=checker,
+            uploads=uploads,
+            plan_id=plan_id,
+            observed_at=observed_at,
+            cells_m=cells_m,
+            normalised=normalised,
+            integration_s=integration_s,
+            aperture_deg=aperture_deg,
+        )
+        request.app.state.jobs.nudge()
+        return JSONResponse(
+            status_code=202,
+            content=JobPublic.from_row(job).model_dump(mode="json"),
+            headers={"Location": f"/v1/jobs/{job.id}", "Preference-Applied": "respond-async"},
+        )
     uploads = await read_uploads(files, settings)
     async with client_watch(request) as gone:  # the client gone: the fit stops between frames, nothing stored
         row = await run_in_threadpool(

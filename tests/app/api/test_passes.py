@@ -91,6 +91,42 @@ def test_a_pass_is_fused_and_stored(client, plan):
     assert body["id"] in client.get(f"/v1/plans/{plan['id']}", headers=A).json()["pass_ids"]
 
 
+def test_a_pass_sent_asynchronously_is_a_job_whose_pass_is_the_synchronous_one(client, plan):
+    """``Prefer: respond-async``: 202 and a job; the worker process fuses the same frames to the same attitude
+    as the synchronous request (every frame's too), stored and linked from the job; a bad one is a 422 now."""
+    import time
+
+    times = _times(plan, 5)
+    data = _stack(5)
+    sync = _post(client, plan["id"], times, data=data).json()
+    r = client.post(
+        "/v1/passes",
+        files=[("files", ("pass.npz", data))],
+        data={"plan_id": plan["id"], "observed_at": times},
+        headers={**A, "Prefer": "respond-async"},
+    )
+    assert r.status_code == 202 and r.json()["kind"] == "pass" and r.json()["total"] == 5, r.text
+    deadline = time.monotonic() + 180
+    while (job := client.get(f"/v1/jobs/{r.json()['id']}", headers=A).json())["state"] in ("queued", "running"):
+        assert time.monotonic() < deadline, job
+        time.sleep(0.3)
+    assert job["state"] == "done", job
+    assert job["result_url"] == f"/v1/passes/{job['result']['pass_id']}"
+    fused = client.get(job["result_url"], headers=A).json()
+    np.testing.assert_allclose(
+        fused["attitude_lvlh"]["rotation_matrix"], sync["attitude_lvlh"]["rotation_matrix"], atol=1e-9
+    )
+    assert [f["used"] for f in fused["frames"]] == [f["used"] for f in sync["frames"]]
+    assert fused["id"] in client.get(f"/v1/plans/{plan['id']}", headers=A).json()["pass_ids"]
+    bad = client.post(
+        "/v1/passes",
+        files=[("files", ("pass.npz", data))],
+        data={"plan_id": plan["id"], "observed_at": times[:4]},
+        headers={**A, "Prefer": "respond-async"},
+    )
+    assert bad.status_code == 422 and bad.json()["detail"][0]["loc"][-1] == "observed_at"
+
+
 @pytest.mark.parametrize(
     ("case", "field"),
     [
