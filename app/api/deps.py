@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Annotated, Any, TypeVar, cast
 
 from fastapi import Depends, HTTPException, Query, Request, Security, UploadFile
 from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import JSONResponse
 from fastapi.security import APIKeyHeader
 from sqlalchemy.orm import Session
 
@@ -220,6 +221,23 @@ async def read_uploads(files: list[UploadFile], settings: Settings) -> list[Any]
     for name, data in read:
         uploads += await run_in_threadpool(decode, data, name, max_side=settings.max_image_side, budget=again)
     return uploads
+
+
+def queued(request: Request, job: Any, prefer_applied: bool = False) -> JSONResponse:
+    """The 202 of work queued as a job: the job as ``GET /v1/jobs/{id}`` shows it, its address in ``Location``;
+    the dispatcher is told there is work."""
+    from app.schemas import JobPublic
+
+    request.app.state.jobs.nudge()
+    headers = {"Location": f"/v1/jobs/{job.id}"}
+    if prefer_applied:
+        headers["Preference-Applied"] = "respond-async"
+    return JSONResponse(status_code=202, content=JobPublic.from_row(job).model_dump(mode="json"), headers=headers)
+
+
+def wants_job(request: Request) -> bool:
+    """The client asked for the work to be queued (``Prefer: respond-async``, RFC 7240)."""
+    return "respond-async" in request.headers.get("prefer", "").lower()
 
 
 def job_limits(settings: Settings) -> Settings:

@@ -96,9 +96,8 @@ def run_dataset(ctx: Any) -> dict[str, Any]:
 
     try:
         manifest = generate(spec, out, radar, progress=False, engine=engine, on_shard=on_shard, resume=True)
-    except BaseException:
-        if ctx.stopping:
-            shutil.rmtree(out.with_name(out.name + ".partial"), ignore_errors=True)
+    except BaseException:  # cancelled or failed: nothing half made is left (a killed worker's shards stay, resumed)
+        shutil.rmtree(out.with_name(out.name + ".partial"), ignore_errors=True)
         raise
     ctx.say(f"dataset: {manifest['frames_per_s']} frames/s, content sha256 {manifest['content_sha256'][:16]}")
     return {

@@ -55,21 +55,19 @@ def create_pass(
     """Fit every frame of a pass, place each in the plan target's LVLH frame at its time, fuse them, and store it.
 
     ``cancelled()`` (the client gone) stops the fit between frames; nothing is stored then."""
-    if len(uploads) < 2:
-        raise InputError(["files"], f"a pass needs at least two frames; this upload holds {len(uploads)}")
-    if len(uploads) > settings.max_batch_frames:
-        raise InputError(["files"], f"{len(uploads)} frames is over the batch limit of {settings.max_batch_frames}")
-    if len(observed_at) != len(uploads):
-        raise InputError(
-            ["observed_at"], f"{len(observed_at)} times for {len(uploads)} frames: send one time per frame"
-        )
-    plan = crud.get_plan(session=session, operator_id=operator_id, plan_id=plan_id)
-    if plan is None:
-        raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
-    check_times(windows_of(plan.result), observed_at)
-    sweeps = sweeps_from(
-        integration_s, aperture_deg, len(uploads), checker.radar.aperture_deg if cells_m is None else None
+    model_aperture = checker.radar.aperture_deg if cells_m is None else None
+    plan = _check_pass(
+        session,
+        operator_id,
+        settings.max_batch_frames,
+        uploads,
+        plan_id,
+        observed_at,
+        integration_s,
+        aperture_deg,
+        model_aperture,
     )
+    sweeps = sweeps_from(integration_s, aperture_deg, len(uploads), model_aperture)
     frames, prep_s = prepare_frames(
         est=est, checker=checker, uploads=uploads, resample=False, normalised=normalised, cells_m=cells_m
     )
@@ -98,8 +96,9 @@ def _check_pass(
     integration_s: list[float] | None,
     aperture_deg: float | None,
     model_aperture_deg: float | None,
-) -> None:
-    """What a pass request must be before any fitting (the synchronous route checks it too, in create_pass)."""
+) -> Any:
+    """What a pass request must be before any fitting (both routes: here, and in a job before it is queued);
+    return the plan's row."""
     if len(uploads) < 2:
         raise InputError(["files"], f"a pass needs at least two frames; this upload holds {len(uploads)}")
     if len(uploads) > limit:
@@ -113,6 +112,7 @@ def _check_pass(
         raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
     check_times(windows_of(plan.result), observed_at)
     sweeps_from(integration_s, aperture_deg, len(uploads), model_aperture_deg)
+    return plan
 
 
 def submit_pass(

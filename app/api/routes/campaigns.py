@@ -10,7 +10,7 @@ from fastapi.responses import JSONResponse
 
 from app import crud
 from app.api import examples
-from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep, plan_in_worker
+from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep, plan_in_worker, queued, wants_job
 from app.schemas import (
     CAMPAIGN_EXAMPLE,
     CampaignCreate,
@@ -60,16 +60,11 @@ async def create_campaign(
     at once: a worker process plans it without the request's time limit, and a client that goes away loses
     nothing (``GET /v1/jobs/{id}`` follows it).
     """
-    if "respond-async" in request.headers.get("prefer", "").lower():
+    if wants_job(request):
         job = await run_in_threadpool(
             submit_campaign, session=session, settings=settings, operator_id=operator.id, campaign_in=campaign_in
         )
-        request.app.state.jobs.nudge()
-        return JSONResponse(
-            status_code=202,
-            content=JobPublic.from_row(job).model_dump(mode="json"),
-            headers={"Location": f"/v1/jobs/{job.id}", "Preference-Applied": "respond-async"},
-        )
+        return queued(request, job, prefer_applied=True)
     row = await plan_in_worker(
         request,
         "campaign",

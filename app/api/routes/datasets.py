@@ -9,7 +9,7 @@ from fastapi import APIRouter, Body, HTTPException, Request
 from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, JSONResponse
 
-from app.api.deps import CurrentOperator, SessionDep, SettingsDep
+from app.api.deps import CurrentOperator, SessionDep, SettingsDep, queued
 from app.schemas import DatasetCreate, JobPublic, Text
 from app.services import datasets as datasets_svc
 
@@ -38,12 +38,7 @@ def create_dataset(
     job = datasets_svc.submit_dataset(
         session=session, settings=settings, operator_id=operator.id, dataset_in=dataset_in
     )
-    request.app.state.jobs.nudge()
-    return JSONResponse(
-        status_code=202,
-        content=JobPublic.from_row(job).model_dump(mode="json"),
-        headers={"Location": f"/v1/jobs/{job.id}"},
-    )
+    return queued(request, job)
 
 
 @router.get(

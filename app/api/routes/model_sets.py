@@ -8,7 +8,7 @@ from fastapi import APIRouter, Body, HTTPException, Request
 from fastapi import Path as PathParam
 from fastapi.responses import JSONResponse
 
-from app.api.deps import CheckersDep, CurrentOperator, ModelSetsDep, SessionDep, SettingsDep, checker_for
+from app.api.deps import CheckersDep, CurrentOperator, ModelSetsDep, SessionDep, SettingsDep, checker_for, queued
 from app.schemas import (
     AdaptationCreate,
     AdaptationPublic,
@@ -134,12 +134,7 @@ def create_reestimation(
         plan_id=body.plan_id,
         limit=body.limit,
     )
-    request.app.state.jobs.nudge()
-    return JSONResponse(
-        status_code=202,
-        content=JobPublic.from_row(job).model_dump(mode="json"),
-        headers={"Location": f"/v1/jobs/{job.id}"},
-    )
+    return queued(request, job)
 
 
 @router.post(

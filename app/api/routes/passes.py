@@ -23,7 +23,9 @@ from app.api.deps import (
     client_watch,
     job_limits,
     observe_work,
+    queued,
     read_uploads,
+    wants_job,
 )
 from app.schemas import IsoDateTime, JobPublic, PassesPublic, PassPublic, PassSummary, Text
 from app.services import passes as pass_svc
@@ -82,7 +84,7 @@ async def create_pass(
     cells_m = cells_from_form(range_cell_m, cross_range_cell_m)
     est, checker = answering(request, session, model_sets, checkers, target)
     started = time.perf_counter()
-    if "respond-async" in request.headers.get("prefer", "").lower():
+    if wants_job(request):
         limits = job_limits(settings)
         uploads = await read_uploads(files, limits)
         job = await run_in_threadpool(
@@ -99,12 +101,7 @@ async def create_pass(
             integration_s=integration_s,
             aperture_deg=aperture_deg,
         )
-        request.app.state.jobs.nudge()
-        return JSONResponse(
-            status_code=202,
-            content=JobPublic.from_row(job).model_dump(mode="json"),
-            headers={"Location": f"/v1/jobs/{job.id}", "Preference-Applied": "respond-async"},
-        )
+        return queued(request, job, prefer_applied=True)
     uploads = await read_uploads(files, settings)
     async with client_watch(request) as gone:  # the client gone: the fit stops between frames, nothing stored
         row = await run_in_threadpool(
