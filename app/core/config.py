@@ -71,7 +71,10 @@ class Settings(BaseSettings):
     orphan_grace_s: float = Field(default=0.0, ge=0.0)
     log_level: str = Field(default="info", pattern="^(debug|info|warning|error)$")
     log_json: bool | None = None  # unset: JSON lines unless stderr is a terminal
-    job_workers: int = Field(default=1, ge=1, le=256, description="jobs running at once on this host")
+    job_workers: int = Field(
+        default=1, ge=0, le=256, description="jobs running at once on this host (0: none; another host runs them)"
+    )
+    max_dataset_gb: float = Field(default=20.0, gt=0, le=100_000, description="the largest data set a job may write")
     max_pass_job_frames: int = Field(
         default=512, ge=2, le=100_000, description="frames of a pass sent with Prefer: respond-async (a job)"
     )

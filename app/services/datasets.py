@@ -60,7 +60,14 @@ def spec_and_radar(params: dict[str, Any]) -> tuple[Any, Any]:
 def submit_dataset(*, session: Session, settings: Settings, operator_id: str, dataset_in: DatasetCreate) -> Job:
     """Check the request (a bad one is a 422 now, not a failed job later) and queue it."""
     params = dataset_in.model_dump(mode="json")
-    spec, _ = spec_and_radar(params)
+    spec, radar = spec_and_radar(params)
+    size_gb = spec.n * (radar.n_range * radar.n_azimuth * (2 + 1 / 8) + 64) / 1e9  # float16 frames, packed labels
+    if size_gb > settings.max_dataset_gb:
+        raise InputError(
+            ["n"],
+            f"{spec.n} frames of {radar.n_range} x {radar.n_azimuth} make {size_gb:.1f} GB, over GSA_MAX_DATASET_GB "
+            f"({settings.max_dataset_gb:g}): ask for fewer frames, or smaller ones",
+        )
     shards = -(-spec.n // spec.shard_size)
     return jobs.submit(
         session,

@@ -247,9 +247,15 @@ class Dispatcher:
         thread = self._thread
         if thread is not None:
             thread.join(timeout)
+        for proc in self.children.values():  # each running worker goes on; its exit is collected, not left a zombie
+            threading.Thread(target=proc.wait, name="gsa-jobs-reap", daemon=True).start()
+        self.children = {}
 
     def nudge(self) -> None:
-        """Say there is work: start the thread if it is not running, else wake it."""
+        """Say there is work: start the thread if it is not running, else wake it (a host that runs no jobs,
+        GSA_JOB_WORKERS=0, leaves them to the hosts that do)."""
+        if self.settings.job_workers == 0:
+            return
         self._stop.clear()
         with self._lock:
             if self._thread is None or not self._thread.is_alive():

@@ -24,8 +24,8 @@ from tests.conftest import KEY_A, KEY_B
 from tests.utils.databases import database_url
 from tests.utils.server import Server, access_line, leave_after, multipart, run_load, stored_ids
 
-# 480 requests: about 72 plans and 150 estimates, over the floors below (bench.load goes further)
-CLIENTS, REQUESTS_EACH = 16, 30
+# 224 requests: about 34 plans and 70 estimates, over the floors below (make load's bench.load goes further)
+CLIENTS, REQUESTS_EACH = 16, 14
 
 
 @pytest.fixture
@@ -65,8 +65,8 @@ def test_two_workers_under_16_clients_lose_and_duplicate_nothing(server_env, tmp
                 acked, stored = res.acked[key][kind], stored_ids(srv.url, key, kind)
                 assert len(set(acked)) == len(acked), "an id was acknowledged twice"
                 assert sorted(stored) == sorted(acked), f"{kind}s: {len(acked)} acknowledged, {len(stored)} stored"
-        assert sum(len(v["estimate"]) for v in res.acked.values()) > 100
-        assert sum(len(v["plan"]) for v in res.acked.values()) > 30
+        assert sum(len(v["estimate"]) for v in res.acked.values()) > 45
+        assert sum(len(v["plan"]) for v in res.acked.values()) > 14
     finally:
         srv.stop()
     _check_store(server_env)
@@ -90,13 +90,13 @@ def test_kill_9_mid_writes_loses_no_acknowledged_write_and_restarts_clean(server
             n = httpx.get(srv.url + "/v1/estimates", params={"limit": 1}, headers={"X-API-Key": KEY_A}).json()["count"]
         except httpx.HTTPError:
             n = 0
-        if n >= 40:
+        if n >= 24:
             break
     srv.kill()
     stop.set()
     t.join()
     acked = results[0].acked[KEY_A]
-    assert len(acked["estimate"]) >= 40
+    assert len(acked["estimate"]) >= 24
     assert results[0].errors, "the kill should have cut some requests off"
 
     if backend == "sqlite":

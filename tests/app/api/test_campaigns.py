@@ -5,15 +5,11 @@ import io
 import json
 from datetime import UTC, datetime
 
-import numpy as np
 import pytest
 from ccsds_ndm.ndm_io import NdmIo
 
 from app.schemas import CAMPAIGN_EXAMPLE
-from planner.elements import elements_to_state
 from tests.conftest import KEY_A, KEY_B
-from tests.utils.j2 import fly_tod_j2, propagate_tod_j2
-from tests.utils.orbits import PAPER_TARGET
 
 A = {"X-API-Key": KEY_A}
 B = {"X-API-Key": KEY_B}
@@ -88,63 +84,6 @@ def test_bad_campaign_input_is_a_422_naming_the_field_and_stores_nothing(client,
     assert client.get("/v1/campaigns", headers=B).json()["count"] == before
 
 
-def test_the_opm_holds_every_burn_and_flies_to_each_scene(client, campaign, tmp_path):
-    r = client.get(f"/v1/campaigns/{campaign['id']}/export/opm", headers=A)
-    assert r.status_code == 200
-    assert "META_START" not in r.text
-    from app.schemas import OrbitIn
-    from app.services.planning import to_orbit
-
-    back = to_orbit(OrbitIn.model_validate({"name": "x", "opm": r.text}), "observer")  # the service reads it back
-    assert abs((back.epoch - datetime.fromisoformat(campaign["epoch"])).total_seconds()) < 1e-6
-    opm = _read(tmp_path, r.text, "campaign_opm")
-    seg = opm.body.segment
-    sv = seg.data.state_vector
-    burns = [b for s in campaign["scenes"] for b in s["burns"]]
-    mans = seg.data.maneuver_parameters
-    assert len(mans) == len(burns)
-    epoch = datetime.fromisoformat(campaign["epoch"])
-    assert abs((_t(sv.epoch) - epoch).total_seconds()) < 1e-3
-    flown = []
-    for man, b in zip(mans, burns, strict=True):
-        t = (_t(man.man_epoch_ignition) - epoch).total_seconds()
-        assert abs(t - (datetime.fromisoformat(b["time"]) - epoch).total_seconds()) < 1e-3
-        dv = np.array([man.man_dv_1.value, man.man_dv_2.value, man.man_dv_3.value])
-        np.testing.assert_allclose(dv * 1000.0, b["dv_m_s"], atol=1e-5)
-        flown.append(((datetime.fromisoformat(b["time"]) - epoch).total_seconds(), dv))
-    # Fly the OPM's state through every burn with the independent integrator; the target from its elements.
-    r0 = np.array([sv.x.value, sv.y.value, sv.z.value])
-    v0 = np.array([sv.x_dot.value, sv.y_dot.value, sv.z_dot.value])
-    t_access = np.array([(datetime.fromisoformat(s["t_access"]) - epoch).total_seconds() for s in campaign["scenes"]])
-    obs, _ = fly_tod_j2(epoch, r0, v0, 0.0, flown, t_access)
-    rt, vt = elements_to_state(*PAPER_TARGET.radians())
-    tgt = propagate_tod_j2(epoch, rt, vt, (PAPER_TARGET.epoch - epoch).total_seconds(), t_access)
-    separation = np.linalg.norm(obs - tgt, axis=0)
-    np.testing.assert_allclose(separation, [s["check"]["separation_km"] for s in campaign["scenes"]], atol=0.2)
-
-
-def test_the_oem_has_one_observer_segment_between_burns(client, campaign, tmp_path):
-    r = client.get(f"/v1/campaigns/{campaign['id']}/export/oem", headers=A)
-    assert r.status_code == 200
-    segs = _read(tmp_path, r.text, "campaign_oem").body.segment
-    burns = [b for s in campaign["scenes"] for b in s["burns"]]
-    assert len(segs) == 1 + len(burns) + 1
-    for k, b in enumerate(burns):
-        before, after = segs[1 + k], segs[2 + k]
-        t_burn = datetime.fromisoformat(b["time"])
-        assert abs((_t(before.metadata.stop_time) - t_burn).total_seconds()) < 1e-3
-        assert abs((_t(after.metadata.start_time) - t_burn).total_seconds()) < 1e-3
-        last, first = before.data.state_vector[-1], after.data.state_vector[0]
-        dr = [first.x.value - last.x.value, first.y.value - last.y.value, first.z.value - last.z.value]
-        dv = [
-            first.x_dot.value - last.x_dot.value,
-            first.y_dot.value - last.y_dot.value,
-            first.z_dot.value - last.z_dot.value,
-        ]
-        assert np.linalg.norm(dr) < 1e-5
-        np.testing.assert_allclose(np.array(dv) * 1000.0, b["dv_m_s"], atol=1e-4)
-
-
 def test_the_czml_marks_every_scene_and_the_csv_every_pass(client, campaign):
     r = client.get(f"/v1/campaigns/{campaign['id']}/export/czml", headers=A)
     assert r.status_code == 200
@@ -172,26 +111,26 @@ def test_a_campaign_over_its_time_budget_is_503_and_stores_nothing(settings):
         assert c.get("/v1/campaigns", headers=A).json()["count"] == before
 
 
-def test_a_campaign_asked_for_asynchronously_is_a_job_whose_result_is_the_same_campaign(client, campaign):
+def test_a_campaign_asked_for_asynchronously_is_a_job_whose_result_is_the_same_campaign(client):
     """``Prefer: respond-async``: 202 and a job at once; the worker process plans the same campaign as the
     synchronous request did (every scene and burn), stored and linked from the job."""
     import time
 
-    r = client.post("/v1/campaigns", json=CAMPAIGN_EXAMPLE, headers={**A, "Prefer": "respond-async"})
+    short = {**CAMPAIGN_EXAMPLE, "duration_days": 8}
+    campaign = client.post("/v1/campaigns", json=short, headers=A).json()  # the same request, answered at once
+    r = client.post("/v1/campaigns", json=short, headers={**A, "Prefer": "respond-async"})
     assert r.status_code == 202, r.text
     assert r.headers["preference-applied"] == "respond-async" and r.json()["kind"] == "campaign"
     job_id = r.json()["id"]
     deadline = time.monotonic() + 240
-    seen_progress = set()
     while True:
         job = client.get(f"/v1/jobs/{job_id}", headers=A).json()
-        seen_progress.add(job["progress"])
         if job["state"] not in ("queued", "running") or time.monotonic() > deadline:
             break
         time.sleep(0.3)
     assert job["state"] == "done", job
     assert job["result_url"] == f"/v1/campaigns/{job['result']['campaign_id']}"
-    assert len(seen_progress) >= 2  # the planner's progress reached the job as it went
+    assert job["progress"] == 1.0 and "jobs: done" in job["log_tail"]
     planned = client.get(job["result_url"], headers=A).json()
     assert planned["scenes"] == campaign["scenes"] and planned["dv_total_m_s"] == campaign["dv_total_m_s"]
     assert client.get(f"/v1/jobs/{job_id}", headers=B).status_code == 404

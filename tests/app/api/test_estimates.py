@@ -363,25 +363,6 @@ def test_cells_in_metres_resample_about_the_centre(client):
     assert r.status_code == 201, r.text
 
 
-def test_an_operators_mesh_is_offered_and_a_bad_one_refused(settings, tmp_path):
-    mesh = tmp_path / "cube-sat.obj"
-    verts = [(x, y, z) for x in (-1.5, 1.5) for y in (-1, 1) for z in (-1, 1)]
-    faces = [(1, 2, 4, 3), (5, 7, 8, 6), (1, 5, 6, 2), (3, 4, 8, 7), (1, 3, 7, 5), (2, 6, 8, 4)]
-    mesh.write_text(
-        "".join(f"v {x} {y} {z}\n" for x, y, z in verts) + "".join(f"f {a} {b} {c} {d}\n" for a, b, c, d in faces)
-    )
-    with TestClient(create_app(settings.model_copy(update={"target_model": mesh}))) as c:
-        assert "cube-sat" in c.get("/readyz").json()["targets"]
-    broken = tmp_path / "broken.obj"
-    broken.write_text("v 1 2\nf 1 2 3\n")
-    with pytest.raises(ModelFileError, match="broken.obj"):
-        create_app(settings.model_copy(update={"target_model": broken}))
-    huge = tmp_path / "huge.obj"
-    huge.write_text(mesh.read_text())
-    with pytest.raises(ModelFileError, match="frame is only"):
-        create_app(settings.model_copy(update={"target_model": huge, "target_scale": 50.0}))
-
-
 def test_a_gsa_simulate_shard_is_read_as_it_is(client, tmp_path):
     """A shard's frames, not its labels and truths, each taken as the normalised frame the file says it is."""
     from inference.simulation.dataset import DatasetSpec, generate

@@ -81,6 +81,7 @@ def test_a_data_set_job_writes_the_bytes_this_process_would(client, tmp_path):
         ({"n": 4, "physics": "fdtd"}, "physics"),
         ({"n": 4, "radar": {"n_azimuth": 60}}, "radar"),
         ({"n": 4, "frames": 3}, "frames"),
+        ({"n": 1_000_000, "radar": {"n_range": 1024, "n_azimuth": 1024}}, "n"),  # 2.2 TB: over GSA_MAX_DATASET_GB
     ],
 )
 def test_a_bad_data_set_request_is_a_422_naming_the_field_and_no_job(client, body, field):
