@@ -100,8 +100,8 @@ def check_address(address: str, timeout: float = CONNECT_TIMEOUT_S) -> tuple[str
     return host, int(port_text)
 
 
-def _ray_init(address: str) -> int:
-    """Connect to (or start) Ray; return the cluster's CPU count."""
+def _ray_init(address: str, logs: bool = False) -> int:
+    """Connect to (or start) Ray (``logs``: the workers' output forwarded here); return the cluster's CPU count."""
     try:
         import ray
     except ImportError:
@@ -111,9 +111,9 @@ def _ray_init(address: str) -> int:
             check_address(address)
         try:
             if address == "local":
-                ray.init(include_dashboard=False, log_to_driver=False, configure_logging=False)
+                ray.init(include_dashboard=False, log_to_driver=logs, configure_logging=False)
             else:
-                ray.init(address=address, log_to_driver=False, configure_logging=False)
+                ray.init(address=address, log_to_driver=logs, configure_logging=False)
         except Exception as exc:  # refused: a token that does not match (RAY_AUTH_TOKEN), another Ray release...
             first = next((ln for ln in str(exc).splitlines() if ln.strip()), type(exc).__name__)
             raise EngineError(f"{RAY_ENV}={address}: Ray would not connect: {first[:300]}") from None
@@ -121,14 +121,15 @@ def _ray_init(address: str) -> int:
     return max(1, int(resources.get("CPU", 1)))
 
 
-def engine_for(address: str | None = None, workers: int | None = None) -> Engine:
-    """The engine for ``address`` (default: ``GSA_RAY_ADDRESS``; unset or empty: this machine's processes)."""
+def engine_for(address: str | None = None, workers: int | None = None, logs: bool = False) -> Engine:
+    """The engine for ``address`` (default: ``GSA_RAY_ADDRESS``; unset or empty: this machine's processes);
+    ``logs``: Ray forwards its workers' output here (the first connection of a process decides)."""
     address = (os.environ.get(RAY_ENV, "") if address is None else address).strip()
     if not address:
         return LocalEngine(max(1, workers or os.cpu_count() or 1))
     if address != "local":
         check_address(address)
-    return RayEngine(address, _ray_init(address))
+    return RayEngine(address, _ray_init(address, logs))
 
 
 def describe(engine: Engine) -> dict[str, Any]:

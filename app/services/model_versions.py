@@ -197,7 +197,7 @@ def run_adaptation(ctx: Any) -> dict[str, Any]:
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
             text=True,
-            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+            env={**os.environ, "PYTHONUNBUFFERED": "1", "GSA_RAY_ADDRESS": settings.ray_address},  # a cluster: there
         )
         assert proc.stdout is not None
         last = ""
@@ -206,8 +206,9 @@ def run_adaptation(ctx: Any) -> dict[str, Any]:
             if line.strip():
                 last = line
             ctx.say(line)
-            if line.startswith("adapt: "):
-                stage = line[len("adapt: ") :]
+            at = line.find("adapt: ")  # on a Ray cluster the line comes prefixed with its worker
+            if at >= 0:
+                stage = line[at + len("adapt: ") :]
                 m = EPOCH.search(line)
                 if m:
                     ctx.report(stage, int(m.group(1)), int(m.group(2)), 0.1 + 0.75 * int(m.group(1)) / int(m.group(2)))

@@ -32,6 +32,7 @@ import argparse
 import copy
 import json
 import math
+import os
 import platform
 import shutil
 import sys
@@ -205,10 +206,24 @@ def adapt(
     from inference.simulation.targets import builtin_target
     from inference.training.checkpoints import save_checkpoint
     from inference.training.recover import recover
-    from inference.training.train import uses_bf16
+    from inference.training.train import agreed_stop, distributed_world, start_distributed, uses_bf16
     from inference.trust import card_radar_and_target
 
     opts = opts or AdaptOptions()
+    rank, world = distributed_world()  # under torchrun or Ray Train: one of `world` processes (DDP on the CPU)
+    if world > 1:
+        if opts.batch_size < world:
+            raise InferenceError(
+                f"batch size {opts.batch_size} is smaller than the {world} processes that share each step",
+                field="batch_size",
+            )
+        start_distributed(torch.device("cpu"))
+    lead = rank == 0
+
+    def say(text: str) -> None:
+        if lead:
+            _say(text)
+
     t0 = time.perf_counter()
     cpu0 = time.process_time()
     base = Path(base_dir)
@@ -236,17 +251,17 @@ def adapt(
             field="frames",
         )
     train_idx, val_idx = scene_split(frames.scenes, opts.validation_share, opts.seed)
-    _say(f"reading the base set {base} back from its ONNX files")
+    say(f"reading the base set {base} back from its ONNX files")
     unet, swin, cfg, parity = recover(base)
     train, val = frames.subset(train_idx), frames.subset(val_idx)
-    _say(
+    say(
         f"{len(frames)} labelled frames ({left_out} outside +-{max_angle:g} deg left out): {len(train)} from "
         f"{len(set(train.scenes))} scene(s) to train on, {len(val)} from {len(set(val.scenes))} held out"
     )
     y_train = label_masks(train.angles_deg, radar, model)
     y_val = label_masks(val.angles_deg, radar, model)
     n_sim = int(math.ceil(opts.sim_ratio * len(train)))
-    _say(f"simulating {n_sim} frames of the base set's kind to mix in")
+    say(f"simulating {n_sim} frames of the base set's kind to mix in")
     sim = simulated_frames(n_sim, max_angle, radar)
     x_all = np.concatenate([train.frames, sim["image"]])
     y_all = np.concatenate([y_train, sim["label"]])
@@ -261,6 +276,14 @@ def adapt(
     opt_u = torch.optim.Adam(unet.parameters(), lr=opts.lr_unet)
     tail = cast(Any, swin).tail_modules(1).parameters() if opts.train_swin else iter(())
     opt_s = torch.optim.Adam(list(tail) or [torch.zeros(1, requires_grad=True)], lr=opts.lr_swin)
+    step_u: torch.nn.Module = unet  # what each step runs: under DDP, wrappers that average the gradients
+    step_s: torch.nn.Module = swin
+    if world > 1:
+        from torch.nn.parallel import DistributedDataParallel as DDP
+
+        step_u = DDP(unet)  # every process starts from process 0's weights
+        if opts.train_swin:
+            step_s = DDP(swin)
     # What must not be lost: fresh frames of our own kind, scored beside the held-out labelled ones; the weights
     # kept are those with the lowest sum of both losses.
     own = simulated_frames(max(16, len(val)), max_angle, radar, SIM_SEED + 1)
@@ -276,13 +299,14 @@ def adapt(
             "score": mine["loss"] + ours["loss"],
         }
 
-    before = validate()
-    _say(
-        f"before: held-out Swin median {before['swin_geodesic_median_deg']:.2f} deg, "
-        f"UNet++ IoU {before['iou_median']:.3f}, loss {before['loss']:.4f}; our own frames' Swin median "
-        f"{before['own_swin_geodesic_median_deg']:.2f} deg"
-    )
-    best = (before["score"], 0, copy.deepcopy(unet.state_dict()), copy.deepcopy(swin.state_dict()))
+    before = validate() if lead else {"score": 0.0}  # process 0 scores, keeps the best weights and writes
+    if lead:
+        say(
+            f"before: held-out Swin median {before['swin_geodesic_median_deg']:.2f} deg, "
+            f"UNet++ IoU {before['iou_median']:.3f}, loss {before['loss']:.4f}; our own frames' Swin median "
+            f"{before['own_swin_geodesic_median_deg']:.2f} deg"
+        )
+    best = (before["score"], 0, copy.deepcopy(unet.state_dict()), copy.deepcopy(swin.state_dict())) if lead else None
     history = [{"epoch": 0, **before, "seconds": 0.0}]
     deadline = t0 + 60.0 * opts.max_minutes
     for epoch in range(1, opts.epochs + 1):
@@ -290,17 +314,22 @@ def adapt(
         swin.train()
         order = rng.permutation(len(x_all))
         sums = [0.0, 0.0]
+        seen = 0  # frames this process stepped on (its share of each batch under DDP)
         for k in range(0, len(order), opts.batch_size):
             sel = np.sort(order[k : k + opts.batch_size])
+            if world > 1:  # the same batches everywhere (one seed); each process takes its share of each
+                if len(sel) < world:
+                    continue
+                sel = sel[rank::world]
             x = torch.from_numpy(x_all[sel, None])
             y = torch.from_numpy(y_all[sel, None].astype(np.float32))
             a = torch.from_numpy(a_all[sel] / ANGLE_SCALE_DEG).float()
             x, y = _augment(x, y, opts, gen)
             with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
-                enh = unet(x)
+                enh = step_u(x)
                 loss_u = relative_frobenius_loss(enh.float(), y)
                 if opts.train_swin:
-                    loss_s = angle_loss(swin(enh.detach()).float(), a)
+                    loss_s = angle_loss(step_s(enh.detach()).float(), a)
                 else:
                     loss_s = torch.zeros(())
             if opts.train_swin:
@@ -312,28 +341,35 @@ def adapt(
             opt_u.step()
             sums[0] += float(loss_u.detach()) * len(sel)
             sums[1] += float(loss_s.detach()) * len(sel)
-        score = validate()
-        history.append(
-            {
-                "epoch": epoch,
-                **score,
-                "train_unet_loss": sums[0] / len(order),
-                "train_swin_loss": sums[1] / len(order),
-                "seconds": round(time.perf_counter() - t0, 1),
-            }
-        )
-        mark = ""
-        if score["score"] < best[0]:
-            best = (score["score"], epoch, copy.deepcopy(unet.state_dict()), copy.deepcopy(swin.state_dict()))
-            mark = " (best so far)"
-        _say(
-            f"epoch {epoch}/{opts.epochs}: held-out Swin median {score['swin_geodesic_median_deg']:.2f} deg, "
-            f"IoU {score['iou_median']:.3f}, loss {score['loss']:.4f}; own frames' Swin median "
-            f"{score['own_swin_geodesic_median_deg']:.2f} deg{mark} [{time.perf_counter() - t0:.0f} s]"
-        )
-        if time.perf_counter() > deadline:
-            _say(f"max_minutes {opts.max_minutes:g} reached after epoch {epoch}")
+            seen += len(sel)
+        if lead:
+            score = validate()
+            history.append(
+                {
+                    "epoch": epoch,
+                    **score,
+                    "train_unet_loss": sums[0] / max(seen, 1),
+                    "train_swin_loss": sums[1] / max(seen, 1),
+                    "seconds": round(time.perf_counter() - t0, 1),
+                }
+            )
+            mark = ""
+            assert best is not None
+            if score["score"] < best[0]:
+                best = (score["score"], epoch, copy.deepcopy(unet.state_dict()), copy.deepcopy(swin.state_dict()))
+                mark = " (best so far)"
+            say(
+                f"epoch {epoch}/{opts.epochs}: held-out Swin median {score['swin_geodesic_median_deg']:.2f} deg, "
+                f"IoU {score['iou_median']:.3f}, loss {score['loss']:.4f}; own frames' Swin median "
+                f"{score['own_swin_geodesic_median_deg']:.2f} deg{mark} [{time.perf_counter() - t0:.0f} s]"
+            )
+        if agreed_stop(time.perf_counter() > deadline, world, torch.device("cpu")):
+            say(f"max_minutes {opts.max_minutes:g} reached after epoch {epoch}")
             break
+    if not lead:  # process 0 exports and recalibrates; the others are done
+        _leave_group(world)
+        return {}
+    assert best is not None
     unet.load_state_dict(best[2])
     swin.load_state_dict(best[3])
     after = validate()
@@ -365,6 +401,7 @@ def adapt(
         "before": before,
         "after": after,
         "bf16": bf16,
+        "processes": world,
         "cpu": platform.processor() or platform.machine(),
         "train_seconds": round(train_seconds, 1),
     }
@@ -377,14 +414,14 @@ def adapt(
         data = {k: card.get(k) for k in ("radar", "target", "target_model", "max_angle_deg")}
         data["target"] = data["target"] or trained_target
         write_json(work / "training.json", {"mode": "adapt", "data": data, "complete": True, "seed": opts.seed})
-        _say(f"exporting to {out} (int8 UNet++, float16 Swin)")
+        say(f"exporting to {out} (int8 UNet++, float16 Swin)")
         mixed = np.concatenate([train.frames, sim["image"]])
         int8_frames = mixed[np.random.default_rng(opts.seed).permutation(len(mixed))[:128]]
         try:
             exported = export(work, out, int8_frames, extra={"adaptation": record}, half=True, int8=True)
             record["export"] = "int8 UNet++ (as shipped), float16 Swin"
         except InferenceError as exc:  # int8 moved the angles too far: keep UNet++ in float16, and say why
-            _say(f"int8 refused ({exc}); exporting UNet++ in float16")
+            say(f"int8 refused ({exc}); exporting UNet++ in float16")
             record["export"] = f"float16 UNet++ and Swin: int8 refused ({exc})"
             exported = export(work, out, int8_frames, extra={"adaptation": record}, half=True, int8=False)
     finally:
@@ -397,8 +434,18 @@ def adapt(
     record["minutes"] = round((time.perf_counter() - t0) / 60.0, 2)
     exported["adaptation"] = record
     write_json(out / "model_card.json", exported)
-    _say(f"done in {record['minutes']:.1f} min ({record['cpu_minutes']:.1f} CPU min): {out}")
+    say(f"done in {record['minutes']:.1f} min ({record['cpu_minutes']:.1f} CPU min): {out}")
+    _leave_group(world)
     return record
+
+
+def _leave_group(world: int) -> None:
+    """Under DDP: wait for every process, then leave the group."""
+    if world > 1:
+        import torch.distributed as dist
+
+        dist.barrier()
+        dist.destroy_process_group()
 
 
 def _coverage(angles: NDArray[np.float64], limit: float) -> float:
@@ -472,6 +519,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--batch-size", type=int, default=d.batch_size)
     p.add_argument("--train-swin", action="store_true", help="also fine-tune Swin's last stage (default: UNet++ only)")
     p.add_argument("--seed", type=int, default=d.seed)
+    p.add_argument(
+        "--ray-workers", type=int, help="with GSA_RAY_ADDRESS set: Ray Train workers (default 2), DDP on their CPUs"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -491,7 +541,16 @@ def run(args: argparse.Namespace) -> int:
     if out.resolve() == base.resolve():
         raise InferenceError("--out is the base folder: write the adapted set to a new folder", field="out")
     # ``gsa adapt --plan`` reads the folder beforehand (the planner places its J2000 labels): ``args.labelled``.
-    record = adapt(base, getattr(args, "labelled", None) or args.frames, out, opts, args.target)
+    frames = getattr(args, "labelled", None) or args.frames
+    address = os.environ.get("GSA_RAY_ADDRESS", "").strip()
+    if address:  # Ray Train's TorchTrainer: DDP over the cluster's workers (CPUs)
+        from inference.training.ray_train import adapt_on_ray
+
+        record = adapt_on_ray(base, frames, out, opts, args.target, address, args.ray_workers)
+    elif args.ray_workers is not None:
+        raise InferenceError("--ray-workers needs a cluster: set GSA_RAY_ADDRESS", field="ray_workers")
+    else:
+        record = adapt(base, frames, out, opts, args.target)
     print(json.dumps({k: record[k] for k in ("before", "after", "chosen_epoch", "calibration", "minutes")}, indent=1))
     return 0
 

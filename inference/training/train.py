@@ -103,7 +103,8 @@ def distributed_world() -> tuple[int, int]:
     return (rank, world) if world > 1 else (0, 1)
 
 
-def _start_distributed(dev: torch.device) -> None:
+def start_distributed(dev: torch.device) -> None:
+    """Join the process group torchrun or Ray Train set up for this process (NCCL on a GPU, gloo on a CPU)."""
     import torch.distributed as dist
 
     if not dist.is_initialized():
@@ -255,7 +256,7 @@ def train(data_dir: str | Path, out_dir: str | Path, options: TrainOptions | Non
         t_epoch = time.perf_counter()
         losses = _epoch(run, epoch, rng, run_u, run_s)
         if run.rank != 0:  # process 0 scores, reports and checkpoints; the others step on with it
-            if _stop_agreed(run, False):
+            if agreed_stop(False, run.world, run.dev):
                 break
             continue
         record: dict[str, Any] = {"epoch": epoch + 1, **losses, **_score(run), "seconds": time.perf_counter() - t_epoch}
@@ -271,7 +272,7 @@ def train(data_dir: str | Path, out_dir: str | Path, options: TrainOptions | Non
         )
         _checkpoint(run, epoch + 1, ckpt_path)
         out_of_time = opts.max_minutes is not None and (time.perf_counter() - t_start) / 60.0 > opts.max_minutes
-        if _stop_agreed(run, out_of_time):
+        if agreed_stop(out_of_time, run.world, run.dev):
             print(
                 f"train: stopping after epoch {epoch + 1}: {opts.max_minutes} min used; --resume continues",
                 file=sys.stderr,
@@ -287,13 +288,13 @@ def train(data_dir: str | Path, out_dir: str | Path, options: TrainOptions | Non
     return record
 
 
-def _stop_agreed(run: _Run, stop: bool) -> bool:
+def agreed_stop(stop: bool, world: int, dev: torch.device) -> bool:
     """Process 0's word on stopping, heard by every process (alone: its own)."""
-    if run.world == 1:
+    if world == 1:
         return stop
     import torch.distributed as dist
 
-    flag = torch.tensor([1 if stop else 0], device=run.dev)
+    flag = torch.tensor([1 if stop else 0], device=dev)
     dist.broadcast(flag, 0)
     return bool(flag.item())
 
@@ -326,7 +327,7 @@ def _set_up(data_dir: Path, out: Path, opts: TrainOptions) -> _Run:
                 f"batch size {opts.batch_size} is smaller than the {world} processes that share each step",
                 field="batch_size",
             )
-        _start_distributed(dev)
+        start_distributed(dev)
     unet, swin = build_models(cfg)
     for name, given, net in (("unet_from", opts.unet_from, unet), ("swin_from", opts.swin_from, swin)):
         if given is not None:

@@ -132,6 +132,40 @@ def test_gsa_train_on_the_cluster_is_ray_trains_torchtrainer_with_ddp(cluster, s
     assert "trained 2 epochs" in done.stdout
 
 
+def test_gsa_adapt_on_the_cluster_is_ray_train_with_ddp(cluster, smoke_models, tmp_path):
+    """An adaptation on the cluster: two Ray Train workers share each step (DDP on their CPUs); worker 0 keeps the
+    best weights, exports and recalibrates; its lines reach the command's stderr."""
+    import json
+
+    import numpy as np
+
+    from inference.labelled import write_frame
+    from inference.simulation.dataset import render_frames
+    from tests.utils.models import SMOKE_RADAR
+
+    folder = tmp_path / "lab"
+    folder.mkdir()
+    arr = render_frames(DatasetSpec(n=24, seed=77, variety="robust"), SMOKE_RADAR, 0, 24)
+    for k in range(24):
+        write_frame(
+            folder / f"f{k:02d}.npz",
+            arr["image"][k].astype(np.float32),
+            angles_deg=arr["angles_deg"][k],
+            scene=f"s{k // 8}",
+            normalised=True,
+        )
+    env = {**os.environ, "GSA_RAY_ADDRESS": cluster, "OMP_NUM_THREADS": "1"}
+    cmd = [sys.executable, "-m", "app.cli", "adapt", "--frames", str(folder), "--base", str(smoke_models)]
+    cmd += ["--out", str(tmp_path / "adapted"), "--epochs", "2", "--sim-ratio", "0.5", "--batch-size", "8"]
+    done = subprocess.run([*cmd, "--ray-workers", "2"], env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    card = json.loads((tmp_path / "adapted" / "model_card.json").read_text())
+    assert card["adaptation"]["processes"] == 2 and card["adaptation"]["labelled"]["frames"] == 24
+    assert "2 Ray Train workers" in done.stderr and "adapt: epoch 2/2" in done.stderr
+    assert "recalibrated" in card["adaptation"]["calibration"] and (tmp_path / "adapted" / "unetpp.onnx").is_file()
+    assert json.loads(done.stdout)["chosen_epoch"] in (0, 1, 2)
+
+
 def test_an_address_where_no_head_answers_is_a_clear_error_in_seconds(tmp_path):
     port = _free_port()  # nothing listens there
     started = time.monotonic()
