@@ -31,8 +31,13 @@ def pg_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module", params=["sqlite", "postgresql"])
 def backend(request: pytest.FixtureRequest) -> str:
-    """Every database-backed test module runs once on SQLite and once on a real PostgreSQL server."""
+    """Every database-backed test module runs once on SQLite and once on a real PostgreSQL server; a test whose
+    subject is not the database is marked ``@SQLITE_ONLY`` and runs once, on the module's SQLite client."""
     return str(request.param)
+
+
+# A database-backed test whose subject is not the database (numerics, memory, start-up): once, on SQLite.
+SQLITE_ONLY = pytest.mark.parametrize("backend", ["sqlite"], indirect=True, scope="module")
 
 
 @pytest.fixture(scope="module")

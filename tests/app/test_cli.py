@@ -162,7 +162,11 @@ def test_simulate_a_pass_then_fuse_it(tmp_path, smoke_models):
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "integration_s" in bad.stderr, bad.stderr
 
 
-def test_bad_pass_requests_are_one_line_errors(tmp_path):
+def test_bad_pass_requests_are_one_line_errors(tmp_path, capsys, monkeypatch):
+    """In this process (the command's own main; a child process per case cost 2 s of imports each)."""
+    from app.cli import main
+
+    monkeypatch.setenv("GSA_DATA_DIR", str(tmp_path / "data"))
     req = tmp_path / "paper.json"
     req.write_text(json.dumps(PAPER_EXAMPLE))
     cases = [
@@ -172,14 +176,17 @@ def test_bad_pass_requests_are_one_line_errors(tmp_path):
         (["--snr-reference", "12"], "--snr-reference"),
     ]
     for extra, message in cases:
-        out = _gsa("simulate", "--pass", str(req), "--out", str(tmp_path / "p"), *extra, cwd=tmp_path)
-        assert out.returncode == 2 and out.stderr.count("\n") == 1 and message in out.stderr, (extra, out.stderr)
+        capsys.readouterr()
+        code = main(["simulate", "--pass", str(req), "--out", str(tmp_path / "p"), *extra])
+        err = capsys.readouterr().err
+        assert code == 2 and err.count("\n") == 1 and message in err, (extra, err)
         assert not (tmp_path / "p").exists() and not (tmp_path / "p.partial").exists()
     (tmp_path / "taken").mkdir()
-    taken = _gsa("simulate", "--pass", str(req), "--out", str(tmp_path / "taken"), cwd=tmp_path)
-    assert taken.returncode == 2 and "exists" in taken.stderr
-    empty = _gsa("pass", str(tmp_path / "taken"), cwd=tmp_path)
-    assert empty.returncode == 2 and empty.stderr.count("\n") == 1 and "pass.json" in empty.stderr
+    assert main(["simulate", "--pass", str(req), "--out", str(tmp_path / "taken")]) == 2
+    assert "exists" in capsys.readouterr().err
+    assert main(["pass", str(tmp_path / "taken")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "pass.json" in err
 
 
 def test_plan_export_writes_every_format(tmp_path):

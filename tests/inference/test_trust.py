@@ -13,7 +13,7 @@ from inference.simulation.catalogue import FRESH_SEED, KINDS, bad_frames, good_f
 from inference.trust import load_checkers
 
 N_GOOD = 200
-N_BAD = 8  # about a second a frame (library search and fit); bench.trust measures the flag rates on more
+N_BAD = 6  # about a second a frame (library search and fit); bench.trust measures the flag rates on more
 
 
 @pytest.fixture(scope="module")

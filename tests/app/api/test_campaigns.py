@@ -9,7 +9,7 @@ import pytest
 from ccsds_ndm.ndm_io import NdmIo
 
 from app.schemas import CAMPAIGN_EXAMPLE
-from tests.conftest import KEY_A, KEY_B
+from tests.conftest import KEY_A, KEY_B, SQLITE_ONLY
 
 A = {"X-API-Key": KEY_A}
 B = {"X-API-Key": KEY_B}
@@ -111,6 +111,7 @@ def test_a_campaign_over_its_time_budget_is_503_and_stores_nothing(settings):
         assert c.get("/v1/campaigns", headers=A).json()["count"] == before
 
 
+@SQLITE_ONLY
 def test_a_campaign_asked_for_asynchronously_is_a_job_whose_result_is_the_same_campaign(client):
     """``Prefer: respond-async``: 202 and a job at once; the worker process plans the same campaign as the
     synchronous request did (every scene and burn), stored and linked from the job."""

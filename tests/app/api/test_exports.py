@@ -14,7 +14,7 @@ from skyfield.api import EarthSatellite, wgs84
 from app.schemas import PAPER_EXAMPLE
 from planner.elements import elements_to_state
 from planner.propagation import skyfield_times, timescale
-from tests.conftest import KEY_A, KEY_B
+from tests.conftest import KEY_A, KEY_B, SQLITE_ONLY
 from tests.utils.j2 import propagate_tod_j2
 from tests.utils.orbits import ISS_EPOCH, ISS_L1, ISS_L2, PAPER_TARGET
 
@@ -38,6 +38,7 @@ def _t(kvn_time):
     return datetime.fromisoformat(str(kvn_time).rstrip("Z")).replace(tzinfo=UTC)
 
 
+@SQLITE_ONLY
 def test_opm_is_read_back_and_its_burn_meets_the_target(client, plan, tmp_path):
     r = client.get(f"/v1/plans/{plan['id']}/export/opm", headers=A)
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/plain")
@@ -88,6 +89,7 @@ def test_opm_is_read_back_and_its_burn_meets_the_target(client, plan, tmp_path):
     assert abs(separation - ph["verification"]["separation_km"]) < 0.2, separation
 
 
+@SQLITE_ONLY
 def test_oem_is_read_back_with_the_burn_between_segments(client, plan, tmp_path):
     r = client.get(f"/v1/plans/{plan['id']}/export/oem", headers=A)
     assert r.status_code == 200
@@ -277,6 +279,7 @@ def test_geojson_tracks_station_and_where_it_sees_the_target(client, plan):
     assert _central_deg(a_lat, a_lon, np.array([o_lat]), np.array([o_lon]))[0] < standoff_deg + 0.05
 
 
+@SQLITE_ONLY
 def test_geojson_night_side_against_skyfield(client, plan):
     """The night polygon at T_access holds the ground points where skyfield puts the Sun's centre below the
     horizon (its own topocentric altitude, de421), and none where it is above, away from a 1-deg band at the line."""
@@ -306,6 +309,7 @@ def test_geojson_night_side_against_skyfield(client, plan):
     assert poly.contains(Point(a_lon, a_lat))
 
 
+@SQLITE_ONLY
 def test_the_opm_goes_back_in_as_an_observer(client, plan):
     """The service reads its own OPM (502.0-B-3 KVN: no META_START/META_STOP): as a new plan's observer, its
     state read back to the millimetre and planned."""

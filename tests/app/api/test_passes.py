@@ -15,7 +15,7 @@ from inference.simulation.scene import simulate
 from inference.simulation.targets import tiangong_like
 from scene import choose_window
 from scene.simulation import PassOptions, render_pass, simulate_pass
-from tests.conftest import KEY_A, KEY_B
+from tests.conftest import KEY_A, KEY_B, SQLITE_ONLY
 from tests.utils.models import SMOKE_RADAR
 
 A = {"X-API-Key": KEY_A}
@@ -91,6 +91,7 @@ def test_a_pass_is_fused_and_stored(client, plan):
     assert body["id"] in client.get(f"/v1/plans/{plan['id']}", headers=A).json()["pass_ids"]
 
 
+@SQLITE_ONLY
 def test_a_pass_sent_asynchronously_is_a_job_whose_pass_is_the_synchronous_one(client, plan):
     """``Prefer: respond-async``: 202 and a job; the worker process fuses the same frames to the same attitude
     as the synchronous request (every frame's too), stored and linked from the job; a bad one is a 422 now."""

@@ -6,7 +6,7 @@ from sqlalchemy import create_engine, func, select, text
 
 from app.db.models import Plan
 from app.schemas import PAPER_EXAMPLE
-from tests.conftest import KEY_A, KEY_B
+from tests.conftest import KEY_A, KEY_B, SQLITE_ONLY
 from tests.utils.orbits import ISS_L1, ISS_L2
 
 A = {"X-API-Key": KEY_A}
@@ -336,6 +336,7 @@ def test_a_plan_over_its_memory_budget_is_503_and_stores_nothing(settings, monke
         assert c.get("/v1/plans", headers=A).json()["count"] == before
 
 
+@SQLITE_ONLY
 def test_memory_stays_flat_over_repeated_plans(client):
     """A bounded soak: 40 one-day plans through the API; resident memory after the first 10 grows < 5 MB
     (each plan used to keep every integration step: ~0.4 MB a one-day plan, 12 MB here). make load runs 500."""
