@@ -13,13 +13,21 @@ from sqlalchemy.orm import Session, sessionmaker
 
 def _prepare_sqlite_file(url: str) -> None:
     """Create a SQLite database's folder (0700) and file (0600) before SQLite does (it would use the umask:
-    a world-readable 0644); its -wal and -shm files take the file's mode."""
+    a world-readable 0644); its -wal and -shm files take the file's mode.
+
+    An existing file is left unopened: closing any descriptor of a file drops every POSIX lock this process holds
+    on it, so opening and closing the database beside a live connection (a second engine in one process: a
+    restart in the tests, ``gsa serve``'s own start-up session) took that connection's locks away, and another
+    process's commits were lost under its stale pages."""
     from app.core.security import private_dir
 
     path = url.split("///", 1)[-1]
-    if path and path != ":memory:":
+    if path and path != ":memory:" and not os.path.exists(path):
         private_dir(Path(path).parent)
-        os.close(os.open(path, os.O_WRONLY | os.O_CREAT, 0o600))
+        try:
+            os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+        except FileExistsError:
+            pass  # made meanwhile by another process
 
 
 def make_engine(url: str) -> Engine:

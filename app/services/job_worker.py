@@ -113,13 +113,18 @@ def run(job_id: str) -> int:
 
     settings = settings_from_env()
     factory = make_session_factory(make_engine(settings.database_url))
-    with factory() as s:
-        job = s.get(Job, job_id)
-        if job is None or job.state != "running":
-            return 0  # cancelled before it started, or claimed twice: nothing to do
-        s.execute(update(Job).where(Job.id == job_id).values(runner=f"{host()}:{os.getpid()}", stage="started"))
+    with factory() as s:  # write first: a read then a write in one SQLite transaction can meet another's commit
+        mine = s.execute(
+            update(Job)
+            .where(Job.id == job_id, Job.state == "running")
+            .values(runner=f"{host()}:{os.getpid()}", stage="started")
+        )
         s.commit()
-        s.refresh(job)
+        job = s.get(Job, job_id)
+        if not getattr(mine, "rowcount", 0) or job is None:
+            state = "gone" if job is None else job.state
+            print(f"jobs: job {job_id} is {state}, not running: nothing to do", file=sys.stderr, flush=True)
+            return 0  # cancelled before it started: nothing to do
         ctx = JobContext(job, settings, factory)
 
     def stop(_signum: int, _frame: Any) -> None:
@@ -150,6 +155,9 @@ def run(job_id: str) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    import faulthandler
+
+    faulthandler.enable()  # a crash of the interpreter itself leaves its stack in the job's log
     argv = sys.argv[1:] if argv is None else argv
     logging.basicConfig(level=logging.WARNING)
     if len(argv) != 1:

@@ -171,7 +171,9 @@ def recover(session: Session, resume: bool = True) -> int:
     MAX_ATTEMPTS starts, saying why; while serving, failed (its worker died: out of memory, killed). Return how
     many were touched. Another host's jobs are left to it."""
     touched = 0
-    for job in session.scalars(select(Job).where(Job.state == "running")):
+    found = list(session.scalars(select(Job).where(Job.state == "running")))
+    session.commit()  # each change below is a transaction of its own that writes first (SQLite: no stale read)
+    for job in found:
         name, _, pid = job.runner.rpartition(":")
         if name != host() or not pid.isdigit():
             continue
@@ -199,8 +201,9 @@ def recover(session: Session, resume: bool = True) -> int:
         what = "the service restarted while this ran" if resume else "its worker process is gone"
         values["log"] = append_log(job.log, [f"jobs: {what}; {values['state']}"])
         values["updated_at"] = now
-        touched += _count(session.execute(update(Job).where(Job.id == job.id, Job.state == "running").values(**values)))
-    session.commit()
+        seen = (Job.id == job.id, Job.state == "running", Job.runner == job.runner)
+        touched += _count(session.execute(update(Job).where(*seen).values(**values)))
+        session.commit()
     return touched
 
 
@@ -291,25 +294,23 @@ class Dispatcher:
             if code is None:
                 continue
             del self.children[job_id]
-            with self.session_factory() as s:  # a worker that died without a word: say so
+            with self.session_factory() as s:  # a worker that died without a word: say so (writes first, no read)
                 now = utcnow()
-                job = s.get(Job, job_id)
-                if job is not None and job.state == "running" and job.runner == f"{host()}:{proc.pid}":
-                    reason = f"the worker process ended with status {code} before finishing"
-                    if code < 0:
-                        reason += f" (signal {-code}; out of memory kills with 9)"
-                    s.execute(
-                        update(Job)
-                        .where(Job.id == job_id, Job.state == "running")
-                        .values(
-                            state="cancelled" if job.cancel_requested else "failed",
-                            error=None if job.cancel_requested else reason,
-                            stage="cancelled" if job.cancel_requested else job.stage,
-                            finished_at=now,
-                            updated_at=now,
-                        )
-                    )
-                    s.commit()
+                reason = f"the worker process ended with status {code} before finishing"
+                if code < 0:
+                    reason += f" (signal {-code}; out of memory kills with 9)"
+                mine = (Job.id == job_id, Job.state == "running", Job.runner == f"{host()}:{proc.pid}")
+                s.execute(
+                    update(Job)
+                    .where(*mine, Job.cancel_requested.is_(True))
+                    .values(state="cancelled", stage="cancelled", finished_at=now, updated_at=now)
+                )
+                s.execute(
+                    update(Job)
+                    .where(*mine, Job.cancel_requested.is_(False))
+                    .values(state="failed", error=reason, finished_at=now, updated_at=now)
+                )
+                s.commit()
         with _file_lock(Path(self.settings.data_dir) / "jobs" / "dispatch.lock"), self.session_factory() as s:
             recover(s, resume=False)  # a worker of this host that died unseen no longer holds a place
             running = [
@@ -319,6 +320,7 @@ class Dispatcher:
             queued = list(
                 s.scalars(select(Job).where(Job.state == "queued").order_by(Job.created_at).limit(max(room, 0)))
             )
+            s.commit()  # the reads end here: each claim below writes first
             for job in queued:
                 now = utcnow()
                 claimed = _count(
@@ -353,6 +355,8 @@ class Dispatcher:
         log = Path(self.settings.data_dir) / "jobs" / f"{job_id}.log"
         log.parent.mkdir(parents=True, exist_ok=True)
         with open(log, "ab") as out:
+            out.write(f"jobs: {host()}:{os.getpid()} starts a worker for {job_id}\n".encode())
+            out.flush()
             return subprocess.Popen(
                 [sys.executable, "-m", "app.services.job_worker", job_id],
                 stdout=out,
