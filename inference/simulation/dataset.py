@@ -226,10 +226,9 @@ SHARD_TIME = (1980, 1, 1, 0, 0, 0)  # every member's zip time: a shard's bytes a
 
 
 def shard_bytes(arrays: dict[str, NDArray[Any]]) -> bytes:
-    """An ``.npz`` of ``arrays`` (``np.load`` reads it) whose bytes depend on the arrays alone.
-
-    ``np.savez`` stamps each member with the wall-clock time, so the same frames written a second apart hashed
-    differently; here every member carries the same fixed time.
+    """An ``.npz`` of ``arrays`` (``np.load`` reads it) whose bytes depend on the arrays alone, made in memory so a
+    Ray task can hand it back. Every member carries one fixed zip time, stated here rather than left to
+    ``zipfile``'s default for members opened by name (which ``np.savez`` relies on).
     """
     import io
     import zipfile

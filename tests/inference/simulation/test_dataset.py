@@ -215,8 +215,8 @@ def test_bad_variety_is_refused_before_any_work():
 
 
 def test_a_shard_is_the_same_bytes_whenever_it_is_written(tmp_path, monkeypatch):
-    """np.savez stamped each member with the wall clock: the same frames written a second apart hashed apart.
-    Written a year later (the clock moved), a shard is byte for byte the one written now."""
+    """A shard's bytes are its arrays' alone: written a year later (the clock moved), it is byte for byte the one
+    written now (each member carries one fixed zip time; a writer stamping the clock would fail this)."""
     import time as time_module
 
     spec = DatasetSpec(n=2, seed=3, shard_size=2)
