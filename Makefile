@@ -40,6 +40,7 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.passes
 	$(BIN)/python -m bench.load
 	$(BIN)/python -m bench.reliability
+	$(BIN)/python -m bench.exports
 	$(BIN)/python -m bench.jobs
 
 # 5000+ generated requests per database (313 per route); the counts go to BENCHMARKS.md.
@@ -51,6 +52,7 @@ fuzz: $(STAMP)
 load: $(STAMP)
 	$(BIN)/python -m bench.load
 	$(BIN)/python -m bench.reliability
+	$(BIN)/python -m bench.exports
 
 # The house rules CI holds before the tests: lint, format and types (mypy strict on app, planner, inference, scene).
 lint: $(STAMP)

@@ -11,7 +11,18 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from app.core.security import HMAC_SCHEME, LEGACY_SCHEME, digests_equal, key_digest, key_prefix, new_api_key
-from app.db.models import ApiKey, Campaign, Estimate, GroundStation, LabelledFrame, Operator, Pass, Plan, utcnow
+from app.db.models import (
+    ApiKey,
+    Campaign,
+    Estimate,
+    GroundStation,
+    LabelledFrame,
+    Operator,
+    Pass,
+    Plan,
+    PlanExport,
+    utcnow,
+)
 from app.schemas.common import name_key
 
 if TYPE_CHECKING:
@@ -91,8 +102,17 @@ def count_api_keys(*, session: Session) -> int:
     return int(session.scalar(select(func.count()).select_from(ApiKey)) or 0)
 
 
-def create_plan(*, session: Session, operator_id: str, request: PlanCreate, result: PlanResult) -> Plan:
-    """Store a plan: its request as validated (a stored station's copy in it) and its typed result."""
+def create_plan(
+    *,
+    session: Session,
+    operator_id: str,
+    request: PlanCreate,
+    result: PlanResult,
+    plan_id: str | None = None,
+    exports: dict[str, bytes] | None = None,
+) -> Plan:
+    """Store a plan: its request as validated (a stored station's copy in it), its typed result and, in the same
+    transaction, its exports (name to compressed body) as written when it was made."""
     assert not isinstance(request.ground_station, str)  # the service resolves a station's name before planning
     chosen = result.chosen
     plan = Plan(
@@ -105,9 +125,27 @@ def create_plan(*, session: Session, operator_id: str, request: PlanCreate, resu
         request=request.model_dump(mode="json"),
         result=result.stored(),
     )
+    if plan_id is not None:
+        plan.id = plan_id
     session.add(plan)
+    session.flush()  # the plan's row first: its exports point at it
+    session.add_all(PlanExport(plan_id=plan.id, name=name, body=body) for name, body in (exports or {}).items())
     session.commit()
     return plan
+
+
+def get_plan_export(*, session: Session, plan_id: str, name: str) -> bytes | None:
+    """A plan's stored export (compressed), or None where it has none (a plan made before exports were stored)."""
+    return session.scalar(select(PlanExport.body).where(PlanExport.plan_id == plan_id, PlanExport.name == name))
+
+
+def store_plan_exports(*, session: Session, plan_id: str, exports: dict[str, bytes]) -> None:
+    """Keep the exports made for an older plan on its first request (another request storing them first wins)."""
+    try:
+        session.add_all(PlanExport(plan_id=plan_id, name=name, body=body) for name, body in exports.items())
+        session.commit()
+    except IntegrityError:
+        session.rollback()
 
 
 def create_campaign(*, session: Session, operator_id: str, request: CampaignCreate, result: CampaignResult) -> Campaign:

@@ -1,68 +1,46 @@
-"""CCSDS navigation messages in KVN (502.0-B-3), as inputs: an OMM's mean elements and an OPM's state vector.
+"""CCSDS navigation data messages (502.0-B-3) read and written with ``ccsds-ndm``: KVN and XML.
 
-KVN is one ``KEYWORD = value [units]`` a line, ``COMMENT`` lines and blank lines ignored, each
-message opened by its version keyword (``CCSDS_OMM_VERS``, ``CCSDS_OPM_VERS``). The OMM's fields
-go on to sgp4's own OMM record (``planner.tle.tle_from_omm``); the OPM's state vector becomes the
-osculating elements the planner propagates.
+Reading: an OPM's state vector becomes the osculating elements the planner propagates; an OMM's mean elements go on
+to sgp4's own OMM record (``planner.tle.tle_from_omm``). Writing: the OPM (a state and impulsive manoeuvres) and the
+OEM (segments of states) of a plan or a campaign. ``ccsds-ndm`` (the CCSDS NDM/XML 4.0 schemas as data classes,
+with its KVN and XML readers and writers) does the syntax of both forms, so what the service writes is what the
+standard's tools read and the other way round; this module checks what the planner needs of a message (an Earth-
+centred inertial frame, UTC, a bound orbit) and names the keyword at fault.
+
+ccsds-ndm's KVN reader passes over lines it does not know (a misspelt keyword, a line with no ``=``) and reads a
+second message in the same text over the first, so a KVN text is first checked here for its shape: one message,
+its version keyword first, each line ``KEYWORD = value``.
 """
 
 from __future__ import annotations
 
 import calendar
+import dataclasses
+import enum
 import math
 import re
+from collections.abc import Sequence
+from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
+from typing import Any, Literal
 
 from planner.constants import MU_EARTH_KM3_S2
 from planner.elements import Elements, elements_of_state
 from planner.errors import ElementsError, TLEError
 
+Format = Literal["kvn", "xml"]
+FORMATS: tuple[Format, ...] = ("kvn", "xml")
 VERSIONS = ("2.0", "3.0")
-_UNITS = re.compile(r"\s*\[[^\]]*\]\s*$")
 # Inertial frames whose axes are the planner's GCRS ones to within EME2000's 23-mas frame bias.
 INERTIAL_FRAMES = ("EME2000", "GCRF", "ICRF")
-STATE_KEYS = ("X", "Y", "Z", "X_DOT", "Y_DOT", "Z_DOT")
+_KVN_LINE = re.compile(r"^[A-Z][A-Z0-9_]*\s*=")
+_XML_VERSION = re.compile(r"<(opm|omm|oem)\b[^>]*\bversion\s*=\s*[\"']([^\"']*)[\"']", re.I)
 
 
-def parse_kvn(text: str, version_key: str, field: str) -> list[dict[str, str]]:
-    """The messages of a KVN text, each a dict of keyword to value (units dropped), checked for their version."""
-    error = TLEError if version_key == "CCSDS_OMM_VERS" else ElementsError
-    messages: list[dict[str, str]] = []
-    for n, raw in enumerate(text.splitlines(), 1):
-        line = raw.strip()
-        if not line or line.startswith("COMMENT"):
-            continue
-        if "=" not in line:
-            raise error(f"line {n} is not KEYWORD = value: {line[:60]!r}", field=field)
-        key, value = (part.strip() for part in line.split("=", 1))
-        value = _UNITS.sub("", value)
-        if key == version_key:
-            if value not in VERSIONS:
-                raise error(f"{version_key} {value!r}: this reads versions 2.0 and 3.0", field=version_key)
-            messages.append({})
-        elif not messages:
-            raise error(f"a message starts with {version_key} = 3.0 (or 2.0); line {n} comes first", field=field)
-        messages[-1][key] = value
-    if len(messages) != 1:
-        raise error(f"the text holds {len(messages)} messages; send one", field=field)
-    return messages
-
-
-def omm_fields_from_kvn(text: str) -> dict[str, object]:
-    """The one OMM of a KVN text (CelesTrak's ``FORMAT=kvn``) as the field dict ``tle_from_omm`` reads."""
-    return dict(parse_kvn(text, "CCSDS_OMM_VERS", "omm_kvn")[0])
-
-
-def _number(fields: dict[str, str], key: str) -> float:
-    if key not in fields:
-        raise ElementsError(f"the OPM has no {key}", field=key)
-    try:
-        value = float(fields[key])
-    except ValueError:
-        raise ElementsError(f"{key} {fields[key]!r} is not a number", field=key) from None
-    if not math.isfinite(value):
-        raise ElementsError(f"{key} must be finite", field=key)
-    return value
+def ccsds_time_text(t: datetime) -> str:
+    """A CCSDS time (ASCII time code A), UTC without a zone designator, to the microsecond (a state written to the
+    millisecond belongs to a moment up to 0.5 ms away: 4 m along-track in low orbit)."""
+    return t.astimezone(UTC).strftime("%Y-%m-%dT%H:%M:%S.%f")
 
 
 _DOY = re.compile(r"^(\d{4})-(\d{3})T(\d{2}):(\d{2}):(\d{2}(?:\.\d+)?)Z?$")
@@ -81,29 +59,288 @@ def ccsds_time(text: str) -> datetime:
         year, day, hour, minute, second = m.groups()
         if not 1 <= int(day) <= (366 if calendar.isleap(int(year)) else 365):
             raise ValueError(f"day of year {day} does not exist in {year}")
-        whole = float(second)
         start = datetime(int(year), 1, 1, int(hour), int(minute), tzinfo=UTC)
-        return start + timedelta(days=int(day) - 1, seconds=whole)
+        return start + timedelta(days=int(day) - 1, seconds=float(second))
     return datetime.fromisoformat(text.rstrip("Z")).replace(tzinfo=UTC)
 
 
-def elements_from_opm(text: str) -> Elements:
-    """The osculating elements of an OPM's state vector (km, km/s; Earth-centred, inertial, UTC)."""
-    fields = parse_kvn(text, "CCSDS_OPM_VERS", "opm")[0]
+# --------------------------------------------------------------------------------------------------- reading
+
+
+def _check_kvn(text: str, kind: str, error: type[ElementsError] | type[TLEError], field: str) -> None:
+    """One KVN message of ``kind`` (OPM, OMM), its version first and readable, every line ``KEYWORD = value``."""
+    version_key = f"CCSDS_{kind}_VERS"
+    seen = 0
+    for n, raw in enumerate(text.splitlines(), 1):
+        line = raw.strip()
+        if not line or line.startswith("COMMENT"):
+            continue
+        if not _KVN_LINE.match(line):
+            raise error(f"line {n} is not KEYWORD = value: {line[:60]!r}", field=field)
+        key, value = (part.strip() for part in line.split("=", 1))
+        value = re.sub(r"\s*\[[^\]]*\]\s*$", "", value)
+        if key.startswith("CCSDS_") and key.endswith("_VERS") and key != version_key:
+            raise error(f"this is a {key[6:9]}, not an {kind}", field=field)
+        if key == version_key:
+            seen += 1
+            if value not in VERSIONS:
+                raise error(f"{version_key} {value!r}: this reads versions 2.0 and 3.0", field=version_key)
+        elif not seen:
+            raise error(f"a message starts with {version_key} = 3.0 (or 2.0); line {n} comes first", field=field)
+    if seen != 1:
+        raise error(f"the text holds {seen} messages; send one", field=field)
+
+
+def _check_xml(text: str, kind: str, error: type[ElementsError] | type[TLEError], field: str) -> None:
+    if re.search(r"<!(DOCTYPE|ENTITY)", text, re.I):  # NDM/XML needs no DTD: no entity expansion, no external files
+        raise error("a DOCTYPE or ENTITY declaration is not read: send the NDM/XML message without one", field=field)
+    found = _XML_VERSION.findall(text)
+    kinds = {k.upper() for k, _ in found}
+    if kinds - {kind}:
+        raise error(f"this is a {'/'.join(sorted(kinds))} in XML, not an {kind}", field=field)
+    if len(found) != 1:
+        raise error(f"the XML holds {len(found)} {kind} messages; send one", field=field)
+    if found[0][1] not in VERSIONS:
+        raise error(f"CCSDS_{kind}_VERS {found[0][1]!r}: this reads versions 2.0 and 3.0", field=f"CCSDS_{kind}_VERS")
+
+
+def read_message(text: str, kind: Literal["OPM", "OMM"], field: str) -> Any:
+    """The one ``kind`` message of a KVN or XML text as ccsds-ndm's data classes (its ``header``, ``body.segment``).
+    Raises ElementsError (OPM) or TLEError (OMM) naming ``field`` or the keyword at fault."""
+    from ccsds_ndm.ndm_io import NdmIo
+
+    error = ElementsError if kind == "OPM" else TLEError
+    xml = text.lstrip().startswith("<")
+    (_check_xml if xml else _check_kvn)(text, kind, error, field)
+    try:
+        message = NdmIo().from_string(text)
+    except Exception as exc:  # the library raises what its parsers do  # noqa: BLE001
+        what = str(exc).splitlines()[0][:200] if str(exc) else type(exc).__name__
+        raise error(f"not a readable {kind} ({'XML' if xml else 'KVN'}): {what}", field=field) from None
+    if type(message).__name__ == "Ndm":  # an <ndm> wrapper (CelesTrak's XML): the one message in it
+        inner = list(getattr(message, kind.lower(), []) or [])
+        if len(inner) != 1:
+            raise error(f"the XML holds {len(inner)} {kind} messages; send one", field=field)
+        message = inner[0]
+    if type(message).__name__.upper() != kind:
+        raise error(f"this is a {type(message).__name__.upper()}, not an {kind}", field=field)
+    return message
+
+
+def fields_of(node: Any, out: dict[str, object] | None = None) -> dict[str, object]:
+    """A message part's keywords and values, flattened (``MEAN_MOTION``: 15.72...), as the KVN names them; units
+    dropped, enumerations as their text, comments left out."""
+    out = {} if out is None else out
+    for f in dataclasses.fields(node):
+        value = getattr(node, f.name)
+        name = f.metadata.get("name", f.name)
+        if value is None or isinstance(value, list):
+            continue
+        if dataclasses.is_dataclass(value):
+            if any(g.name == "value" for g in dataclasses.fields(value)):
+                out[name] = getattr(value, "value")  # a quantity with units  # noqa: B009
+            else:
+                fields_of(value, out)
+        else:
+            out[name] = value.value if isinstance(value, enum.Enum) else value
+    return out
+
+
+def omm_fields(text: str, field: str) -> dict[str, object]:
+    """The one OMM of a KVN or XML text (CelesTrak's ``FORMAT=kvn`` or ``xml``) as the field dict ``tle_from_omm``
+    reads."""
+    segment = read_message(text, "OMM", field).body.segment
+    return {**fields_of(segment.metadata), **fields_of(segment.data)}
+
+
+def _number(fields: dict[str, object], key: str) -> float:
+    if fields.get(key) is None:
+        raise ElementsError(f"the OPM has no {key}", field=key)
+    value = float(fields[key])  # type: ignore[arg-type]
+    if not math.isfinite(value):
+        raise ElementsError(f"{key} must be finite", field=key)
+    return value
+
+
+def elements_from_opm(text: str, field: str = "opm") -> Elements:
+    """The osculating elements of an OPM's state vector (KVN or XML; km, km/s; Earth-centred, inertial, UTC)."""
+    segment = read_message(text, "OPM", field).body.segment
+    meta = fields_of(segment.metadata)
     for key, allowed in (("CENTER_NAME", ("EARTH",)), ("REF_FRAME", INERTIAL_FRAMES), ("TIME_SYSTEM", ("UTC",))):
-        got = fields.get(key, "").upper()
+        got = str(meta.get(key) or "").upper()
         if got not in allowed:
             raise ElementsError(f"{key} {got or 'missing'}: give {' or '.join(allowed)}", field=key)
+    state = segment.data.state_vector
+    values = fields_of(state) if state is not None else {}
     try:
-        epoch = ccsds_time(fields.get("EPOCH", ""))
+        epoch = ccsds_time(str(values.get("EPOCH", "")))
     except ValueError:
         raise ElementsError(
-            f"EPOCH {fields.get('EPOCH')!r} is not a CCSDS time (YYYY-MM-DDThh:mm:ss or YYYY-DDDThh:mm:ss, UTC)",
+            f"EPOCH {values.get('EPOCH')!r} is not a CCSDS time (YYYY-MM-DDThh:mm:ss or YYYY-DDDThh:mm:ss, UTC)",
             field="EPOCH",
         ) from None
-    r = [_number(fields, k) for k in STATE_KEYS[:3]]
-    v = [_number(fields, k) for k in STATE_KEYS[3:]]
+    r = [_number(values, k) for k in ("X", "Y", "Z")]
+    v = [_number(values, k) for k in ("X_DOT", "Y_DOT", "Z_DOT")]
     energy = 0.5 * sum(x * x for x in v) - MU_EARTH_KM3_S2 / math.sqrt(sum(x * x for x in r))
     if not energy < 0.0:
         raise ElementsError("the state vector is not a bound (elliptic) Earth orbit: check X_DOT..Z_DOT", field="X_DOT")
     return elements_of_state(r, v, epoch)  # Elements validate themselves
+
+
+# --------------------------------------------------------------------------------------------------- writing
+
+
+@dataclass(frozen=True)
+class Burn:
+    """One impulsive manoeuvre: its moment, impulse (km/s in the message's frame) and a comment."""
+
+    t: datetime
+    dv_km_s: tuple[float, float, float]
+    comment: str
+
+
+@dataclass(frozen=True)
+class Segment:
+    """One OEM segment: an object's states at times ``t`` (GCRF; km, km/s as (3, N) rows ``r``, ``v``)."""
+
+    object_name: str
+    object_id: str
+    comment: str
+    t: Sequence[datetime]
+    r: Any
+    v: Any
+
+
+def _serialise(message: Any, fmt: Format) -> str:
+    from ccsds_ndm.mapping import NDMFileFormats
+    from ccsds_ndm.ndm_io import NdmIo
+
+    if fmt not in FORMATS:
+        raise ValueError(f"format {fmt!r}: kvn or xml")
+    text = NdmIo().to_string(message, NDMFileFormats.KVN if fmt == "kvn" else NDMFileFormats.XML)
+    return text if text.endswith("\n") else text + "\n"
+
+
+def _header(created: datetime, originator: str) -> Any:
+    from ccsds_ndm.models.ndmxml4.ndmxml_4_0_0_common_4_0 import OdmHeader
+
+    return OdmHeader(creation_date=ccsds_time_text(created), originator=originator)
+
+
+def _km(x: float) -> Any:
+    from ccsds_ndm.models.ndmxml4.ndmxml_4_0_0_common_4_0 import PositionTypeUo, PositionUnits
+
+    return PositionTypeUo(value=round(float(x), 6), units=PositionUnits.KM)  # millimetres
+
+
+def _km_s(x: float) -> Any:
+    from ccsds_ndm.models.ndmxml4.ndmxml_4_0_0_common_4_0 import VelocityTypeUo, VelocityUnits
+
+    return VelocityTypeUo(value=round(float(x), 9), units=VelocityUnits.KM_S)  # micrometres a second
+
+
+def opm_message(
+    *,
+    created: datetime,
+    originator: str,
+    object_name: str,
+    object_id: str,
+    epoch: datetime,
+    r_km: Sequence[float],
+    v_km_s: Sequence[float],
+    comment: str,
+    burns: Sequence[Burn] = (),
+    fmt: Format = "kvn",
+) -> str:
+    """A CCSDS OPM 3.0 (GCRF, UTC): a state at ``epoch`` and each burn as an impulsive manoeuvre (duration 0, no
+    mass change: the observer's mass is not planned)."""
+    from ccsds_ndm.models.ndmxml4 import ndmxml_4_0_0_common_4_0 as common
+    from ccsds_ndm.models.ndmxml4 import ndmxml_4_0_0_opm_3_0 as opm
+    from ccsds_ndm.models.ndmxml4.ndmxml_4_0_0_master_4_0 import Opm
+
+    state = common.StateVectorType(
+        comment=[comment],
+        epoch=ccsds_time_text(epoch),
+        x=_km(r_km[0]),
+        y=_km(r_km[1]),
+        z=_km(r_km[2]),
+        x_dot=_km_s(v_km_s[0]),
+        y_dot=_km_s(v_km_s[1]),
+        z_dot=_km_s(v_km_s[2]),
+    )
+    manoeuvres = [
+        opm.ManeuverParametersType(
+            comment=[b.comment],
+            man_epoch_ignition=ccsds_time_text(b.t),
+            man_duration=common.DurationType(value=0.0, units=common.TimeUnits.S),
+            man_delta_mass=common.DeltamassTypeZ(value=0.0, units=common.MassUnits.KG),
+            man_ref_frame="GCRF",
+            man_dv_1=_km_s(b.dv_km_s[0]),
+            man_dv_2=_km_s(b.dv_km_s[1]),
+            man_dv_3=_km_s(b.dv_km_s[2]),
+        )
+        for b in burns
+    ]
+    message = Opm(
+        header=_header(created, originator),
+        body=opm.OpmBody(
+            segment=opm.OpmSegment(
+                metadata=opm.OpmMetadata(
+                    object_name=object_name,
+                    object_id=object_id,
+                    center_name="EARTH",
+                    ref_frame="GCRF",
+                    time_system="UTC",
+                ),
+                data=opm.OpmData(state_vector=state, maneuver_parameters=manoeuvres),
+            )
+        ),
+    )  # its version attributes are fixed by the schema: CCSDS_OPM_VERS 3.0
+    return _serialise(message, fmt)
+
+
+def oem_message(*, created: datetime, originator: str, segments: Sequence[Segment], fmt: Format = "kvn") -> str:
+    """A CCSDS OEM 3.0 (GCRF, UTC): each segment's states, to be interpolated by Lagrange's of degree 7."""
+    from ccsds_ndm.models.ndmxml4 import ndmxml_4_0_0_common_4_0 as common
+    from ccsds_ndm.models.ndmxml4 import ndmxml_4_0_0_oem_3_0 as oem
+    from ccsds_ndm.models.ndmxml4.ndmxml_4_0_0_master_4_0 import Oem
+
+    pieces = []
+    for seg in segments:
+        if len(seg.t) == 0:
+            continue
+        start, stop = ccsds_time_text(seg.t[0]), ccsds_time_text(seg.t[-1])
+        pieces.append(
+            oem.OemSegment(
+                metadata=oem.OemMetadata(
+                    object_name=seg.object_name,
+                    object_id=seg.object_id,
+                    center_name="EARTH",
+                    ref_frame="GCRF",
+                    time_system="UTC",
+                    start_time=start,
+                    useable_start_time=start,
+                    useable_stop_time=stop,
+                    stop_time=stop,
+                    interpolation="LAGRANGE",
+                    interpolation_degree=7,
+                ),
+                data=oem.OemData(
+                    comment=[seg.comment],
+                    state_vector=[
+                        common.StateVectorAccType(
+                            epoch=ccsds_time_text(t),
+                            x=_km(seg.r[0][k]),
+                            y=_km(seg.r[1][k]),
+                            z=_km(seg.r[2][k]),
+                            x_dot=_km_s(seg.v[0][k]),
+                            y_dot=_km_s(seg.v[1][k]),
+                            z_dot=_km_s(seg.v[2][k]),
+                        )
+                        for k, t in enumerate(seg.t)
+                    ],
+                ),
+            )
+        )
+    message = Oem(header=_header(created, originator), body=oem.OemBody(segment=pieces))  # CCSDS_OEM_VERS 3.0
+    return _serialise(message, fmt)

@@ -9,7 +9,7 @@ import threading
 import time
 from collections.abc import AsyncIterator, Callable, Iterator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Annotated, Any, TypeVar, cast
+from typing import TYPE_CHECKING, Annotated, Any, Literal, TypeVar, cast
 
 from fastapi import Depends, HTTPException, Query, Request, Security, UploadFile
 from fastapi.concurrency import run_in_threadpool
@@ -29,6 +29,11 @@ from planner.plan import StopCheck
 
 if TYPE_CHECKING:  # the fit's module imports the simulator's geometry: kept out of `gsa --help`
     from inference.trust import Checker, Checkers
+
+CcsdsFormat = Annotated[
+    Literal["kvn", "xml"], Query(description="kvn (502.0-B-3's KEYWORD = value text) or xml (the NDM/XML schema)")
+]
+"""A CCSDS export's form: the ``format`` query parameter of the OPM and OEM exports."""
 
 api_key_header = APIKeyHeader(name="X-API-Key", auto_error=False, description="an operator's API key")
 

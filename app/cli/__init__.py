@@ -100,7 +100,8 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
     pl.add_argument(
         "--export",
         metavar="DIR",
-        help="also write the plan as opm.txt, oem.txt (CCSDS KVN), plan.czml, plan.geojson, access.csv and pointing.csv",
+        help="also write the plan as opm.txt, oem.txt (CCSDS KVN), opm.xml, oem.xml (CCSDS XML), plan.czml, "
+        "plan.geojson, access.csv and pointing.csv",
     )
     pl.set_defaults(func=_lazy("planning", "cmd_plan"))
     cp = sub.add_parser("campaign", help="plan a campaign of GSA scenes from a JSON request (POST /v1/campaigns)")

@@ -135,28 +135,28 @@ def cmd_plan(args: argparse.Namespace) -> int:
     return 0
 
 
+FILE_NAMES = {  # an export's stored name -> its file in --export's folder
+    "opm": "opm.txt",
+    "opm.xml": "opm.xml",
+    "oem": "oem.txt",
+    "oem.xml": "oem.xml",
+    "czml": "plan.czml",
+    "geojson": "plan.geojson",
+    "pointing.csv": "pointing.csv",
+}
+
+
 def _export_plan(plan: Any, result: dict[str, Any], req: Any, folder: Path) -> None:
     """Write the plan in every export format into ``folder`` (as GET /v1/plans/{id}/export/... serves them)."""
-    from app.errors import InputError
     from app.services import exports
     from app.services.planning import access_csv
 
     folder.mkdir(parents=True, exist_ok=True)
-    name = "local"
-    files = {
-        "access.csv": access_csv(result["access_windows"]),
-        "pointing.csv": exports.pointing_csv(plan, result["access_windows"]),
-    }
     names = {"target": req.target.name, "observer": req.observer.name, "station": req.ground_station.name}
-    files["plan.geojson"] = exports.geojson(plan, names, result["access_windows"])
-    try:
-        arc = exports.plan_arc(plan, result)
-    except InputError as exc:
-        print(f"note: no OPM, OEM or CZML: {exc.message}", file=sys.stderr)
-    else:
-        files["opm.txt"] = exports.opm(arc, name, req.observer.name)
-        files["oem.txt"] = exports.oem(arc, name, req.target.name, req.observer.name)
-        files["plan.czml"] = exports.czml(arc, name, names, req.ground_station.model_dump(), result["access_windows"])
+    texts = exports.render(plan, result, plan_id="local", names=names, station=req.ground_station.model_dump())
+    if not result.get("phasing"):
+        print("note: no OPM, OEM or CZML: the plan has no phasing burn (no candidate was planned)", file=sys.stderr)
+    files = {"access.csv": access_csv(result["access_windows"])} | {FILE_NAMES[k]: v for k, v in texts.items()}
     for fname, body in files.items():
         (folder / fname).write_text(body)
     print(f"wrote {', '.join(sorted(files))} to {folder}", file=sys.stderr)

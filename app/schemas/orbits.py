@@ -108,7 +108,7 @@ ORBIT_SOURCES = ("elements", "tle", "omm", "omm_xml", "omm_csv", "omm_kvn", "opm
 class OrbitIn(Strict):
     """A satellite: a name and exactly one of ``elements``, ``tle`` (2 lines, a 3LE, or a text block), ``omm`` (a
     CelesTrak OMM JSON object), ``omm_xml``, ``omm_csv`` or ``omm_kvn`` (CelesTrak's OMM XML, CSV or KVN text, one
-    element set), or ``opm`` (a CCSDS OPM in KVN: its state vector, taken as osculating elements)."""
+    element set), or ``opm`` (a CCSDS OPM in KVN or XML: its state vector, taken as osculating elements)."""
 
     model_config = ConfigDict(
         extra="forbid",
@@ -142,8 +142,8 @@ class OrbitIn(Strict):
     )
     opm: Annotated[str, Field(max_length=20_000)] | SkipJsonSchema[None] = Field(
         default=None,
-        description="a CCSDS OPM 2.0/3.0 in KVN: EPOCH (UTC) and X..Z_DOT (km, km/s) in EME2000, GCRF or ICRF about "
-        "the Earth, read as osculating elements (plan with reading osculating)",
+        description="a CCSDS OPM 2.0/3.0 in KVN or XML (NDM/XML, no DTD): EPOCH (UTC) and X..Z_DOT (km, km/s) in "
+        "EME2000, GCRF or ICRF about the Earth, read as osculating elements (plan with reading osculating)",
     )
 
     @model_validator(mode="after")

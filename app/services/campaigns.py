@@ -24,6 +24,7 @@ from app.services.planning import (
     to_station,
     with_stored_station,
 )
+from planner import ccsds
 from planner.alignment import HeightBox
 from planner.campaign import (
     CAMPAIGN_MARGIN_S,
@@ -235,8 +236,9 @@ def flight(request: dict[str, Any], result: dict[str, Any]) -> Flight:
     )
 
 
-def export(kind: str, row: Any) -> str:
-    """One export of a stored campaign (a row, or anything with its fields): ``opm``, ``oem``, ``czml``, ``access.csv``."""
+def export(kind: str, row: Any, fmt: ccsds.Format = "kvn") -> str:
+    """One export of a stored campaign (a row, or anything with its fields): ``opm``, ``oem`` (KVN, or XML with
+    ``fmt``), ``czml``, ``access.csv``."""
     from app.services.planning import access_csv
 
     if kind == "access.csv":
@@ -252,7 +254,9 @@ def export(kind: str, row: Any) -> str:
             f"The observer at the start of campaign {row.id}, before any burn; {len(fl.accesses_s)} scene(s), "
             f"{len(burns)} burn(s)"
         )
-        return exports.opm_text(fl.epoch, 0.0, r[:, 0], v[:, 0], burns, f"GSA-{row.id}", row.observer_name, comment)
+        return exports.opm_text(
+            fl.epoch, 0.0, r[:, 0], v[:, 0], burns, f"GSA-{row.id}", row.observer_name, comment, fmt=fmt
+        )
     if kind == "oem":
         # One observer segment between burns: each burn's instant ends one (before it) and starts the next.
         edges = [0.0, *(b["t_s"] for b in fl.burns), fl.t1_s]
@@ -266,7 +270,7 @@ def export(kind: str, row: Any) -> str:
                     row.observer_name, f"GSA-{row.id}-OBSERVER", edges[k], edges[k + 1], piece.state, what
                 )
             )
-        return exports.oem_text(fl.epoch, segments, fl.accesses_s, f"campaign {row.id}", CAMPAIGN_OEM_STEP_S)
+        return exports.oem_text(fl.epoch, segments, fl.accesses_s, f"campaign {row.id}", CAMPAIGN_OEM_STEP_S, fmt=fmt)
     if kind == "czml":
         must = (*fl.accesses_s, *(b["t_s"] for b in fl.burns))
         return exports.czml_text(

@@ -1,20 +1,22 @@
-"""A plan in the formats operators' tools read: CCSDS OPM and OEM (KVN), CZML, an access report and a pointing file.
+"""A plan in the formats operators' tools read: CCSDS OPM and OEM (KVN or XML, written by ccsds-ndm), CZML,
+GeoJSON, an access report and a pointing file.
 
-Every time is ISO 8601 UTC to the microsecond (a Z in the CSV files and CZML; CCSDS KVN writes UTC without a zone
-designator and states TIME_SYSTEM = UTC), every frame is named: GCRF for the CCSDS messages
+Every time is ISO 8601 UTC to the microsecond (a Z in the CSV files and CZML; CCSDS messages write UTC without a
+zone designator and state TIME_SYSTEM = UTC), every frame is named: GCRF for the CCSDS messages
 (the planner's GCRS axes), INERTIAL (ICRF axes, Cesium's name) for CZML, and azimuth from north
 through east with elevation above the station's horizon (WGS-84) for the pointing file.
 
-The OPM, OEM and CZML need the plan's trajectories, which are not stored: the plan is recomputed
-from its stored request (the planner is deterministic), and the recomputed burn is checked
-against the stored one before anything is written.
+A plan's exports are written when the plan is made (``render``, from the plan in hand) and stored with it,
+compressed, so an export is a read. A plan stored before that has none: its plan is recomputed from its stored
+request (the planner is deterministic), the recomputed burn checked against the stored one, and what it writes is
+kept for the next request (``render_again``).
 """
 
 from __future__ import annotations
 
-import io
 import json
 import math
+import zlib
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from typing import Any
@@ -23,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.errors import InputError
+from planner import ccsds
 from planner.errors import PlanningStopped
 from planner.plan import Plan, StopCheck
 from planner.propagation import utc
@@ -34,15 +37,9 @@ OEM_STEP_S = 60.0
 POINTING_STEP_S = 1.0
 
 
-def kvn_time(t: datetime) -> str:
-    """CCSDS KVN time: ISO 8601 UTC without a zone designator, microseconds (a state written to the millisecond
-    belongs to a moment up to 0.5 ms away: 4 m along-track in low orbit)."""
-    return t.astimezone(UTC).strftime("%Y-%m-%dT%H:%M:%S.%f")
-
-
 def z_time(t: datetime) -> str:
     """ISO 8601 UTC with a Z, microseconds: the one time style of the CSV and CZML exports."""
-    return kvn_time(t) + "Z"
+    return ccsds.ccsds_time_text(t) + "Z"
 
 
 @dataclass(frozen=True)
@@ -118,21 +115,6 @@ def _grid(t0: float, t1: float, step: float, must: tuple[float, ...] = ()) -> Ve
     return np.unique(np.concatenate([t, [t1], [m for m in must if t0 <= m <= t1]]))
 
 
-def _header(kind: str, version: str, now: datetime) -> list[str]:
-    return [f"CCSDS_{kind}_VERS = {version}", f"CREATION_DATE = {kvn_time(now)}", f"ORIGINATOR = {ORIGINATOR}", ""]
-
-
-def _state_lines(r: Vec, v: Vec) -> list[str]:
-    return [
-        f"X = {r[0]:.6f} [km]",
-        f"Y = {r[1]:.6f} [km]",
-        f"Z = {r[2]:.6f} [km]",
-        f"X_DOT = {v[0]:.9f} [km/s]",
-        f"Y_DOT = {v[1]:.9f} [km/s]",
-        f"Z_DOT = {v[2]:.9f} [km/s]",
-    ]
-
-
 @dataclass(frozen=True)
 class Manoeuvre:
     """One impulsive burn as the OPM writes it: its time (s after the epoch), impulse (GCRS, km/s) and RTN (m/s)."""
@@ -143,8 +125,9 @@ class Manoeuvre:
     what: str
 
 
-def opm(arc: Arc, plan_id: str, observer_name: str, now: datetime | None = None) -> str:
-    """CCSDS OPM 3.0 (502.0-B-3, KVN) of the observer just before the burn, with the burn as one impulsive manoeuvre."""
+def opm(arc: Arc, plan_id: str, observer_name: str, now: datetime | None = None, fmt: ccsds.Format = "kvn") -> str:
+    """CCSDS OPM 3.0 (502.0-B-3; KVN or XML) of the observer just before the burn, the burn as an impulsive
+    manoeuvre."""
     ph = arc.plan.phasing
     assert ph is not None
     r, v = arc.plan.observer_trajectory.state(arc.t_burn_s)  # type: ignore[union-attr]
@@ -156,10 +139,10 @@ def opm(arc: Arc, plan_id: str, observer_name: str, now: datetime | None = None)
     )
     comment = (
         f"The observer just before its phasing burn, plan {plan_id}; the target is met at "
-        f"{kvn_time(utc(arc.plan.epoch, arc.t_access_s))} UTC"
+        f"{ccsds.ccsds_time_text(utc(arc.plan.epoch, arc.t_access_s))} UTC"
     )
     return opm_text(
-        arc.plan.epoch, arc.t_burn_s, r[:, 0], v[:, 0], [burn], f"GSA-{plan_id}", observer_name, comment, now
+        arc.plan.epoch, arc.t_burn_s, r[:, 0], v[:, 0], [burn], f"GSA-{plan_id}", observer_name, comment, now, fmt
     )
 
 
@@ -173,41 +156,38 @@ def opm_text(
     observer_name: str,
     comment: str,
     now: datetime | None = None,
+    fmt: ccsds.Format = "kvn",
 ) -> str:
-    """CCSDS OPM 3.0 (KVN): a state at ``t_state_s`` and each burn as one impulsive manoeuvre (GCRF, UTC)."""
-    now = now or datetime.now(UTC)
-    # 502.0-B-3 lays an OPM's metadata out as plain KEYWORD = value lines: no META_START/META_STOP (those are
-    # the OEM's and OCM's), so the service, ccsds-ndm and Orekit all read it back.
-    lines = _header("OPM", "3.0", now) + [
-        f"OBJECT_NAME = {observer_name}",
-        f"OBJECT_ID = {object_id}",
-        "CENTER_NAME = EARTH",
-        "REF_FRAME = GCRF",
-        "TIME_SYSTEM = UTC",
-        "",
-        f"COMMENT {comment}",
-        f"EPOCH = {kvn_time(utc(epoch, t_state_s))}",
-        *_state_lines(r, v),
-    ]
-    for burn in burns:
-        rtn = burn.dv_rtn_m_s
-        lines += [
-            "",
-            f"COMMENT {burn.what}. The same in RTN (radial, along-track, normal) at the burn: "
-            f"{rtn[0]:.4f} / {rtn[1]:.4f} / {rtn[2]:.4f} m/s. The observer's mass is not planned: MAN_DELTA_MASS is 0",
-            f"MAN_EPOCH_IGNITION = {kvn_time(utc(epoch, burn.t_s))}",
-            "MAN_DURATION = 0.000 [s]",
-            "MAN_DELTA_MASS = 0.000 [kg]",
-            "MAN_REF_FRAME = GCRF",
-            f"MAN_DV_1 = {burn.dv_km_s[0]:.9f} [km/s]",
-            f"MAN_DV_2 = {burn.dv_km_s[1]:.9f} [km/s]",
-            f"MAN_DV_3 = {burn.dv_km_s[2]:.9f} [km/s]",
-        ]
-    return "\n".join(lines) + "\n"
+    """CCSDS OPM 3.0 (KVN or XML, written by ccsds-ndm): a state at ``t_state_s`` and each burn as one impulsive
+    manoeuvre (GCRF, UTC)."""
+    return ccsds.opm_message(
+        created=now or datetime.now(UTC),
+        originator=ORIGINATOR,
+        object_name=observer_name,
+        object_id=object_id,
+        epoch=utc(epoch, t_state_s),
+        r_km=[float(x) for x in r],
+        v_km_s=[float(x) for x in v],
+        comment=comment,
+        burns=[
+            ccsds.Burn(
+                utc(epoch, b.t_s),
+                b.dv_km_s,
+                f"{b.what}. The same in RTN (radial, along-track, normal) at the burn: "
+                f"{b.dv_rtn_m_s[0]:.4f} / {b.dv_rtn_m_s[1]:.4f} / {b.dv_rtn_m_s[2]:.4f} m/s. "
+                "The observer's mass is not planned: MAN_DELTA_MASS is 0",
+            )
+            for b in burns
+        ],
+        fmt=fmt,
+    )
 
 
-def oem(arc: Arc, plan_id: str, target_name: str, observer_name: str, now: datetime | None = None) -> str:
-    """CCSDS OEM 3.0 (KVN): the target over the arc, the observer in two segments (before and after the burn)."""
+def oem(
+    arc: Arc, plan_id: str, target_name: str, observer_name: str, now: datetime | None = None, fmt: ccsds.Format = "kvn"
+) -> str:
+    """CCSDS OEM 3.0 (KVN or XML): the target over the arc, the observer in two segments (before and after the
+    burn)."""
     assert arc.plan.observer_trajectory is not None and arc.plan.encounter is not None
     assert arc.plan.encounter.arc is not None
     segments = [  # the burn's own instant ends the first observer segment (before it) and starts the second
@@ -229,7 +209,7 @@ def oem(arc: Arc, plan_id: str, target_name: str, observer_name: str, now: datet
             "the observer after the burn",
         ),
     ]
-    return oem_text(arc.plan.epoch, segments, (arc.t_access_s,), f"plan {plan_id}", OEM_STEP_S, now)
+    return oem_text(arc.plan.epoch, segments, (arc.t_access_s,), f"plan {plan_id}", OEM_STEP_S, now, fmt)
 
 
 @dataclass(frozen=True)
@@ -251,41 +231,22 @@ def oem_text(
     source: str,
     step_s: float,
     now: datetime | None = None,
+    fmt: ccsds.Format = "kvn",
 ) -> str:
-    """CCSDS OEM 3.0 (KVN): each segment sampled every ``step_s`` and at each of ``must_s`` it holds."""
-    now = now or datetime.now(UTC)
-    lines = _header("OEM", "3.0", now)
+    """CCSDS OEM 3.0 (KVN or XML, written by ccsds-ndm): each segment sampled every ``step_s`` and at each of
+    ``must_s`` it holds."""
+    pieces = []
     for seg in segments:
         if seg.t1_s - seg.t0_s < 1e-6:
             continue
         t = _grid(seg.t0_s, seg.t1_s, step_s, must_s)
         r, v = seg.states(t)
-        lines += [
-            "META_START",
-            f"OBJECT_NAME = {seg.name}",
-            f"OBJECT_ID = {seg.object_id}",
-            "CENTER_NAME = EARTH",
-            "REF_FRAME = GCRF",
-            "TIME_SYSTEM = UTC",
-            f"START_TIME = {kvn_time(utc(epoch, t[0]))}",
-            f"USEABLE_START_TIME = {kvn_time(utc(epoch, t[0]))}",
-            f"USEABLE_STOP_TIME = {kvn_time(utc(epoch, t[-1]))}",
-            f"STOP_TIME = {kvn_time(utc(epoch, t[-1]))}",
-            "INTERPOLATION = LAGRANGE",
-            "INTERPOLATION_DEGREE = 7",
-            "META_STOP",
-            "",
-            f"COMMENT {seg.what}, {source}: km and km/s",
-        ]
-        for k in range(t.size):
-            lines.append(
-                f"{kvn_time(utc(epoch, t[k]))} "
-                + " ".join(f"{x:.6f}" for x in r[:, k])
-                + " "
-                + " ".join(f"{x:.9f}" for x in v[:, k])
+        pieces.append(
+            ccsds.Segment(
+                seg.name, seg.object_id, f"{seg.what}, {source}: km and km/s", [utc(epoch, x) for x in t], r, v
             )
-        lines.append("")
-    return "\n".join(lines)
+        )
+    return ccsds.oem_message(created=now or datetime.now(UTC), originator=ORIGINATOR, segments=pieces, fmt=fmt)
 
 
 def czml(arc: Arc, plan_id: str, names: dict[str, str], station: dict[str, Any], windows: list[dict[str, Any]]) -> str:
@@ -448,6 +409,19 @@ POINTING_COLUMNS = (
 )
 
 
+def _utc_strings(epoch: datetime, t_s: Vec) -> list[str]:
+    """``z_time(utc(epoch, t))`` for each of ``t_s`` (ascending), at numpy's speed: one ``utc`` at the first time,
+    whole seconds added to it unless a leap second lies between the first and the last (then one by one)."""
+    if t_s.size == 0:
+        return []
+    first, last = utc(epoch, float(t_s[0])), utc(epoch, float(t_s[-1]))
+    if (last - first).total_seconds() != float(t_s[-1] - t_s[0]):  # a leap second inside: UTC's clock repeats one
+        return [z_time(utc(epoch, float(t))) for t in t_s]
+    base = np.datetime64(first.replace(tzinfo=None), "us")
+    micro = np.round((t_s - t_s[0]) * 1e6).astype("int64").astype("timedelta64[us]")
+    return [s + "Z" for s in np.datetime_as_string(base + micro, unit="us").tolist()]
+
+
 def pointing_csv(plan: Plan, windows: list[dict[str, Any]], stop: StopCheck | None = None) -> str:
     """The radar's pointing over each pass, 1-s steps: azimuth (from north, through east), elevation, range and its
     rate, and the azimuth's and elevation's rates the antenna turns at. ``stop()`` is asked before each pass (a
@@ -455,9 +429,8 @@ def pointing_csv(plan: Plan, windows: list[dict[str, Any]], stop: StopCheck | No
     from planner.access import look_angles, pointing_rates
 
     assert plan.target_trajectory is not None and plan.frames is not None and plan.station is not None
-    buf = io.StringIO()
-    buf.write(",".join(POINTING_COLUMNS) + "\n")
-    epoch = plan.epoch
+    traj, station, frames, epoch = plan.target_trajectory, plan.station, plan.frames, plan.epoch
+    lines = [",".join(POINTING_COLUMNS)]
     for k, w in enumerate(windows):
         if stop is not None and (why := stop()) is not None:
             raise PlanningStopped(f"writing pass {k} of {len(windows)} of pointing.csv: {why}")
@@ -466,22 +439,27 @@ def pointing_csv(plan: Plan, windows: list[dict[str, Any]], stop: StopCheck | No
         t = np.arange(math.ceil(rise), math.floor(end) + 1e-9, POINTING_STEP_S)
         if t.size == 0:
             continue
-        r, v = plan.target_trajectory.state(t)
-        look = look_angles(r, t, plan.station, plan.frames)
+        look = look_angles(traj.state(t)[0], t, station, frames)
         dt = 0.5
-        rp, _ = plan.target_trajectory.state(t + dt)
-        rm, _ = plan.target_trajectory.state(t - dt)
         rate = (
-            look_angles(rp, t + dt, plan.station, plan.frames).range_km
-            - look_angles(rm, t - dt, plan.station, plan.frames).range_km
+            look_angles(traj.state(t + dt)[0], t + dt, station, frames).range_km
+            - look_angles(traj.state(t - dt)[0], t - dt, station, frames).range_km
         ) / (2 * dt)
-        az_rate, el_rate = pointing_rates(plan.target_trajectory, plan.station, plan.frames, t)
-        for j in range(t.size):
-            buf.write(
-                f"{k},{z_time(utc(epoch, t[j]))},{look.azimuth_deg[j]:.4f},{look.elevation_deg[j]:.4f},"
-                f"{look.range_km[j]:.3f},{rate[j]:.5f},{az_rate[j]:.4f},{el_rate[j]:.4f}\n"
+        az_rate, el_rate = pointing_rates(traj, station, frames, t)
+        lines += [
+            f"{k},{when},{az:.4f},{el:.4f},{rng:.3f},{rr:.5f},{azr:.4f},{elr:.4f}"
+            for when, az, el, rng, rr, azr, elr in zip(
+                _utc_strings(epoch, t),
+                look.azimuth_deg.tolist(),
+                look.elevation_deg.tolist(),
+                look.range_km.tolist(),
+                rate.tolist(),
+                az_rate.tolist(),
+                el_rate.tolist(),
+                strict=True,
             )
-    return buf.getvalue()
+        ]
+    return "\n".join(lines) + "\n"
 
 
 TRACK_STEP_S = 20.0
@@ -641,15 +619,49 @@ def geojson(plan: Plan, names: dict[str, str], windows: list[dict[str, Any]]) ->
 
 
 NEEDS_BURN = ("opm", "oem", "czml")  # the exports of the planned arc: a plan without a burn has none
+CCSDS_KINDS = ("opm", "oem")  # written in KVN, or XML with format=xml
+COMPRESSION = 1  # zlib's level: a 10-day plan's 4.2-MB pointing.csv takes 34 ms to 1.5 MB (level 6: 166 ms, 1.3 MB)
 
 
-def plan_export(kind: str, row: Any, settings: Any, stop: StopCheck | None = None) -> str:
-    """A stored plan as the export ``kind`` (``EXPORT_TYPES`` of the plans' routes): the plan is recomputed from its
-    stored request under ``stop`` (the plan budget: GSA_PLAN_TIMEOUT_S, GSA_PLAN_MEMORY_MB, the client gone), which
-    the writing obeys too. A plan without a burn is refused before anything is computed for the arc's exports."""
-    from app.schemas import PlanCreate
-    from app.services.planning import run_plan
+def stored_name(kind: str, fmt: ccsds.Format = "kvn") -> str:
+    """The name an export is stored under: ``opm``, ``opm.xml``, ``pointing.csv``..."""
+    return f"{kind}.xml" if fmt == "xml" and kind in CCSDS_KINDS else kind
 
+
+def render(
+    plan: Plan,
+    stored: dict[str, Any],
+    *,
+    plan_id: str,
+    names: dict[str, str],
+    station: dict[str, Any],
+    now: datetime | None = None,
+    stop: StopCheck | None = None,
+) -> dict[str, str]:
+    """Every export of a plan, by stored name: what the plan's exports serve. ``stored`` is the plan's stored result
+    (its windows; its burn, which a recomputed plan is checked against). ``stop`` as for ``pointing_csv``."""
+    windows = stored.get("access_windows", [])
+    out = {"geojson": geojson(plan, names, windows), "pointing.csv": pointing_csv(plan, windows, stop)}
+    if stored.get("phasing"):
+        arc = plan_arc(plan, stored)
+        now = now or datetime.now(UTC)
+        for fmt in ccsds.FORMATS:
+            out[stored_name("opm", fmt)] = opm(arc, plan_id, names["observer"], now, fmt)
+            out[stored_name("oem", fmt)] = oem(arc, plan_id, names["target"], names["observer"], now, fmt)
+        out["czml"] = czml(arc, plan_id, names, station, windows)
+    return out
+
+
+def pack(texts: dict[str, str]) -> dict[str, bytes]:
+    return {name: zlib.compress(text.encode(), COMPRESSION) for name, text in texts.items()}
+
+
+def unpack(body: bytes) -> str:
+    return zlib.decompress(body).decode()
+
+
+def check_exportable(kind: str, row: Any) -> None:
+    """A plan without a burn has no arc to export: refused before anything is read or computed."""
     if kind in NEEDS_BURN and not row.result.get("phasing"):
         raise InputError(
             ["plan"],
@@ -657,18 +669,32 @@ def plan_export(kind: str, row: Any, settings: Any, stop: StopCheck | None = Non
             "export; the access report still is",
             where="path",
         )
+
+
+def stored_export(session: Any, row: Any, kind: str, fmt: ccsds.Format = "kvn") -> str | None:
+    """A stored plan's export as written when it was made; None where the plan has none stored (made before)."""
+    from app import crud
+
+    check_exportable(kind, row)
+    body = crud.get_plan_export(session=session, plan_id=row.id, name=stored_name(kind, fmt))
+    return None if body is None else unpack(body)
+
+
+def keep(session: Any, row: Any, texts: dict[str, str]) -> dict[str, str]:
+    """Store the exports ``render_again`` wrote for an older plan, so its next request is a read."""
+    from app import crud
+
+    crud.store_plan_exports(session=session, plan_id=row.id, exports=pack(texts))
+    return texts
+
+
+def render_again(row: Any, settings: Any, stop: StopCheck | None = None) -> dict[str, str]:
+    """Every export of a stored plan made before its exports were stored: the plan is recomputed from its stored
+    request under ``stop`` (the plan budget: GSA_PLAN_TIMEOUT_S, GSA_PLAN_MEMORY_MB, the client gone), which the
+    writing obeys too."""
+    from app.schemas import PlanCreate
+    from app.services.planning import run_plan
+
     plan, _ = run_plan(PlanCreate.model_validate(row.request), max_grid_points=settings.max_grid_points, stop=stop)
     names = {"target": row.target_name, "observer": row.observer_name, "station": row.station_name}
-    windows = row.result.get("access_windows", [])
-    if kind == "pointing.csv":
-        return pointing_csv(plan, windows, stop)
-    if kind == "geojson":
-        return geojson(plan, names, windows)
-    arc = plan_arc(plan, row.result)
-    if kind == "opm":
-        return opm(arc, row.id, row.observer_name)
-    if kind == "oem":
-        return oem(arc, row.id, row.target_name, row.observer_name)
-    if kind == "czml":
-        return czml(arc, row.id, names, row.request["ground_station"], windows)
-    raise ValueError(f"unknown export {kind!r}")
+    return render(plan, row.result, plan_id=row.id, names=names, station=row.request["ground_station"], stop=stop)

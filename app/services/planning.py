@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from dataclasses import replace
 from datetime import datetime, timedelta
@@ -12,6 +13,7 @@ from sqlalchemy.orm import Session
 from app import crud
 from app.core.config import Settings
 from app.db.models import Plan as PlanRow
+from app.db.models import new_id
 from app.errors import InputError
 from app.schemas import (
     ORBIT_SOURCES,
@@ -24,9 +26,10 @@ from app.schemas import (
     StationIn,
     WindowPublic,
 )
+from app.services import exports
 from planner.access import access_windows
 from planner.alignment import HeightBox
-from planner.ccsds import elements_from_opm, omm_fields_from_kvn
+from planner.ccsds import elements_from_opm, omm_fields
 from planner.elements import Elements
 from planner.errors import PlannerError, PlanningStopped
 from planner.optics import ObserverOptics
@@ -34,6 +37,8 @@ from planner.orbits import Orbit, earth_frames, trajectory
 from planner.plan import Plan, PlanOptions, StopCheck, make_plan
 from planner.propagation import Station, as_utc
 from planner.tle import omm_fields_from_text, parse_tle, split_tles, tle_from_omm, tle_lines
+
+log = logging.getLogger(__name__)
 
 
 def to_orbit(orbit: OrbitIn, where: str) -> Orbit:
@@ -58,13 +63,13 @@ def to_orbit(orbit: OrbitIn, where: str) -> Orbit:
                 )
             return Orbit(orbit.name, tle=tle_from_omm(omm.model_dump(exclude_none=True)))
         if orbit.omm_kvn is not None:
-            return Orbit(orbit.name, tle=tle_from_omm(omm_fields_from_kvn(orbit.omm_kvn), field="omm_kvn"))
+            return Orbit(orbit.name, tle=tle_from_omm(omm_fields(orbit.omm_kvn, "omm_kvn"), field="omm_kvn"))
         if orbit.opm is not None:
             return Orbit(orbit.name, elements=elements_from_opm(orbit.opm))
-        if orbit.omm_xml is not None or orbit.omm_csv is not None:
-            kind, text = ("xml", orbit.omm_xml) if orbit.omm_xml is not None else ("csv", orbit.omm_csv)
-            assert text is not None
-            return Orbit(orbit.name, tle=tle_from_omm(omm_fields_from_text(text, kind), field=f"omm_{kind}"))
+        if orbit.omm_xml is not None:
+            return Orbit(orbit.name, tle=tle_from_omm(omm_fields(orbit.omm_xml, "omm_xml"), field="omm_xml"))
+        if orbit.omm_csv is not None:
+            return Orbit(orbit.name, tle=tle_from_omm(omm_fields_from_text(orbit.omm_csv, "csv"), field="omm_csv"))
         assert orbit.elements is not None
         e = orbit.elements
         assert e.ha_km is not None and e.hp_km is not None  # ElementsIn fills them from a and e too
@@ -286,14 +291,36 @@ def plan_and_store(
     A station given by name is the caller's stored one; the plan keeps a copy of it.
     """
     plan_in = with_stored_station(plan_in, stored_station_lookup(session, operator_id))
-    _, result = run_plan(
+    plan, result = run_plan(
         plan_in,
         max_grid_points=settings.max_grid_points,
         max_epoch_gap_days=settings.max_epoch_gap_days,
         max_tle_age_days=settings.max_tle_age_days,
         stop=stop,
     )
-    return crud.create_plan(session=session, operator_id=operator_id, request=plan_in, result=result)
+    plan_id = new_id()
+    assert not isinstance(plan_in.ground_station, str)  # resolved above
+    names = {"target": plan_in.target.name, "observer": plan_in.observer.name, "station": plan_in.ground_station.name}
+    try:  # the exports, from the plan in hand: stored with it, so each is a read (app.services.exports)
+        texts = exports.render(
+            plan,
+            result.stored(),
+            plan_id=plan_id,
+            names=names,
+            station=plan_in.ground_station.model_dump(mode="json"),
+            stop=stop,
+        )
+    except PlanningStopped as exc:  # the plan stands; its exports are made on their first request instead
+        log.warning("plan %s stored without its exports: %s", plan_id, exc)
+        texts = {}
+    return crud.create_plan(
+        session=session,
+        operator_id=operator_id,
+        request=plan_in,
+        result=result,
+        plan_id=plan_id,
+        exports=exports.pack(texts),
+    )
 
 
 def access_for(*, session: Session, operator_id: str, access_in: AccessCreate, settings: Settings) -> AccessPublic:

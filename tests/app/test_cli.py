@@ -1,4 +1,5 @@
 import json
+import re
 import subprocess
 import sys
 
@@ -195,8 +196,18 @@ def test_plan_export_writes_every_format(tmp_path):
     out = _gsa("plan", str(req), "--export", str(tmp_path / "x"), cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     names = sorted(p.name for p in (tmp_path / "x").iterdir())
-    assert names == ["access.csv", "oem.txt", "opm.txt", "plan.czml", "plan.geojson", "pointing.csv"]
-    assert (tmp_path / "x" / "opm.txt").read_text().startswith("CCSDS_OPM_VERS = 3.0")
+    assert names == [
+        "access.csv",
+        "oem.txt",
+        "oem.xml",
+        "opm.txt",
+        "opm.xml",
+        "plan.czml",
+        "plan.geojson",
+        "pointing.csv",
+    ]
+    assert re.match(r"CCSDS_OPM_VERS\s*= 3.0\n", (tmp_path / "x" / "opm.txt").read_text())
+    assert '<opm id="CCSDS_OPM_VERS" version="3.0">' in (tmp_path / "x" / "opm.xml").read_text()
     again = _gsa("plan", str(req), "--export", str(tmp_path / "x"), cwd=tmp_path)
     assert again.returncode == 2 and "not empty" in again.stderr and again.stderr.count("\n") == 1
 

@@ -47,6 +47,7 @@ def test_upgrade_downgrade_upgrade(url):
         "labelled_frames",
         "model_versions",
         "jobs",
+        "plan_exports",
     }
     command.downgrade(cfg, "base")
     assert _tables(url) == set()
@@ -62,6 +63,7 @@ def test_upgrade_downgrade_upgrade(url):
         "labelled_frames",
         "model_versions",
         "jobs",
+        "plan_exports",
     }
     engine = create_engine(url)
     with engine.connect() as conn:

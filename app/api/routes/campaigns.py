@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Body, HTTPException, Path, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
@@ -10,7 +10,16 @@ from fastapi.responses import JSONResponse
 
 from app import crud
 from app.api import examples
-from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep, plan_in_worker, queued, wants_job
+from app.api.deps import (
+    CcsdsFormat,
+    CurrentOperator,
+    PageDep,
+    SessionDep,
+    SettingsDep,
+    plan_in_worker,
+    queued,
+    wants_job,
+)
 from app.schemas import (
     CAMPAIGN_EXAMPLE,
     CampaignCreate,
@@ -109,10 +118,15 @@ def read_campaign(
 
 
 EXPORT_TYPES = {
-    "opm": ("text/plain", "CCSDS OPM 3.0 (KVN): the observer at the start, and every burn (GCRF, UTC)", "opm.txt"),
+    "opm": (
+        "text/plain",
+        "CCSDS OPM 3.0 (KVN, or XML with format=xml): the observer at the start, and every burn (GCRF, UTC)",
+        "opm.txt",
+    ),
     "oem": (
         "text/plain",
-        "CCSDS OEM 3.0 (KVN): the target, and the observer in one segment between burns (GCRF, UTC, 120 s)",
+        "CCSDS OEM 3.0 (KVN, or XML with format=xml): the target, and the observer in one segment between burns "
+        "(GCRF, UTC, 120 s)",
         "oem.txt",
     ),
     "czml": (
@@ -129,13 +143,34 @@ def _export_route(kind: str) -> None:
 
     media, what, suffix = EXPORT_TYPES[kind]
 
-    def export(session: SessionDep, operator: CurrentOperator, campaign_id: Annotated[Text, Path()]) -> Response:
+    def answer(session: Any, operator: Any, campaign_id: str, fmt: Literal["kvn", "xml"]) -> Response:
         row = crud.get_campaign(session=session, operator_id=operator.id, campaign_id=campaign_id)
         if row is None:
             raise HTTPException(status_code=404, detail="Campaign not found")
-        body = campaigns.export(kind, row)
-        name = f"campaign-{row.id}.{suffix}"
-        return Response(body, media_type=media, headers={"Content-Disposition": f'attachment; filename="{name}"'})
+        body = campaigns.export(kind, row, fmt)
+        media_type, name = media, f"campaign-{row.id}.{suffix}"
+        if fmt == "xml":
+            media_type, name = "application/xml", name.replace(".txt", ".xml")
+        return Response(body, media_type=media_type, headers={"Content-Disposition": f'attachment; filename="{name}"'})
+
+    content: dict[str, Any] = {media: {}}
+    if kind in ("opm", "oem"):
+        content["application/xml"] = {}
+
+        def export(
+            session: SessionDep,
+            operator: CurrentOperator,
+            campaign_id: Annotated[Text, Path()],
+            format: CcsdsFormat = "kvn",  # noqa: A002 (the query parameter's name)
+        ) -> Response:
+            return answer(session, operator, campaign_id, format)
+
+    else:
+
+        def export(  # type: ignore[misc]
+            session: SessionDep, operator: CurrentOperator, campaign_id: Annotated[Text, Path()]
+        ) -> Response:
+            return answer(session, operator, campaign_id, "kvn")
 
     export.__doc__ = f"The campaign as {what}. Flown again from the stored start and burns (no planning is repeated)."
     export.__name__ = f"export_campaign_{kind.replace('.', '_')}"
@@ -144,7 +179,7 @@ def _export_route(kind: str) -> None:
         export,
         methods=["GET"],
         response_class=Response,
-        responses={**NOT_FOUND, 200: {"content": {media: {}}, "description": what}},
+        responses={**NOT_FOUND, 200: {"content": content, "description": what}},
     )
 
 

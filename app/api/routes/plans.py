@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Body, HTTPException, Path, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
@@ -10,6 +10,7 @@ from fastapi.concurrency import run_in_threadpool
 from app import crud
 from app.api import examples
 from app.api.deps import (
+    CcsdsFormat,
     CurrentOperator,
     PageDep,
     SessionDep,
@@ -109,8 +110,16 @@ def export_access_csv(session: SessionDep, operator: CurrentOperator, plan_id: A
 
 
 EXPORT_TYPES = {
-    "opm": ("text/plain", "CCSDS OPM 3.0 (KVN): the observer before its burn, and the burn (GCRF, UTC)", "opm.txt"),
-    "oem": ("text/plain", "CCSDS OEM 3.0 (KVN): target and observer over the planned arc (GCRF, UTC, 60 s)", "oem.txt"),
+    "opm": (
+        "text/plain",
+        "CCSDS OPM 3.0 (KVN, or XML with format=xml): the observer before its burn, and the burn (GCRF, UTC)",
+        "opm.txt",
+    ),
+    "oem": (
+        "text/plain",
+        "CCSDS OEM 3.0 (KVN, or XML with format=xml): target and observer over the planned arc (GCRF, UTC, 60 s)",
+        "oem.txt",
+    ),
     "czml": ("application/json", "CZML for Cesium: both satellites, the station, access intervals, T_access", "czml"),
     "geojson": (
         "application/geo+json",
@@ -126,37 +135,64 @@ EXPORT_TYPES = {
 
 
 async def _export(
-    kind: str, plan_id: str, request: Request, session: SessionDep, operator: CurrentOperator, settings: SettingsDep
+    kind: str,
+    fmt: Literal["kvn", "xml"],
+    plan_id: str,
+    request: Request,
+    session: SessionDep,
+    operator: CurrentOperator,
+    settings: SettingsDep,
 ) -> Response:
     from app.services import exports
 
     row = crud.get_plan(session=session, operator_id=operator.id, plan_id=plan_id)
     if row is None:
         raise HTTPException(status_code=404, detail="Plan not found")
-    # Recomputing and writing run in a worker thread under the plan budget, stopped when the client leaves.
-    async with client_watch(request) as gone:
-        body = await run_in_threadpool(exports.plan_export, kind, row, settings, planning_budget(settings, gone))
+    body = exports.stored_export(session, row, kind, fmt)
+    if body is None:  # a plan made before exports were stored: recomputed in a worker thread under the plan budget,
+        async with client_watch(request) as gone:  # stopped when the client leaves, and kept for the next request
+            texts = await run_in_threadpool(exports.render_again, row, settings, planning_budget(settings, gone))
+        body = exports.keep(session, row, texts)[exports.stored_name(kind, fmt)]
     media, _, suffix = EXPORT_TYPES[kind]
+    if fmt == "xml" and kind in exports.CCSDS_KINDS:
+        media, suffix = "application/xml", suffix.replace(".txt", ".xml")
     name = f"plan-{row.id}.{suffix}"
     return Response(body, media_type=media, headers={"Content-Disposition": f'attachment; filename="{name}"'})
 
 
 def _export_route(kind: str) -> None:
     media, what, _ = EXPORT_TYPES[kind]
-
-    async def export(
-        request: Request,
-        session: SessionDep,
-        operator: CurrentOperator,
-        settings: SettingsDep,
-        plan_id: Annotated[Text, Path()],
-    ) -> Response:
-        return await _export(kind, plan_id, request, session, operator, settings)
-
-    export.__doc__ = (
-        f"The plan as {what}. Recomputed from the stored request under the plan budget (GSA_PLAN_TIMEOUT_S: 503 "
-        "over it), stopped if the client leaves; 422 at once if the plan has no burn and the export needs one."
+    doc = (
+        f"The plan as {what}. Written when the plan was made and served as stored; a plan made before that is "
+        "recomputed once from its stored request under the plan budget (GSA_PLAN_TIMEOUT_S: 503 over it), stopped "
+        "if the client leaves; 422 at once if the plan has no burn and the export needs one."
     )
+    content: dict[str, Any] = {media: {}}
+    if kind in ("opm", "oem"):
+        content["application/xml"] = {}
+
+        async def export(
+            request: Request,
+            session: SessionDep,
+            operator: CurrentOperator,
+            settings: SettingsDep,
+            plan_id: Annotated[Text, Path()],
+            format: CcsdsFormat = "kvn",  # noqa: A002 (the query parameter's name)
+        ) -> Response:
+            return await _export(kind, format, plan_id, request, session, operator, settings)
+
+    else:
+
+        async def export(  # type: ignore[misc]
+            request: Request,
+            session: SessionDep,
+            operator: CurrentOperator,
+            settings: SettingsDep,
+            plan_id: Annotated[Text, Path()],
+        ) -> Response:
+            return await _export(kind, "kvn", plan_id, request, session, operator, settings)
+
+    export.__doc__ = doc
     export.__name__ = f"export_{kind.replace('.', '_')}"
     router.add_api_route(
         f"/{{plan_id}}/export/{kind}",
@@ -165,8 +201,8 @@ def _export_route(kind: str) -> None:
         response_class=Response,
         responses={
             **NOT_FOUND,
-            200: {"content": {media: {}}, "description": what},
-            503: {"description": "recomputing the plan ran over GSA_PLAN_TIMEOUT_S and was stopped"},
+            200: {"content": content, "description": what},
+            503: {"description": "recomputing an older plan ran over GSA_PLAN_TIMEOUT_S and was stopped"},
         },
     )
 

@@ -76,6 +76,31 @@ def test_the_opm_holds_every_burn_and_flies_to_each_scene(client, campaign, tmp_
     np.testing.assert_allclose(separation, [s["check"]["separation_km"] for s in campaign["scenes"]], atol=0.2)
 
 
+def test_the_opm_in_xml_holds_the_kvn_burns_and_goes_back_in(client, campaign, tmp_path):
+    """format=xml: the same state and burns (read by the standard library's XML parser), and the service reads it
+    back as an observer at the campaign's start."""
+    import xml.etree.ElementTree as ET
+
+    from app.schemas import OrbitIn
+    from app.services.planning import to_orbit
+
+    kvn = _read(tmp_path, client.get(f"/v1/campaigns/{campaign['id']}/export/opm", headers=A).text, "opm")
+    r = client.get(f"/v1/campaigns/{campaign['id']}/export/opm?format=xml", headers=A)
+    assert r.status_code == 200 and r.headers["content-type"].startswith("application/xml")
+    root = ET.fromstring(r.text)
+    mans = root.findall("body/segment/data/maneuverParameters")
+    assert len(mans) == len(kvn.body.segment.data.maneuver_parameters) >= 1
+    for man, ref in zip(mans, kvn.body.segment.data.maneuver_parameters, strict=True):
+        assert man.findtext("MAN_EPOCH_IGNITION") == ref.man_epoch_ignition
+        assert [float(man.findtext(f"MAN_DV_{k}")) for k in (1, 2, 3)] == [
+            ref.man_dv_1.value,
+            ref.man_dv_2.value,
+            ref.man_dv_3.value,
+        ]
+    back = to_orbit(OrbitIn.model_validate({"name": "x", "opm": r.text}), "observer")
+    assert abs((back.epoch - datetime.fromisoformat(campaign["epoch"])).total_seconds()) < 1e-6
+
+
 def test_the_oem_has_one_observer_segment_between_burns(client, campaign, tmp_path):
     r = client.get(f"/v1/campaigns/{campaign['id']}/export/oem", headers=A)
     assert r.status_code == 200

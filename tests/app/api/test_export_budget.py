@@ -1,5 +1,6 @@
-"""Exports under the plan budget: a plan without a burn is refused before any recomputing, the recompute and the
-writing stop at GSA_PLAN_TIMEOUT_S (503, the documented answer), and the writing itself obeys the stop."""
+"""Exports under the plan budget: a plan without a burn is refused before any recomputing; for a plan made before
+exports were stored with it, the recompute and the writing stop at GSA_PLAN_TIMEOUT_S (503, the documented answer),
+and the writing itself obeys the stop."""
 
 from __future__ import annotations
 
@@ -53,7 +54,14 @@ def test_a_plan_without_a_burn_is_refused_before_any_recompute(plans, tight, kin
 
 @pytest.mark.parametrize("kind", ["opm", "oem", "czml", "geojson", "pointing.csv"])
 def test_every_export_stops_at_the_plan_budget(plans, client, tight, kind):
+    from sqlalchemy import delete
+
+    from app.db.models import PlanExport
+
     with_burn, _ = plans
+    with client.app.state.session_factory() as session:  # as a plan made before exports were stored
+        session.execute(delete(PlanExport).where(PlanExport.plan_id == with_burn["id"]))
+        session.commit()
     r = tight.get(f"/v1/plans/{with_burn['id']}/export/{kind}", headers=A)
     assert r.status_code == 503, r.text
     assert "GSA_PLAN_TIMEOUT_S" in r.json()["detail"]

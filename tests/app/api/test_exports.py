@@ -4,6 +4,8 @@ flown by an independent J2 integrator (tests/utils/j2.py), and pointed against s
 import csv
 import io
 import json
+import re
+import xml.etree.ElementTree as ET
 from datetime import UTC, datetime
 
 import numpy as np
@@ -42,7 +44,7 @@ def _t(kvn_time):
 def test_opm_is_read_back_and_its_burn_meets_the_target(client, plan, tmp_path):
     r = client.get(f"/v1/plans/{plan['id']}/export/opm", headers=A)
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/plain")
-    text = r.text
+    text = re.sub(r"[ \t]+=[ \t]+", " = ", r.text)  # ccsds-ndm aligns the = signs
     assert text.startswith("CCSDS_OPM_VERS = 3.0\n")
     for key in (
         "CREATION_DATE",
@@ -310,11 +312,31 @@ def test_geojson_night_side_against_skyfield(client, plan):
 
 
 @SQLITE_ONLY
-def test_the_opm_goes_back_in_as_an_observer(client, plan):
-    """The service reads its own OPM (502.0-B-3 KVN: no META_START/META_STOP): as a new plan's observer, its
-    state read back to the millimetre and planned."""
-    text = client.get(f"/v1/plans/{plan['id']}/export/opm", headers=A).text
-    assert "META_START" not in text and "META_STOP" not in text
+@pytest.mark.parametrize("fmt", ["kvn", "xml"])
+def test_the_opm_goes_back_in_as_an_observer(client, plan, fmt):
+    """The service reads its own OPM, KVN (502.0-B-3: no META_START/META_STOP) or XML: as a new plan's observer,
+    its state read back to the millimetre (the XML's numbers read by the standard library's XML parser) and
+    planned."""
+    r = client.get(f"/v1/plans/{plan['id']}/export/opm?format={fmt}", headers=A)
+    assert r.status_code == 200
+    text = r.text
+    if fmt == "kvn":
+        assert r.headers["content-type"].startswith("text/plain")
+        assert "META_START" not in text and "META_STOP" not in text
+        values = {k.strip(): v for k, v in (line.split("=", 1) for line in text.splitlines() if "=" in line)}
+        r_opm = np.array([float(values[k].split()[0]) for k in ("X", "Y", "Z")])
+        v_opm = np.array([float(values[k].split()[0]) for k in ("X_DOT", "Y_DOT", "Z_DOT")])
+    else:
+        assert r.headers["content-type"].startswith("application/xml")
+        assert "attachment" in r.headers["content-disposition"] and ".xml" in r.headers["content-disposition"]
+        root = ET.fromstring(text)
+        assert root.tag == "opm" and root.get("version") == "3.0" and root.get("id") == "CCSDS_OPM_VERS"
+        sv = root.find("body/segment/data/stateVector")
+        assert root.findtext("body/segment/metadata/REF_FRAME") == "GCRF" and sv.find("X").get("units") == "km"
+        r_opm = np.array([float(sv.findtext(k)) for k in ("X", "Y", "Z")])
+        v_opm = np.array([float(sv.findtext(k)) for k in ("X_DOT", "Y_DOT", "Z_DOT")])
+        kvn = client.get(f"/v1/plans/{plan['id']}/export/opm", headers=A).text
+        assert f"X                        = {r_opm[0]} [km]" in kvn  # the same state in both forms
     body = dict(PAPER_EXAMPLE, observer={"name": "from its own OPM", "opm": text})
     body["search"] = {"start": plan["phasing"]["t_burn"], "duration_days": 2}
     r = client.post("/v1/plans", json=body, headers=A)
@@ -324,10 +346,78 @@ def test_the_opm_goes_back_in_as_an_observer(client, plan):
 
     el = to_orbit(OrbitIn.model_validate({"name": "x", "opm": text}), "observer").elements
     r_back, v_back = elements_to_state(*el.radians())
-    values = dict(line.split(" = ", 1) for line in text.splitlines() if " = " in line)
-    r_opm = np.array([float(values[k].split()[0]) for k in ("X", "Y", "Z")])
-    v_opm = np.array([float(values[k].split()[0]) for k in ("X_DOT", "Y_DOT", "Z_DOT")])
     assert np.linalg.norm(r_back - r_opm) < 1e-6 and np.linalg.norm(v_back - v_opm) < 1e-9
+
+
+@SQLITE_ONLY
+def test_the_oem_in_xml_holds_the_kvn_states(client, plan, tmp_path):
+    """The OEM with format=xml, read by the standard library's XML parser: the segments and states of the KVN one."""
+    kvn = _read(tmp_path, client.get(f"/v1/plans/{plan['id']}/export/oem", headers=A).text, "oem")
+    r = client.get(f"/v1/plans/{plan['id']}/export/oem?format=xml", headers=A)
+    assert r.status_code == 200 and r.headers["content-type"].startswith("application/xml")
+    root = ET.fromstring(r.text)
+    assert root.tag == "oem" and root.get("version") == "3.0"
+    segs = root.findall("body/segment")
+    assert len(segs) == len(kvn.body.segment) == 3
+    for seg, ref in zip(segs, kvn.body.segment, strict=True):
+        assert seg.findtext("metadata/OBJECT_ID") == ref.metadata.object_id
+        states = seg.findall("data/stateVector")
+        assert len(states) == len(ref.data.state_vector)
+        for s, v in zip(states[::37], ref.data.state_vector[::37], strict=True):
+            assert s.findtext("EPOCH") == v.epoch and float(s.findtext("Z_DOT")) == v.z_dot.value
+    wrong = client.get(f"/v1/plans/{plan['id']}/export/czml?format=xml", headers=A)  # CZML has one form
+    assert wrong.status_code == 422 and wrong.json()["detail"][0]["loc"] == ["query", "format"], wrong.text
+    bad = client.get(f"/v1/plans/{plan['id']}/export/oem?format=json", headers=A)
+    assert bad.status_code == 422 and bad.json()["detail"][0]["loc"] == ["query", "format"], bad.text
+
+
+def _without_creation_date(text):
+    return re.sub(r"CREATION_DATE\W+[\d\-T:.]+", "", text)
+
+
+@SQLITE_ONLY
+def test_exports_are_served_as_stored_and_an_older_plan_is_recomputed_once(client, plan, monkeypatch):
+    """Every export is written when the plan is made: served with no planning at all (the planner made to fail).
+    A plan stored before (its exports gone) is recomputed on the first request, the same files but their
+    creation date, and served as stored after that."""
+    from app.services import planning
+
+    exports_of = [
+        ("opm", ""),
+        ("opm", "?format=xml"),
+        ("oem", ""),
+        ("oem", "?format=xml"),
+        ("czml", ""),
+        ("geojson", ""),
+        ("pointing.csv", ""),
+    ]
+
+    def no_planning(*a, **k):
+        raise AssertionError("an export planned again")
+
+    with monkeypatch.context() as m:
+        m.setattr(planning, "make_plan", no_planning)
+        stored = {}
+        for kind, query in exports_of:
+            r = client.get(f"/v1/plans/{plan['id']}/export/{kind}{query}", headers=A)
+            assert r.status_code == 200, (kind, r.text)
+            stored[kind + query] = r.text
+    assert stored["pointing.csv"].count("\n") > 1000
+    from sqlalchemy import delete
+
+    from app.db.models import PlanExport
+
+    with client.app.state.session_factory() as session:
+        session.execute(delete(PlanExport).where(PlanExport.plan_id == plan["id"]))
+        session.commit()
+    calls = []
+    real = planning.make_plan
+    monkeypatch.setattr(planning, "make_plan", lambda *a, **k: calls.append(1) or real(*a, **k))
+    for kind, query in exports_of:
+        r = client.get(f"/v1/plans/{plan['id']}/export/{kind}{query}", headers=A)
+        assert r.status_code == 200, (kind, r.text)
+        assert _without_creation_date(r.text) == _without_creation_date(stored[kind + query]), kind + query
+    assert len(calls) == 1  # recomputed once, then kept
 
 
 def test_a_footprint_across_the_antimeridian_and_about_a_pole_stays_fillable():

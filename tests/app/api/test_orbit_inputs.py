@@ -2,6 +2,7 @@
 XML and CSV). Each must give the very windows its TLE gives; skyfield's own OMM reader is the reference for the OMM."""
 
 import copy
+from datetime import datetime
 
 import numpy as np
 import pytest
@@ -219,6 +220,10 @@ BAD = [
     ({"omm": {**OMM, "EPOCH": "yesterday"}}, ["body", "target", "omm", "EPOCH"]),
     ({"omm_xml": XML.replace('version="2.0"', 'version="1.0"')}, ["body", "target", "omm_xml", "CCSDS_OMM_VERS"]),
     ({"omm_xml": "<ndm><omm"}, ["body", "target", "omm_xml"]),
+    (  # an external entity (XXE) is never resolved: any DTD is refused
+        {"omm_xml": XML.replace("<ndm>", '<!DOCTYPE ndm [<!ENTITY x SYSTEM "file:///etc/passwd">]><ndm>')},
+        ["body", "target", "omm_xml"],
+    ),
     ({"omm_csv": "OBJECT_NAME\nISS\n"}, ["body", "target", "omm_csv", "EPOCH"]),
     ({"tle": ["a", ISS_L1, ISS_L2, ISS_L2]}, ["body", "target", "tle"]),
     ({"tle": f"{ISS_L1}\n"}, ["body", "target", "tle"]),
@@ -322,3 +327,73 @@ def test_ccsds_day_of_year_epochs_read_as_their_calendar_dates(client):
     assert a == b
     bad = _windows_named(client, "ISS", {"omm": {**OMM, "EPOCH": "2023-366T00:00:00"}})
     assert bad.status_code == 422 and bad.json()["detail"][0]["loc"][-1] == "EPOCH"
+
+
+def _library_opm(geo, fmt, epoch="2008-09-20T12:25:40.104192"):
+    """An OPM written by ccsds-ndm's own writer from its own data classes (not by the service's writer)."""
+    from ccsds_ndm.mapping import NDMFileFormats
+    from ccsds_ndm.models.ndmxml4 import ndmxml_4_0_0_common_4_0 as c
+    from ccsds_ndm.models.ndmxml4 import ndmxml_4_0_0_opm_3_0 as o
+    from ccsds_ndm.models.ndmxml4.ndmxml_4_0_0_master_4_0 import Opm
+    from ccsds_ndm.ndm_io import NdmIo
+
+    r, v = geo.position.km, geo.velocity.km_per_s
+    km = [c.PositionTypeUo(value=float(x), units=c.PositionUnits.KM) for x in r]
+    km_s = [c.VelocityTypeUo(value=float(x), units=c.VelocityUnits.KM_S) for x in v]
+    message = Opm(
+        header=c.OdmHeader(creation_date="2026-12-05T00:00:00", originator="TEST"),
+        body=o.OpmBody(
+            segment=o.OpmSegment(
+                metadata=o.OpmMetadata(
+                    object_name="ISS (ZARYA)",
+                    object_id="1998-067A",
+                    center_name="EARTH",
+                    ref_frame="EME2000",
+                    time_system="UTC",
+                ),
+                data=o.OpmData(
+                    state_vector=c.StateVectorType(
+                        epoch=epoch, x=km[0], y=km[1], z=km[2], x_dot=km_s[0], y_dot=km_s[1], z_dot=km_s[2]
+                    )
+                ),
+            )
+        ),
+    )
+    return NdmIo().to_string(message, NDMFileFormats.XML if fmt == "xml" else NDMFileFormats.KVN)
+
+
+def test_an_opm_in_xml_from_the_librarys_writer_reads_as_its_kvn_and_as_skyfields_state(client):
+    """CCSDS tools write OPMs in XML too: one from ccsds-ndm's writer (and its day-of-year epoch) gives the elements
+    of the same message in KVN and of the hand-written KVN above, and plans the same windows."""
+    from app.schemas import OrbitIn
+    from app.services.planning import to_orbit
+
+    geo = _iss_state()
+    xml = _library_opm(geo, "xml")
+    assert xml.lstrip().startswith("<?xml") and "<stateVector>" in xml
+    read = {
+        name: to_orbit(OrbitIn.model_validate({"name": "x", "opm": text}), "target").elements
+        for name, text in (
+            ("xml", xml),
+            ("kvn", _library_opm(geo, "kvn")),
+            ("hand", _opm(geo.position.km, geo.velocity.km_per_s)),
+            ("xml-doy", _library_opm(geo, "xml", epoch="2008-264T12:25:40.104192")),
+        )
+    }
+    ref = read["hand"]
+    for name, el in read.items():
+        assert abs(el.ha_km - ref.ha_km) < 1e-6 and abs(el.raan_deg - ref.raan_deg) < 1e-9, name
+        assert abs((el.epoch - ref.epoch).total_seconds()) < 1e-6, name
+    rises = [
+        [datetime.fromisoformat(w["rise"]) for w in _windows(client, {"opm": text})]
+        for text in (xml, _opm(geo.position.km, geo.velocity.km_per_s))  # the hand-written one: 9 decimals
+    ]
+    assert len(rises[0]) == len(rises[1]) >= 3
+    assert max(abs((a - b).total_seconds()) for a, b in zip(*rises, strict=True)) < 1e-3
+    # What is not an OPM is refused by name: an OEM's XML, a second message, a broken document.
+    oem_xml = '<?xml version="1.0"?><oem id="CCSDS_OEM_VERS" version="3.0"><header/></oem>'
+    for text, words in ((oem_xml, "not an OPM"), (xml.replace("<opm", "<opm x").replace("</opm>", ""), "readable")):
+        r = _windows_named(client, "ISS", {"opm": text})
+        assert r.status_code == 422, r.text
+        detail = r.json()["detail"][0]
+        assert detail["loc"][-1] == "opm" and words in detail["msg"], detail
