@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from datetime import datetime
+from datetime import UTC, datetime
 from typing import TYPE_CHECKING, Any
 
 from sqlalchemy import delete as sa_delete
@@ -318,6 +318,25 @@ def tied_to_plan(*, session: Session, operator_id: str, plan_id: str) -> tuple[l
         .order_by(Pass.created_at, Pass.id)
     ).all()
     return list(estimates), list(passes)
+
+
+def passes_over(*, session: Session, operator_id: str, plan_id: str | None, moment: datetime | None) -> list[str]:
+    """The ids of the operator's fused passes of a plan whose frames span ``moment`` (first to last frame's
+    ``observed_at``): the pass a frame observed then belongs to, oldest first. None without a plan or a moment."""
+    if plan_id is None or moment is None:
+        return []
+    moment = moment if moment.tzinfo else moment.replace(tzinfo=UTC)  # SQLite gives its times back naive
+    rows = session.execute(
+        select(Pass.id, Pass.result)
+        .where(Pass.operator_id == operator_id, Pass.plan_id == plan_id)
+        .order_by(Pass.created_at, Pass.id)
+    ).all()
+    out = []
+    for pass_id, result in rows:
+        times = [datetime.fromisoformat(f["observed_at"]) for f in (result or {}).get("frames", [])]
+        if times and min(times) <= moment <= max(times):
+            out.append(pass_id)
+    return out
 
 
 def list_passes(

@@ -193,9 +193,14 @@ class _EstimateRow(Described):
 class EstimatePublic(EstimateResult, _EstimateRow):
     links: dict[str, str]
     """the estimate's own URL and its images' URLs"""
+    pass_ids: list[str] = Field(
+        default_factory=list,
+        description="your fused passes of the same plan whose frames span this frame's observed_at (the pass it was "
+        "observed in), oldest first; given by GET /v1/estimates/{id}, empty in lists",
+    )
 
     @classmethod
-    def from_row(cls, e: Estimate) -> EstimatePublic:
+    def from_row(cls, e: Estimate, pass_ids: list[str] | None = None) -> EstimatePublic:
         """Return a stored estimate row, of any stored format, as the answer."""
         return cls.model_validate(
             {
@@ -208,6 +213,7 @@ class EstimatePublic(EstimateResult, _EstimateRow):
                 "shape": e.shape,
                 "dtype": e.dtype,
                 "snr_db": e.snr_db,
+                "pass_ids": pass_ids or [],
                 **EstimateResult.upgraded(e.result),
                 "links": {
                     "self": f"/v1/estimates/{e.id}",

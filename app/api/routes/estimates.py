@@ -202,8 +202,10 @@ def _owned(session: SessionDep, operator_id: str, estimate_id: Annotated[Text, P
 def read_estimate(
     session: SessionDep, operator: CurrentOperator, estimate_id: Annotated[Text, PathParam()]
 ) -> EstimatePublic:
-    """Return one of the caller's estimates."""
-    return EstimatePublic.from_row(_owned(session, operator.id, estimate_id))
+    """Return one of the caller's estimates, with the fused passes of its plan it was observed in (``pass_ids``)."""
+    row = _owned(session, operator.id, estimate_id)
+    passes = crud.passes_over(session=session, operator_id=operator.id, plan_id=row.plan_id, moment=row.observed_at)
+    return EstimatePublic.from_row(row, passes)
 
 
 def _png(settings: SettingsDep, digest: str) -> Response:

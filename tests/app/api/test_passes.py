@@ -87,8 +87,24 @@ def test_a_pass_is_fused_and_stored(client, plan):
     assert listing["count"] >= 1
     assert client.get("/v1/passes", params={"plan_id": "no-such-plan"}, headers=A).json()["count"] == 0
     assert body["id"] not in client.get("/v1/passes", headers={"X-API-Key": KEY_B}).text
-    # The plan links its passes.
+    # The plan links its passes; an estimate of the plan observed within the pass's frames names it, one
+    # observed in another window of the plan does not.
     assert body["id"] in client.get(f"/v1/plans/{plan['id']}", headers=A).json()["pass_ids"]
+    frame = io.BytesIO()
+    np.save(frame, np.load(io.BytesIO(_stack(1)))["frames"][0])
+    other = plan["access_windows"][1]
+    ids = []
+    for moment in (times[1], other["culmination"]):
+        e = client.post(
+            "/v1/estimates",
+            files={"file": ("f.npy", frame.getvalue())},
+            data={"plan_id": plan["id"], "observed_at": moment},
+            headers=A,
+        )
+        assert e.status_code == 201, e.text
+        ids.append(e.json()["id"])
+    inside, outside = (client.get(f"/v1/estimates/{i}", headers=A).json()["pass_ids"] for i in ids)
+    assert body["id"] in inside and body["id"] not in outside
 
 
 @SQLITE_ONLY
