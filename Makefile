@@ -38,6 +38,7 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.robust
 	$(BIN)/python -m bench.physics
 	$(BIN)/python -m bench.passes
+	$(BIN)/python -m bench.so3
 	$(BIN)/python -m bench.load
 	$(BIN)/python -m bench.reliability
 	$(BIN)/python -m bench.exports

@@ -40,7 +40,15 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from inference.rotations import euler_from_matrix, geodesic_deg, rotation_matrices
+from inference.rotations import (
+    euler_from_matrices,
+    euler_from_matrix,
+    geodesic_deg,
+    rotation_matrices,
+    so3_exp,
+    so3_grid,
+    so3_grid_size,
+)
 from inference.simulation.radar import Radar, projection_matrix
 from inference.simulation.targets import TargetModel, surface_normals
 
@@ -233,8 +241,12 @@ class Renderer:
 
     def pixels(self, angles_deg: Vec, points: Vec | None = None) -> tuple[F32, F32]:
         """Return fractional pixel rows and columns [H, N] of the skin at attitudes [H, 3]."""
+        return self.pixels_of(rotation_matrices(angles_deg), points)
+
+    def pixels_of(self, rotations: Vec, points: Vec | None = None) -> tuple[F32, F32]:
+        """``pixels`` of attitudes given as rotation matrices [H, 3, 3]."""
         pts = self.points if points is None else points
-        m = (self.rows[None] @ rotation_matrices(angles_deg)).astype(np.float32)  # (H, 2, 3)
+        m = (self.rows[None] @ np.asarray(rotations, float).reshape(-1, 3, 3)).astype(np.float32)  # (H, 2, 3)
         uv = m @ np.asarray(pts, np.float32).T  # (H, 2, N)
         return uv[:, 0] + np.float32(self.radar.n_range / 2), uv[:, 1] + np.float32(self.radar.n_azimuth / 2)
 
@@ -257,10 +269,14 @@ class Renderer:
 
     def coverage(self, angles_deg: Vec) -> F32:
         """Return the 4x-pooled silhouette [H, n_range / 4, n_azimuth / 4]: the share of each pixel covered."""
+        return self.coverage_of(rotation_matrices(angles_deg))
+
+    def coverage_of(self, rotations: Vec) -> F32:
+        """``coverage`` of attitudes given as rotation matrices [H, 3, 3]."""
         f = COARSE_FACTOR
         nr, na = self.radar.n_range // f, self.radar.n_azimuth // f
-        rot = rotation_matrices(angles_deg)
-        u0, v0 = self.pixels(angles_deg, self.coarse_points)
+        rot = np.asarray(rotations, float).reshape(-1, 3, 3)
+        u0, v0 = self.pixels_of(rot, self.coarse_points)
         u = (u0 + np.float32(0.5)) / np.float32(f) - np.float32(0.5)
         v = (v0 + np.float32(0.5)) / np.float32(f) - np.float32(0.5)
         iu, iv = np.floor(u), np.floor(v)
@@ -343,6 +359,10 @@ class FitOptions:
     prior_weight: float = 0.002  # cost at one sigma from the start: 0.2 % of IoU
     prune: float = 0.03  # drop a hypothesis whose cost is this far behind the best after the first step
     coarse: bool = False  # fit the 4x-pooled coverage instead (Renderer.coverage): smooth but biased, for far starts
+    # Step in a rotation vector about each start (deg, observation-frame axes) instead of in the Euler angles:
+    # the same step turns the body the same whatever the attitude, where near y = +-90 deg two Euler angles turn it
+    # about one axis and the third direction is lost (gimbal lock). The library's fits, whose starts lie anywhere.
+    local: bool = False
 
 
 def fit(
@@ -362,12 +382,25 @@ def fit(
     beyond sqrt(y^2 + x^2) = 19 deg before it was refined, whatever its silhouette's fit.
     """
     opt = options or FitOptions()
+    if opt.local and prior_at is not None:
+        raise ValueError("a local fit's prior sits on each start (its rotation vector's origin): no prior_at")
     target = np.clip(np.asarray(enhanced, np.float32), 0.0, 1.0)
     total = float(target.sum(dtype=np.float64))
     names = list(starts)
     origin = np.array([starts[n] for n in names], float).reshape(-1, 3)
-    best = origin.copy()
-    centre = origin if prior_at is None else np.broadcast_to(np.asarray(prior_at, float), origin.shape)
+    base = rotation_matrices(origin)  # each start's rotation: a local fit's offsets turn it
+    best = np.zeros_like(origin) if opt.local else origin.copy()
+    centre = best.copy() if prior_at is None else np.broadcast_to(np.asarray(prior_at, float), origin.shape)
+
+    def rotations(points: Vec, live: NDArray[np.intp]) -> Vec:
+        """The rotations [L, S, 3, 3] of points [L, S, 3] of the hypotheses ``live``."""
+        if not opt.local:
+            return rotation_matrices(points.reshape(-1, 3)).reshape(*points.shape[:-1], 3, 3)
+        return np.einsum("lsij,ljk->lsik", so3_exp(np.radians(points)), base[live])
+
+    def angles_of(points: Vec, live: NDArray[np.intp]) -> Vec:
+        return points if not opt.local else euler_from_matrices(rotations(points[:, None], live)).reshape(-1, 3)
+
     best_cost = np.full(len(names), np.inf)
     best_iou = np.zeros(len(names))
     alive = np.ones(len(names), bool)
@@ -376,13 +409,13 @@ def fit(
     pooled = pool(target, COARSE_FACTOR) if opt.coarse else target
 
     def cost(points: Vec, live: NDArray[np.intp]) -> tuple[Vec, Vec]:
-        flat = points.reshape(-1, 3)
+        rot = rotations(points, live).reshape(-1, 3, 3)
         if opt.coarse:
-            iou = soft_iou(renderer.coverage(flat), pooled).reshape(points.shape[:-1])
+            iou = soft_iou(renderer.coverage_of(rot), pooled).reshape(points.shape[:-1])
         else:
             # The window: the frame's silhouette and where the centres put the target, with a margin.
-            win = _window_for(renderer, silhouette, best[live])
-            iou = soft_iou(renderer.occupancy(flat, win), win.crop(target), total).reshape(points.shape[:-1])
+            win = _window_for(renderer, silhouette, angles_of(best[live], live))
+            iou = soft_iou(renderer.occupancy_of(rot, win), win.crop(target), total).reshape(points.shape[:-1])
         prior = opt.prior_weight * np.sum(((points - centre[live][:, None, :]) / opt.prior_sigma_deg) ** 2, axis=-1)
         return 1.0 - iou + prior, iou
 
@@ -417,7 +450,8 @@ def fit(
             if not np.any(moved | better):
                 break
     order = np.argsort(np.where(alive, best_cost, np.inf))
-    return [Fit(best[k].copy(), float(best_iou[k]), float(best_cost[k]), names[k]) for k in order if alive[k]]
+    answers = angles_of(best, np.arange(len(names)))
+    return [Fit(answers[k].copy(), float(best_iou[k]), float(best_cost[k]), names[k]) for k in order if alive[k]]
 
 
 COMMON_STEPS_DEG = (0.35, 0.12, 0.05)
@@ -573,18 +607,32 @@ def brightness_agreement(renderer: Renderer, frame: Vec, angles_deg: Vec, mask: 
     return float(np.corrcoef(x, y)[0, 1])
 
 
-LIBRARY_STEP_DEG = 7.5
-LIBRARY_HALF_RANGE_DEG = 45.0
+LIBRARY_SPACING_DEG = 15.0  # measured: design/measurements.md, "The coarse silhouette library over SO(3)"
+LIBRARY_MAX_SPACING_DEG = 20.0  # beyond it the nearest entry can lie outside the coarse fit's reach
+
+
+class LibraryError(ValueError):
+    """A library the coarse renderer cannot use: its spacing, named, with what would do."""
+
+    field = "library_spacing_deg"
+
+
+def library_spacing_limits(renderer: Renderer) -> tuple[float, float]:
+    """The spacings (deg) a library of ``renderer``'s target can have: at least the turn that moves the target's
+    farthest point by one coarse pixel (closer entries cannot be told apart at the coarse resolution), at most
+    ``LIBRARY_MAX_SPACING_DEG``."""
+    radius_px = float(np.max(np.linalg.norm(renderer.coarse_points, axis=1))) / renderer.pixel_m
+    return math.degrees(COARSE_FACTOR / max(radius_px, 1e-9)), LIBRARY_MAX_SPACING_DEG
 
 
 @dataclass(frozen=True)
 class Library:
-    """Coarse silhouettes of a grid of attitudes over the +-45 deg cube: starts for targets without networks.
+    """Coarse silhouettes of attitudes spread evenly over all of SO(3) (``so3_grid``): the starts of the search
+    where no network answer fits (a target without networks, an attitude outside their cube).
 
-    Built once per target (2,197 attitudes at 7.5 deg; cost in design/measurements.md, "The coarse
-    silhouette library"); ``starts``
-    scores every entry against a frame's 4x-pooled enhanced silhouette in one product
-    and returns the best few, each at least ``separation_deg`` from the others.
+    Built once per target (4,400 attitudes at 15 deg, about 1.4 s and 36 MB; design/measurements.md, "The coarse
+    silhouette library over SO(3)"); ``starts`` scores every entry against a frame's 4x-pooled enhanced silhouette
+    in one product and returns the best few, each at least ``separation_deg`` from the others.
     """
 
     angles_deg: Vec
@@ -592,14 +640,14 @@ class Library:
     totals: Vec
 
     @staticmethod
-    def build(
-        renderer: Renderer,
-        step_deg: float = LIBRARY_STEP_DEG,
-        half_range_deg: float = LIBRARY_HALF_RANGE_DEG,
-        batch: int = 128,
-    ) -> Library:
-        g = np.arange(-half_range_deg, half_range_deg + 1e-9, step_deg)
-        angles = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+    def build(renderer: Renderer, spacing_deg: float = LIBRARY_SPACING_DEG, batch: int = 128) -> Library:
+        lo, hi = library_spacing_limits(renderer)
+        if not (math.isfinite(spacing_deg) and lo <= spacing_deg <= hi):
+            raise LibraryError(
+                f"library spacing {spacing_deg:g} deg: this target and radar resolve {lo:.1f} to {hi:g} deg (closer "
+                "entries look alike at the coarse resolution; farther ones leave attitudes out of the fit's reach)"
+            )
+        angles = euler_from_matrices(so3_grid(so3_grid_size(spacing_deg)))
         parts = [
             renderer.coverage(angles[k : k + batch]).reshape(
                 -1, (renderer.shape[0] // COARSE_FACTOR) * (renderer.shape[1] // COARSE_FACTOR)

@@ -64,8 +64,10 @@ AMBIGUOUS = "fits nearly as well: the frame cannot tell them apart"  # the end o
 BRIGHTNESS_MARGIN = 0.01  # silhouettes this close (soft IoU) are told apart by their bright parts
 DISTINCT_DEG = 5.0  # an alternative is at least this far from the answer
 # From library starts: first the coarse coverage (smooth, within a degree or two), then the fine label.
-LIBRARY_COARSE = FitOptions(steps_deg=(4.0, 2.0, 1.0), max_iter=(3, 3, 3), prior_weight=0.0, prune=0.05, coarse=True)
-LIBRARY_FINE = FitOptions(steps_deg=(2.0, 1.0, 0.5, 0.25, 0.12), max_iter=(4, 4, 3, 2, 2), prior_weight=0.0)
+LIBRARY_COARSE = FitOptions(
+    steps_deg=(4.0, 2.0, 1.0), max_iter=(3, 3, 3), prior_weight=0.0, prune=0.05, coarse=True, local=True
+)
+LIBRARY_FINE = FitOptions(steps_deg=(2.0, 1.0, 0.5, 0.25, 0.12), max_iter=(4, 4, 3, 2, 2), prior_weight=0.0, local=True)
 
 
 @dataclass(frozen=True)

@@ -245,8 +245,8 @@ async function planPage(id) {
       <td class="num">${cf.target_angular_rate_deg_s == null ? "-" : num(cf.target_angular_rate_deg_s, 2)}</td>
       <td>${cf.sunlit ? "yes" : "no"}</td><td class="reasons">${cf.feasible ? "yes" : `no: ${esc(cf.reasons.join("; "))}`}</td></tr>`;
   }).join("");
-  const exportsList = ["opm", "oem", "czml", "geojson", "access.csv", "pointing.csv"]
-    .map((k) => `<a href="#" data-export="${k}">${k}</a>`).join(" · ");
+  const exportsList = ["opm", "opm?format=xml", "oem", "oem?format=xml", "czml", "geojson", "access.csv", "pointing.csv"]
+    .map((k) => `<a href="#" data-export="${k}">${k.replace("?format=xml", " (XML)")}</a>`).join(" · ");
   view.innerHTML = `<h1>Plan ${esc(p.target_name)} / ${esc(p.observer_name)} / ${esc(p.station_name)}</h1>
     <p class="muted">${esc(p.id)} · created ${utc(p.created_at)} · ${p.duration_days} days from ${utc(p.epoch)} · elements ${esc(p.reading)}</p>
     ${verdict}${(p.notes || []).map((n) => `<p class="muted">note: ${esc(n)}</p>`).join("")}${mapSvg(geo, coastLines)}${skySvg(geo, (geo.features.find((x) => x.properties.kind === "station") || {}).properties)}${scene}
@@ -268,12 +268,12 @@ async function planPage(id) {
     ev.preventDefault();
     const kind = a.dataset.export;
     const note = document.getElementById("exporting");
-    note.textContent = `preparing ${kind} (the plan is recomputed: a few seconds)...`;
+    note.textContent = `preparing ${kind} (a plan made before exports were stored is recomputed: a few seconds)...`;
     try {
       const blob = await api(`/v1/plans/${encodeURIComponent(id)}/export/${kind}`, "blob");
       const link = document.createElement("a");
       link.href = URL.createObjectURL(blob);
-      link.download = `plan-${id}.${kind}`;
+      link.download = `plan-${id}.${kind.replace("?format=xml", ".xml")}`;
       link.click();
       note.textContent = `${kind} ready`;
     } catch (err) {
@@ -309,7 +309,8 @@ async function campaignPage(id) {
   const stretches = c.stretches.map((st) => `<tr${st.scene === null ? "" : ' class="chosen"'}><td>${utc(st.start)}</td>
       <td>${utc(st.end)}</td><td class="num">${st.candidates}</td><td class="num">${st.feasible}</td>
       <td class="reasons">${esc(st.note)}</td></tr>`).join("");
-  const exportsList = ["opm", "oem", "czml", "access.csv"].map((k) => `<a href="#" data-export="${k}">${k}</a>`).join(" · ");
+  const exportsList = ["opm", "opm?format=xml", "oem", "oem?format=xml", "czml", "access.csv"]
+    .map((k) => `<a href="#" data-export="${k}">${k.replace("?format=xml", " (XML)")}</a>`).join(" · ");
   const verdict = c.scenes.length
     ? `<p class="verdict good">${c.scenes.length} feasible scene(s) for ${num(c.dv_total_m_s, 1)} of ${num(c.dv_budget_m_s, 0)} m/s.</p>`
     : `<p class="verdict bad">No feasible scene within the budget in the span: each stretch below says why.</p>`;
@@ -332,7 +333,7 @@ async function campaignPage(id) {
     const blob = await api(`/v1/campaigns/${encodeURIComponent(id)}/export/${kind}`, "blob");
     const link = document.createElement("a");
     link.href = URL.createObjectURL(blob);
-    link.download = `campaign-${id}.${kind}`;
+    link.download = `campaign-${id}.${kind.replace("?format=xml", ".xml")}`;
     link.click();
   }));
 }

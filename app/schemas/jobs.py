@@ -141,7 +141,9 @@ class DatasetCreate(Strict):
     snr_max_db: float | None = Field(default=15.0, ge=-40, le=80)
     """highest SNR"""
     max_angle_deg: float = Field(default=45.0, ge=0, le=89)
-    """each Euler angle uniform within plus or minus this"""
+    """each Euler angle uniform within plus or minus this (attitudes cube)"""
+    attitudes: Literal["cube", "so3"] = "cube"
+    """cube: the Euler angles within max_angle_deg; so3: uniform over every rotation"""
     shard_size: int = Field(default=250, ge=1, le=10_000)
     """frames per shard (each shard is one task of the engine)"""
     n_train: int | None = Field(default=None, ge=0)

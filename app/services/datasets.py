@@ -44,6 +44,7 @@ def spec_and_radar(params: dict[str, Any]) -> tuple[Any, Any]:
             snr_min_db=params.get("snr_min_db"),
             snr_max_db=params.get("snr_max_db"),
             max_angle_deg=params.get("max_angle_deg", 45.0),
+            attitudes=params.get("attitudes", "cube"),
             shard_size=params.get("shard_size", 250),
             n_train=params.get("n_train"),
             variety=params.get("variety"),

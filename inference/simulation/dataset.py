@@ -54,7 +54,9 @@ FORMAT_VERSION = 1
 
 @dataclass(frozen=True, slots=True)
 class DatasetSpec:
-    """What to generate. Angles are uniform in [-max_angle_deg, max_angle_deg] on each axis."""
+    """What to generate. ``attitudes`` "cube": the Euler angles uniform in [-max_angle_deg, max_angle_deg] on each
+    axis (the paper's); "so3": attitudes uniform over all rotations (Haar measure), written as Euler angles z and x
+    in (-180, 180], y in [-90, 90]."""
 
     n: int
     seed: int = 0
@@ -78,6 +80,7 @@ class DatasetSpec:
     po_bounces: int = 1
     po_roughness: tuple[float, float] = (0.0, 0.0)
     po_facet_m: float = 0.2
+    attitudes: str = "cube"  # or "so3": see the class's docstring
 
     def __post_init__(self) -> None:
         if not isinstance(self.n, int) or self.n <= 0:
@@ -95,6 +98,12 @@ class DatasetSpec:
                 )
         if not 0.0 <= self.max_angle_deg <= 89.0:
             raise DatasetError(f"max_angle_deg {self.max_angle_deg} is outside [0, 89]", field="max_angle_deg")
+        if self.attitudes not in ATTITUDES:
+            raise DatasetError(
+                f"attitudes {self.attitudes!r}: one of {', '.join(ATTITUDES)} (the +-max_angle_deg cube, or every "
+                "rotation)",
+                field="attitudes",
+            )
         if self.shard_size <= 0:
             raise DatasetError("shard_size must be positive", field="shard_size")
         if not (isinstance(self.variety_share, (int, float)) and 0.0 < self.variety_share <= 1.0):
@@ -131,6 +140,18 @@ class DatasetSpec:
             raise DatasetError(f"n_train {self.n_train} must be within [0, n={self.n}]", field="n_train")
 
 
+ATTITUDES = ("cube", "so3")
+
+
+def uniform_rotation_angles(rng: np.random.Generator) -> tuple[float, float, float]:
+    """Euler angles (z, y, x deg) of a rotation drawn uniformly over SO(3): a unit quaternion from four normal
+    draws is uniform on the 3-sphere, and so its rotation under the Haar measure (Shoemake)."""
+    from inference.rotations import euler_from_matrix, quaternion_matrix
+
+    q = rng.standard_normal(4)
+    return euler_from_matrix(quaternion_matrix(q / np.linalg.norm(q)))
+
+
 def frame_seed(seed: int, index: int) -> int:
     """Return the seed of frame ``index``: a function of (seed, index) only."""
     digest = hashlib.sha256(f"gsa-isar:{seed}:{index}".encode()).digest()
@@ -141,7 +162,10 @@ def frame_truth(spec: DatasetSpec, index: int) -> tuple[tuple[float, float, floa
     """Return the angles (z, y, x deg), SNR (dB or None) and seed of frame ``index``."""
     s = frame_seed(spec.seed, index)
     rng = np.random.default_rng(s)
-    angles = tuple(float(a) for a in rng.uniform(-spec.max_angle_deg, spec.max_angle_deg, 3))
+    if spec.attitudes == "so3":
+        angles: tuple[float, ...] = uniform_rotation_angles(rng)
+    else:
+        angles = tuple(float(a) for a in rng.uniform(-spec.max_angle_deg, spec.max_angle_deg, 3))
     snr = None
     if spec.snr_min_db is not None and spec.snr_max_db is not None:
         snr = float(rng.uniform(spec.snr_min_db, spec.snr_max_db))
@@ -473,7 +497,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--n", type=int, default=5000, help="number of frames (default 5000)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--snr-db", default="-3:15", help="SNR range LOW:HIGH in dB, or 'none' (default -3:15)")
-    p.add_argument("--max-angle-deg", type=float, default=45.0)
+    p.add_argument("--max-angle-deg", type=float, default=45.0, help="each Euler angle within +-this (cube)")
+    p.add_argument(
+        "--attitudes",
+        default="cube",
+        help="cube: Euler angles within --max-angle-deg (default); so3: uniform over every rotation",
+    )
     p.add_argument("--split", action="store_true", help="the paper's split: first 80%% train, last 20%% test")
     p.add_argument("--n-train", type=int, help="split after this many training frames (the rest are the test set)")
     p.add_argument("--shard-size", type=int, default=250)
@@ -580,6 +609,7 @@ def run(args: argparse.Namespace) -> int:
         args.bounces,
         parse_roughness(args.roughness),
         args.facet_m,
+        args.attitudes,
     )
     radar = Radar(args.carrier_hz, args.bandwidth_hz, args.n_range, args.n_azimuth, args.aperture_deg)
     if args.preview:

@@ -56,6 +56,7 @@ def test_manifest_catches_tampering(tmp_path):
         ({"n": 3, "snr_min_db": 10.0, "snr_max_db": 0.0}, "snr_db"),
         ({"n": 3, "n_train": 4}, "n_train"),
         ({"n": 3, "max_angle_deg": 95.0}, "max_angle_deg"),
+        ({"n": 3, "attitudes": "sphere"}, "attitudes"),
     ],
 )
 def test_bad_specs(kwargs, field):
@@ -98,6 +99,18 @@ def test_simulate_command(tmp_path):
     assert "4/4 frames" in out.stderr
     manifest = json.loads((tmp_path / "set" / "manifest.json").read_text())
     assert manifest["frames"] == 4 and manifest["split"]["train"] == [0, 3]
+
+
+def test_a_set_over_every_rotation_writes_its_attitudes_beyond_the_cube(tmp_path):
+    out = _simulate(
+        "--n", "6", "--attitudes", "so3", *SMALL_ARGS, "--workers", "1", "--out", str(tmp_path / "s"), cwd=tmp_path
+    )
+    assert out.returncode == 0, out.stderr
+    manifest = json.loads((tmp_path / "s" / "manifest.json").read_text())
+    with np.load(tmp_path / "s" / "shard-00000.npz") as shard:
+        angles = shard["angles_deg"]
+    assert len(angles) == 6 and np.abs(angles).max() > 45.0
+    assert "so3" in json.dumps(manifest)
     # --n-train N: the first N frames train, the rest test (the shipped models' 24,000 of 25,000).
     other = _simulate(
         "--n",
@@ -137,6 +150,7 @@ def test_simulate_command(tmp_path):
         (["--n", "3", "--model", "missing.obj"], "does not exist"),
         (["--n", "3", "--n-train", "4"], "n_train 4 must be within [0, n=3]"),
         (["--n", "3", "--n-train", "2", "--split"], "not both"),
+        (["--n", "3", "--attitudes", "all"], "attitudes 'all': one of cube, so3"),
     ],
 )
 def test_simulate_bad_input_is_one_line_and_leaves_nothing(tmp_path, args, message):
