@@ -640,9 +640,13 @@ class Library:
     totals: Vec
 
     @staticmethod
-    def build(renderer: Renderer, spacing_deg: float = LIBRARY_SPACING_DEG, batch: int = 128) -> Library:
+    def build(renderer: Renderer, spacing_deg: float | None = None, batch: int = 128) -> Library:
+        """The library at ``spacing_deg``, or by default ``LIBRARY_SPACING_DEG`` moved into the limits the target
+        allows (a target a few coarse pixels across resolves nothing finer than the widest spacing: that one)."""
         lo, hi = library_spacing_limits(renderer)
-        if not (math.isfinite(spacing_deg) and lo <= spacing_deg <= hi):
+        if spacing_deg is None:
+            spacing_deg = min(max(LIBRARY_SPACING_DEG, lo), hi)
+        elif not (math.isfinite(spacing_deg) and lo <= spacing_deg <= hi):
             raise LibraryError(
                 f"library spacing {spacing_deg:g} deg: this target and radar resolve {lo:.1f} to {hi:g} deg (closer "
                 "entries look alike at the coarse resolution; farther ones leave attitudes out of the fit's reach)"

@@ -344,3 +344,13 @@ def oem_message(*, created: datetime, originator: str, segments: Sequence[Segmen
         )
     message = Oem(header=_header(created, originator), body=oem.OemBody(segment=pieces))  # CCSDS_OEM_VERS 3.0
     return _serialise(message, fmt)
+
+
+def convert(text: str, kind: Literal["OEM", "OPM"], fmt: Format) -> str:
+    """A message this module wrote, in the other form (KVN to XML or back): read and written by ccsds-ndm."""
+    from ccsds_ndm.ndm_io import NdmIo
+
+    message = NdmIo().from_string(text)
+    if type(message).__name__.upper() != kind:
+        raise ValueError(f"this is a {type(message).__name__.upper()}, not an {kind}")
+    return _serialise(message, fmt)

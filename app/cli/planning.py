@@ -153,7 +153,9 @@ def _export_plan(plan: Any, result: dict[str, Any], req: Any, folder: Path) -> N
 
     folder.mkdir(parents=True, exist_ok=True)
     names = {"target": req.target.name, "observer": req.observer.name, "station": req.ground_station.name}
-    texts = exports.render(plan, result, plan_id="local", names=names, station=req.ground_station.model_dump())
+    texts = exports.with_later(
+        exports.render(plan, result, plan_id="local", names=names, station=req.ground_station.model_dump())
+    )
     if not result.get("phasing"):
         print("note: no OPM, OEM or CZML: the plan has no phasing burn (no candidate was planned)", file=sys.stderr)
     files = {"access.csv": access_csv(result["access_windows"])} | {FILE_NAMES[k]: v for k, v in texts.items()}

@@ -19,7 +19,7 @@ import math
 import zlib
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -422,23 +422,32 @@ def _utc_strings(epoch: datetime, t_s: Vec) -> list[str]:
     return [s + "Z" for s in np.datetime_as_string(base + micro, unit="us").tolist()]
 
 
+POINTING_CHUNK = 12  # passes computed together: one vectorised call each, and the stop asked between chunks
+
+
 def pointing_csv(plan: Plan, windows: list[dict[str, Any]], stop: StopCheck | None = None) -> str:
     """The radar's pointing over each pass, 1-s steps: azimuth (from north, through east), elevation, range and its
-    rate, and the azimuth's and elevation's rates the antenna turns at. ``stop()`` is asked before each pass (a
-    reason stops the work: ``PlanningStopped``)."""
+    rate, and the azimuth's and elevation's rates the antenna turns at. ``stop()`` is asked before each chunk of
+    ``POINTING_CHUNK`` passes (a reason stops the work: ``PlanningStopped``)."""
     from planner.access import look_angles, pointing_rates
 
     assert plan.target_trajectory is not None and plan.frames is not None and plan.station is not None
     traj, station, frames, epoch = plan.target_trajectory, plan.station, plan.frames, plan.epoch
     lines = [",".join(POINTING_COLUMNS)]
-    for k, w in enumerate(windows):
+    for first in range(0, len(windows), POINTING_CHUNK):
         if stop is not None and (why := stop()) is not None:
-            raise PlanningStopped(f"writing pass {k} of {len(windows)} of pointing.csv: {why}")
-        rise = (datetime.fromisoformat(w["rise"]) - epoch).total_seconds()
-        end = (datetime.fromisoformat(w["set"]) - epoch).total_seconds()
-        t = np.arange(math.ceil(rise), math.floor(end) + 1e-9, POINTING_STEP_S)
-        if t.size == 0:
+            raise PlanningStopped(f"writing pass {first} of {len(windows)} of pointing.csv: {why}")
+        passes, times = [], []
+        for k in range(first, min(first + POINTING_CHUNK, len(windows))):
+            rise = (datetime.fromisoformat(windows[k]["rise"]) - epoch).total_seconds()
+            end = (datetime.fromisoformat(windows[k]["set"]) - epoch).total_seconds()
+            t_k = np.arange(math.ceil(rise), math.floor(end) + 1e-9, POINTING_STEP_S)
+            if t_k.size:
+                passes.append((k, t_k))
+                times.append(t_k)
+        if not times:
             continue
+        t = np.concatenate(times)
         look = look_angles(traj.state(t)[0], t, station, frames)
         dt = 0.5
         rate = (
@@ -446,19 +455,17 @@ def pointing_csv(plan: Plan, windows: list[dict[str, Any]], stop: StopCheck | No
             - look_angles(traj.state(t - dt)[0], t - dt, station, frames).range_km
         ) / (2 * dt)
         az_rate, el_rate = pointing_rates(traj, station, frames, t)
-        lines += [
-            f"{k},{when},{az:.4f},{el:.4f},{rng:.3f},{rr:.5f},{azr:.4f},{elr:.4f}"
-            for when, az, el, rng, rr, azr, elr in zip(
-                _utc_strings(epoch, t),
-                look.azimuth_deg.tolist(),
-                look.elevation_deg.tolist(),
-                look.range_km.tolist(),
-                rate.tolist(),
-                az_rate.tolist(),
-                el_rate.tolist(),
-                strict=True,
-            )
-        ]
+        columns = [look.azimuth_deg, look.elevation_deg, look.range_km, rate, az_rate, el_rate]
+        at = 0
+        for k, t_k in passes:
+            part = slice(at, at + t_k.size)
+            at += t_k.size
+            lines += [
+                f"{k},{when},{az:.4f},{el:.4f},{rng:.3f},{rr:.5f},{azr:.4f},{elr:.4f}"
+                for when, az, el, rng, rr, azr, elr in zip(
+                    _utc_strings(epoch, t_k), *(c[part].tolist() for c in columns), strict=True
+                )
+            ]
     return "\n".join(lines) + "\n"
 
 
@@ -647,9 +654,22 @@ def render(
         now = now or datetime.now(UTC)
         for fmt in ccsds.FORMATS:
             out[stored_name("opm", fmt)] = opm(arc, plan_id, names["observer"], now, fmt)
-            out[stored_name("oem", fmt)] = oem(arc, plan_id, names["target"], names["observer"], now, fmt)
+        # The OEM in XML is written from the stored KVN on its first request (LATER): its serializer's 0.1 s a plan
+        # is spent only for who asks for it.
+        out["oem"] = oem(arc, plan_id, names["target"], names["observer"], now)
         out["czml"] = czml(arc, plan_id, names, station, windows)
     return out
+
+
+# An export written from another stored one on its first request: its name -> (source, message kind).
+LATER: dict[str, tuple[str, Literal["OEM", "OPM"]]] = {"oem.xml": ("oem", "OEM")}
+
+
+def with_later(texts: dict[str, str]) -> dict[str, str]:
+    """``render``'s exports and those it leaves for later (``LATER``), written now: every export of the plan."""
+    return texts | {
+        name: ccsds.convert(texts[source], what, "xml") for name, (source, what) in LATER.items() if source in texts
+    }
 
 
 def pack(texts: dict[str, str]) -> dict[str, bytes]:
@@ -672,20 +692,28 @@ def check_exportable(kind: str, row: Any) -> None:
 
 
 def stored_export(session: Any, row: Any, kind: str, fmt: ccsds.Format = "kvn") -> str | None:
-    """A stored plan's export as written when it was made; None where the plan has none stored (made before)."""
+    """A stored plan's export as written when it was made (one of ``LATER`` written from its stored source and kept
+    on its first request); None where the plan has none stored (made before)."""
     from app import crud
 
     check_exportable(kind, row)
-    body = crud.get_plan_export(session=session, plan_id=row.id, name=stored_name(kind, fmt))
+    name = stored_name(kind, fmt)
+    body = crud.get_plan_export(session=session, plan_id=row.id, name=name)
+    if body is None and name in LATER:
+        source, what = LATER[name]
+        kvn = crud.get_plan_export(session=session, plan_id=row.id, name=source)
+        if kvn is not None:
+            text = ccsds.convert(unpack(kvn), what, "xml")
+            crud.store_plan_exports(session=session, plan_id=row.id, exports=pack({name: text}))
+            return text
     return None if body is None else unpack(body)
 
 
-def keep(session: Any, row: Any, texts: dict[str, str]) -> dict[str, str]:
+def keep(session: Any, row: Any, texts: dict[str, str]) -> None:
     """Store the exports ``render_again`` wrote for an older plan, so its next request is a read."""
     from app import crud
 
     crud.store_plan_exports(session=session, plan_id=row.id, exports=pack(texts))
-    return texts
 
 
 def render_again(row: Any, settings: Any, stop: StopCheck | None = None) -> dict[str, str]:

@@ -5,7 +5,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from inference.fit import Renderer, fit, mirror, silhouette_iou
-from inference.rotations import geodesic_deg, rotation_matrices, rotation_matrix
+from inference.rotations import geodesic_deg, rotation_matrices, rotation_matrix, so3_grid_size
 from inference.simulation.radar import Imager, Radar
 from inference.simulation.scene import label_mask
 from inference.simulation.targets import comsat_like, tiangong_like
@@ -97,6 +97,10 @@ def test_a_library_spacing_the_coarse_renderer_cannot_use_is_refused(tiangong):
     for bad in (lo / 2, 45.0, float("nan")):
         with pytest.raises(LibraryError, match="library spacing .* resolve"):
             Library.build(tiangong, bad)
+    # A target a few coarse pixels across resolves nothing finer than the widest spacing: the default takes that.
+    tiny = Renderer(tiangong_like(), Radar(bandwidth_hz=2e7, n_range=64, n_azimuth=64, aperture_deg=0.5))
+    assert library_spacing_limits(tiny)[0] > 20.0
+    assert len(Library.build(tiny).angles_deg) == so3_grid_size(20.0)
 
 
 def _occupancy_by_numpy(renderer, angles, r0, c0, h, w):

@@ -152,7 +152,8 @@ async def _export(
     if body is None:  # a plan made before exports were stored: recomputed in a worker thread under the plan budget,
         async with client_watch(request) as gone:  # stopped when the client leaves, and kept for the next request
             texts = await run_in_threadpool(exports.render_again, row, settings, planning_budget(settings, gone))
-        body = exports.keep(session, row, texts)[exports.stored_name(kind, fmt)]
+        exports.keep(session, row, texts)
+        body = exports.stored_export(session, row, kind, fmt)
     media, _, suffix = EXPORT_TYPES[kind]
     if fmt == "xml" and kind in exports.CCSDS_KINDS:
         media, suffix = "application/xml", suffix.replace(".txt", ".xml")

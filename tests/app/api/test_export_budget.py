@@ -75,13 +75,13 @@ def test_writing_the_pointing_file_obeys_the_stop():
     req = PlanCreate.model_validate(PAPER_EXAMPLE)
     plan, result = run_plan(req)
     windows = result.model_dump(mode="json")["access_windows"]
-    assert len(windows) > 3
+    assert len(windows) > 2 * exports.POINTING_CHUNK
     asked = []
 
     def stop():
         asked.append(1)
         return "the client disconnected" if len(asked) > 2 else None
 
-    with pytest.raises(PlanningStopped, match="pass 2 of"):
+    with pytest.raises(PlanningStopped, match=f"pass {2 * exports.POINTING_CHUNK} of"):
         exports.pointing_csv(plan, windows, stop)
     assert len(asked) == 3
