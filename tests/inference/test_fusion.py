@@ -127,7 +127,7 @@ def _euler_to_rotvec_jacobian(o, e, h=1e-6):
     return np.stack(cols, axis=1)
 
 
-TRIALS = 50
+TRIALS = 30
 
 
 def test_correlated_frame_errors_fuse_to_the_cramer_rao_bound():

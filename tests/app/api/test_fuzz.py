@@ -1,6 +1,6 @@
 """Property-based fuzzing of every route from the app's own OpenAPI schema (schemathesis), authenticated.
 
-Each operation gets a mix of schema-valid and schema-invalid requests, ``GSA_FUZZ_EXAMPLES_PER_ROUTE`` of them (default 10
+Each operation gets a mix of schema-valid and schema-invalid requests, ``GSA_FUZZ_EXAMPLES_PER_ROUTE`` of them (default 6
 in the suite; ``make fuzz`` runs 5000 in all). Every response must be a non-5xx
 whose status code, content type, headers and body are the ones the schema declares.
 With ``GSA_FUZZ_REPORT=path`` the counts by route and status are written there.
@@ -25,7 +25,7 @@ from schemathesis.specs.openapi import checks as oa
 from app.main import create_app
 from tests.conftest import KEY_A
 
-EXAMPLES = int(os.environ.get("GSA_FUZZ_EXAMPLES_PER_ROUTE", "10"))
+EXAMPLES = int(os.environ.get("GSA_FUZZ_EXAMPLES_PER_ROUTE", "6"))
 REPORT = os.environ.get("GSA_FUZZ_REPORT")
 # Small limits so that no generated request can tie the worker up (they are what an operator would set).
 LIMITS = {
