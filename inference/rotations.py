@@ -128,6 +128,15 @@ def geodesic_deg(a_deg: Vec, b_deg: Vec) -> Vec:
     return np.degrees(np.arccos(np.clip((trace - 1.0) / 2.0, -1.0, 1.0)))
 
 
+def euler_difference(a_deg: Vec, b_deg: Vec) -> Vec:
+    """Return a - b per Euler axis, wrapped into [-180, 180) deg (z and x wrap at +-180; y never reaches it).
+
+    >>> euler_difference(np.array([179.0, 10.0, -170.0]), np.array([-179.0, 5.0, 170.0])).tolist()
+    [-2.0, 5.0, 20.0]
+    """
+    return np.asarray((np.asarray(a_deg, float) - np.asarray(b_deg, float) + 180.0) % 360.0 - 180.0)
+
+
 def angle_deg(a: Vec, b: Vec) -> float:
     """Return the rotation angle (deg) between two rotation matrices.
 

@@ -31,7 +31,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -86,18 +86,37 @@ class Calibration:
     floor_deg: tuple[float, float, float] = (0.1, 0.2, 0.3)
     network_bound_deg: tuple[float, float, float] = (1.0, 1.5, 1.5)
     made: dict[str, Any] = field(default_factory=dict)
+    # The library search's answers (a frame whose network answer did not fit, or a target without networks), where
+    # the calibration had such frames (``calibrate``: frames over all of SO(3)): their own IoU threshold and bounds,
+    # no "moved from Swin" check (a search's answer is far from Swin's by design) and no +-50 deg limit. None: those
+    # answers are held to the network path's thresholds, bounds and limit (a calibration made before these existed).
+    library_iou_min: float | None = None
+    library_doubt_max: float | None = None
+    library_scale: tuple[float, float, float] | None = None
+    library_floor_deg: tuple[float, float, float] | None = None
 
     @staticmethod
     def load(path: str | Path) -> Calibration:
         raw = read_json(path, ModelFileError, "model")
         known = {k: v for k, v in raw.items() if k in Calibration.__dataclass_fields__}
-        for k in ("median_range", "scale", "floor_deg", "network_bound_deg"):
-            if k in known:
+        for k in ("median_range", "scale", "floor_deg", "network_bound_deg", "library_scale", "library_floor_deg"):
+            if known.get(k) is not None:
                 known[k] = tuple(known[k])
         return Calibration(**known)
 
     def write(self, path: str | Path) -> None:
         write_json(path, asdict(self))
+
+    @property
+    def covers_library(self) -> bool:
+        """Whether the library search's answers have a calibration of their own (over every rotation)."""
+        return self.library_scale is not None and self.library_floor_deg is not None
+
+    def bounds_model(self, searched: bool) -> tuple[Vec, Vec]:
+        """(scale, floor) per axis for an answer of the library search (``searched``) or of the network path."""
+        if searched and self.covers_library:
+            return np.asarray(self.library_scale, float), np.asarray(self.library_floor_deg, float)
+        return np.asarray(self.scale, float), np.asarray(self.floor_deg, float)
 
 
 @dataclass(frozen=True)
@@ -151,6 +170,14 @@ def raw_covariance(hessian: Vec, soft_iou: float) -> Vec | None:
 def raw_uncertainty(cov: Vec | None) -> Vec:
     """Return sqrt(inv(H)_ii (1 - soft IoU)) per axis (deg) from ``raw_covariance``; infinite where it has none."""
     return np.full(3, np.inf) if cov is None else np.sqrt(np.maximum(np.diag(cov), 0.0))
+
+
+def bounds_from(raw: Vec, scale: Vec, floor_deg: Vec) -> Vec:
+    """The 90 % bounds per axis, sqrt(floor^2 + (scale raw)^2); infinite where ``raw`` is."""
+    finite = np.isfinite(raw)
+    return np.where(
+        finite, np.sqrt(np.asarray(floor_deg) ** 2 + (np.asarray(scale) * np.where(finite, raw, 0.0)) ** 2), np.inf
+    )
 
 
 def bound_covariance(cov_raw: Vec, scale: Vec, floor_deg: Vec) -> Vec:
@@ -266,6 +293,8 @@ class Checker:
         features = {"median": frame_median(np.asarray(frame, np.float64)), "doubt": enhancer_doubt(enh)}
         fits = []
         raw_cov = None
+        searched = net is None  # the answer came from a search over the library (a path calibrated on its own)
+        scale, floor = cal.bounds_model(searched)
         if refine or net is None:
             if net is not None:
                 # The prior sits on Swin's answer for both: Swin saw the brightness, which tells the
@@ -276,6 +305,8 @@ class Checker:
             if net is None or (search and self._hard_iou(fits[0].angles_deg, enh) < cal.iou_min):
                 # No networks, or their answer does not fit: search the library too.
                 fits = sorted(fits + self.search(enh), key=lambda f: f.cost)
+                searched = True
+                scale, floor = cal.bounds_model(searched)
             fits = self._with_other_branch(enh, fits)
             fits = self._by_brightness(frame, enh, fits)
             best = fits[0]
@@ -283,9 +314,7 @@ class Checker:
             hessian, soft, iou = curvature(self.renderer, enh, angles)
             raw_cov = raw_covariance(hessian, soft)
             raw = raw_uncertainty(raw_cov)
-            finite = np.isfinite(raw)
-            spread = np.asarray(cal.scale) * np.where(finite, raw, 0.0)
-            bound = np.where(finite, np.sqrt(np.asarray(cal.floor_deg) ** 2 + spread**2), np.inf)
+            bound = bounds_from(raw, scale, floor)
             features.update({f"raw_{a}": float(r) for a, r in zip("zyx", raw, strict=True)})
             features["soft_iou"] = soft
         else:
@@ -293,6 +322,7 @@ class Checker:
             bound = np.asarray(cal.network_bound_deg, float)
             iou = self._hard_iou(angles, enh)
         features["iou"] = iou
+        features["searched"] = float(searched)
         alternatives: list[Alternative] = []
         if fits:
             for f in fits[1:]:
@@ -321,11 +351,11 @@ class Checker:
                     )
         if net is not None:
             features["moved_deg"] = float(geodesic_deg(angles, net)[0])
-        reasons = self._reasons(features, angles, bound, alternatives, net is not None and refine)
+        reasons = self._reasons(features, angles, bound, alternatives, net is not None and refine, searched)
         quality = Quality(round(iou, 4), tuple(round(float(b), 3) for b in bound), not reasons, reasons)  # type: ignore[arg-type]
         cov = None
         if raw_cov is not None and np.all(np.isfinite(bound)):
-            cov = bound_covariance(raw_cov, np.asarray(cal.scale), np.asarray(cal.floor_deg))
+            cov = bound_covariance(raw_cov, scale, floor)
         return Checked(angles, net, bool(fits), quality, alternatives, features, cov)
 
     def _with_other_branch(self, enhanced: Vec, fits: list[Fit]) -> list[Fit]:
@@ -372,8 +402,12 @@ class Checker:
         bound: Vec,
         alternatives: list[Alternative],
         compare_network: bool,
+        searched: bool = False,
     ) -> list[str]:
         cal = self.calibration
+        library = searched and cal.covers_library  # the search's answer, held to its own calibration
+        iou_min = cal.library_iou_min if library and cal.library_iou_min is not None else cal.iou_min
+        doubt_max = cal.library_doubt_max if library and cal.library_doubt_max is not None else cal.doubt_max
         out = []
         lo, hi = cal.median_range
         if not lo <= features["median"] <= hi:
@@ -381,25 +415,30 @@ class Checker:
                 f"the frame's median brightness {features['median']:.2f} is outside the {lo:.2f}-{hi:.2f} of fresh "
                 "frames: normalised twice, inverted, or not an ISAR magnitude frame?"
             )
-        if features["doubt"] > cal.doubt_max:
+        if features["doubt"] > doubt_max:
             out.append(
                 f"UNet++ is unsure of {100 * features['doubt']:.0f} % of the silhouette's area (fresh frames: under "
-                f"{100 * cal.doubt_max:.0f} %): the frame is unlike its training frames"
+                f"{100 * doubt_max:.0f} %): the frame is unlike its training frames"
             )
-        if features["iou"] < cal.iou_min:
+        if features["iou"] < iou_min:
             out.append(
                 f"the {self.model.name} projection fits the enhanced silhouette poorly (IoU {features['iou']:.3f}, "
-                f"fresh frames at least {cal.iou_min:.3f}): another satellite, a flipped or transposed frame, or "
+                f"fresh frames at least {iou_min:.3f}): another satellite, a flipped or transposed frame, or "
                 "pixels of another size (send range_cell_m and cross_range_cell_m)?"
             )
-        if compare_network and features.get("moved_deg", 0.0) > cal.moved_max_deg:
+        if compare_network and not library and features.get("moved_deg", 0.0) > cal.moved_max_deg:
             out.append(
                 f"the fit moved {features['moved_deg']:.1f} deg from the network's answer (fresh frames: under "
                 f"{cal.moved_max_deg:.1f} deg)"
             )
-        if np.max(np.abs(angles)) > cal.angle_limit_deg:
+        if not library and np.max(np.abs(angles)) > cal.angle_limit_deg:
             out.append(
                 f"the attitude is outside the +-{cal.angle_limit_deg:.0f} deg the networks and the calibration cover"
+                + (
+                    ""
+                    if cal.covers_library
+                    else " (gsa calibrate --so3-frames calibrates the library search's answers)"
+                )
             )
         close = [a for a in alternatives if a.fit_gap < cal.ambiguity_margin]
         if close:
@@ -445,6 +484,10 @@ def fit_bounds(raw: Vec, errors: Vec, coverage: float = 0.9) -> tuple[float, flo
     return best[1], best[2]
 
 
+MIN_LIBRARY_FRAMES = 30  # searched answers a calibration needs before the library path gets thresholds of its own
+CUBE_DEG = 45.0  # the networks' training range per Euler angle
+
+
 def calibrate(
     checker: Checker,
     frames: NDArray[np.floating],
@@ -459,8 +502,39 @@ def calibrate(
     Thresholds sit just outside what the good frames show (1st/99th percentiles with a
     margin), so about 1-2 % of good frames are flagged by design; the bounds are fitted per
     axis to cover 90 %. Returns the calibration and the frames' checks under it.
+
+    Two paths, each calibrated on its own answers: the network path (Swin's answer refined) on
+    the frames inside the networks' +-45 deg cube, and the library search's answers (a frame
+    whose network answer does not fit the network path's IoU threshold) where at least
+    ``MIN_LIBRARY_FRAMES`` frames took it, which frames with attitudes over all of SO(3) provide.
+    The search's trigger is itself a threshold, so the frames are checked in turn: loose (no
+    search: the network path's figures), with the IoU threshold set (who searches, and what the
+    search finds), and under the finished calibration.
     """
     import sys
+
+    from inference.rotations import euler_difference
+
+    truth = np.asarray(truth, float)
+    network_deg = np.asarray(network_deg, float)
+
+    def check_all(cal: Calibration, stage: str) -> list[Checked]:
+        checker.calibration = cal
+
+        def say(done: int, total: int) -> None:
+            if progress and (done % 50 == 0 or done == total):
+                print(f"calibrate ({stage}): {done}/{total} frames", file=sys.stderr, flush=True)
+
+        return checker.check_many(frames, enhanced, network_deg, progress=say)
+
+    def features(checks: list[Checked]) -> dict[str, Vec]:
+        return {key: np.array([c.features.get(key, np.nan) for c in checks]) for key in checks[0].features}
+
+    def bounds(checks: list[Checked], rows: NDArray[np.bool_]) -> list[tuple[float, float]]:
+        feats = features(checks)
+        raw = np.stack([feats[f"raw_{a}"] for a in "zyx"], axis=1)[rows]
+        err = euler_difference(np.array([c.angles_deg for c in checks]), truth)[rows]
+        return [fit_bounds(raw[:, i], err[:, i]) for i in range(3)]
 
     loose = Calibration(
         target=checker.model.name,
@@ -471,33 +545,86 @@ def calibrate(
         angle_limit_deg=math.inf,
         max_bound_deg=math.inf,
     )
-    checker.calibration = loose
-    checks = []
-    for k in range(len(frames)):
-        checks.append(checker.check(frames[k], enhanced[k], network_deg[k]))
-        if progress and (k + 1) % 50 == 0:
-            print(f"calibrate: {k + 1}/{len(frames)} frames", file=sys.stderr, flush=True)
-    feats = {key: np.array([c.features[key] for c in checks]) for key in checks[0].features}
-    fitted = np.array([c.angles_deg for c in checks])
-    err = fitted - truth
-    raw = np.stack([feats[f"raw_{a}"] for a in "zyx"], axis=1)
-    pairs = [fit_bounds(raw[:, i], err[:, i]) for i in range(3)]
+    first = check_all(loose, "network path")
+    feats = features(first)
+    cube = np.max(np.abs(truth), axis=1) <= CUBE_DEG
+    net_rows = cube if cube.sum() >= MIN_LIBRARY_FRAMES else np.ones(len(frames), bool)
+    iou_min = round(float(np.quantile(feats["iou"][net_rows], 0.01)) - 0.005, 4)
+    # Who searches at that threshold, and what the search finds (the library path's own figures).
+    second = check_all(replace(loose, iou_min=iou_min), "library search")
+    searched = features(second)["searched"] > 0.5
+    checks = [second[k] if searched[k] else first[k] for k in range(len(frames))]
+    net_rows = net_rows & ~searched
+    if not net_rows.any():  # every frame searched (no networks' answer fitted): the network path keeps them all
+        net_rows = np.ones(len(frames), bool)
+    pairs = bounds(checks, net_rows)
+    library: dict[str, Any] = {}
+    if searched.sum() >= MIN_LIBRARY_FRAMES:
+        lib_pairs = bounds(checks, searched)
+        lib_feats = features(second)
+        library = {
+            "library_doubt_max": round(float(np.quantile(lib_feats["doubt"][searched], 0.99)) * 1.25, 4),
+            "library_scale": tuple(round(p[0], 4) for p in lib_pairs),
+            "library_floor_deg": tuple(round(p[1], 4) for p in lib_pairs),
+        }
+    swin_err = np.abs(euler_difference(np.asarray(network_deg, np.float64), truth))[cube if cube.any() else np.ones(len(frames), bool)]
     cal = Calibration(
         target=checker.model.name,
-        iou_min=round(float(np.quantile(feats["iou"], 0.01)) - 0.005, 4),
-        doubt_max=round(float(np.quantile(feats["doubt"], 0.99)) * 1.25, 4),
+        iou_min=iou_min,
+        doubt_max=round(float(np.quantile(feats["doubt"][net_rows], 0.99)) * 1.25, 4),
         median_range=(
             round(float(np.quantile(feats["median"], 0.005)) * 0.8, 4),
             round(float(np.quantile(feats["median"], 0.995)) + 0.05, 4),
         ),
-        moved_max_deg=round(max(float(np.quantile(feats["moved_deg"], 0.99)) * 1.5, 3.0), 3),
+        moved_max_deg=round(max(float(np.quantile(feats["moved_deg"][net_rows], 0.99)) * 1.5, 3.0), 3),
         scale=tuple(round(p[0], 4) for p in pairs),  # type: ignore[arg-type]
         floor_deg=tuple(round(p[1], 4) for p in pairs),  # type: ignore[arg-type]
-        network_bound_deg=tuple(round(float(q), 4) for q in np.quantile(np.abs(network_deg - truth), 0.9, axis=0)),  # type: ignore[arg-type]
-        made={**(made or {}), "frames": len(frames)},
+        network_bound_deg=tuple(round(float(q), 4) for q in np.quantile(swin_err, 0.9, axis=0)),  # type: ignore[arg-type]
+        made={
+            **(made or {}),
+            "frames": len(frames),
+            "frames_in_cube": int(cube.sum()),
+            "library_frames": int(searched.sum()),
+        },
+        **library,
     )
-    checker.calibration = cal
-    return cal, [checker.check(frames[k], enhanced[k], network_deg[k]) for k in range(len(frames))]
+    if library:
+        cal = replace(cal, library_iou_min=library_iou_threshold(checker, cal, checks, truth, searched))
+    return cal, check_all(cal, "checked")
+
+
+def library_iou_threshold(
+    checker: Checker, cal: Calibration, checks: list[Checked], truth: Vec, searched: NDArray[np.bool_]
+) -> float:
+    """The library search's IoU threshold: under the 1st percentile of its correct answers (within 2 deg), and above
+    every answer over 10 deg off that no other check flags (none of the calibration's wrong answers is trusted).
+
+    Outside the networks' cube UNet++'s silhouettes are poorer (the IoU of a correct answer there is a median 0.86
+    against 0.98 inside), so a wrong attitude can fit them as well as the truth; what tells the two apart on these
+    frames is how well the projection fits at all. The calibration frames' truth is known, so the threshold is set
+    where their wrong answers stop being trusted, and ``bench.so3`` measures it on frames of another seed.
+    """
+    from inference.rotations import geodesic_deg
+
+    answers = np.array([c.angles_deg for c in checks])
+    err = geodesic_deg(answers, truth)
+    iou = np.array([c.features["iou"] for c in checks])
+    correct = searched & (err <= 2.0)
+    base = iou[correct] if correct.sum() >= MIN_LIBRARY_FRAMES else iou[searched]
+    threshold = float(np.quantile(base, 0.01)) - 0.005
+    trial = replace(cal, library_iou_min=0.0)
+    kept = checker.calibration
+    checker.calibration = trial
+    try:
+        for k in np.flatnonzero(searched & (err > 10.0)):
+            c = checks[k]
+            raw = np.array([c.features[f"raw_{a}"] for a in "zyx"])
+            bound = bounds_from(raw, *trial.bounds_model(True))
+            if not checker._reasons(c.features, c.angles_deg, bound, c.alternatives, False, True):
+                threshold = max(threshold, float(iou[k]) + 0.001)
+    finally:
+        checker.calibration = kept
+    return round(threshold, 4)
 
 
 class Checkers:
@@ -563,6 +690,15 @@ def add_arguments(p: Any) -> None:
     p.add_argument("--models", default=None, help="model directory (default: the shipped models)")
     p.add_argument("--frames", type=int, default=300, help="fresh frames to calibrate on (default 300)")
     p.add_argument("--seed", type=int, default=CALIBRATION_SEED, help=f"their seed (default {CALIBRATION_SEED})")
+    p.add_argument(
+        "--so3-frames",
+        type=int,
+        default=0,
+        help="fresh frames with attitudes over all of SO(3) (seed SEED+1) that calibrate the library search's answers "
+        f"(at least {MIN_LIBRARY_FRAMES}; default 0: none, and answers outside the networks' cube stay flagged). "
+        "Until UNet++ is trained over SO(3) this also trusts frames whose cross-range axis is reversed "
+        "(README, 'Any attitude')",
+    )
     p.add_argument("--out", help="where to write the calibration (default: MODELS/trust.json)")
 
 
@@ -579,15 +715,29 @@ def run(args: Any) -> int:
 
     if args.frames < 50:
         raise DatasetError(f"--frames {args.frames}: calibrating needs at least 50 frames", field="frames")
+    if args.so3_frames != 0 and args.so3_frames < MIN_LIBRARY_FRAMES:
+        raise DatasetError(
+            f"--so3-frames {args.so3_frames}: give 0 or at least {MIN_LIBRARY_FRAMES} (the library path's thresholds "
+            "come from them)",
+            field="so3_frames",
+        )
     model_dir = Path(args.models) if args.models else DEFAULT_MODEL_DIR
     est = Estimator.load(model_dir)
     radar, target = card_radar_and_target(model_dir, est.img_size)
     t0 = time.perf_counter()
-    print(f"calibrate: simulating {args.frames} fresh frames (seed {args.seed})", file=sys.stderr, flush=True)
+    print(
+        f"calibrate: simulating {args.frames} fresh frames (seed {args.seed}) and {args.so3_frames} over SO(3) "
+        f"(seed {args.seed + 1})",
+        file=sys.stderr,
+        flush=True,
+    )
     frames, truth, _ = good_frames(args.frames, args.seed, radar, builtin_target(target))
+    if args.so3_frames:
+        more, more_truth, _ = good_frames(args.so3_frames, args.seed + 1, radar, builtin_target(target), "so3")
+        frames, truth = np.concatenate([frames, more]), np.concatenate([truth, more_truth])
     res = est.estimate(frames)
     made = {
-        "command": f"gsa calibrate --frames {args.frames} --seed {args.seed}",
+        "command": f"gsa calibrate --frames {args.frames} --seed {args.seed} --so3-frames {args.so3_frames}",
         "seed": args.seed,
         "date": datetime.now(UTC).date().isoformat(),
         "models": est.identity,

@@ -241,7 +241,12 @@ def fit_and_fuse(
     progress: Progress | None = None,
     cancelled: Callable[[], bool] | None = None,
 ) -> FusedPass:
-    """Read every frame of a pass (the networks, then the fit, no library search), place each and fuse them.
+    """Read every frame of a pass (the networks, then the fit), place each and fuse them.
+
+    Where the calibration covers the library search's answers (``Calibration.covers_library``: frames over all of
+    SO(3)), a frame whose network answer does not fit is searched as a single frame is, so the pass's frames
+    outside the networks' cube are read and fused too; otherwise the search is skipped (its answers would all be
+    flagged, and the other frames stand in: design/measurements.md, "A pass skips the library search").
 
     ``frames``: the pass's frames as the models take them [N, H, W]; ``scene``: over the pass's span
     (``pass_span``); ``sweeps``: each frame's measured sweep rate and integration time (``sweeps_from``), or None.
@@ -250,7 +255,13 @@ def fit_and_fuse(
     """
     t0 = time.perf_counter()
     read = read_frames(
-        est, checker, frames, search=False, preprocess_s=preprocess_s, progress=progress, cancelled=cancelled
+        est,
+        checker,
+        frames,
+        search=checker.calibration.covers_library,
+        preprocess_s=preprocess_s,
+        progress=progress,
+        cancelled=cancelled,
     )
     t1 = time.perf_counter()
     attitude, checks = fuse_pass(

@@ -86,10 +86,17 @@ def at_attitudes(
 
 
 def good_frames(
-    n: int, seed: int = FRESH_SEED, radar: Radar | None = None, model: TargetModel | None = None
+    n: int,
+    seed: int = FRESH_SEED,
+    radar: Radar | None = None,
+    model: TargetModel | None = None,
+    attitudes: str = "cube",
 ) -> tuple[NDArray[np.float32], NDArray[np.float64], NDArray[np.float64]]:
-    """Return n fresh normalised frames of ``model`` (default: the default target), their angles and SNRs."""
-    frames, angles, snrs, _ = simulated(DatasetSpec(n=n, seed=seed), radar, model)
+    """Return n fresh normalised frames of ``model`` (default: the default target), their angles and SNRs.
+
+    ``attitudes``: "cube" (each Euler angle within +-45 deg) or "so3" (uniform over every rotation).
+    """
+    frames, angles, snrs, _ = simulated(DatasetSpec(n=n, seed=seed, attitudes=attitudes), radar, model)
     return frames, angles, snrs
 
 
