@@ -567,7 +567,9 @@ def calibrate(
             "library_scale": tuple(round(p[0], 4) for p in lib_pairs),
             "library_floor_deg": tuple(round(p[1], 4) for p in lib_pairs),
         }
-    swin_err = np.abs(euler_difference(np.asarray(network_deg, np.float64), truth))[cube if cube.any() else np.ones(len(frames), bool)]
+    swin_err = np.abs(euler_difference(np.asarray(network_deg, np.float64), truth))[
+        cube if cube.any() else np.ones(len(frames), bool)
+    ]
     cal = Calibration(
         target=checker.model.name,
         iou_min=iou_min,
