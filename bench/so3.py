@@ -57,7 +57,13 @@ def flipped_trusted(calibration: str | None, n: int = 24) -> tuple[int, int]:
     return sum(c.quality.trusted for c in checker.check_many(frames, res.enhanced, res.angles_deg)), n
 
 
-def score(frames: np.ndarray, truth: np.ndarray, spacing_deg: float, calibration: str | None = None) -> dict[str, Any]:
+def score(
+    frames: np.ndarray,
+    truth: np.ndarray,
+    spacing_deg: float,
+    calibration: str | None = None,
+    labels: np.ndarray | None = None,
+) -> dict[str, Any]:
     from inference.fit import Library, mirror
     from inference.rotations import euler_difference, geodesic_deg
 
@@ -69,6 +75,9 @@ def score(frames: np.ndarray, truth: np.ndarray, spacing_deg: float, calibration
     res = est.estimate(frames)
     checks = checker.check_many(frames, res.enhanced, res.angles_deg)
     seconds = time.perf_counter() - t0
+    from inference.frames import silhouette_ious
+
+    unet_iou = float(np.mean(silhouette_ious(res.enhanced, labels))) if labels is not None else float("nan")
     answers = np.array([c.angles_deg for c in checks])
     err = geodesic_deg(answers, truth)
     mirrored = np.array([mirror(t) for t in truth])
@@ -87,6 +96,7 @@ def score(frames: np.ndarray, truth: np.ndarray, spacing_deg: float, calibration
     good = err <= 2.0
     return {
         "frames": len(frames),
+        "unet_iou": unet_iou,
         "median": float(np.median(err)),
         "p95": float(np.percentile(err, 95)),
         "beyond_10": float(np.mean(err > 10.0)),
@@ -171,8 +181,8 @@ def main(argv: list[str] | None = None) -> int:
     }
     rows: dict[str, dict[str, Any]] = {}
     for name, spec in sets.items():
-        frames, truth, _, _ = simulated(spec)
-        rows[name] = score(frames, truth, LIBRARY_SPACING_DEG, args.calibration)
+        frames, truth, _, labels = simulated(spec)
+        rows[name] = score(frames, truth, LIBRARY_SPACING_DEG, args.calibration, labels)
         _log(f"{name}: { {k: v for k, v in rows[name].items() if k != 'points'} }")
     spacing_rows = {}
     frames, truth, _, _ = simulated(sets["uniform SO(3), our frames"])
@@ -200,15 +210,15 @@ def main(argv: list[str] | None = None) -> int:
         "",
         "| frames | median (deg) | p95 (deg) | beyond 10 deg | of them trusted | wrong branch | of them trusted | "
         "of them listing the truth | trusted | good (<= 2 deg) flagged | trusted outside their bound | "
-        "bound coverage z / y / x | ms a frame |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "bound coverage z / y / x | ms a frame | UNet++ IoU with the label |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, r in rows.items():
         cov = " / ".join(f"{100 * c:.0f} %" for c in r["covered"])
         lines.append(
             f"| {name} | {r['median']:.2f} | {r['p95']:.1f} | {100 * r['beyond_10']:.1f} % | {r['beyond_10_trusted']} | "
             f"{r['wrong']} | {r['wrong_trusted']} | {r['wrong_listing']} | {100 * r['trusted']:.0f} % | "
-            f"{100 * r['good_flagged']:.0f} % | {100 * r['trusted_outside_bound']:.0f} % | {cov} | {r['ms']:.0f} |"
+            f"{100 * r['good_flagged']:.0f} % | {100 * r['trusted_outside_bound']:.0f} % | {cov} | {r['ms']:.0f} | {r['unet_iou']:.3f} |"
         )
     lines += [
         "",

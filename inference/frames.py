@@ -106,3 +106,16 @@ def npy_header(fh: Any) -> tuple[tuple[int, ...], np.dtype[Any]]:
     except (OSError, EOFError, SyntaxError, TypeError) as exc:
         raise ValueError(str(exc)) from None
     return tuple(int(d) for d in shape), dtype
+
+
+def silhouette_ious(enhanced: NDArray[np.floating], labels: NDArray[Any]) -> NDArray[np.float64]:
+    """Each frame's IoU of a silhouette (> 0.5, e.g. UNet++'s) with its label [N]; 1 where both are empty.
+
+    >>> silhouette_ious(np.array([[[0.9, 0.2], [0.7, 0.0]]]), np.array([[[1, 1], [0, 0]]])).tolist()
+    [0.3333333333333333]
+    """
+    a = np.asarray(enhanced) > 0.5
+    b = np.asarray(labels) > 0.5
+    inter = np.logical_and(a, b).sum(axis=(1, 2))
+    union = np.logical_or(a, b).sum(axis=(1, 2))
+    return np.asarray(np.where(union > 0, inter / np.maximum(union, 1), 1.0), np.float64)

@@ -160,10 +160,17 @@ def evaluate(
 
 
 def held_out(data_dir: str | Path, manifest: dict[str, Any]) -> tuple[NDArray[Any], NDArray[Any]]:
-    """Return a data set's test frames and angles (its manifest's split, or the last 20 %)."""
+    """Return a data set's test frames and angles (its manifest's split, or the last 20 %) inside the networks' cube.
+
+    Swin answers the +-45 deg cube (``ANGLE_SCALE_DEG``); a set over SO(3) keeps its test frames outside it for
+    UNet++ (``inference.training.train``'s ``test_silhouette_iou``), not for these rows.
+    """
+    from inference.frames import ANGLE_SCALE_DEG
+
     _, (lo, hi) = split_ranges(manifest)
     data = load_range(data_dir, lo, hi, verify=False)
-    return data["image"], data["angles_deg"]
+    inside = np.all(np.abs(data["angles_deg"]) <= ANGLE_SCALE_DEG, axis=1)
+    return data["image"][inside], data["angles_deg"][inside]
 
 
 def table(results: dict[str, Any]) -> str:

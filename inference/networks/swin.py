@@ -225,3 +225,16 @@ class SwinTransformer(nn.Module):
 def angle_loss(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     """Mean squared error on the (scaled) angles, the paper's Swin loss."""
     return F.mse_loss(pred, target)
+
+
+def cube_angle_loss(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """``angle_loss`` over the frames whose scaled angles lie within [-1, 1] on every axis (the cube Swin answers).
+
+    A set with frames over all of SO(3) teaches UNet++ every attitude, while Swin's regressed Euler triple, which
+    wraps at +-180 deg and is singular at y = +-90, learns the cube only (the library search answers the rest).
+    Weighted rather than indexed, so a GPU step does not wait on the mask; the same as ``angle_loss`` when every
+    frame is inside, 0 when none is.
+    """
+    inside = (target.abs() <= 1.0).all(dim=1).to(pred.dtype)
+    per_frame = ((pred - target) ** 2).mean(dim=1)
+    return (per_frame * inside).sum() / inside.sum().clamp(min=1.0)

@@ -81,6 +81,9 @@ class DatasetSpec:
     po_roughness: tuple[float, float] = (0.0, 0.0)
     po_facet_m: float = 0.2
     attitudes: str = "cube"  # or "so3": see the class's docstring
+    # Under "so3", the share of frames drawn over every rotation; the others in the cube (a set that teaches
+    # UNet++ every attitude while Swin keeps learning the cube it answers: inference/training/train.py).
+    so3_share: float = 1.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.n, int) or self.n <= 0:
@@ -104,6 +107,13 @@ class DatasetSpec:
                 "rotation)",
                 field="attitudes",
             )
+        if not (isinstance(self.so3_share, (int, float)) and 0.0 < self.so3_share <= 1.0):
+            raise DatasetError(
+                f"so3_share {self.so3_share} must be in (0, 1]: the share of frames drawn over every rotation",
+                field="so3_share",
+            )
+        if self.so3_share < 1.0 and self.attitudes != "so3":
+            raise DatasetError("so3_share needs attitudes so3 (--attitudes so3)", field="so3_share")
         if self.shard_size <= 0:
             raise DatasetError("shard_size must be positive", field="shard_size")
         if not (isinstance(self.variety_share, (int, float)) and 0.0 < self.variety_share <= 1.0):
@@ -162,7 +172,7 @@ def frame_truth(spec: DatasetSpec, index: int) -> tuple[tuple[float, float, floa
     """Return the angles (z, y, x deg), SNR (dB or None) and seed of frame ``index``."""
     s = frame_seed(spec.seed, index)
     rng = np.random.default_rng(s)
-    if spec.attitudes == "so3":
+    if spec.attitudes == "so3" and is_over_so3(spec, s):
         angles: tuple[float, ...] = uniform_rotation_angles(rng)
     else:
         angles = tuple(float(a) for a in rng.uniform(-spec.max_angle_deg, spec.max_angle_deg, 3))
@@ -170,6 +180,12 @@ def frame_truth(spec: DatasetSpec, index: int) -> tuple[tuple[float, float, floa
     if spec.snr_min_db is not None and spec.snr_max_db is not None:
         snr = float(rng.uniform(spec.snr_min_db, spec.snr_max_db))
     return (angles[0], angles[1], angles[2]), snr, s
+
+
+def is_over_so3(spec: DatasetSpec, frame_seed: int) -> bool:
+    """Whether the frame of this seed draws its attitude over every rotation (``so3_share``; a stream of its own,
+    so a set with a share of 1 is what it was before the share existed)."""
+    return spec.so3_share >= 1.0 or float(np.random.default_rng([frame_seed, 3]).uniform()) < spec.so3_share
 
 
 def is_varied(spec: DatasetSpec, frame_seed: int) -> bool:
@@ -503,6 +519,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default="cube",
         help="cube: Euler angles within --max-angle-deg (default); so3: uniform over every rotation",
     )
+    p.add_argument(
+        "--so3-share",
+        type=float,
+        default=1.0,
+        help="with --attitudes so3: the share of frames over every rotation, the rest in the cube (default 1)",
+    )
     p.add_argument("--split", action="store_true", help="the paper's split: first 80%% train, last 20%% test")
     p.add_argument("--n-train", type=int, help="split after this many training frames (the rest are the test set)")
     p.add_argument("--shard-size", type=int, default=250)
@@ -610,6 +632,7 @@ def run(args: argparse.Namespace) -> int:
         parse_roughness(args.roughness),
         args.facet_m,
         args.attitudes,
+        args.so3_share,
     )
     radar = Radar(args.carrier_hz, args.bandwidth_hz, args.n_range, args.n_azimuth, args.aperture_deg)
     if args.preview:

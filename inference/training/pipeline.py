@@ -56,8 +56,13 @@ def prepare(
     workers: int | None = None,
     variety: str | None = None,
     variety_share: float = 1.0,
+    attitudes: str = "cube",
+    so3_share: float = 1.0,
 ) -> None:
     """Simulate the data set into ``WORK/data`` and Table 7's fresh SNR sets into ``WORK/snr-DB`` (each once).
+
+    ``attitudes`` "so3" draws ``so3_share`` of the data set's frames over every rotation (the rest in the cube);
+    the SNR test sets stay in the cube, where Swin answers.
 
     ``variety`` (a ``VARIETY_PRESETS`` name) varies the training set's scattering frame by frame;
     the SNR test sets stay default frames, so runs with and without it are scored alike.
@@ -67,7 +72,15 @@ def prepare(
     if not (data / "manifest.json").exists():
         shutil.rmtree(data, ignore_errors=True)
         n_train = default_train_frames(n) if n_train is None else n_train
-        spec = DatasetSpec(n=n, seed=seed, n_train=n_train, variety=variety, variety_share=variety_share)
+        spec = DatasetSpec(
+            n=n,
+            seed=seed,
+            n_train=n_train,
+            variety=variety,
+            variety_share=variety_share,
+            attitudes=attitudes,
+            so3_share=so3_share,
+        )
         generate(spec, data, radar, workers=workers)
     for snr in SNR_DB if n_snr else ():
         d = work / f"snr-{snr:g}"
@@ -166,6 +179,8 @@ def run(
     radar: Any = None,
     out: Path | None = None,
     evaluate: bool = True,
+    attitudes: str = "cube",
+    so3_share: float = 1.0,
 ) -> dict[str, Any]:
     """Simulate (once), train ``WORK/NAME`` (resuming), evaluate when done, and pack the weights into ``out``.
 
@@ -173,7 +188,18 @@ def run(
     data set (``n`` frames, ``n_train`` of them for training, ``n_snr`` per SNR test set) and
     always resumes, so calling it again continues a run the time limit cut off.
     """
-    prepare(work, n, n_train, n_snr, options.seed, radar, variety=variety, variety_share=variety_share)
+    prepare(
+        work,
+        n,
+        n_train,
+        n_snr,
+        options.seed,
+        radar,
+        variety=variety,
+        variety_share=variety_share,
+        attitudes=attitudes,
+        so3_share=so3_share,
+    )
     record = train(work / "data", work / name, replace(options, resume=True))
     if evaluate:
         evaluate_run(work, name)
@@ -209,6 +235,10 @@ def main(argv: list[str] | None = None) -> int:
         q.add_argument(
             "--variety-share", type=float, default=1.0, help="vary only this share of the frames (default 1)"
         )
+        q.add_argument("--attitudes", default="cube", help="cube (default) or so3: the data set's attitudes")
+        q.add_argument(
+            "--so3-share", type=float, default=1.0, help="with --attitudes so3, this share over every rotation"
+        )
     r.add_argument("--name", default="run", help="run folder inside WORK")
     r.add_argument("--out", help="where the float16 pieces go (default: none)")
     r.add_argument(
@@ -234,6 +264,8 @@ def main(argv: list[str] | None = None) -> int:
                 args.seed,
                 variety=args.variety,
                 variety_share=args.variety_share,
+                attitudes=args.attitudes,
+                so3_share=args.so3_share,
             )
             print(f"data sets ready in {args.work}")
         elif args.cmd == "run":
@@ -251,6 +283,8 @@ def main(argv: list[str] | None = None) -> int:
                 variety=args.variety,
                 variety_share=args.variety_share,
                 out=Path(args.out) if args.out else None,
+                attitudes=args.attitudes,
+                so3_share=args.so3_share,
             )
             print(json.dumps({k: v for k, v in m.items() if k in ("complete", "epochs")}))
         elif args.cmd == "pack":

@@ -46,9 +46,9 @@ import torch
 
 from inference.errors import DatasetError, InferenceError, module_main
 from inference.files import write_json
-from inference.frames import ANGLE_SCALE_DEG
+from inference.frames import ANGLE_SCALE_DEG, silhouette_ious
 from inference.networks.build import ModelConfig, build_models, get_config
-from inference.networks.swin import angle_loss
+from inference.networks.swin import cube_angle_loss
 from inference.networks.unetpp import relative_frobenius_loss
 from inference.simulation.dataset import load_arrays, load_manifest, split_ranges
 from inference.training.augment import perturb_silhouettes
@@ -266,6 +266,11 @@ def train(data_dir: str | Path, out_dir: str | Path, options: TrainOptions | Non
             f"train: epoch {epoch + 1}/{opts.epochs} done: unet {record['unet_loss']:.4f} swin {record['swin_loss']:.4f} "
             f"test MAE z/y/x {mae[0]:.2f}/{mae[1]:.2f}/{mae[2]:.2f} deg"
             + (" (averaged weights {:.2f}/{:.2f}/{:.2f})".format(*ema_mae) if ema_mae else "")
+            + (
+                " silhouette IoU cube {cube:.3f} outside {outside:.3f}".format(**record["test_silhouette_iou"])
+                if "test_silhouette_iou" in record
+                else ""
+            )
             + f" ({record['seconds']:.0f} s)",
             file=sys.stderr,
             flush=True,
@@ -454,7 +459,8 @@ def _epoch(
             if train_swin and opts.silhouette_noise and run.gen is not None:
                 swin_in = perturb_silhouettes(swin_in, opts.silhouette_noise, run.gen)
             # A frozen Swin's loss is not worth its forward pass (two-stage's UNet++ epochs).
-            loss_s = angle_loss(run_s(swin_in).float(), a) if train_swin else torch.zeros((), device=dev)
+            # Frames outside the cube (a set over SO(3)) teach UNet++ only: ``cube_angle_loss``.
+            loss_s = cube_angle_loss(run_s(swin_in).float(), a) if train_swin else torch.zeros((), device=dev)
         if train_swin:
             run.opt_s.zero_grad(set_to_none=True)
             loss_s.backward()  # type: ignore[no-untyped-call]
@@ -484,20 +490,33 @@ def _epoch(
     return {k: float(v) / len(batches) for k, v in sums.items()}
 
 
-def _score(run: _Run) -> dict[str, list[float]]:
-    """Score the test split: the raw weights' per-axis MAE (and the averaged weights', with ``ema``)."""
+def _score(run: _Run) -> dict[str, Any]:
+    """Score the test split: the raw weights' per-axis MAE (and the averaged weights', with ``ema``).
+
+    Over the test frames inside the cube (Swin's range). Where the split also has frames outside it (a set over
+    SO(3)), ``test_silhouette_iou`` gives UNet++'s mean IoU with the label inside and outside the cube.
+    """
     # Swin reads the frames UNet++ already enhanced (two-stage), or raw frames through UNet++ (or not).
     src, through = (run.cache, False) if run.cache is not None else (run.data["image"], run.opts.enhance)
+    angles = run.data["angles_deg"][run.test_idx]
+    inside = np.all(np.abs(angles) <= ANGLE_SCALE_DEG, axis=1)
 
     def test_mae(u: torch.nn.Module, s: torch.nn.Module) -> list[float]:
-        if not len(run.test_idx):
+        if not inside.any():
             return [math.nan] * 3
-        pred, _ = predict(u if through else None, s, src[run.test_idx], run.dev)
-        return [float(v) for v in np.abs(pred - run.data["angles_deg"][run.test_idx]).mean(axis=0)]
+        pred, _ = predict(u if through else None, s, src[run.test_idx[inside]], run.dev)
+        return [float(v) for v in np.abs(pred - angles[inside]).mean(axis=0)]
 
-    scores = {"test_mae_deg": test_mae(run.unet, run.swin)}
+    scores: dict[str, Any] = {"test_mae_deg": test_mae(run.unet, run.swin)}
     if run.averaged:
         scores["ema_test_mae_deg"] = test_mae(run.averaged["unet"].module, run.averaged["swin"].module)
+    if through and not inside.all():
+        _, enhanced = predict(run.unet, run.swin, src[run.test_idx], run.dev)
+        iou = silhouette_ious(enhanced, run.data["label"][run.test_idx])  # type: ignore[arg-type]
+        scores["test_silhouette_iou"] = {
+            "cube": float(iou[inside].mean()) if inside.any() else math.nan,
+            "outside": float(iou[~inside].mean()),
+        }
     return scores
 
 

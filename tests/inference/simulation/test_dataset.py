@@ -57,6 +57,8 @@ def test_manifest_catches_tampering(tmp_path):
         ({"n": 3, "n_train": 4}, "n_train"),
         ({"n": 3, "max_angle_deg": 95.0}, "max_angle_deg"),
         ({"n": 3, "attitudes": "sphere"}, "attitudes"),
+        ({"n": 3, "attitudes": "so3", "so3_share": 0.0}, "so3_share"),
+        ({"n": 3, "so3_share": 0.5}, "so3_share"),
     ],
 )
 def test_bad_specs(kwargs, field):
@@ -194,6 +196,27 @@ def test_variety_changes_the_scattering_but_not_the_truth(tmp_path):
     assert not np.array_equal(plain["image"], varied["image"])
     again = render_frames(DatasetSpec(n=4, seed=3, variety="robust"), radar, 0, 4)
     np.testing.assert_array_equal(varied["image"], again["image"])  # seeded
+
+
+def test_an_so3_share_mixes_cube_and_every_rotation_frame_by_frame():
+    """Of 2,000 frames at share 0.3: the frames beyond the cube number about 0.3 x 96 % (a uniform rotation lies in
+    the +-45 deg cube with probability 3.7 %, which the cube-drawn frames count in), each frame's attitude is its
+    own draw's whatever the share (the coin has a stream of its own), and the cube frames are the cube's draws."""
+    n = 2000
+    mixed = DatasetSpec(n=n, seed=5, attitudes="so3", so3_share=0.3)
+    every = DatasetSpec(n=n, seed=5, attitudes="so3")
+    cube = DatasetSpec(n=n, seed=5)
+    angles = np.array([frame_truth(mixed, i)[0] for i in range(n)])
+    beyond = np.max(np.abs(angles), axis=1) > 45.0
+    expected = n * 0.3 * (1 - 0.037)
+    assert abs(beyond.sum() - expected) < 4 * np.sqrt(expected), beyond.sum()
+    from_every = np.array([frame_truth(every, i)[0] == tuple(angles[i]) for i in range(n)])
+    from_cube = np.array([frame_truth(cube, i)[0] == tuple(angles[i]) for i in range(n)])
+    assert np.all(from_every ^ from_cube) and np.all(from_every[beyond])
+    assert abs(from_every.mean() - 0.3) < 0.04, from_every.mean()
+    assert [frame_truth(every, i) for i in range(50)] == [
+        frame_truth(DatasetSpec(n=n, seed=5, attitudes="so3", so3_share=1.0), i) for i in range(50)
+    ]
 
 
 def test_a_variety_share_mixes_default_and_varied_frames_frame_by_frame():

@@ -347,3 +347,51 @@ def test_gpu_pipeline_at_toy_size(tmp_path):
     assert pack(work / "b", tmp_path / "out3")["epochs"] == 1
     with pytest.raises(ModelFileError, match="checkpoint.pt is missing"):
         pack(tmp_path / "nowhere", tmp_path / "out4")
+
+
+def test_swin_learns_the_cube_only_from_a_set_over_so3():
+    """cube_angle_loss: the mean squared error over the frames inside the cube (scaled angles within [-1, 1]),
+    computed directly; the paper's loss where every frame is inside; 0 (not NaN) where none is."""
+    from inference.networks.swin import angle_loss, cube_angle_loss
+
+    gen = torch.Generator().manual_seed(0)
+    pred = torch.randn(6, 3, generator=gen)
+    target = torch.tensor(
+        [[0.1, -0.5, 0.9], [2.0, 0.1, 0.1], [0.0, 0.0, -1.0], [-3.9, 1.5, 0.2], [0.3, 0.3, 0.3], [1.0, 1.0, 1.01]]
+    )
+    inside = [0, 2, 4]
+    direct = sum(float(((pred[k] - target[k]) ** 2).mean()) for k in inside) / len(inside)
+    assert float(cube_angle_loss(pred, target)) == pytest.approx(direct, rel=1e-6)
+    assert float(cube_angle_loss(pred[inside], target[inside])) == pytest.approx(
+        float(angle_loss(pred[inside], target[inside])), rel=1e-6
+    )
+    assert float(cube_angle_loss(pred[[1, 3]], target[[1, 3]])) == 0.0
+
+
+def test_gpu_pipeline_over_so3_at_toy_size(tmp_path):
+    """A set half over every rotation: UNet++'s silhouettes are scored inside and outside the cube each epoch,
+    Swin's MAE and the evaluation rows over the test frames inside the cube only (counted from the set itself)."""
+    from inference.simulation.dataset import load_arrays
+    from inference.training.pipeline import run as pipeline_run
+
+    work = tmp_path / "work"
+    pipeline_run(
+        work,
+        recipe("smoke", max_minutes=5, epochs=1),
+        n=16,
+        out=tmp_path / "out",
+        radar=SMALL,
+        name="so3",
+        n_train=8,
+        attitudes="so3",
+        so3_share=0.5,
+    )
+    angles = load_arrays(work / "data", verify=False)["angles_deg"][8:]
+    inside = int(np.all(np.abs(angles) <= 45.0, axis=1).sum())
+    assert 0 < inside < 8, inside  # both kinds in the test split (seed 0)
+    history = json.loads((tmp_path / "out" / "training.json").read_text())["history"]
+    iou = history[-1]["test_silhouette_iou"]
+    assert set(iou) == {"cube", "outside"} and all(0.0 <= v <= 1.0 for v in iou.values())
+    assert np.all(np.isfinite(history[-1]["test_mae_deg"]))
+    rows = json.loads((tmp_path / "out" / "evaluation.json").read_text())["rows"]
+    assert rows["with enhancement"]["n"] == inside
