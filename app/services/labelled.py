@@ -4,6 +4,8 @@ where it is given in J2000, checked as a whole, then stored (frames as blobs, th
 from __future__ import annotations
 
 import hashlib
+import io
+import json
 from dataclasses import dataclass
 from datetime import datetime, timedelta
 from pathlib import Path
@@ -19,7 +21,7 @@ from app.errors import InputError
 from app.schemas import LabelledFramePublic, LabelledSummary, LabelledUpload
 from app.services import images
 from app.services.scenes import scene_for, windows_of
-from app.services.uploads import DecodeBudget
+from app.services.uploads import DecodeBudget, decode
 from inference.errors import InferenceError
 from inference.labelled import MAX_SIGMA_DEG, FrameRead, coverage, observed_times, read_frame
 from scene.errors import SceneError
@@ -65,6 +67,65 @@ def _placing(
         req = {k: campaign.request[k] for k in ("target", "observer", "ground_station")}
         return Placing(req, windows_of(campaign.result), campaign.station_name, campaign_id=campaign.id)
     return None
+
+
+IMAGE_MAGIC = (b"\x89PNG", b"II*\x00", b"MM\x00*", b"\x93NUMPY")  # PNG, TIFF, .npy; anything else is read as an .npz
+
+
+@dataclass(frozen=True)
+class FormLabels:
+    """Labels sent as form fields, one per image file (.png, .tif, .npy) in the order of the files; an .npz carries
+    its own. ``angles_deg`` "z,y,x"; or ``quaternion_j2000`` "w,x,y,z" with ``observed_at`` (ISO 8601, UTC)."""
+
+    angles_deg: list[str] | None = None
+    quaternion_j2000: list[str] | None = None
+    observed_at: list[str] | None = None
+
+
+def _numbers(text: str, n: int, field: str, k: int) -> list[float]:
+    try:
+        values = [float(v) for v in text.replace(" ", "").split(",")]
+    except ValueError:
+        values = []
+    if len(values) != n or not all(np.isfinite(values)):
+        raise InputError([field, k], f"{n} finite numbers separated by commas; got {text!r}")
+    return values
+
+
+def as_labelled_npz(files: list[tuple[str, bytes]], labels: FormLabels) -> list[tuple[bytes, bytes]]:
+    """Each file as the labelled-frame .npz ``read_frame`` reads, with the bytes that identify it: an .npz as it is;
+    an image file (.png, .tif, .npy: one 2-D frame) with the next form label, identified by its bytes and that
+    label. Refuses a count of labels that does not match the images. (The request's decode budget is charged when
+    ``read_frame`` reads the packed image.)"""
+    images_at = [k for k, (_, data) in enumerate(files) if data.startswith(IMAGE_MAGIC)]
+    angles, quats, times = labels.angles_deg or [], labels.quaternion_j2000 or [], labels.observed_at or []
+    if angles and quats:
+        raise InputError(["angles_deg"], "give angles_deg or quaternion_j2000 for the image files, not both")
+    given, field = (angles, "angles_deg") if angles or not quats else (quats, "quaternion_j2000")
+    if len(given) != len(images_at):
+        raise InputError(
+            [field],
+            f"{len(images_at)} image file(s) (.png, .tif, .npy) need one {field} each, in the order of the files "
+            f"(an .npz carries its own label); got {len(given)}",
+        )
+    if times and len(times) != len(images_at):
+        raise InputError(["observed_at"], f"one observed_at per image file ({len(images_at)}); got {len(times)}")
+    out = [(data, data) for _, data in files]
+    for j, k in enumerate(images_at):
+        name, data = files[k]
+        frame = decode(data, name, allow_stack=False)[0].magnitude
+        arrays: dict[str, Any] = {"image": frame}
+        if field == "angles_deg":
+            arrays["angles_deg"] = np.array(_numbers(given[j], 3, field, j))
+        else:
+            arrays["quaternion_j2000"] = np.array(_numbers(given[j], 4, field, j))
+        if times:
+            arrays["observed_at"] = np.array(times[j])
+        buf = io.BytesIO()
+        np.savez(buf, **arrays)
+        label = {key: v.tolist() for key, v in arrays.items() if key != "image"}
+        out[k] = (buf.getvalue(), data + b"\0" + json.dumps(label, sort_keys=True).encode())
+    return out
 
 
 def read_labelled(
@@ -113,8 +174,12 @@ def create_labelled(
     scene: str | None = None,
     attitude_sigma_deg: float | None = None,
     campaign_id: str | None = None,
+    labels: FormLabels | None = None,
 ) -> LabelledUpload:
-    """Store the uploaded labelled frames of ``target`` (see the module's text); return what was stored."""
+    """Store the uploaded labelled frames of ``target`` (see the module's text); return what was stored.
+
+    An image file (.png, .tif, .npy) takes its label from ``labels`` (one per image file, in order); its stored
+    identity is its bytes and its label together, so the same image under another label is another frame."""
     if not files:
         raise InputError(["files"], "no frames in the upload")
     if len(files) > settings.max_batch_frames:
@@ -123,11 +188,13 @@ def create_labelled(
         raise InputError(["attitude_sigma_deg"], f"between 0 and {MAX_SIGMA_DEG:g} deg")
     plan = _placing(session, operator_id, plan_id, campaign_id, target)
     budget = DecodeBudget.of(settings)
+    packed = as_labelled_npz(files, labels or FormLabels())
+    digests = [hashlib.sha256(identity).hexdigest() for _, identity in packed]
+    files = [(name, data) for (name, _), (data, _) in zip(files, packed, strict=True)]
     reads = read_labelled(files=files, size=size, model_cells_m=model_cells_m, plan=plan, budget=budget)
     for (name, _), r in zip(files, reads, strict=True):
         if r.quaternion_j2000 is not None and plan is None:  # the reader refuses these without a plan
             raise InputError(["files", name, "plan_id"], "a label in J2000 needs plan_id (or campaign_id)")
-    digests = [hashlib.sha256(data).hexdigest() for _, data in files]
     known = crud.labelled_inputs(session=session, operator_id=operator_id, target=target, digests=digests)
     station = plan.station_name if plan is not None else None
     rows, blobs, seen = [], [], set(known)

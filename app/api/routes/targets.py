@@ -30,7 +30,12 @@ FILES = (
     "labelled frames, one .npz each (the format of inference.labelled, as gsa simulate --scene writes it): 'image' "
     "(2-D, raw or complex, [range, cross-range]; 'normalised' optional), the label as 'angles_deg' (z, y, x in the "
     "frame's observation frame) or 'quaternion_j2000' (body to J2000, w x y z) with 'observed_at' and plan_id; "
-    "optionally 'scene', 'attitude_sigma_deg', 'snr_db', 'range_cell_m' with 'cross_range_cell_m'"
+    "optionally 'scene', 'attitude_sigma_deg', 'snr_db', 'range_cell_m' with 'cross_range_cell_m'. Or an image "
+    "file (.png, .tif: 8/16-bit grayscale magnitudes; .npy: a 2-D array) whose label is a form field below, one "
+    "per image file in the order of the files"
+)
+FORM_LABEL = (
+    "repeat the field, one per image file (.png, .tif, .npy) in the order of the files; an .npz carries its own"
 )
 
 
@@ -72,6 +77,17 @@ async def add_labelled_frames(
             "(its frames' times within its access windows)",
         ),
     ] = None,
+    angles_deg: Annotated[
+        list[str] | None,
+        Form(description=f"an image file's label 'z,y,x' (deg, the frame's observation frame): {FORM_LABEL}"),
+    ] = None,
+    quaternion_j2000: Annotated[
+        list[str] | None,
+        Form(description=f"instead of angles_deg: 'w,x,y,z' body to J2000, with observed_at and plan_id: {FORM_LABEL}"),
+    ] = None,
+    observed_at: Annotated[
+        list[str] | None, Form(description=f"an image file's time (ISO 8601, UTC): {FORM_LABEL}")
+    ] = None,
 ) -> LabelledUpload:
     """Store labelled frames of a target: each frame, its label in the frame's observation frame, and where it came from.
 
@@ -97,6 +113,7 @@ async def add_labelled_frames(
         scene=scene,
         attitude_sigma_deg=attitude_sigma_deg,
         campaign_id=campaign_id,
+        labels=labelled_svc.FormLabels(angles_deg, quaternion_j2000, observed_at),
     )
 
 

@@ -194,3 +194,92 @@ def test_a_file_stored_meanwhile_by_another_request_is_a_conflict_not_a_500(clie
         with pytest.raises(Conflict, match="meanwhile"):
             crud.create_labelled(session=session, rows=[row(owner)])
         assert len(crud.labelled_inputs(session=session, operator_id=owner, target=T, digests=["f" * 64])) == 1
+
+
+def _frame_shas(settings, names):
+    engine = create_engine(settings.database_url)
+    with engine.connect() as conn:
+        rows = conn.execute(
+            select(LabelledFrame.input_name, LabelledFrame.frame_sha256).where(LabelledFrame.input_name.in_(names))
+        ).all()
+    engine.dispose()
+    return dict(rows)
+
+
+def test_png_and_npy_frames_take_their_labels_from_the_form(client, settings):
+    """An image file's label is a form field, one per image file in order (an .npz among them keeps its own): the
+    frame stored is the one the same image gives as an .npz written by inference.labelled.write_frame."""
+    from PIL import Image
+
+    rng = np.random.default_rng(21)
+    png_pixels = (rng.random((64, 64)) * 200 + 20).astype(np.uint8)
+    png = io.BytesIO()
+    Image.fromarray(png_pixels, mode="L").save(png, format="PNG")
+    npy_pixels = rng.random((64, 64)) + 0.01
+    npy = io.BytesIO()
+    np.save(npy, npy_pixels)
+    files = [
+        ("f.png", png.getvalue()),
+        ("own.npz", _npz(22, angles_deg=(5.0, 5.0, 5.0))),
+        ("f.npy", npy.getvalue()),
+    ]
+    client_form = {"angles_deg": ["10,-20,30", "-1.5, 2, 170"], "scene": "images"}
+    r = client.post(
+        f"/v1/targets/{T}/labelled-frames",
+        files=[("files", (n, d)) for n, d in files],
+        data=client_form,
+        headers=A,
+    )
+    assert r.status_code == 201, r.text
+    stored = {f["name"]: f["angles_deg"] for f in r.json()["stored"]}
+    assert stored == {"f.png": [10.0, -20.0, 30.0], "own.npz": [5.0, 5.0, 5.0], "f.npy": [-1.5, 2.0, 170.0]}
+    # the same images as .npz files written by the folder format's own writer store the same frames
+    ref = io.BytesIO()
+    write_frame(ref, png_pixels.astype(np.float64), angles_deg=(0.0, 1.0, 2.0))
+    ref_npy = io.BytesIO()
+    write_frame(ref_npy, npy_pixels, angles_deg=(0.0, 1.0, 3.0))
+    assert _post(client, [("ref.npz", ref.getvalue()), ("ref-npy.npz", ref_npy.getvalue())]).status_code == 201
+    shas = _frame_shas(settings, ["f.png", "ref.npz", "f.npy", "ref-npy.npz"])
+    assert shas["f.png"] == shas["ref.npz"] and shas["f.npy"] == shas["ref-npy.npz"]
+    # the same image and label again: already stored; under another label: another frame
+    again = client.post(
+        f"/v1/targets/{T}/labelled-frames",
+        files=[("files", ("f.png", png.getvalue()))],
+        data={"angles_deg": "10,-20,30"},
+        headers=A,
+    ).json()
+    assert again["already_stored"] == ["f.png"]
+    other = client.post(
+        f"/v1/targets/{T}/labelled-frames",
+        files=[("files", ("f.png", png.getvalue()))],
+        data={"angles_deg": "11,-20,30"},
+        headers=A,
+    ).json()
+    assert [f["angles_deg"] for f in other["stored"]] == [[11.0, -20.0, 30.0]]
+
+
+@pytest.mark.parametrize(
+    ("form", "field", "says"),
+    [
+        ({}, "angles_deg", "need one angles_deg each"),
+        ({"angles_deg": ["1,2,3", "4,5,6"]}, "angles_deg", "got 2"),
+        ({"angles_deg": "1,2"}, "angles_deg", "3 finite numbers"),
+        ({"angles_deg": "0,95,0"}, "angles_deg", "y within"),
+        ({"angles_deg": "1,2,3", "quaternion_j2000": "1,0,0,0"}, "angles_deg", "not both"),
+        ({"quaternion_j2000": "1,0,0,0"}, "observed_at", "observed_at"),
+    ],
+)
+def test_an_image_file_s_bad_form_label_is_refused_and_nothing_is_stored(client, settings, form, field, says):
+    before = _count(settings)
+    npy = io.BytesIO()
+    np.save(npy, np.random.default_rng(31).random((64, 64)) + 0.01)
+    r = client.post(
+        f"/v1/targets/{T}/labelled-frames",
+        files=[("files", ("good.npz", _npz(98, angles_deg=(0.0, 0.0, 0.0)))), ("files", ("x.npy", npy.getvalue()))],
+        data=form,
+        headers=A,
+    )
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"][0]
+    assert field in [str(v) for v in detail["loc"]] and says in detail["msg"], detail
+    assert _count(settings) == before
