@@ -174,11 +174,14 @@ def create_labelled(
     scene: str | None = None,
     attitude_sigma_deg: float | None = None,
     campaign_id: str | None = None,
-    labels: FormLabels | None = None,
+    angles_deg: list[str] | None = None,
+    quaternion_j2000: list[str] | None = None,
+    observed_at: list[str] | None = None,
 ) -> LabelledUpload:
     """Store the uploaded labelled frames of ``target`` (see the module's text); return what was stored.
 
-    An image file (.png, .tif, .npy) takes its label from ``labels`` (one per image file, in order); its stored
+    An image file (.png, .tif, .npy) takes its label from the form's ``angles_deg``, or ``quaternion_j2000`` with
+    ``observed_at`` (``FormLabels``: one per image file, in order); its stored
     identity is its bytes and its label together, so the same image under another label is another frame."""
     if not files:
         raise InputError(["files"], "no frames in the upload")
@@ -188,7 +191,7 @@ def create_labelled(
         raise InputError(["attitude_sigma_deg"], f"between 0 and {MAX_SIGMA_DEG:g} deg")
     plan = _placing(session, operator_id, plan_id, campaign_id, target)
     budget = DecodeBudget.of(settings)
-    packed = as_labelled_npz(files, labels or FormLabels())
+    packed = as_labelled_npz(files, FormLabels(angles_deg, quaternion_j2000, observed_at))
     digests = [hashlib.sha256(identity).hexdigest() for _, identity in packed]
     files = [(name, data) for (name, _), (data, _) in zip(files, packed, strict=True)]
     reads = read_labelled(files=files, size=size, model_cells_m=model_cells_m, plan=plan, budget=budget)

@@ -113,7 +113,9 @@ async def add_labelled_frames(
         scene=scene,
         attitude_sigma_deg=attitude_sigma_deg,
         campaign_id=campaign_id,
-        labels=labelled_svc.FormLabels(angles_deg, quaternion_j2000, observed_at),
+        angles_deg=angles_deg,
+        quaternion_j2000=quaternion_j2000,
+        observed_at=observed_at,
     )
 
 
