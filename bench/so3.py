@@ -35,13 +35,17 @@ def _log(msg: str) -> None:
     print(f"bench.so3: {msg}", file=sys.stderr, flush=True)
 
 
+MODELS: Path | None = None  # --models: a model folder instead of the shipped one
+
+
 def _checker(calibration: str | None) -> tuple[Any, Any]:
-    """The shipped models and the default target's checker, under ``calibration`` (a trust.json; None: the shipped)."""
+    """The models (``MODELS``, default the shipped) and the default target's checker, under ``calibration`` (a
+    trust.json; None: the models' own)."""
     from inference.runtime import DEFAULT_MODEL_DIR, Estimator
     from inference.trust import Calibration, load_checkers
 
-    est = Estimator.load(DEFAULT_MODEL_DIR)
-    checker = load_checkers(DEFAULT_MODEL_DIR, est.img_size).get("tiangong-like")
+    est = Estimator.load(MODELS or DEFAULT_MODEL_DIR)
+    checker = load_checkers(MODELS or DEFAULT_MODEL_DIR, est.img_size).get("tiangong-like")
     if calibration:
         checker.calibration = Calibration.load(calibration)
     return est, checker
@@ -127,7 +131,7 @@ def _calibration_command(calibration: str | None) -> str:
     from inference.runtime import DEFAULT_MODEL_DIR
     from inference.trust import TRUST_FILE, Calibration
 
-    made = Calibration.load(calibration or DEFAULT_MODEL_DIR / TRUST_FILE).made
+    made = Calibration.load(calibration or (MODELS or DEFAULT_MODEL_DIR) / TRUST_FILE).made
     return f"`{made.get('command', 'gsa calibrate')}`"
 
 
@@ -141,7 +145,7 @@ def plot(ours: dict[str, np.ndarray], robust: dict[str, np.ndarray], calibration
     from inference.runtime import DEFAULT_MODEL_DIR
     from inference.trust import TRUST_FILE, Calibration
 
-    cal = Calibration.load(calibration or DEFAULT_MODEL_DIR / TRUST_FILE)
+    cal = Calibration.load(calibration or (MODELS or DEFAULT_MODEL_DIR) / TRUST_FILE)
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True)
     for ax, (name, pts) in zip(axes, (("our frames", ours), ("robust preset", robust)), strict=True):
         err = np.maximum(pts["err"], 0.01)
@@ -167,8 +171,12 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m bench.so3", description=__doc__.split("\n")[0])
     p.add_argument("--frames", type=int, default=200)
     p.add_argument("--spacings", default="10,15,20", help="library spacings (deg) to compare on the SO(3) frames")
-    p.add_argument("--calibration", help="the trust calibration (a trust.json) to check with (default: the shipped)")
+    p.add_argument("--calibration", help="the trust calibration (a trust.json) to check with (default: the models')")
+    p.add_argument("--models", help="a model folder to measure instead of the shipped one")
+    p.add_argument("--out", default="BENCHMARKS.md", help="the markdown file whose section is replaced")
     args = p.parse_args(argv)
+    global MODELS
+    MODELS = Path(args.models) if args.models else None
     from inference.fit import LIBRARY_SPACING_DEG
     from inference.simulation.catalogue import simulated
     from inference.simulation.dataset import DatasetSpec
@@ -195,13 +203,15 @@ def main(argv: list[str] | None = None) -> int:
         f"## {TITLE}",
         "",
         f"Machine: {machine()}. Date: {datetime.now(UTC).date().isoformat()}. Command: `python -m bench.so3 --frames "
-        f"{n}{' --calibration ' + args.calibration if args.calibration else ''}` (bench/so3.py). {n} fresh frames a row (SNR -3..15 dB, seeds nothing was trained on), the shipped "
-        f"models, the service's whole answer with the coarse library spread over SO(3) at {LIBRARY_SPACING_DEG:g} deg "
+        f"{n}{' --calibration ' + args.calibration if args.calibration else ''}"
+        f"{' --models ' + args.models if args.models else ''}` (bench/so3.py). {n} fresh frames a row (SNR -3..15 dB, "
+        f"seeds nothing was trained on), {'the models of ' + args.models if args.models else 'the shipped models'}, "
+        f"the service's whole answer with the coarse library spread over SO(3) at {LIBRARY_SPACING_DEG:g} deg "
         "(the search's starts where Swin's answer does not fit), two fitting threads. Wrong branch: over 5 deg off and "
         "nearer the truth's near-mirror. Bound coverage: share of frames within the 90 % bound, per axis z / y / x. "
         "Goal (issue 43): uniform SO(3) median <= 1 deg, at most 3 % beyond 10 deg and none of them trusted, the "
         "cube no worse, <= 300 ms a frame. Trust: the checks and bounds of "
-        f"`{args.calibration or 'inference/models/shipped/trust.json'}` "
+        f"`{args.calibration or (args.models or 'inference/models/shipped') + '/trust.json'}` "
         f"({_calibration_command(args.calibration)}); an answer of the library search is held to the thresholds and bounds "
         "calibrated on the search's own answers over SO(3) (`Calibration.library_*`). Trusted outside their bound: "
         "the share of trusted answers whose error exceeds their 90 % bound, on the worst axis.",
@@ -240,10 +250,10 @@ def main(argv: list[str] | None = None) -> int:
         "",
         f"Cross-range-flipped frames (the bad-frame catalogue's, `inference.simulation.catalogue.bad_frames`): "
         f"{flipped} of {n_flipped} trusted under this calibration. Over SO(3) such a frame is, up to the body's "
-        "asymmetry, an ordinary frame of the attitude it shows reversed, and UNet++'s silhouettes outside its cube "
-        "are too poor for the asymmetry to tell them apart.",
+        "asymmetry, an ordinary frame of the attitude it shows reversed: a single frame cannot tell the cross-range "
+        "sign (records/checkpoints/so3-unet-cpu-2026-12-05: not even a UNet++ fine-tuned over SO(3)).",
     ]
-    replace_section(TITLE, lines)
+    replace_section(TITLE, lines, Path(args.out))
     print("\n".join(lines))
     return 0
 

@@ -698,7 +698,7 @@ def add_arguments(p: Any) -> None:
         default=0,
         help="fresh frames with attitudes over all of SO(3) (seed SEED+1) that calibrate the library search's answers "
         f"(at least {MIN_LIBRARY_FRAMES}; default 0: none, and answers outside the networks' cube stay flagged). "
-        "Until UNet++ is trained over SO(3) this also trusts frames whose cross-range axis is reversed "
+        "It also trusts frames whose cross-range axis is reversed, which over SO(3) a single frame cannot tell "
         "(README, 'Any attitude')",
     )
     p.add_argument("--out", help="where to write the calibration (default: MODELS/trust.json)")
