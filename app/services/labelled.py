@@ -92,11 +92,14 @@ def _numbers(text: str, n: int, field: str, k: int) -> list[float]:
     return values
 
 
-def as_labelled_npz(files: list[tuple[str, bytes]], labels: FormLabels) -> list[tuple[bytes, bytes]]:
+def as_labelled_npz(
+    files: list[tuple[str, bytes]], labels: FormLabels, budget: DecodeBudget | None = None
+) -> list[tuple[bytes, bytes]]:
     """Each file as the labelled-frame .npz ``read_frame`` reads, with the bytes that identify it: an .npz as it is;
     an image file (.png, .tif, .npy: one 2-D frame) with the next form label, identified by its bytes and that
-    label. Refuses a count of labels that does not match the images. (The request's decode budget is charged when
-    ``read_frame`` reads the packed image.)"""
+    label. Refuses a count of labels that does not match the images. An image is charged to the request's decode
+    ``budget`` from its header before it is decoded here, and again when ``read_frame`` reads it packed (an image
+    file counts twice against the budget: the safe side)."""
     images_at = [k for k, (_, data) in enumerate(files) if data.startswith(IMAGE_MAGIC)]
     angles, quats, times = labels.angles_deg or [], labels.quaternion_j2000 or [], labels.observed_at or []
     if angles and quats:
@@ -113,7 +116,7 @@ def as_labelled_npz(files: list[tuple[str, bytes]], labels: FormLabels) -> list[
     out = [(data, data) for _, data in files]
     for j, k in enumerate(images_at):
         name, data = files[k]
-        frame = decode(data, name, allow_stack=False)[0].magnitude
+        frame = decode(data, name, allow_stack=False, budget=budget)[0].magnitude
         arrays: dict[str, Any] = {"image": frame}
         if field == "angles_deg":
             arrays["angles_deg"] = np.array(_numbers(given[j], 3, field, j))
@@ -191,7 +194,7 @@ def create_labelled(
         raise InputError(["attitude_sigma_deg"], f"between 0 and {MAX_SIGMA_DEG:g} deg")
     plan = _placing(session, operator_id, plan_id, campaign_id, target)
     budget = DecodeBudget.of(settings)
-    packed = as_labelled_npz(files, FormLabels(angles_deg, quaternion_j2000, observed_at))
+    packed = as_labelled_npz(files, FormLabels(angles_deg, quaternion_j2000, observed_at), budget)
     digests = [hashlib.sha256(identity).hexdigest() for _, identity in packed]
     files = [(name, data) for (name, _), (data, _) in zip(files, packed, strict=True)]
     reads = read_labelled(files=files, size=size, model_cells_m=model_cells_m, plan=plan, budget=budget)

@@ -501,17 +501,20 @@ def _score(run: _Run) -> dict[str, Any]:
     angles = run.data["angles_deg"][run.test_idx]
     inside = np.all(np.abs(angles) <= ANGLE_SCALE_DEG, axis=1)
 
-    def test_mae(u: torch.nn.Module, s: torch.nn.Module) -> list[float]:
+    def test(u: torch.nn.Module, s: torch.nn.Module) -> tuple[list[float], np.ndarray | None]:
+        """The MAE over the cube's test frames, and UNet++'s output for every test frame (one pass)."""
+        if not len(run.test_idx):
+            return [math.nan] * 3, None
+        pred, enhanced = predict(u if through else None, s, src[run.test_idx], run.dev)
         if not inside.any():
-            return [math.nan] * 3
-        pred, _ = predict(u if through else None, s, src[run.test_idx[inside]], run.dev)
-        return [float(v) for v in np.abs(pred - angles[inside]).mean(axis=0)]
+            return [math.nan] * 3, enhanced
+        return [float(v) for v in np.abs(pred[inside] - angles[inside]).mean(axis=0)], enhanced
 
-    scores: dict[str, Any] = {"test_mae_deg": test_mae(run.unet, run.swin)}
+    mae, enhanced = test(run.unet, run.swin)
+    scores: dict[str, Any] = {"test_mae_deg": mae}
     if run.averaged:
-        scores["ema_test_mae_deg"] = test_mae(run.averaged["unet"].module, run.averaged["swin"].module)
-    if through and not inside.all():
-        _, enhanced = predict(run.unet, run.swin, src[run.test_idx], run.dev)
+        scores["ema_test_mae_deg"] = test(run.averaged["unet"].module, run.averaged["swin"].module)[0]
+    if enhanced is not None and not inside.all():
         iou = silhouette_ious(enhanced, run.data["label"][run.test_idx])  # type: ignore[arg-type]
         scores["test_silhouette_iou"] = {
             "cube": float(iou[inside].mean()) if inside.any() else math.nan,
