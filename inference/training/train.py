@@ -515,7 +515,7 @@ def _score(run: _Run) -> dict[str, Any]:
     if run.averaged:
         scores["ema_test_mae_deg"] = test(run.averaged["unet"].module, run.averaged["swin"].module)[0]
     if enhanced is not None and not inside.all():
-        iou = silhouette_ious(enhanced, run.data["label"][run.test_idx])  # type: ignore[arg-type]
+        iou = silhouette_ious(enhanced, run.data["label"][run.test_idx])
         scores["test_silhouette_iou"] = {
             "cube": float(iou[inside].mean()) if inside.any() else math.nan,
             "outside": float(iou[~inside].mean()),
