@@ -8,7 +8,9 @@ Euler angles (z, y, x) in degrees of R = Rz(z) Ry(y) Rx(x), body to observation 
 
 from __future__ import annotations
 
+import ast
 import math
+import threading
 from typing import Any
 
 import numpy as np
@@ -87,6 +89,27 @@ def resample_metres(
         mag, scale, offset=offset, output_shape=(size, size), order=1, mode="constant", cval=float(np.median(mag))
     )
     return np.asarray(out, np.float64)
+
+
+_AST_LOCK = threading.Lock()
+_LITERAL_EVAL = ast.literal_eval
+
+
+def _serial_literal_eval(node_or_string: Any) -> Any:
+    """``ast.literal_eval``, one thread at a time.
+
+    numpy parses every .npy header (``np.load``, ``npy_header``) with ``ast.literal_eval``, and CPython 3.11 (3.11.7
+    here) can fail that when two threads parse at once: SystemError "AST constructor recursion depth mismatch"
+    (python/cpython#106905). The service reads uploads in a thread pool, and the two-worker load test met it as a
+    500 on an .npy upload. numpy imports ``ast`` inside its reader, so the stand-in goes on the ``ast`` module
+    itself (the same function, serialised); a header is a few hundred bytes, so the lock costs nothing measurable.
+    """
+    with _AST_LOCK:
+        return _LITERAL_EVAL(node_or_string)
+
+
+if getattr(ast.literal_eval, "__name__", "") != "_serial_literal_eval":
+    ast.literal_eval = _serial_literal_eval
 
 
 def npy_header(fh: Any) -> tuple[tuple[int, ...], np.dtype[Any]]:
