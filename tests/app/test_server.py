@@ -96,7 +96,9 @@ def test_kill_9_mid_writes_loses_no_acknowledged_write_and_restarts_clean(server
     stop.set()
     t.join()
     acked = results[0].acked[KEY_A]
-    assert len(acked["estimate"]) >= 24
+    # 24 were stored when the kill came; each of the 8 clients may have had one of them stored but not yet
+    # acknowledged (its response in flight), so at least 24 - 8 were acknowledged.
+    assert len(acked["estimate"]) >= 24 - 8
     assert results[0].errors, "the kill should have cut some requests off"
 
     if backend == "sqlite":
