@@ -223,13 +223,7 @@ def test_png_and_npy_frames_take_their_labels_from_the_form(client, settings):
         ("own.npz", _npz(22, angles_deg=(5.0, 5.0, 5.0))),
         ("f.npy", npy.getvalue()),
     ]
-    client_form = {"angles_deg": ["10,-20,30", "-1.5, 2, 170"], "scene": "images"}
-    r = client.post(
-        f"/v1/targets/{T}/labelled-frames",
-        files=[("files", (n, d)) for n, d in files],
-        data=client_form,
-        headers=A,
-    )
+    r = _post(client, files, angles_deg=["10,-20,30", "-1.5, 2, 170"], scene="images")
     assert r.status_code == 201, r.text
     stored = {f["name"]: f["angles_deg"] for f in r.json()["stored"]}
     assert stored == {"f.png": [10.0, -20.0, 30.0], "own.npz": [5.0, 5.0, 5.0], "f.npy": [-1.5, 2.0, 170.0]}
@@ -242,19 +236,9 @@ def test_png_and_npy_frames_take_their_labels_from_the_form(client, settings):
     shas = _frame_shas(settings, ["f.png", "ref.npz", "f.npy", "ref-npy.npz"])
     assert shas["f.png"] == shas["ref.npz"] and shas["f.npy"] == shas["ref-npy.npz"]
     # the same image and label again: already stored; under another label: another frame
-    again = client.post(
-        f"/v1/targets/{T}/labelled-frames",
-        files=[("files", ("f.png", png.getvalue()))],
-        data={"angles_deg": "10,-20,30"},
-        headers=A,
-    ).json()
+    again = _post(client, [("f.png", png.getvalue())], angles_deg="10,-20,30").json()
     assert again["already_stored"] == ["f.png"]
-    other = client.post(
-        f"/v1/targets/{T}/labelled-frames",
-        files=[("files", ("f.png", png.getvalue()))],
-        data={"angles_deg": "11,-20,30"},
-        headers=A,
-    ).json()
+    other = _post(client, [("f.png", png.getvalue())], angles_deg="11,-20,30").json()
     assert [f["angles_deg"] for f in other["stored"]] == [[11.0, -20.0, 30.0]]
 
 
@@ -273,12 +257,7 @@ def test_an_image_file_s_bad_form_label_is_refused_and_nothing_is_stored(client,
     before = _count(settings)
     npy = io.BytesIO()
     np.save(npy, np.random.default_rng(31).random((64, 64)) + 0.01)
-    r = client.post(
-        f"/v1/targets/{T}/labelled-frames",
-        files=[("files", ("good.npz", _npz(98, angles_deg=(0.0, 0.0, 0.0)))), ("files", ("x.npy", npy.getvalue()))],
-        data=form,
-        headers=A,
-    )
+    r = _post(client, [("good.npz", _npz(98, angles_deg=(0.0, 0.0, 0.0))), ("x.npy", npy.getvalue())], **form)
     assert r.status_code == 422, r.text
     detail = r.json()["detail"][0]
     assert field in [str(v) for v in detail["loc"]] and says in detail["msg"], detail
