@@ -38,13 +38,13 @@ import numpy as np
 from bench.common import machine
 from bench.sections import replace_section
 from inference.fusion import Z90
-from inference.rotations import angle_deg, euler_from_matrix, rotation_matrix, spin_rotations
+from inference.rotations import angle_deg, euler_from_matrix, reversed_reading, rotation_matrix, spin_rotations
 from inference.runtime import Estimator
 from inference.trust import load_checkers
 from planner.examples import PAPER_STATION, PAPER_TARGET
 from planner.orbits import Orbit
 from scene import Scene, Window
-from scene.fusion import fit_and_fuse, fuse_pass, pass_span, reversed_reading, sweeps_from
+from scene.fusion import fit_and_fuse, fuse_pass, pass_span, sweeps_from
 from scene.geometry import access_windows
 from scene.simulation import PassOptions, SimulatedFrame, render_pass, simulate_pass
 

@@ -13,13 +13,16 @@ Two fixed matrices carry the frames' symmetries:
   its near-mirror ``MIRROR @ R @ MIRROR`` (Euler (z, -y, -x)) draw the same frame for a target
   symmetric about its body xy plane.
 - ``RX_180`` = diag(1, -1, -1), the half turn about X: a frame read reversed in cross-range shows
-  the body turned by it (``RX_180 @ R``); acting on Euler (z, y, x) errors, it is the near-mirror's
-  sign flip of y and x.
+  the body turned by it (``RX_180 @ R``, ``reversed_reading``); acting on Euler (z, y, x) errors, it is
+  the near-mirror's sign flip of y and x. The identity is exact, whatever the scattering: the half
+  turn about the line of sight (X, range) leaves the line of sight's direction in the body, so every
+  return, and negates only cross-range (Y) and the image normal (Z), which the projection drops.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -75,6 +78,17 @@ def euler_from_matrix(r: Vec) -> tuple[float, float, float]:
     z = math.atan2(r[1, 0], r[0, 0])
     x = math.atan2(r[2, 1], r[2, 2])
     return math.degrees(z), math.degrees(y), math.degrees(x)
+
+
+def reversed_reading(angles_deg: Sequence[float] | Vec) -> tuple[float, float, float]:
+    """The attitude (Euler z, y, x deg) a frame shows when its cross-range axis is reversed: ``RX_180 @ R``.
+
+    Its own inverse. A frame whose columns are reversed is, exactly, the ordinary frame of this attitude.
+
+    >>> [round(a, 9) for a in reversed_reading((10.0, 20.0, 30.0))]
+    [-10.0, -20.0, -150.0]
+    """
+    return euler_from_matrix(RX_180 @ rotation_matrix(*(float(a) for a in angles_deg)))
 
 
 def euler_to_quaternion(z_deg: float, y_deg: float, x_deg: float) -> tuple[float, float, float, float]:

@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from inference.fusion import PassFrame, fuse, sweep_rates, sweep_sigmas
-from inference.rotations import MIRROR, RX_180, euler_from_matrix, rotation_matrix
+from inference.rotations import MIRROR, euler_from_matrix, reversed_reading, rotation_matrix
 from scene.errors import SceneError
 from scene.geometry import Placements, Scene
 from scene.reading import Progress, read_frames
@@ -165,13 +165,6 @@ def sweeps_from(
                 f"through a target at most {MAX_SWEEP_DEG_S:g} deg/s (a fast tumble): check the integration time",
             )
     return [(math.radians(aperture) / float(t), float(t)) for t in integration_s]
-
-
-def reversed_reading(angles: Sequence[float] | Vec) -> tuple[float, float, float]:
-    """The attitude (Euler z, y, x deg) of a frame read reversed in cross-range, from its mirrored reading's.
-
-    The same map takes a frame's true attitude to the one its mirrored frame shows: Rx(180) R (``RX_180``)."""
-    return euler_from_matrix(RX_180 @ rotation_matrix(*(float(a) for a in angles)))
 
 
 def usable(checked: Checked) -> bool:

@@ -203,7 +203,7 @@ def cmd_simulate_pass(args: argparse.Namespace) -> int:
     import numpy as np
 
     from app.services.passes import pass_record
-    from scene.fusion import reversed_reading
+    from inference.rotations import reversed_reading
 
     if not args.out:
         raise CliError("give --out DIR for the pass's frames")

@@ -561,6 +561,74 @@ async function passPage(id) {
     <th>90 % bound z / y / x</th><th>branch</th><th class="num">residual (deg)</th><th>verdict</th></tr></thead><tbody>${rows}</tbody></table></div>`;
 }
 
+// ---- model sets (issue 42): each target's versions, which one answers, promotion and rollback; the labelled frames
+// the adaptations learn from, per scene, with where their attitudes lie in the networks' cube.
+function labelledPanel(frames, a, b, names) {
+  const S = 250, M = 34, lim = 60;
+  const P = (v) => M + ((Math.max(-lim, Math.min(lim, v)) + lim) / (2 * lim)) * (S - 2 * M);
+  const scenes = [...new Set(frames.map((f) => f.scene))];
+  let g = `<rect x="${P(-45)}" y="${P(-45)}" width="${P(45) - P(-45)}" height="${P(45) - P(-45)}" class="plotbg"/>`;
+  for (let v = -45; v <= 45; v += 15) {
+    g += `<line x1="${P(v)}" x2="${P(v)}" y1="${P(-45)}" y2="${P(45)}" class="gridline"/><line y1="${P(-v)}" y2="${P(-v)}" x1="${P(-45)}" x2="${P(45)}" class="gridline"/>`;
+  }
+  g += `<text x="${S / 2}" y="${S - 6}" class="tick" text-anchor="middle">${names[0]} (deg, -45..45)</text>`;
+  g += `<text x="10" y="${S / 2}" class="tick" text-anchor="middle" transform="rotate(-90 10 ${S / 2})">${names[1]} (deg)</text>`;
+  frames.forEach((f) => {
+    const hue = (scenes.indexOf(f.scene) * 137) % 360;
+    g += `<circle cx="${P(f.angles_deg[a])}" cy="${P(-f.angles_deg[b])}" r="3" class="labelpoint" fill="hsl(${hue},65%,45%)"><title>${esc(f.name)} (${esc(f.scene)}): ${f.angles_deg.map((v) => num(v, 1)).join(", ")}</title></circle>`;
+  });
+  return `<svg class="coverage" viewBox="0 0 ${S} ${S}" role="img" aria-label="labelled attitudes, ${names[0]} against ${names[1]}">${g}</svg>`;
+}
+
+function figures(f) {
+  if (!f) return "-";
+  const parts = [];
+  if (f.swin_geodesic_median_deg !== undefined) parts.push(`Swin median ${num(f.swin_geodesic_median_deg, 2)} deg`);
+  if (f.iou_median !== undefined) parts.push(`UNet++ IoU ${num(f.iou_median, 3)}`);
+  if (f.own_swin_geodesic_median_deg !== undefined) parts.push(`own frames ${num(f.own_swin_geodesic_median_deg, 2)} deg`);
+  return parts.length ? esc(parts.join(", ")) : "-";
+}
+
+async function modelsPage() {
+  const sets = await api("/v1/model-sets");
+  const blocks = await Promise.all(sets.data.map(async (s) => {
+    const lab = await api(`/v1/targets/${encodeURIComponent(s.target)}/labelled-frames?limit=100`);
+    const versions = s.versions.map((v) => `<tr class="${v.promoted || (v.version === 0 && s.answering_version === 0) ? "answering" : ""}">
+        <td class="num">${v.version}</td><td>${v.version === s.answering_version ? "<b>answers</b>" : ""}</td>
+        <td>${v.created_at ? utc(v.created_at) : "configured set"}</td><td class="num">${v.base_version ?? "-"}</td>
+        <td class="num">${v.summary.labelled_frames ?? "-"}</td>
+        <td>${v.summary.train_scenes ? esc(v.summary.train_scenes.length ?? v.summary.train_scenes) : "-"} / ${v.summary.validation_scenes ? esc(v.summary.validation_scenes.length ?? v.summary.validation_scenes) : "-"}</td>
+        <td>${figures(v.summary.before)}</td><td>${figures(v.summary.after)}</td><td class="num">${num(v.summary.cpu_minutes, 1)}</td>
+        <td>${v.version === s.answering_version ? "" : `<button class="promote" data-target="${esc(s.target)}" data-version="${v.version}">${v.version === 0 ? "Roll back to 0" : "Promote"}</button>`}</td></tr>`).join("");
+    const scenes = Object.entries(lab.per_scene).map(([k, n]) => `<tr><td>${esc(k)}</td><td class="num">${n}</td></tr>`).join("");
+    const frames = lab.data.slice(0, 50).map((f) => `<tr><td>${esc(f.name)}</td><td>${esc(f.scene)}</td>
+        <td>${f.angles_deg.map((v) => num(v, 2)).join(", ")}</td><td>${utc(f.observed_at)}</td><td>${esc(f.station_name || "-")}</td>
+        <td class="num">${num(f.attitude_sigma_deg, 2)}</td><td class="num">${num(f.snr_db, 1)}</td><td>${utc(f.created_at)}</td></tr>`).join("");
+    return `<section class="modelset"><h2>${esc(s.target)} <span class="muted">version ${s.answering_version} answers</span></h2>
+      <table class="versions"><thead><tr><th class="num">version</th><th></th><th>made (UTC)</th><th class="num">from</th>
+      <th class="num">labelled frames</th><th>scenes train / held out</th><th>held out, before</th><th>held out, after</th>
+      <th class="num">CPU min</th><th></th></tr></thead><tbody>${versions}</tbody></table>
+      <h3>Labelled frames <span class="muted">(${lab.count} in ${Object.keys(lab.per_scene).length} scene(s); ${num(100 * lab.coverage, 0)} % of the cube's 15 deg cells${lab.count > lab.data.length ? `; the newest ${lab.data.length} drawn` : ""})</span></h3>
+      ${lab.count ? `<div class="coveragebox">${labelledPanel(lab.data, 0, 1, ["z", "y"])}${labelledPanel(lab.data, 0, 2, ["z", "x"])}
+        <table class="scenes"><thead><tr><th>scene</th><th class="num">frames</th></tr></thead><tbody>${scenes}</tbody></table></div>
+        <div class="scroll"><table class="labelled"><thead><tr><th>frame</th><th>scene</th><th>z, y, x (deg)</th><th>observed (UTC)</th>
+        <th>station</th><th class="num">optical 1-sigma (deg)</th><th class="num">SNR (dB)</th><th>stored (UTC)</th></tr></thead><tbody>${frames}</tbody></table></div>`
+        : `<p class="muted">None yet: POST /v1/targets/${esc(s.target)}/labelled-frames, or gsa labelled add DIR --target ${esc(s.target)} --server.</p>`}
+      </section>`;
+  }));
+  view.innerHTML = `<h1>Model sets <span class="muted">(${sets.data.length})</span></h1>
+    <p class="muted">Each adaptation (<code>POST /v1/model-sets/{target}/adaptations</code>, <code>gsa adapt</code>) is a new version
+    of its target's set, learnt from the labelled frames below; one version answers each target, and every estimate names it.</p>
+    ${blocks.join("") || '<p class="muted">No model sets: the service serves none.</p>'}`;
+  view.querySelectorAll("button.promote").forEach((b) => b.addEventListener("click", async () => {
+    b.disabled = true;
+    try {
+      await api(`/v1/model-sets/${encodeURIComponent(b.dataset.target)}/versions/${b.dataset.version}/promote`, "json", "POST");
+    } catch (err) { fail(err.message); }
+    route();
+  }));
+}
+
 async function route() {
   takeKeyFromAddress();
   if (!key()) return askForKey();
@@ -579,6 +647,7 @@ async function route() {
     else if (parts[0] === "passes" && parts[1]) await passPage(decodeURIComponent(parts[1]));
     else if (parts[0] === "passes") await passesPage();
     else if (parts[0] === "jobs") await jobsPage();
+    else if (parts[0] === "models") await modelsPage();
     else await plansPage(params);
   } catch (err) {
     fail(err.message);

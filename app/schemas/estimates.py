@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 from pydantic import Field
 
 from app.schemas.common import Described, StoredResult, utc_or_none
-from inference.rotations import euler_from_matrix, euler_to_quaternion, rotation_matrix
+from inference.rotations import euler_from_matrix, euler_to_quaternion, reversed_reading, rotation_matrix
 
 if TYPE_CHECKING:
     from app.db.models import Estimate
@@ -97,6 +97,15 @@ class CheckedPublic(Described):
         None, description="Swin's own estimate, the fit's start (null for a target without trained networks)"
     )
     refined: bool = Field(True, description="whether the attitude was fitted to the target's projection")
+    attitude_reversed: AttitudePublic | None = Field(
+        None,
+        description="the attitude the same frame shows read with its cross-range axis reversed: the answer turned "
+        "half about the line of sight (RX_180 R). A single frame cannot tell the two apart, whatever the scattering, "
+        "since that half turn keeps the line of sight's direction in the body; the answer assumes the README's image "
+        "convention. This one holds where the radar's cross-range sense is the opposite, or the target turns against "
+        "the line of sight faster than it sweeps (a pass tells: its fusion reads such frames so). Null on answers "
+        "stored before it",
+    )
 
     @staticmethod
     def fields_of(c: Checked) -> dict[str, Any]:
@@ -105,6 +114,7 @@ class CheckedPublic(Described):
             "attitude": AttitudePublic.from_euler(c.angles_deg),
             "attitude_network": None if c.network_deg is None else AttitudePublic.from_euler(c.network_deg),
             "refined": c.refined,
+            "attitude_reversed": AttitudePublic.from_euler(reversed_reading(c.angles_deg)),
             "quality": QualityPublic.from_quality(c.quality),
             "alternatives": [AlternativePublic.from_alternative(a) for a in c.alternatives],
         }

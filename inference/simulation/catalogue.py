@@ -6,7 +6,12 @@ models would see (what ``app.services.uploads.prepare`` makes of the upload), so
 flag rate of every kind can be measured (``bench/trust.py``, ``tests/inference/test_trust.py``):
 
 * ``other-satellite``: frames of ``comsat_like``, a box-wing satellite, not the target;
-* ``range-flipped`` / ``cross-range-flipped``: the rows / columns reversed (a sign convention);
+* ``range-flipped`` / ``cross-range-flipped``: the rows / columns reversed (a sign convention). Reversed
+  columns are exactly the frame of the attitude turned half about the line of sight (``RX_180 @ R``,
+  ``inference.rotations.reversed_reading``), whatever the scattering: over SO(3) no single-frame check can
+  flag them (the answer is that attitude, and its ``attitude_reversed`` the truth); they are flagged only
+  where the checks hold answers to the networks' cube, which that attitude lies outside
+  (``SINGLE_FRAME_UNFLAGGABLE``);
 * ``transposed``: range and cross-range swapped;
 * ``normalised-twice``: a normalised frame sent again as raw (``normalised=false``);
 * ``pixels-halved``: a 512 x 512 frame of the same radar resampled to 256 in pixels, not in
@@ -43,6 +48,7 @@ KINDS = (
     "pure-noise",
     "inverted",
 )
+SINGLE_FRAME_UNFLAGGABLE = ("cross-range-flipped",)  # an ordinary frame of another attitude (above)
 CATALOGUE_SEED = 50_000  # bad frames: a seed no training, validation or test set uses
 FRESH_SEED = 60_000  # fresh good frames for the trust tests and benchmarks
 CALIBRATION_SEED = 70_000  # fresh good frames the shipped trust calibration was fitted on
@@ -104,6 +110,14 @@ def _zoom(mag: NDArray[Any], size: int) -> NDArray[np.float64]:
     from scipy.ndimage import zoom
 
     return np.asarray(zoom(mag, (size / mag.shape[0], size / mag.shape[1]), order=1))
+
+
+def bad_frames_truth(kind: str, n: int, seed: int = CATALOGUE_SEED) -> NDArray[np.float64]:
+    """The true attitudes (Euler z, y, x deg) of ``bad_frames(kind, n, seed)``'s frames, [n, 3]."""
+    if kind not in KINDS:
+        raise ValueError(f"unknown kind {kind!r}; one of {', '.join(KINDS)}")
+    spec = DatasetSpec(n=n, seed=seed + KINDS.index(kind) * 1000)
+    return np.array([frame_truth(spec, i)[0] for i in range(n)], float).reshape(-1, 3)
 
 
 def bad_frames(kind: str, n: int, seed: int = CATALOGUE_SEED, radar: Radar | None = None) -> NDArray[np.float32]:

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from app.schemas import CAMPAIGN_EXAMPLE, PAPER_EXAMPLE
+from inference.labelled import write_frame
 from tests.conftest import KEY_A
 from tests.utils.server import Server
 
@@ -74,6 +75,18 @@ def served(tmp_path_factory, smoke_models):
         timeout=300,
     )
     assert passed.status_code == 201, passed.text
+    labelled = []
+    for k in range(6):  # two scenes' labelled frames, for the model sets page
+        one = io.BytesIO()
+        angles = (-30.0 + 10.0 * k, 5.0 * k - 10.0, 20.0 - 6.0 * k)
+        write_frame(
+            one, np.random.default_rng(10 + k).random((64, 64)) + 0.01, angles_deg=angles, scene=f"pass-{k % 2}"
+        )
+        labelled.append(("files", (f"lab{k}.npz", one.getvalue())))
+    stored = httpx.post(
+        srv.url + "/v1/targets/tiangong-like/labelled-frames", files=labelled, headers=headers, timeout=120
+    )
+    assert stored.status_code == 201, stored.text
     radar = {"n_range": 64, "n_azimuth": 64, "bandwidth_hz": 0.4e9, "aperture_deg": 1.275}
     job = httpx.post(srv.url + "/v1/datasets", json={"n": 4, "radar": radar}, headers=headers, timeout=60).json()
     for _ in range(600):  # finished before the pages are drawn (an active job's page looks again every 2 s)
@@ -140,6 +153,10 @@ def test_console_pages_in_chromium(served, tmp_path):
             ['<svg class="panel"', 'class="framepoint"', 'id="passframes"', "Fused attitude, body to LVLH"],
         ),
         "jobs": (f"{console}/jobs", [job["id"][:8], 'id="jobs"', "<progress", ">done<", ">manifest</a>"]),
+        "models": (
+            f"{console}/models",
+            ["Model sets", "version 0 answers", 'class="labelpoint"', "6 in 2 scene(s)", "pass-1", "lab5.npz"],
+        ),
         "no-key": (f"{srv.url}/console/", ["Use this key"]),
     }
     for name, (url, expected) in pages.items():

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 from PIL import Image
+from scipy.spatial.transform import Rotation
 from sqlalchemy import create_engine, func, select
 
 from app.db.models import Estimate
@@ -61,6 +62,14 @@ def test_estimate_complex_npy(client, frame):
     att = body["attitude"]
     assert len(att["euler_zyx_deg"]) == 3 and len(att["quaternion_wxyz"]) == 4
     assert np.allclose(np.linalg.det(np.array(att["rotation_matrix"])), 1.0)
+    # The reading with cross-range reversed: the answer turned half about the line of sight (X), in all three forms.
+    rev = body["attitude_reversed"]
+    half_x = Rotation.from_rotvec([np.pi, 0.0, 0.0])
+    expected = half_x * Rotation.from_quat(np.roll(att["quaternion_wxyz"], -1))
+    assert Rotation.from_quat(np.roll(rev["quaternion_wxyz"], -1)).approx_equal(expected, atol=1e-9)
+    np.testing.assert_allclose(rev["rotation_matrix"], expected.as_matrix(), atol=1e-9)
+    assert Rotation.from_euler("ZYX", rev["euler_zyx_deg"], degrees=True).approx_equal(expected, atol=1e-9)
+    assert client.get(body["links"]["self"], headers=A).json()["attitude_reversed"] == rev
     assert body["model"]["config"] == "smoke" and body["dtype"] == "complex128"
     assert set(body["timings_s"]) >= {"preprocess", "unetpp", "swin"}
     png = client.get(body["links"]["enhanced_png"], headers=A)
