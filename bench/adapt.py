@@ -248,7 +248,13 @@ def plot(results: dict[str, dict[str, Any]]) -> None:
         axes[0].plot(n, [r["geodesic_p95_deg"] for r in h], "s--", color=c, label=f"{standin}: p95")
         axes[1].plot(n, [100 * r["beyond_10_deg"] for r in h], "o-", color=c, label=standin)
         axes[2].plot(n, [100 * r["trusted"] for r in h], "o-", color=c, label=f"{standin}: trusted")
-        axes[2].plot(n, [np.nan if r["good_flagged"] is None else 100 * r["good_flagged"] for r in h], "s--", color=c, label=f"{standin}: good flagged")
+        axes[2].plot(
+            n,
+            [np.nan if r["good_flagged"] is None else 100 * r["good_flagged"] for r in h],
+            "s--",
+            color=c,
+            label=f"{standin}: good flagged",
+        )
     own = next(iter(results.values()))
     base = own[min(own, key=lambda k: int(k.split("/")[0]))]["own"]["geodesic_median_deg"]
     axes[0].axhline(base, color="grey", lw=0.8, ls=":", label="own frames, shipped set")
