@@ -51,8 +51,9 @@ def _checker(calibration: str | None) -> tuple[Any, Any]:
     return est, checker
 
 
-def flipped_trusted(calibration: str | None, n: int = 24) -> tuple[int, int, int]:
-    """Cross-range-flipped frames (the bad-frame catalogue's): (trusted, of them read as the attitude they show, frames).
+def flipped_trusted(calibration: str | None, n: int = 24) -> tuple[int, int, int, int]:
+    """Cross-range-flipped frames (the bad-frame catalogue's): (trusted, of them read as the attitude they show, of them
+    over 10 deg from it, frames).
 
     Read as shown: the answer turned half about the line of sight (``reversed_reading``) within 5 deg of the truth."""
     from inference.rotations import geodesic_deg, reversed_reading
@@ -65,7 +66,8 @@ def flipped_trusted(calibration: str | None, n: int = 24) -> tuple[int, int, int
     shown = np.array([reversed_reading(c.angles_deg) for c in checks])
     right = geodesic_deg(shown, bad_frames_truth("cross-range-flipped", n)) <= 5.0
     trusted = np.array([c.quality.trusted for c in checks])
-    return int(trusted.sum()), int((trusted & right).sum()), n
+    far = geodesic_deg(shown, bad_frames_truth("cross-range-flipped", n)) > 10.0
+    return int(trusted.sum()), int((trusted & right).sum()), int((trusted & far).sum()), n
 
 
 def score(
@@ -252,12 +254,13 @@ def main(argv: list[str] | None = None) -> int:
         )
     lines.append("")
     plot(rows["uniform SO(3), our frames"]["points"], rows["uniform SO(3), robust preset"]["points"], args.calibration)
-    flipped, shown, n_flipped = flipped_trusted(args.calibration)
+    flipped, shown, far, n_flipped = flipped_trusted(args.calibration)
     lines[-1:-1] = [
         "",
         f"Cross-range-flipped frames (the bad-frame catalogue's, `inference.simulation.catalogue.bad_frames`): "
         f"{flipped} of {n_flipped} trusted, {shown} of them read as the attitude they show (the truth turned half "
-        "about the line of sight, within 5 deg; the answer's `attitude_reversed` is then the truth). Such a frame "
+        f"about the line of sight, within 5 deg; the answer's `attitude_reversed` is then the truth), {far} over 10 deg "
+        "from it (a wrong answer trusted, as the fit can give on a frame of that attitude itself). Such a frame "
         "is exactly the frame of that attitude, whatever the scattering (tests/inference/simulation/test_scene.py), "
         "so over SO(3) no single-frame check can flag it; under the networks' cube it was flagged only because "
         "that attitude lies outside the cube.",

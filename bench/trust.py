@@ -21,9 +21,17 @@ import numpy as np
 from bench.common import interleaved_medians, machine
 from bench.sections import replace_section
 from inference.evaluation.evaluate import SNR_DB, snr_spec
-from inference.rotations import geodesic_deg
+from inference.rotations import geodesic_deg, reversed_reading
 from inference.runtime import Estimator
-from inference.simulation.catalogue import FRESH_SEED, KINDS, bad_frames, good_frames, simulated
+from inference.simulation.catalogue import (
+    FRESH_SEED,
+    KINDS,
+    SINGLE_FRAME_UNFLAGGABLE,
+    bad_frames,
+    bad_frames_truth,
+    good_frames,
+    simulated,
+)
 from inference.simulation.dataset import DatasetSpec
 from inference.simulation.scene import VARIANTS, Scattering, mask_iou
 from inference.trust import load_checkers
@@ -138,6 +146,14 @@ def main() -> None:
                 key = next((name for word, name in CHECKS if word in r), r[:40])
                 counts[key] = counts.get(key, 0) + 1
         top = ", ".join(f"{k} ({v})" for k, v in sorted(counts.items(), key=lambda kv: -kv[1])[:3])
+        if kind in SINGLE_FRAME_UNFLAGGABLE:  # exactly a frame of another attitude: read as it, or flagged
+            shown = geodesic_deg(np.array([reversed_reading(c.angles_deg) for c in bc]), bad_frames_truth(kind, N_BAD))
+            trusted = np.array([c.quality.trusted for c in bc])
+            top += (
+                f"; no single-frame check can flag it over SO(3) (README, 'Any attitude'): {int(trusted.sum())} "
+                f"trusted, {int((trusted & (shown <= 5.0)).sum())} of them read as the attitude the frame shows "
+                "(within 5 deg)"
+            )
         lines.append(f"| {kind} | **{100 * flagged:.0f} %** | {top} |")
     lines += [""]
 

@@ -16,7 +16,7 @@
 #                                       training leaves the newest checkpoint, which is packed all the same.
 #                                       Run it as:  timeout 560 inference/gpu_train.sh oneshot
 #   Back home:  python -m inference.training.pipeline join --pieces OUT --run runs/so3
-#               gsa export --run runs/so3 --half --int8 --frames DATA   (then gsa calibrate --so3-frames 400)
+#               gsa export --run runs/so3 --half --int8 --frames DATA   (then gsa calibrate --frames 600 --so3-frames 1000)
 #
 #   inference/gpu_train.sh launch       simulate the data, start both trainings in the background, watch ~9 min
 #   inference/gpu_train.sh watch SECS   watch the runs; pack the compact run's newest weights into $OUT

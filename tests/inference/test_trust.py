@@ -5,20 +5,23 @@ Fresh frames come from seeds no training, validation, test or calibration set us
 fitted on other frames (seed 70000), so these tests hold it against data it never saw.
 """
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-from inference.rotations import euler_difference, geodesic_deg
+from inference.rotations import euler_difference, geodesic_deg, reversed_reading
 from inference.runtime import Estimator
-from inference.simulation.catalogue import FRESH_SEED, KINDS, bad_frames, good_frames
-from inference.trust import Calibration, Checked, Quality, library_iou_threshold, load_checkers
+from inference.simulation.catalogue import (
+    FRESH_SEED,
+    KINDS,
+    SINGLE_FRAME_UNFLAGGABLE,
+    bad_frames,
+    bad_frames_truth,
+    good_frames,
+)
+from inference.trust import Checked, Quality, library_iou_threshold, library_limits, load_checkers
 
 N_GOOD = 200
 N_SO3 = 60  # about 0.27 s a frame (most are searched); bench.so3 measures 200 a set
-# gsa calibrate --frames 600 --seed 70000 --so3-frames 400: the library search's own calibration, not shipped (README)
-SO3_CALIBRATION = Path(__file__).resolve().parents[2] / "records" / "calibration" / "trust-so3-2026-12-05.json"
 N_BAD = 6  # about a second a frame (library search and fit); bench.trust measures the flag rates on more
 
 
@@ -79,7 +82,7 @@ def test_few_good_frames_are_flagged(good):
     assert all(c.quality.reasons == [] for c in checks if c.quality.trusted)
 
 
-@pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.parametrize("kind", [k for k in KINDS if k not in SINGLE_FRAME_UNFLAGGABLE])
 def test_untrustworthy_frames_are_flagged(shipped, kind):
     est, checker = shipped
     frames = bad_frames(kind, N_BAD)
@@ -112,19 +115,35 @@ def over_so3(shipped):
     est, checker = shipped
     frames, truth, _ = good_frames(N_SO3, FRESH_SEED + 43, attitudes="so3")
     res = est.estimate(frames)
-    shipped_calibration = checker.calibration
-    checker.calibration = Calibration.load(SO3_CALIBRATION)
-    try:
-        return truth, checker.check_many(frames, res.enhanced, res.angles_deg)
-    finally:
-        checker.calibration = shipped_calibration
+    return truth, checker.check_many(frames, res.enhanced, res.angles_deg)
 
 
-def test_the_shipped_calibration_leaves_the_library_search_to_the_network_path_s_thresholds(shipped):
-    """Not shipped until UNet++ is trained over SO(3) (a cross-range-flipped frame would be trusted): an answer
-    outside the cube stays flagged, as the flipped-frame check above relies on."""
+def test_the_shipped_calibration_holds_the_library_search_to_its_own_figures(shipped):
+    """gsa calibrate --frames 600 --seed 70000 --so3-frames 1000: the library search's answers have their own
+    thresholds and bounds, and no +-50 deg limit (the next test holds them against fresh frames)."""
     _, checker = shipped
-    assert not checker.calibration.covers_library and Calibration.load(SO3_CALIBRATION).covers_library
+    cal = checker.calibration
+    assert cal.covers_library and cal.made["library_frames"] >= 500
+    assert cal.library_iou_min < cal.iou_min and cal.library_doubt_max > cal.doubt_max
+    assert cal.library_max_bound_deg <= cal.max_bound_deg
+
+
+def test_a_cross_range_flipped_frame_is_read_as_the_attitude_it_shows(shipped):
+    """Reversed columns are exactly the frame of the attitude turned half about the line of sight
+    (tests/inference/simulation/test_scene.py), so over SO(3) no check of one frame can flag it: the service reads it
+    as that attitude, whose reversed reading (the answer's attitude_reversed) is the truth. What must hold is that its
+    trusted answers are right about what the frame shows, as for any frame."""
+    est, checker = shipped
+    n = 2 * N_BAD
+    frames, truth = bad_frames("cross-range-flipped", n), bad_frames_truth("cross-range-flipped", n)
+    res = est.estimate(frames)
+    checks = checker.check_many(frames, res.enhanced, res.angles_deg)
+    err = geodesic_deg(np.array([reversed_reading(c.angles_deg) for c in checks]), truth)
+    trusted = np.array([c.quality.trusted for c in checks])
+    assert np.median(err) <= 3.0, err
+    # Measured: 6 of the 7 trusted within 3 deg; one 14.6 deg off, as the fit answers that attitude's own frame
+    # (BENCHMARKS.md "Any attitude": the goal's "none beyond 10 deg trusted" is missed there).
+    assert trusted.sum() >= 3 and np.mean(err[trusted] <= 5.0) >= 0.8, (err, trusted)
 
 
 def test_answers_over_so3_are_held_to_the_library_search_s_own_calibration(over_so3):
@@ -155,11 +174,11 @@ def test_the_library_threshold_rises_above_every_wrong_answer_no_other_check_fla
         feats = {"median": 0.3, "doubt": 0.05, "iou": iou, "searched": 1.0, **{f"raw_{a}": raw for a in "zyx"}}
         return Checked(np.array(angles, float), None, True, Quality(iou, (1.0,) * 3, True, []), [], feats)
 
-    truth = np.zeros((42, 3))
-    checks = [answer((0.5, 0.0, 0.0), iou, 1.0) for iou in np.linspace(0.80, 0.95, 40)]
-    checks.append(answer((30.0, 0.0, 0.0), 0.91, 1.0))  # wrong, nothing else flags it
-    checks.append(answer((0.0, 40.0, 0.0), 0.94, 1e3))  # wrong, but its bound is far over 5 deg
-    cal = Calibration.load(SO3_CALIBRATION)
+    truth = np.tile([120.0, 0.0, 0.0], (42, 1))  # outside the networks' cube, where the library's thresholds hold
+    checks = [answer((120.5, 0.0, 0.0), iou, 1.0) for iou in np.linspace(0.80, 0.95, 40)]
+    checks.append(answer((150.0, 0.0, 0.0), 0.91, 1.0))  # wrong, nothing else flags it
+    checks.append(answer((120.0, 40.0, 0.0), 0.94, 1e3))  # wrong, but its bound is far over 5 deg
+    cal = checker.calibration
     t = library_iou_threshold(checker, cal, checks, truth, np.ones(42, bool))
     assert 0.91 < t <= 0.912, t
     t_alone = library_iou_threshold(checker, cal, checks[:40], truth[:40], np.ones(40, bool))
@@ -172,3 +191,24 @@ def test_a_calibration_with_too_few_so3_frames_is_a_one_line_error(capsys):
     assert main(["calibrate", "--so3-frames", "10", "--out", "never.json"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--so3-frames 10" in err, err
+
+
+def test_the_library_bound_limit_chosen_trusts_the_most_correct_answers(shipped):
+    """The rule, on made-up answers: wrong ones (30 deg off) that fit the silhouette well but are loosely bounded
+    (raw curvature 12: a 90 % bound of about 4 deg) force a high IoU threshold under a loose bound limit; a limit
+    under their bounds flags them instead, so the threshold drops to the correct answers' 1st percentile and all
+    the correct ones (bounds under 1 deg) are trusted. The chosen limit is that one."""
+    _, checker = shipped
+
+    def answer(angles, iou, raw):
+        feats = {"median": 0.3, "doubt": 0.05, "iou": iou, "searched": 1.0, **{f"raw_{a}": raw for a in "zyx"}}
+        return Checked(np.array(angles, float), None, True, Quality(iou, (1.0,) * 3, True, []), [], feats)
+
+    ious = np.linspace(0.80, 0.95, 40)
+    checks = [answer((120.5, 0.0, 0.0), iou, 1.0) for iou in ious]
+    checks += [answer((150.0, 0.0, 0.0), 0.93, 12.0), answer((120.0, 25.0, 0.0), 0.94, 12.0)]
+    truth = np.tile([120.0, 0.0, 0.0], (len(checks), 1))
+    cal = library_limits(checker, checker.calibration, checks, truth, np.ones(len(checks), bool))
+    bound = np.sqrt(np.asarray(cal.library_floor_deg) ** 2 + (12.0 * np.asarray(cal.library_scale)) ** 2).max()
+    assert cal.library_max_bound_deg < bound <= checker.calibration.max_bound_deg, (cal.library_max_bound_deg, bound)
+    assert cal.library_iou_min == pytest.approx(np.quantile(ious, 0.01) - 0.005, abs=1e-4)
