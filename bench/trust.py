@@ -21,7 +21,7 @@ import numpy as np
 from bench.common import interleaved_medians, machine
 from bench.sections import replace_section
 from inference.evaluation.evaluate import SNR_DB, snr_spec
-from inference.rotations import geodesic_deg, reversed_reading
+from inference.rotations import angle_deg, geodesic_deg, reversed_reading, rotation_matrices
 from inference.runtime import Estimator
 from inference.simulation.catalogue import (
     FRESH_SEED,
@@ -196,6 +196,12 @@ def main() -> None:
     oc = [other.check(frames[k], res.enhanced[k], None) for k in range(spec.n)]
     per = (time.perf_counter() - t0) / spec.n
     gf = geodesic_deg(np.array([c.angles_deg for c in oc]), truth)
+    # comsat-like is nearly symmetric under a half turn about each body axis (a box with two wings), which draws
+    # about the same silhouette; the library over SO(3) may land on any of those, so the error is also given modulo them.
+    half_turns = [np.diag(d) for d in ((1.0, -1.0, -1.0), (-1.0, 1.0, -1.0), (-1.0, -1.0, 1.0))]
+    answers = rotation_matrices(np.array([c.angles_deg for c in oc]))
+    truths = rotation_matrices(truth)
+    gs = np.array([min([gf[k]] + [angle_deg(answers[k] @ h, truths[k]) for h in half_turns]) for k in range(spec.n)])
     sil = res.enhanced > 0.5
     iou = mask_iou(sil, labels).mean()
     fit_iou = np.median([c.quality.silhouette_iou for c in oc])
@@ -206,8 +212,11 @@ def main() -> None:
         "fitted from the coarse library (`target=comsat-like`): the shipped UNet++, trained on the default target only,",
         f"finds its silhouette at IoU **{iou:.3f}** against the label; the fitted answer's geodesic error is median",
         f"**{np.median(gf):.2f} deg**, p90 {np.percentile(gf, 90):.2f} deg, {100 * np.mean(gf > 10):.0f} % beyond 10 deg",
-        f"(median silhouette IoU of the fit {fit_iou:.3f}), {per:.2f} s a frame for the search. Every answer says the",
-        "calibration is the default target's, so none is marked trusted.",
+        f"(median silhouette IoU of the fit {fit_iou:.3f}), {per:.2f} s a frame for the search; modulo the half turns "
+        f"about its body axes, which draw nearly the same silhouette, median **{np.median(gs):.2f} deg**, "
+        f"{100 * np.mean(gs > 10):.0f} % beyond 10 deg. The search's library spans SO(3) (the cube's prior kept it near "
+        "the truth before: 7.8 deg, 42 %), so on a silhouette this poor it finds the body's symmetric turns and other "
+        "attitudes far from the truth. Every answer says the calibration is the default target's, so none is trusted.",
         "",
     ]
 
