@@ -64,10 +64,9 @@ def flipped_trusted(calibration: str | None, n: int = 24) -> tuple[int, int, int
     res = est.estimate(frames)
     checks = checker.check_many(frames, res.enhanced, res.angles_deg)
     shown = np.array([reversed_reading(c.angles_deg) for c in checks])
-    right = geodesic_deg(shown, bad_frames_truth("cross-range-flipped", n)) <= 5.0
+    err = geodesic_deg(shown, bad_frames_truth("cross-range-flipped", n))
     trusted = np.array([c.quality.trusted for c in checks])
-    far = geodesic_deg(shown, bad_frames_truth("cross-range-flipped", n)) > 10.0
-    return int(trusted.sum()), int((trusted & right).sum()), int((trusted & far).sum()), n
+    return int(trusted.sum()), int((trusted & (err <= 5.0)).sum()), int((trusted & (err > 10.0)).sum()), n
 
 
 def score(

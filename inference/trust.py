@@ -676,18 +676,10 @@ def library_iou_threshold(
     correct = held & (err <= 2.0)
     base = iou[correct] if correct.sum() >= MIN_LIBRARY_FRAMES else iou[held]
     threshold = float(np.quantile(base, 0.01)) - 0.005
-    trial = replace(cal, library_iou_min=0.0)
-    kept = checker.calibration
-    checker.calibration = trial
-    try:
-        for k in np.flatnonzero(held & (err > 10.0)):
-            c = checks[k]
-            raw = np.array([c.features[f"raw_{a}"] for a in "zyx"])
-            bound = bounds_from(raw, *trial.bounds_model(True))
-            if not checker._reasons(c.features, c.angles_deg, bound, c.alternatives, False, True):
-                threshold = max(threshold, float(iou[k]) + 0.001)
-    finally:
-        checker.calibration = kept
+    wrong = np.flatnonzero(held & (err > 10.0))
+    passes = trusted_under(checker, replace(cal, library_iou_min=0.0), [checks[k] for k in wrong])
+    for k in wrong[passes]:
+        threshold = max(threshold, float(iou[k]) + 0.001)
     return round(threshold, 4)
 
 

@@ -593,7 +593,7 @@ async function modelsPage() {
   const sets = await api("/v1/model-sets");
   const blocks = await Promise.all(sets.data.map(async (s) => {
     const lab = await api(`/v1/targets/${encodeURIComponent(s.target)}/labelled-frames?limit=100`);
-    const versions = s.versions.map((v) => `<tr class="${v.promoted || (v.version === 0 && s.answering_version === 0) ? "answering" : ""}">
+    const versions = s.versions.map((v) => `<tr class="${v.version === s.answering_version ? "answering" : ""}">
         <td class="num">${v.version}</td><td>${v.version === s.answering_version ? "<b>answers</b>" : ""}</td>
         <td>${v.created_at ? utc(v.created_at) : "configured set"}</td><td class="num">${v.base_version ?? "-"}</td>
         <td class="num">${v.summary.labelled_frames ?? "-"}</td>
