@@ -98,6 +98,11 @@ class Calibration:
     # The widest 90 % bound a library answer may have and be trusted (None: max_bound_deg): outside the cube a wrong
     # attitude can fit UNet++'s poorer silhouette well, but the fit's curvature then bounds it loosely.
     library_max_bound_deg: float | None = None
+    # The IoU below which a network answer sends the frame to the library search too (None: ``iou_min``). A set
+    # recalibrated on another radar's frames keeps its base set's trigger: that radar's poorer silhouettes lower the
+    # trust threshold, and a trigger that low would stop the search that finds the answers Swin got wrong
+    # (design/measurements.md, "The search trigger on another radar").
+    search_iou_min: float | None = None
 
     @staticmethod
     def load(path: str | Path) -> Calibration:
@@ -115,6 +120,11 @@ class Calibration:
     def covers_library(self) -> bool:
         """Whether the library search's answers have a calibration of their own (over every rotation)."""
         return self.library_scale is not None and self.library_floor_deg is not None
+
+    @property
+    def search_below(self) -> float:
+        """The network answer's silhouette IoU below which the library is searched too."""
+        return self.iou_min if self.search_iou_min is None else self.search_iou_min
 
     def holds_to_library(self, searched: bool, angles: Vec) -> bool:
         """Whether an answer's checks are the library search's own: a search's answer outside the networks' cube.
@@ -313,7 +323,7 @@ class Checker:
                 # The mirror is refined whatever its prior (``keep``): both branches reach the answer's alternatives
                 # and the brightness tie-break.
                 fits = fit(self.renderer, enh, {"network": net, "mirror": mirror(net)}, prior_at=net, keep=("mirror",))
-            if net is None or (search and self._hard_iou(fits[0].angles_deg, enh) < cal.iou_min):
+            if net is None or (search and self._hard_iou(fits[0].angles_deg, enh) < cal.search_below):
                 # No networks, or their answer does not fit: search the library too.
                 fits = sorted(fits + self.search(enh), key=lambda f: f.cost)
                 searched = True
@@ -372,11 +382,16 @@ class Checker:
     def _with_other_branch(self, enhanced: Vec, fits: list[Fit]) -> list[Fit]:
         """The best fit's near-mirror, refined from there where no fit already lies near it: both branches of the
         pair reach the brightness tie-break and the alternatives (an answer found by the library search, or a
-        network answer whose own mirror start went elsewhere, had none)."""
+        network answer whose own mirror start went elsewhere, had none).
+
+        Refined as the library's starts are (coarse, then fine, in steps about the start): an answer off its own
+        branch by a few degrees has a mirror as far off the other one, and outside the cube Euler steps stall near
+        y = +-90 deg (design/measurements.md, "The other branch's refit")."""
         other = mirror(fits[0].angles_deg)
         if any(geodesic_deg(f.angles_deg, other)[0] < DISTINCT_DEG for f in fits):
             return fits
-        refined = fit(self.renderer, enhanced, {"other-branch": other})
+        coarse = fit(self.renderer, enhanced, {"other-branch": other}, LIBRARY_COARSE)
+        refined = fit(self.renderer, enhanced, {"other-branch": coarse[0].angles_deg}, LIBRARY_FINE)
         return sorted(fits + refined, key=lambda f: f.cost)
 
     def _by_brightness(self, frame: NDArray[np.floating], enhanced: Vec, fits: list[Fit]) -> list[Fit]:
@@ -507,6 +522,7 @@ def calibrate(
     truth: Vec,
     made: dict[str, Any] | None = None,
     progress: bool = False,
+    search_iou_min: float | None = None,
 ) -> tuple[Calibration, list[Checked]]:
     """Fit the thresholds and the uncertainty model on fresh good frames with known attitudes.
 
@@ -521,6 +537,9 @@ def calibrate(
     The search's trigger is itself a threshold, so the frames are checked in turn: loose (no
     search: the network path's figures), with the IoU threshold set (who searches, and what the
     search finds), and under the finished calibration.
+
+    ``search_iou_min`` fixes the search's trigger instead (a set recalibrated on another radar's frames
+    keeps its base set's: ``Calibration.search_iou_min``); None: the trigger is the IoU threshold.
     """
     import sys
 
@@ -562,7 +581,7 @@ def calibrate(
     net_rows = cube if cube.sum() >= MIN_LIBRARY_FRAMES else np.ones(len(frames), bool)
     iou_min = round(float(np.quantile(feats["iou"][net_rows], 0.01)) - 0.005, 4)
     # Who searches at that threshold, and what the search finds (the library path's own figures).
-    second = check_all(replace(loose, iou_min=iou_min), "library search")
+    second = check_all(replace(loose, iou_min=iou_min, search_iou_min=search_iou_min), "library search")
     searched = features(second)["searched"] > 0.5
     checks = [second[k] if searched[k] else first[k] for k in range(len(frames))]
     net_rows = net_rows & ~searched
@@ -599,6 +618,7 @@ def calibrate(
             "frames_in_cube": int(cube.sum()),
             "library_frames": int(searched.sum()),
         },
+        search_iou_min=search_iou_min,
         **library,
     )
     if library:

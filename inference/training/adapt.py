@@ -427,7 +427,7 @@ def adapt(
     finally:
         if not work_dir:
             shutil.rmtree(work, ignore_errors=True)
-    record["calibration"] = recalibrate(out, val, radar, model)
+    record["calibration"] = recalibrate(out, val, radar, model, base)
     if not record["calibration"]["recalibrated"] and (base / "trust.json").is_file():
         shutil.copyfile(base / "trust.json", out / "trust.json")
     record["cpu_minutes"] = round((time.process_time() - cpu0) / 60.0, 2)
@@ -454,14 +454,18 @@ def _coverage(angles: NDArray[np.float64], limit: float) -> float:
     return round(coverage(angles, limit), 4)
 
 
-def recalibrate(model_dir: Path, val: LabelledFrames, radar: Any, model: Any) -> dict[str, Any]:
+def recalibrate(
+    model_dir: Path, val: LabelledFrames, radar: Any, model: Any, base: Path | None = None
+) -> dict[str, Any]:
     """Calibrate trust on the held-out labelled frames through the exported set; write its ``trust.json``.
 
     With fewer than ``MIN_CALIBRATION_FRAMES`` held-out frames the base set's calibration is kept
-    (copied) and the record says so: thresholds from a handful of frames would be noise.
+    (copied) and the record says so: thresholds from a handful of frames would be noise. The library
+    search's trigger stays the base set's (``Calibration.search_iou_min``): this radar's poorer
+    silhouettes lower the trust threshold, and a trigger that low would stop the search where Swin is wrong.
     """
     from inference.runtime import Estimator
-    from inference.trust import TRUST_FILE, Checker, calibrate
+    from inference.trust import TRUST_FILE, Calibration, Checker, calibrate
 
     if len(val) < MIN_CALIBRATION_FRAMES:
         return {
@@ -479,8 +483,13 @@ def recalibrate(model_dir: Path, val: LabelledFrames, radar: Any, model: Any) ->
         "scenes": sorted(set(val.scenes)),
         "list_sha256": val.list_sha256(),
     }
-    _say(f"recalibrating trust on {len(val)} held-out labelled frames")
-    cal, checks = calibrate(Checker(model, radar), val.frames, res.enhanced, res.angles_deg, val.angles_deg, made)
+    trigger = None
+    if base is not None and (base / TRUST_FILE).is_file():
+        trigger = Calibration.load(base / TRUST_FILE).search_below
+    _say(f"recalibrating trust on {len(val)} held-out labelled frames (the search's trigger: IoU {trigger})")
+    cal, checks = calibrate(
+        Checker(model, radar), val.frames, res.enhanced, res.angles_deg, val.angles_deg, made, search_iou_min=trigger
+    )
     cal.write(model_dir / TRUST_FILE)
     fitted = np.array([c.angles_deg for c in checks])
     geo = geodesic_deg(fitted, val.angles_deg)
@@ -489,6 +498,7 @@ def recalibrate(model_dir: Path, val: LabelledFrames, radar: Any, model: Any) ->
         "frames": len(val),
         "fitted_geodesic_median_deg": round(float(np.median(geo)), 3),
         "flagged_share": round(float(np.mean([not c.quality.trusted for c in checks])), 3),
+        "search_iou_min": trigger,
     }
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from inference.fit import Renderer, fit, mirror, silhouette_iou
+from inference.fit import Fit, Renderer, fit, mirror, silhouette_iou
 from inference.rotations import geodesic_deg, rotation_matrices, rotation_matrix, so3_grid_size
 from inference.simulation.radar import Imager, Radar
 from inference.simulation.scene import label_mask
@@ -173,6 +173,22 @@ def test_a_still_pass_fitted_to_all_its_frames_at_once_finds_the_attitude_they_s
     assert err < 0.1, err
     assert out.frames == 5 and out.iou > 0.98
     assert 0.8 < out.moved_deg < 1.3  # it walked back the 1 deg it was put off
+
+
+def test_the_other_branch_is_found_from_an_answer_off_its_own_branch_outside_the_cube(tiangong):
+    """An answer of the library search over SO(3) lands near the truth's near-mirror but some degrees off it (the
+    silhouette barely constrains one axis there): the refit from that answer's mirror must still reach the truth
+    (the simulator's own attitude), including near y = +-90 deg where Euler steps stall (issue 43)."""
+    checker = Checker(tiangong_like(), RADAR, networks=True)
+    rng = np.random.default_rng(174)
+    for _ in range(4):
+        truth = np.array([rng.uniform(-180, 180), rng.choice([-1, 1]) * rng.uniform(55, 80), rng.uniform(-180, 180)])
+        off = Rotation.from_rotvec(np.radians(8.0) * Rotation.random(random_state=rng).apply([1.0, 0.0, 0.0]))
+        answer = (Rotation.from_euler("ZYX", mirror(truth), degrees=True) * off).as_euler("ZYX", degrees=True)
+        label = _label(tiangong.model, truth).astype(float)
+        fits = checker._with_other_branch(label, [Fit(answer, 0.5, 0.5, "library-0")])
+        other = [f for f in fits if f.start == "other-branch"]
+        assert other and geodesic_deg(other[0].angles_deg, truth)[0] < 2.0, (truth, other and other[0].angles_deg)
 
 
 def test_the_near_mirror_start_is_refined_however_far_the_prior_puts_it(tiangong):

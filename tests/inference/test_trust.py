@@ -212,3 +212,31 @@ def test_the_library_bound_limit_chosen_trusts_the_most_correct_answers(shipped)
     bound = np.sqrt(np.asarray(cal.library_floor_deg) ** 2 + (12.0 * np.asarray(cal.library_scale)) ** 2).max()
     assert cal.library_max_bound_deg < bound <= checker.calibration.max_bound_deg, (cal.library_max_bound_deg, bound)
     assert cal.library_iou_min == pytest.approx(np.quantile(ious, 0.01) - 0.005, abs=1e-4)
+
+
+def test_the_library_search_is_triggered_by_its_own_threshold_not_the_trust_threshold(shipped):
+    """A set recalibrated on another radar keeps its base set's search trigger (Calibration.search_iou_min) while
+    its trust threshold falls: whether a frame is searched follows the trigger alone, and without one, iou_min."""
+    from dataclasses import replace
+
+    est, checker = shipped
+    frames, _, _ = good_frames(1, FRESH_SEED + 4300)
+    res = est.estimate(frames)
+    kept = checker.calibration
+    searched = {}
+    try:
+        for name, cal in {
+            "trigger above, trust threshold below": replace(kept, iou_min=0.0, search_iou_min=1.0),
+            "trigger below, trust threshold above": replace(kept, iou_min=1.0, search_iou_min=0.0),
+            "no trigger, trust threshold above": replace(kept, iou_min=1.0, search_iou_min=None),
+        }.items():
+            checker.calibration = cal
+            c = checker.check(frames[0], res.enhanced[0], res.angles_deg[0])
+            searched[name] = c.features["searched"] > 0.5
+    finally:
+        checker.calibration = kept
+    assert searched == {
+        "trigger above, trust threshold below": True,
+        "trigger below, trust threshold above": False,
+        "no trigger, trust threshold above": True,
+    }

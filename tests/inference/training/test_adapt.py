@@ -1,6 +1,7 @@
 """Adaptation: networks read back from ONNX files, fine-tuned on labelled frames split by scene, exported, trusted anew."""
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ from inference.simulation.dataset import DatasetSpec, render_frames
 from inference.training.adapt import AdaptOptions, adapt
 from inference.training.checkpoints import save_checkpoint
 from inference.training.recover import recover, recover_swin, recover_unet
+from inference.trust import Calibration
 from tests.utils.models import SMOKE_RADAR
 
 
@@ -111,7 +113,10 @@ def _labelled(folder, scenes, per, seed):
 def test_adapt_splits_by_scene_keeps_the_best_weights_and_serves(smoke_base, tmp_path, capsys):
     frames = _labelled(tmp_path / "lab", scenes=3, per=20, seed=41)
     out = tmp_path / "adapted"
-    rec = adapt(smoke_base, frames, out, AdaptOptions(epochs=2, sim_ratio=0.5, validation_share=0.3))
+    base = tmp_path / "base"
+    shutil.copytree(smoke_base, base)
+    Calibration(iou_min=0.9321).write(base / "trust.json")  # the base set's trust: its search trigger is kept
+    rec = adapt(base, frames, out, AdaptOptions(epochs=2, sim_ratio=0.5, validation_share=0.3))
     lab = rec["labelled"]
     assert not set(lab["train_scenes"]) & set(lab["validation_scenes"])
     assert lab["train_frames"] + lab["validation_frames"] == 60 and lab["validation_frames"] >= 20
@@ -137,6 +142,7 @@ def test_adapt_splits_by_scene_keeps_the_best_weights_and_serves(smoke_base, tmp
     assert est.estimate(np.zeros((1, 64, 64), np.float32)).angles_deg.shape == (1, 3)
     trust = json.loads((out / "trust.json").read_text())
     assert rec["calibration"]["recalibrated"] and trust["made"]["frames"] == lab["validation_frames"]
+    assert trust["search_iou_min"] == rec["calibration"]["search_iou_min"] == 0.9321
     assert sorted(trust["made"]["scenes"]) == lab["validation_scenes"]
     assert set(trust["made"]["labelled_frames"]) <= {p.name for p in frames.iterdir()}
 
