@@ -328,8 +328,10 @@ class Checker:
                 fits = sorted(fits + self.search(enh), key=lambda f: f.cost)
                 searched = True
                 scale, floor = cal.bounds_model(searched)
-            fits = self._with_other_branch(enh, fits)
-            fits = self._by_brightness(frame, enh, fits)
+            fits = self._by_brightness(frame, enh, self._with_other_branch(enh, fits))
+            if not any(geodesic_deg(f.angles_deg, mirror(fits[0].angles_deg))[0] < DISTINCT_DEG for f in fits):
+                # The bright parts chose a fit whose own other branch was never refined: refine it, and choose again.
+                fits = self._by_brightness(frame, enh, self._with_other_branch(enh, fits))
             best = fits[0]
             angles = best.angles_deg
             hessian, soft, iou = curvature(self.renderer, enh, angles)
