@@ -329,9 +329,9 @@ class Checker:
                 searched = True
                 scale, floor = cal.bounds_model(searched)
             fits = self._by_brightness(frame, enh, self._with_other_branch(enh, fits))
-            if not any(geodesic_deg(f.angles_deg, mirror(fits[0].angles_deg))[0] < DISTINCT_DEG for f in fits):
-                # The bright parts chose a fit whose own other branch was never refined: refine it, and choose again.
-                fits = self._by_brightness(frame, enh, self._with_other_branch(enh, fits))
+            refit = self._with_other_branch(enh, fits)
+            if refit is not fits:  # the bright parts chose a fit whose own other branch was never refined: choose again
+                fits = self._by_brightness(frame, enh, refit)
             best = fits[0]
             angles = best.angles_deg
             hessian, soft, iou = curvature(self.renderer, enh, angles)
@@ -382,9 +382,9 @@ class Checker:
         return Checked(angles, net, bool(fits), quality, alternatives, features, cov)
 
     def _with_other_branch(self, enhanced: Vec, fits: list[Fit]) -> list[Fit]:
-        """The best fit's near-mirror, refined from there where no fit already lies near it: both branches of the
-        pair reach the brightness tie-break and the alternatives (an answer found by the library search, or a
-        network answer whose own mirror start went elsewhere, had none).
+        """The best fit's near-mirror, refined from there where no fit already lies near it (else ``fits`` itself,
+        unchanged): both branches of the pair reach the brightness tie-break and the alternatives (an answer found
+        by the library search, or a network answer whose own mirror start went elsewhere, had none).
 
         Refined as the library's starts are (coarse, then fine, in steps about the start): an answer off its own
         branch by a few degrees has a mirror as far off the other one, and outside the cube Euler steps stall near
