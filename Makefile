@@ -22,8 +22,9 @@ setup: $(STAMP)
 run: $(STAMP)
 	$(BIN)/gsa serve
 
+# Two processes, whole test files each (module fixtures are built once; the load tests keep their own servers).
 test: $(STAMP) browser
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile
 
 # The console's tests run in Debian's Chromium; installed once if the machine lacks it (apt, as root or with sudo).
 browser:
