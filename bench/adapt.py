@@ -174,6 +174,34 @@ def run_point(
     return row
 
 
+def rescore_point(standin: str, row: dict[str, Any], work: Path, data: dict[str, Any]) -> dict[str, Any]:
+    """A kept point scored again with the code as it is now: its adapted weights as they were, trust recalibrated on
+    the same held-out scenes of the adaptation (``recalibrate``, as ``gsa adapt`` does), then ``evaluate``."""
+    from inference.runtime import DEFAULT_MODEL_DIR, Estimator
+    from inference.simulation.targets import builtin_target
+    from inference.training.adapt import recalibrate
+    from inference.trust import card_radar_and_target
+
+    model_dir = DEFAULT_MODEL_DIR
+    row = dict(row)
+    if row["frames"]:
+        model_dir = work / f"{standin}-{row['frames']}-{row['scenes']}"
+        if not (model_dir / "model_card.json").is_file():
+            raise SystemExit(f"bench.adapt: {model_dir} is not kept: run the point without --rescore")
+        held = set(
+            json.loads((model_dir / "model_card.json").read_text())["adaptation"]["labelled"]["validation_scenes"]
+        )
+        lab = subset(data["pool"], row["frames"], row["scenes"])
+        val = lab.subset(np.flatnonzero([s in held for s in lab.scenes]))
+        radar, target = card_radar_and_target(model_dir, Estimator.load(model_dir).img_size)
+        row["calibration"] = recalibrate(model_dir, val, radar, builtin_target(target), DEFAULT_MODEL_DIR)
+    _log(f"{standin} {row['frames']}/{row['scenes']}: scoring again on the held-out scenes and on our own frames")
+    row["held_out"] = evaluate(model_dir, *data["test"])
+    row["own"] = evaluate(model_dir, *data["own"])
+    row["rescored"] = datetime.now(UTC).date().isoformat()
+    return row
+
+
 def section(results: dict[str, dict[str, Any]]) -> list[str]:
     lines = [
         f"## {TITLE}",
@@ -286,6 +314,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--minutes", type=float, default=20.0, help="each adaptation's max_minutes (default 20)")
     p.add_argument("--work", default="/tmp/gsa-bench-adapt", help="where the adapted sets go")
     p.add_argument("--report-only", action="store_true", help="write the section and plot from the stored results")
+    p.add_argument(
+        "--rescore",
+        action="store_true",
+        help="score the stored points again with the code as it is now: their adapted sets (kept under --work) "
+        "recalibrated on the same held-out scenes, weights unchanged",
+    )
     args = p.parse_args(argv)
     RESULTS.mkdir(parents=True, exist_ok=True)
     path = RESULTS / f"adapt-{args.standin}.json"
@@ -300,11 +334,16 @@ def main(argv: list[str] | None = None) -> int:
         own = scene_frames(DEFAULT_SCATTERING, OWN_N // 10, 10, OWN_SEED)
         data = {"pool": pool, "test": (test[0], test[1]), "own": (own[0], own[1])}
         for point in args.points.split(","):
-            if point in stored:
+            if args.rescore:
+                if point not in stored:
+                    raise SystemExit(f"bench.adapt: no stored point {point} to score again")
+                stored[point] = rescore_point(args.standin, stored[point], Path(args.work), data)
+            elif point in stored:
                 continue
-            frames, scenes = (int(v) for v in point.split("/"))
-            _log(f"point {point}")
-            stored[point] = run_point(args.standin, frames, scenes, args.minutes, Path(args.work), data)
+            else:
+                frames, scenes = (int(v) for v in point.split("/"))
+                _log(f"point {point}")
+                stored[point] = run_point(args.standin, frames, scenes, args.minutes, Path(args.work), data)
             path.write_text(json.dumps(stored, indent=1))
     results = {
         s: json.loads((RESULTS / f"adapt-{s}.json").read_text())

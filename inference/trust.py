@@ -21,7 +21,7 @@ The checks, each a threshold from the calibration (``trust.json`` beside the mod
 the frame's brightness statistics lie where fresh frames' do (the median pixel; catches
 frames normalised twice, inverted frames, noise); UNet++ is sure of its pixels (the share
 of enhanced pixels between 0.1 and 0.9, against the silhouette's area); the projection
-fits (``iou_min``); the fit stayed near Swin's answer (``moved_max_deg``); the attitude
+fits (``iou_min``); the fit stayed near Swin's answer (``moved_max_deg``; not for a library search's answer); the attitude
 lies in the +-45 deg the networks were trained on (with a margin); no other attitude fits
 within ``ambiguity_margin``; and the bound is under ``max_bound_deg``.
 """
@@ -89,8 +89,9 @@ class Calibration:
     made: dict[str, Any] = field(default_factory=dict)
     # The library search's answers (a frame whose network answer did not fit, or a target without networks), where
     # the calibration had such frames (``calibrate``: frames over all of SO(3)): their own IoU threshold and bounds,
-    # no "moved from Swin" check (a search's answer is far from Swin's by design) and no +-50 deg limit. None: those
-    # answers are held to the network path's thresholds, bounds and limit (a calibration made before these existed).
+    # no +-50 deg limit. None: those answers are held to the network path's thresholds, bounds and limit (a
+    # calibration made before these existed, or one with too few searched frames; ``calibrate`` then counts them in
+    # the network path's figures). No search's answer meets the "moved from Swin" check: it is far from Swin's by design.
     library_iou_min: float | None = None
     library_doubt_max: float | None = None
     library_scale: tuple[float, float, float] | None = None
@@ -457,7 +458,7 @@ class Checker:
                 f"fresh frames at least {iou_min:.3f}): another satellite, a flipped or transposed frame, or "
                 "pixels of another size (send range_cell_m and cross_range_cell_m)?"
             )
-        if compare_network and not library and features.get("moved_deg", 0.0) > cal.moved_max_deg:
+        if compare_network and not searched and features.get("moved_deg", 0.0) > cal.moved_max_deg:
             out.append(
                 f"the fit moved {features['moved_deg']:.1f} deg from the network's answer (fresh frames: under "
                 f"{cal.moved_max_deg:.1f} deg)"
@@ -586,12 +587,23 @@ def calibrate(
     second = check_all(replace(loose, iou_min=iou_min, search_iou_min=search_iou_min), "library search")
     searched = features(second)["searched"] > 0.5
     checks = [second[k] if searched[k] else first[k] for k in range(len(frames))]
-    net_rows = net_rows & ~searched
-    if not net_rows.any():  # every frame searched (no networks' answer fitted): the network path keeps them all
-        net_rows = np.ones(len(frames), bool)
-    pairs = bounds(checks, net_rows)
+    covers = searched.sum() >= MIN_LIBRARY_FRAMES
+    # Each threshold is calibrated on the answers it will judge. Without a library calibration of its own (too few
+    # searched frames: a set recalibrated on another radar's frames, most of them searched) the search's answers are
+    # held to the network path's doubt threshold and bounds, so they count in them; with one, only those inside the
+    # cube do (``Calibration.holds_to_library``) and its bounds are the library's. The "moved from Swin" check skips
+    # a search's answers, so its threshold comes from the others alone (design/measurements.md, "Thresholds from
+    # the answers they judge").
+    outside = np.array([float(np.max(np.abs(c.angles_deg))) > CUBE_DEG for c in checks])
+    doubt_rows = net_rows & ~(searched & outside) if covers else net_rows
+    moved_rows = net_rows & ~searched
+    bound_rows = moved_rows if covers else net_rows
+    for rows in (doubt_rows, moved_rows, bound_rows):
+        if not rows.any():  # every frame searched (no networks' answer fitted): the network path keeps them all
+            rows[:] = True
+    pairs = bounds(checks, bound_rows)
     library: dict[str, Any] = {}
-    if searched.sum() >= MIN_LIBRARY_FRAMES:
+    if covers:
         lib_pairs = bounds(checks, searched)
         lib_feats = features(second)
         library = {
@@ -605,12 +617,12 @@ def calibrate(
     cal = Calibration(
         target=checker.model.name,
         iou_min=iou_min,
-        doubt_max=round(float(np.quantile(feats["doubt"][net_rows], 0.99)) * 1.25, 4),
+        doubt_max=round(float(np.quantile(feats["doubt"][doubt_rows], 0.99)) * 1.25, 4),
         median_range=(
             round(float(np.quantile(feats["median"], 0.005)) * 0.8, 4),
             round(float(np.quantile(feats["median"], 0.995)) + 0.05, 4),
         ),
-        moved_max_deg=round(max(float(np.quantile(feats["moved_deg"][net_rows], 0.99)) * 1.5, 3.0), 3),
+        moved_max_deg=round(max(float(np.quantile(feats["moved_deg"][moved_rows], 0.99)) * 1.5, 3.0), 3),
         scale=tuple(round(p[0], 4) for p in pairs),  # type: ignore[arg-type]
         floor_deg=tuple(round(p[1], 4) for p in pairs),  # type: ignore[arg-type]
         network_bound_deg=tuple(round(float(q), 4) for q in np.quantile(swin_err, 0.9, axis=0)),  # type: ignore[arg-type]
