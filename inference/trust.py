@@ -592,8 +592,8 @@ def calibrate(
     # searched frames: a set recalibrated on another radar's frames, most of them searched) the search's answers are
     # held to the network path's doubt threshold and bounds, so they count in them; with one, only those inside the
     # cube do (``Calibration.holds_to_library``) and its bounds are the library's. The "moved from Swin" check skips
-    # a search's answers, so its threshold comes from the others alone (design/measurements.md, "Thresholds from
-    # the answers they judge").
+    # a search's answers, so its threshold comes from the others alone
+    # (design/measurements.md, "Thresholds from the answers they judge").
     outside = np.array([float(np.max(np.abs(c.angles_deg))) > CUBE_DEG for c in checks])
     doubt_rows = net_rows & ~(searched & outside) if covers else net_rows
     moved_rows = net_rows & ~searched
