@@ -588,19 +588,21 @@ def calibrate(
     searched = features(second)["searched"] > 0.5
     checks = [second[k] if searched[k] else first[k] for k in range(len(frames))]
     covers = searched.sum() >= MIN_LIBRARY_FRAMES
+
     # Each threshold is calibrated on the answers it will judge. Without a library calibration of its own (too few
     # searched frames: a set recalibrated on another radar's frames, most of them searched) the search's answers are
     # held to the network path's doubt threshold and bounds, so they count in them; with one, only those inside the
     # cube do (``Calibration.holds_to_library``) and its bounds are the library's. The "moved from Swin" check skips
     # a search's answers, so its threshold comes from the others alone
     # (design/measurements.md, "Thresholds from the answers they judge").
-    outside = np.array([float(np.max(np.abs(c.angles_deg))) > CUBE_DEG for c in checks])
-    doubt_rows = net_rows & ~(searched & outside) if covers else net_rows
-    moved_rows = net_rows & ~searched
+    def or_all(rows: NDArray[np.bool_]) -> NDArray[np.bool_]:
+        """Every frame searched (no networks' answer fitted): the network path keeps them all."""
+        return rows if rows.any() else np.ones(len(frames), bool)
+
+    outside = np.max(np.abs(np.array([c.angles_deg for c in checks])), axis=1) > CUBE_DEG
+    doubt_rows = or_all(net_rows & ~(searched & outside)) if covers else net_rows
+    moved_rows = or_all(net_rows & ~searched)
     bound_rows = moved_rows if covers else net_rows
-    for rows in (doubt_rows, moved_rows, bound_rows):
-        if not rows.any():  # every frame searched (no networks' answer fitted): the network path keeps them all
-            rows[:] = True
     pairs = bounds(checks, bound_rows)
     library: dict[str, Any] = {}
     if covers:
