@@ -120,74 +120,45 @@ class Window:
         return frame[self.r0 : self.r0 + self.h, self.c0 : self.c0 + self.w]
 
 
-def _splat(idx: NDArray[np.int64], stride: int, size: int, fu: F32, fv: F32, weight: F32 | None = None) -> Vec:
-    """Add each point's weight bilinearly to cells idx, idx + 1 (next column), idx + stride (next row) and both.
-
-    ``fu``, ``fv`` are the shares that go to the next row and column; ``size`` is the flat grid's length.
-    """
-    gu, gv = 1.0 - fu, 1.0 - fv
-    w = np.float32(1.0) if weight is None else weight
-    counts = np.bincount(idx.ravel(), (w * gu * gv).ravel(), size)
-    counts += np.bincount((idx + stride).ravel(), (w * fu * gv).ravel(), size)
-    counts += np.bincount((idx + 1).ravel(), (w * gu * fv).ravel(), size)
-    counts += np.bincount((idx + stride + 1).ravel(), (w * fu * fv).ravel(), size)
-    return np.asarray(counts, np.float64)
-
-
-@numba.njit(cache=True, nogil=True)
-def _cross(src: F32, dst: F32, grow: bool) -> None:
-    """Grey dilation (``grow``) or erosion of ``src`` [h, w] with the 3 x 3 cross into ``dst``; outside is ignored."""
-    h, w = src.shape
-    for i in range(h):
-        for j in range(w):
-            e = src[i, j]
-            for n in (
-                src[i - 1, j] if i > 0 else e,
-                src[i + 1, j] if i < h - 1 else e,
-                src[i, j - 1] if j > 0 else e,
-                src[i, j + 1] if j < w - 1 else e,
-            ):
-                e = max(e, n) if grow else min(e, n)
-            dst[i, j] = e
-
-
 @numba.njit(cache=True, nogil=True)
 def _occupancy_kernel(m: F32, points: F32, offset: F32, zone: np.float32, rate: np.float32, out: F32) -> None:
     """Fill ``out`` [H, h, w] with the smooth labels: project, splat, ``1 - exp(rate * count)``, close.
 
-    Per hypothesis k, in float32 as numpy would: u = m[k, 0] . p + offset[0] (v likewise); the
-    share of a point that goes to the next row is clip((frac(u) - (0.5 - zone)) / (2 zone), 0, 1),
-    the same for columns, rows and columns clipped into the window (a share past its last row or
-    column is dropped); the counts add up in float64. Then the grey closing with the 3 x 3 cross
-    (dilate with zero outside, erode with one outside, keep the original where larger: the
-    closing ``label_mask`` applies, taken grey).
+    Per hypothesis k, in float32: u = m[k, 0] . p + offset[0] (v likewise); the share of a point
+    that goes to the next row is clip((frac(u) - (0.5 - zone)) / (2 zone), 0, 1), the same for
+    columns, rows and columns clipped into the window (a share past its last row or column is
+    dropped). Then the grey closing with the 3 x 3 cross (dilate with zero outside, erode with one
+    outside, keep the original where larger: the closing ``label_mask`` applies, taken grey).
 
     One compiled pass over the points instead of numpy's dozen (projection, fractions, indices,
-    four bincounts): 2.3-4.3 times faster a hypothesis
-    (design/measurements.md, "A compiled silhouette renderer"). It lets go of the GIL, so
+    four bincounts): 2.3-4.3 times faster a hypothesis (design/measurements.md, "A compiled
+    silhouette renderer"); then a third less again (the counts in float32, the hand-over's division
+    a product, no ``exp`` where nothing landed, the closing over padded grids in two passes;
+    design/measurements.md, "The renderer's kernel, a third faster"). It lets go of the GIL, so
     ``Checker.check_many``'s threads share the cores. ``tests/inference/test_fit.py`` checks it
     against the same formula written in numpy and scipy.ndimage.
     """
     n_h, h, w = out.shape
     half = np.float32(0.5) - zone
-    width = np.float32(2.0) * zone
+    inv_width = np.float32(1.0) / (np.float32(2.0) * zone)
     one = np.float32(1.0)
     zero = np.float32(0.0)
-    counts = np.zeros((h + 1, w + 1), np.float64)
-    occ = np.empty((h, w), np.float32)
-    grown = np.empty((h, w), np.float32)
-    shrunk = np.empty((h, w), np.float32)
+    o0, o1 = offset[0], offset[1]
+    counts = np.zeros((h + 1, w + 1), np.float32)
+    # Padded by a pixel on each side: the dilation reads zero outside the window, the erosion one.
+    occ = np.zeros((h + 2, w + 2), np.float32)
+    grown = np.ones((h + 2, w + 2), np.float32)
     for k in range(n_h):
         counts[:] = 0.0
         a0, a1, a2 = m[k, 0, 0], m[k, 0, 1], m[k, 0, 2]
         b0, b1, b2 = m[k, 1, 0], m[k, 1, 1], m[k, 1, 2]
         for p in range(points.shape[0]):
             x, y, z = points[p, 0], points[p, 1], points[p, 2]
-            u = a0 * x + a1 * y + a2 * z + offset[0]
-            v = b0 * x + b1 * y + b2 * z + offset[1]
+            u = a0 * x + a1 * y + a2 * z + o0
+            v = b0 * x + b1 * y + b2 * z + o1
             iu, iv = np.floor(u), np.floor(v)
-            fu = min(max((u - iu - half) / width, zero), one)
-            fv = min(max((v - iv - half) / width, zero), one)
+            fu = min(max((u - iu - half) * inv_width, zero), one)
+            fv = min(max((v - iv - half) * inv_width, zero), one)
             r = min(max(int(iu), 0), h - 1)
             c = min(max(int(iv), 0), w - 1)
             gu, gv = one - fu, one - fv
@@ -197,12 +168,26 @@ def _occupancy_kernel(m: F32, points: F32, offset: F32, zone: np.float32, rate: 
             counts[r + 1, c + 1] += fu * fv
         for i in range(h):
             for j in range(w):
-                occ[i, j] = one - np.exp(np.float32(counts[i, j]) * rate)
-        _cross(occ, grown, True)  # dilate with the cross, zero outside
-        _cross(grown, shrunk, False)  # erode with the cross, one outside
-        for i in range(h):  # keep the original where larger
-            for j in range(w):
-                out[k, i, j] = max(shrunk[i, j], occ[i, j])
+                n = counts[i, j]
+                occ[i + 1, j + 1] = zero if n == zero else one - np.exp(n * rate)
+        for i in range(1, h + 1):  # dilate with the cross
+            for j in range(1, w + 1):
+                grown[i, j] = max(max(occ[i, j], occ[i - 1, j]), max(max(occ[i + 1, j], occ[i, j - 1]), occ[i, j + 1]))
+        for i in range(1, h + 1):  # erode with the cross, and keep the original where larger
+            for j in range(1, w + 1):
+                e = min(min(grown[i, j], grown[i - 1, j]), min(min(grown[i + 1, j], grown[i, j - 1]), grown[i, j + 1]))
+                out[k, i - 1, j - 1] = max(e, occ[i, j])
+
+
+def hull_vertices(points: F32) -> F32:
+    """The points [N, 3] on their convex hull (all of them where the hull is flat): a linear map's extremes over
+    the points lie on them, so a projection's bounding box is theirs (for the default target 1 point in ~100)."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        return np.ascontiguousarray(points[ConvexHull(points).vertices])
+    except (QhullError, ValueError):  # fewer than 4 points, or all in a plane
+        return points
 
 
 @dataclass(frozen=True)
@@ -216,6 +201,7 @@ class Renderer:
     coarse_points: Vec = field(init=False)
     coarse_normals: Vec = field(init=False)
     coarse_areas: Vec = field(init=False)
+    outline: F32 = field(init=False)  # the fine skin's convex hull's vertices: their projection spans the skin's
     rows: Vec = field(init=False)  # (2, 3): observation-frame metres to (range, cross-range) pixels
     pixel_m: float = field(init=False)
 
@@ -230,6 +216,7 @@ class Renderer:
         areas = np.full(len(surface), skin_area(surface) / len(surface))
         fine, _, _ = thin(surface, normals, areas, self.spacing_px * pixel)
         set_(self, "points", fine.astype(np.float32))
+        set_(self, "outline", hull_vertices(self.points))
         pts, nrm, ar = thin(surface, normals, areas, 0.75 * COARSE_FACTOR * pixel)
         set_(self, "coarse_points", pts)
         set_(self, "coarse_normals", nrm)
@@ -239,11 +226,11 @@ class Renderer:
     def shape(self) -> tuple[int, int]:
         return self.radar.n_range, self.radar.n_azimuth
 
-    def pixels(self, angles_deg: Vec, points: Vec | None = None) -> tuple[F32, F32]:
+    def pixels(self, angles_deg: Vec, points: NDArray[np.floating] | None = None) -> tuple[F32, F32]:
         """Return fractional pixel rows and columns [H, N] of the skin at attitudes [H, 3]."""
         return self.pixels_of(rotation_matrices(angles_deg), points)
 
-    def pixels_of(self, rotations: Vec, points: Vec | None = None) -> tuple[F32, F32]:
+    def pixels_of(self, rotations: Vec, points: NDArray[np.floating] | None = None) -> tuple[F32, F32]:
         """``pixels`` of attitudes given as rotation matrices [H, 3, 3]."""
         pts = self.points if points is None else points
         m = (self.rows[None] @ np.asarray(rotations, float).reshape(-1, 3, 3)).astype(np.float32)  # (H, 2, 3)
@@ -272,28 +259,84 @@ class Renderer:
         return self.coverage_of(rotation_matrices(angles_deg))
 
     def coverage_of(self, rotations: Vec) -> F32:
-        """``coverage`` of attitudes given as rotation matrices [H, 3, 3]."""
+        """``coverage`` of attitudes given as rotation matrices [H, 3, 3] (``_coverage_kernel``)."""
         f = COARSE_FACTOR
-        nr, na = self.radar.n_range // f, self.radar.n_azimuth // f
         rot = np.asarray(rotations, float).reshape(-1, 3, 3)
-        u0, v0 = self.pixels_of(rot, self.coarse_points)
-        u = (u0 + np.float32(0.5)) / np.float32(f) - np.float32(0.5)
-        v = (v0 + np.float32(0.5)) / np.float32(f) - np.float32(0.5)
-        iu, iv = np.floor(u), np.floor(v)
-        fu, fv = u - iu, v - iv
-        nz = np.abs(rot[:, 2, :] @ self.coarse_normals.T).astype(np.float32)  # (H, N)
+        m = (self.rows[None] @ rot).astype(np.float32)  # (H, 2, 3)
+        offset = np.array([self.radar.n_range / 2, self.radar.n_azimuth / 2], np.float32)
         a = self.coarse_areas.astype(np.float32)
         px = np.float32(self.pixel_m)
-        w = (a * nz + np.sqrt(a) * px * np.sqrt(np.maximum(1 - nz * nz, 0))) / (f * px) ** 2
-        h = len(rot)
-        stride = na + 2
-        size = (nr + 2) * stride
-        base = (np.arange(h, dtype=np.int64) * size)[:, None]
-        idx = base + (np.clip(iu, -1, nr).astype(np.int64) + 1) * stride + np.clip(iv, -1, na).astype(np.int64) + 1
-        idx = np.minimum(idx, base + size - stride - 2)
-        counts = _splat(idx, stride, h * size, fu, fv, w)
-        grid = counts.reshape(h, nr + 2, stride)[:, 1:-1, 1:-1]
-        return np.minimum(grid, 1.0).astype(np.float32)
+        out = np.empty((len(rot), self.radar.n_range // f, self.radar.n_azimuth // f), np.float32)
+        _coverage_kernel(
+            m,
+            np.ascontiguousarray(rot[:, 2, :]),
+            np.asarray(self.coarse_points, np.float32),
+            np.ascontiguousarray(self.coarse_normals, float),
+            a,
+            np.sqrt(a) * px,
+            np.float32((f * px) ** 2),
+            offset,
+            f,
+            out,
+        )
+        return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _coverage_kernel(
+    m: F32,
+    depth: Vec,
+    points: F32,
+    normals: Vec,
+    areas: F32,
+    edge: F32,
+    cell: np.float32,
+    offset: F32,
+    f: int,
+    out: F32,
+) -> None:
+    """Fill ``out`` [H, n_range / f, n_azimuth / f] with the share of each pooled pixel the coarse skin covers.
+
+    Per hypothesis k and coarse point, in float32: u = (m[k, 0] . p + offset[0] + 0.5) / f - 0.5 (v likewise);
+    its weight (area a seen from the image plane, at least an edge-on line sqrt(a) wide: ``edge`` = sqrt(a) x
+    pixel) (a |n_z| + edge sqrt(1 - n_z^2)) / ``cell``, with n_z = |depth[k] . normal| (float64, then float32);
+    the weight shared bilinearly over the four pooled pixels about (u, v) on a grid padded by one, added in
+    float64, then clipped at 1. Indices clip to the padding, and a point past the last padded row or column adds
+    at the last pixel's corner (as the numpy formulation it replaced, kept in ``tests/inference/test_fit.py``).
+    """
+    n_h, nr, na = out.shape
+    stride = na + 2
+    size = (nr + 2) * stride
+    last = size - stride - 2
+    grid = np.zeros(size + stride + 2)
+    one = np.float32(1.0)
+    zero = np.float32(0.0)
+    half = np.float32(0.5)
+    ff = np.float32(f)
+    for k in range(n_h):
+        grid[:] = 0.0
+        a0, a1, a2 = m[k, 0, 0], m[k, 0, 1], m[k, 0, 2]
+        b0, b1, b2 = m[k, 1, 0], m[k, 1, 1], m[k, 1, 2]
+        d0, d1, d2 = depth[k, 0], depth[k, 1], depth[k, 2]
+        for p in range(points.shape[0]):
+            x, y, z = points[p, 0], points[p, 1], points[p, 2]
+            u = ((a0 * x + a1 * y + a2 * z) + offset[0] + half) / ff - half
+            v = ((b0 * x + b1 * y + b2 * z) + offset[1] + half) / ff - half
+            iu, iv = np.floor(u), np.floor(v)
+            fu, fv = u - iu, v - iv
+            nz = np.float32(abs(d0 * normals[p, 0] + d1 * normals[p, 1] + d2 * normals[p, 2]))
+            w = (areas[p] * nz + edge[p] * np.sqrt(max(one - nz * nz, zero))) / cell
+            r = int(min(max(iu, -1.0), nr)) + 1
+            c = int(min(max(iv, -1.0), na)) + 1
+            i = min(r * stride + c, last)
+            gu, gv = one - fu, one - fv
+            grid[i] += w * gu * gv
+            grid[i + stride] += w * fu * gv
+            grid[i + 1] += w * gu * fv
+            grid[i + stride + 1] += w * fu * fv
+        for r in range(nr):
+            for c in range(na):
+                out[k, r, c] = np.float32(min(grid[(r + 1) * stride + c + 1], 1.0))
 
 
 def soft_iou(occupancy: F32, target: NDArray[np.floating], target_total: float | None = None) -> Vec:
@@ -301,10 +344,30 @@ def soft_iou(occupancy: F32, target: NDArray[np.floating], target_total: float |
 
     ``target_total`` is the target's sum over the whole frame when ``target`` is a crop.
     """
-    inter = np.einsum("hij,ij->h", occupancy, target.astype(np.float32), dtype=np.float64)
+    inter, covered = _soft_sums(np.ascontiguousarray(occupancy, np.float32), np.ascontiguousarray(target, np.float32))
     total = float(target.sum()) if target_total is None else target_total
-    union = occupancy.sum(axis=(1, 2), dtype=np.float64) + total - inter
+    union = covered + total - inter
     return np.asarray(inter / np.maximum(union, 1e-9))
+
+
+@numba.njit(cache=True, nogil=True, fastmath={"reassoc", "nsz", "contract"})  # a sum in any order: SIMD
+def _soft_sums(occupancy: F32, target: F32) -> tuple[Vec, Vec]:
+    """Per hypothesis, the sums (float64) of occupancy x target and of occupancy: one pass, where numpy made two
+    and a float64 copy."""
+    n_h, h, w = occupancy.shape
+    inter = np.zeros(n_h)
+    covered = np.zeros(n_h)
+    for k in range(n_h):
+        a = 0.0
+        b = 0.0
+        for i in range(h):
+            for j in range(w):
+                o = occupancy[k, i, j]
+                a += o * target[i, j]
+                b += o
+        inter[k] = a
+        covered[k] = b
+    return inter, covered
 
 
 def _stencil() -> Vec:
@@ -522,7 +585,7 @@ CURVATURE_STEP_DEG = 0.6  # the stencil that measures the answer's curvature: wi
 
 def _window_for(renderer: Renderer, silhouette: NDArray[np.bool_], angles_deg: Vec) -> Window:
     """The crop holding the frame's silhouette and the target at these attitudes, with a margin."""
-    u, v = renderer.pixels(np.asarray(angles_deg, float).reshape(-1, 3))
+    u, v = renderer.pixels(np.asarray(angles_deg, float).reshape(-1, 3), renderer.outline)  # the skin's extremes
     rows, cols = np.flatnonzero(silhouette.any(axis=1)), np.flatnonzero(silhouette.any(axis=0))
     r_lo = min(float(u.min()), float(rows[0]) if len(rows) else math.inf)
     r_hi = max(float(u.max()), float(rows[-1]) if len(rows) else -math.inf)
@@ -630,14 +693,18 @@ class Library:
     """Coarse silhouettes of attitudes spread evenly over all of SO(3) (``so3_grid``): the starts of the search
     where no network answer fits (a target without networks, an attitude outside their cube).
 
-    Built once per target (4,400 attitudes at 15 deg, about 1.4 s and 36 MB; design/measurements.md, "The coarse
-    silhouette library over SO(3)"); ``starts`` scores every entry against a frame's 4x-pooled enhanced silhouette
-    in one product and returns the best few, each at least ``separation_deg`` from the others.
+    Built once per target (4,400 attitudes at 15 deg, about 0.6 s and 44 MB;
+    design/measurements.md, "The coarse silhouette library over SO(3)"); ``starts`` scores every entry against a
+    frame's 4x-pooled enhanced silhouette in one product and returns the best few, each at least ``separation_deg``
+    from the others. The silhouettes keep only the pooled pixels some entry covers (``columns``: 2,514 of 4,096 for
+    the default target), in float32, so the product is one BLAS call of about a millisecond where converting float16
+    took 49 (design/measurements.md, "The renderer's kernel, a third faster").
     """
 
     angles_deg: Vec
-    silhouettes: NDArray[np.float16]  # (M, n / 4 * n / 4)
+    silhouettes: NDArray[np.float32]  # (M, len(columns))
     totals: Vec
+    columns: NDArray[np.intp]  # the pooled pixels (flat, n / 4 * n / 4) that some entry covers
 
     @staticmethod
     def build(renderer: Renderer, spacing_deg: float | None = None, batch: int = 128) -> Library:
@@ -659,12 +726,13 @@ class Library:
             for k in range(0, len(angles), batch)
         ]
         sil = np.concatenate(parts)
-        return Library(angles, sil.astype(np.float16), sil.sum(axis=1, dtype=np.float64))
+        columns = np.flatnonzero(sil.max(axis=0) > 0)
+        return Library(angles, np.ascontiguousarray(sil[:, columns]), sil.sum(axis=1, dtype=np.float64), columns)
 
     def starts(self, enhanced: Vec, count: int = 4, separation_deg: float = 15.0) -> list[Vec]:
         """Return up to ``count`` library attitudes that best match the enhanced frame, best first."""
-        target = pool(np.clip(np.asarray(enhanced, float), 0.0, 1.0), COARSE_FACTOR).ravel().astype(np.float32)
-        inter = self.silhouettes.astype(np.float32) @ target
+        target = pool(np.clip(np.asarray(enhanced, float), 0.0, 1.0), COARSE_FACTOR).ravel()
+        inter = self.silhouettes @ target[self.columns].astype(np.float32)  # no entry covers the other pixels
         iou = inter / np.maximum(self.totals + target.sum() - inter, 1e-9)
         chosen: list[Vec] = []
         for k in np.argsort(-iou):

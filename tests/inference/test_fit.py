@@ -153,6 +153,64 @@ def test_the_compiled_occupancy_matches_a_numpy_formulation(tiangong, window):
     assert ref.sum() > 100  # the target is in view
 
 
+def _coverage_by_numpy(renderer, angles, radar=RADAR):
+    """The coarse coverage written out in numpy as it was before the compiled kernel: projection, weights from the
+    normals, four weighted ``bincount``s over a padded grid, clipped at 1."""
+    f = 4
+    nr, na = radar.n_range // f, radar.n_azimuth // f
+    rot = rotation_matrices(angles)
+    uv = (renderer.rows[None] @ rot) @ renderer.coarse_points.T  # (H, 2, N), float64
+    u = (uv[:, 0] + radar.n_range / 2 + 0.5) / f - 0.5
+    v = (uv[:, 1] + radar.n_azimuth / 2 + 0.5) / f - 0.5
+    iu, iv = np.floor(u), np.floor(v)
+    fu, fv = u - iu, v - iv
+    nz = np.abs(rot[:, 2, :] @ renderer.coarse_normals.T)
+    a = renderer.coarse_areas
+    w = (a * nz + np.sqrt(a) * renderer.pixel_m * np.sqrt(np.maximum(1 - nz * nz, 0))) / (f * renderer.pixel_m) ** 2
+    stride, size = na + 2, (nr + 2) * (na + 2)
+    out = []
+    for k in range(len(rot)):
+        idx = (np.clip(iu[k], -1, nr).astype(int) + 1) * stride + np.clip(iv[k], -1, na).astype(int) + 1
+        idx = np.minimum(idx, size - stride - 2)
+        gu, gv = 1 - fu[k], 1 - fv[k]
+        counts = sum(
+            np.bincount(idx + d, w[k] * share, size)
+            for d, share in ((0, gu * gv), (stride, fu[k] * gv), (1, gu * fv[k]), (stride + 1, fu[k] * fv[k]))
+        )
+        out.append(np.minimum(counts.reshape(nr + 2, stride)[1:-1, 1:-1], 1.0))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("size", [(256, 256), (96, 128)])
+def test_the_compiled_coverage_matches_a_numpy_formulation(size):
+    """The coarse kernel against the same formula in float64 numpy over SO(3): the whole target in the frame, and
+    (a smaller frame of the same cells) parts of it off every edge, clipped to the padding."""
+    radar = Radar(n_range=size[0], n_azimuth=size[1])
+    renderer = Renderer(tiangong_like(), radar)
+    angles = np.random.default_rng(5).uniform(-180, 180, (8, 3)) * [1, 0.5, 1]
+    ours = renderer.coverage(angles)
+    ref = _coverage_by_numpy(renderer, angles, radar)
+    assert ours.shape == ref.shape == (8, radar.n_range // 4, radar.n_azimuth // 4)
+    # float32 against float64 positions and weights
+    assert np.abs(ours - ref).max() < 1e-3
+    assert np.abs(ours - ref).mean() < 1e-5
+    assert (ref > 0.5).sum(axis=(1, 2)).min() > 20  # the target is in view
+    u, v = renderer.pixels(angles, renderer.coarse_points)
+    off = (u < 0) | (u >= radar.n_range) | (v < 0) | (v >= radar.n_azimuth)
+    assert off.any() == (size != (256, 256))
+
+
+def test_the_fit_window_spans_the_skin_from_its_hull_alone(tiangong):
+    """The window's bounding box comes from the skin's hull vertices: the same extremes as every point's."""
+    angles = np.random.default_rng(6).uniform(-180, 180, (200, 3)) * [1, 0.5, 1]
+    u, v = tiangong.pixels(angles)
+    uh, vh = tiangong.pixels(angles, tiangong.outline)
+    assert len(tiangong.outline) < len(tiangong.points) / 20
+    for full, hull in ((u, uh), (v, vh)):
+        np.testing.assert_array_equal(full.min(axis=1), hull.min(axis=1))
+        np.testing.assert_array_equal(full.max(axis=1), hull.max(axis=1))
+
+
 def test_a_still_pass_fitted_to_all_its_frames_at_once_finds_the_attitude_they_share():
     """Five exact labels of one body attitude seen from five sides; the common fit starts 1 deg off and must return."""
     from inference.fit import COMMON_SPACING_PX, fit_common
