@@ -329,10 +329,16 @@ class Checker:
                 fits = sorted(fits + self.search(enh), key=lambda f: f.cost)
                 searched = True
                 scale, floor = cal.bounds_model(searched)
+            first = fits[0]
             fits = self._by_brightness(frame, enh, self._with_other_branch(enh, fits))
-            refit = self._with_other_branch(enh, fits)
-            if refit is not fits:  # the bright parts chose a fit whose own other branch was never refined: choose again
-                fits = self._by_brightness(frame, enh, refit)
+            if fits[0] is not first:
+                # The other branch's refit fits better, or the bright parts chose another fit: its own other branch
+                # may never have been refined, so refine it and choose again. (Where the best is still ``first``,
+                # its other branch was refined, even if the refit moved over DISTINCT_DEG from the exact mirror:
+                # refining the same start again gave the same fit twice: on 81 of 200 frames over SO(3).)
+                refit = self._with_other_branch(enh, fits)
+                if refit is not fits:
+                    fits = self._by_brightness(frame, enh, refit)
             best = fits[0]
             angles = best.angles_deg
             hessian, soft, iou = curvature(self.renderer, enh, angles)
