@@ -147,8 +147,17 @@ def evaluate(model_dir: Path, frames: np.ndarray, truth: np.ndarray) -> dict[str
     }
 
 
+def variant_key(stored: dict[str, Any], point: str, note: str) -> str:
+    """The key FRAMES/SCENES/N of a variant of ``point`` with this note: the stored one that has it (the run
+    resumes), else the first N free."""
+    n = 1
+    while f"{point}/{n}" in stored and stored[f"{point}/{n}"].get("note") != note:
+        n += 1
+    return f"{point}/{n}"
+
+
 def run_point(
-    standin: str, frames: int, scenes: int, minutes: float, work: Path, data: dict[str, Any]
+    standin: str, frames: int, scenes: int, minutes: float, work: Path, data: dict[str, Any], name: str = ""
 ) -> dict[str, Any]:
     from inference.runtime import DEFAULT_MODEL_DIR
     from inference.training.adapt import AdaptOptions, adapt
@@ -156,7 +165,7 @@ def run_point(
     model_dir = DEFAULT_MODEL_DIR
     row: dict[str, Any] = {"frames": frames, "scenes": scenes}
     if frames:
-        out = work / f"{standin}-{frames}-{scenes}"
+        out = work / f"{standin}-{name or f'{frames}-{scenes}'}"
         t0 = time.perf_counter()
         rec = adapt(DEFAULT_MODEL_DIR, subset(data["pool"], frames, scenes), out, AdaptOptions(max_minutes=minutes))
         row.update(
@@ -174,7 +183,7 @@ def run_point(
     return row
 
 
-def rescore_point(standin: str, row: dict[str, Any], work: Path, data: dict[str, Any]) -> dict[str, Any]:
+def rescore_point(standin: str, row: dict[str, Any], work: Path, data: dict[str, Any], name: str) -> dict[str, Any]:
     """A kept point scored again with the code as it is now: its adapted weights as they were, trust recalibrated on
     the same held-out scenes of the adaptation (``recalibrate``, as ``gsa adapt`` does), then ``evaluate``."""
     from inference.runtime import DEFAULT_MODEL_DIR, Estimator
@@ -185,7 +194,7 @@ def rescore_point(standin: str, row: dict[str, Any], work: Path, data: dict[str,
     model_dir = DEFAULT_MODEL_DIR
     row = dict(row)
     if row["frames"]:
-        model_dir = work / f"{standin}-{row['frames']}-{row['scenes']}"
+        model_dir = work / f"{standin}-{name}"
         if not (model_dir / "model_card.json").is_file():
             raise SystemExit(f"bench.adapt: {model_dir} is not kept: run the point without --rescore")
         held = set(
@@ -315,6 +324,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--points", default=",".join(f"{f}/{s}" for f, s in POINTS), help="FRAMES/SCENES,... to run")
     p.add_argument("--minutes", type=float, default=20.0, help="each adaptation's max_minutes (default 20)")
     p.add_argument("--work", default="/tmp/gsa-bench-adapt", help="where the adapted sets go")
+    p.add_argument(
+        "--note",
+        help="run the points as a variant of the stored rows (e.g. another --minutes), kept beside them as "
+        "FRAMES/SCENES/N with this note in the table",
+    )
     p.add_argument("--report-only", action="store_true", help="write the section and plot from the stored results")
     p.add_argument(
         "--rescore",
@@ -336,16 +350,24 @@ def main(argv: list[str] | None = None) -> int:
         own = scene_frames(DEFAULT_SCATTERING, OWN_N // 10, 10, OWN_SEED)
         data = {"pool": pool, "test": (test[0], test[1]), "own": (own[0], own[1])}
         for point in args.points.split(","):
+            if args.note and not args.rescore:
+                point = variant_key(stored, point, args.note)
             if args.rescore:
                 if point not in stored:
                     raise SystemExit(f"bench.adapt: no stored point {point} to score again")
-                stored[point] = rescore_point(args.standin, stored[point], Path(args.work), data)
+                stored[point] = rescore_point(
+                    args.standin, stored[point], Path(args.work), data, point.replace("/", "-")
+                )
             elif point in stored:
                 continue
             else:
-                frames, scenes = (int(v) for v in point.split("/"))
+                frames, scenes = (int(v) for v in point.split("/")[:2])
                 _log(f"point {point}")
-                stored[point] = run_point(args.standin, frames, scenes, args.minutes, Path(args.work), data)
+                stored[point] = run_point(
+                    args.standin, frames, scenes, args.minutes, Path(args.work), data, point.replace("/", "-")
+                )
+                if args.note:
+                    stored[point]["note"] = args.note
             path.write_text(json.dumps(stored, indent=1))
     results = {
         s: json.loads((RESULTS / f"adapt-{s}.json").read_text())
