@@ -193,6 +193,14 @@ def test_a_calibration_with_too_few_so3_frames_is_a_one_line_error(capsys):
     assert err.count("\n") == 1 and "--so3-frames 10" in err, err
 
 
+def test_a_negative_count_of_robust_so3_frames_is_a_one_line_error(capsys):
+    from app.cli import main
+
+    assert main(["calibrate", "--so3-robust-frames", "-5", "--out", "never.json"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--so3-robust-frames -5" in err, err
+
+
 def test_the_library_bound_limit_chosen_trusts_the_most_correct_answers(shipped):
     """The rule, on made-up answers: wrong ones (30 deg off) that fit the silhouette well but are loosely bounded
     (raw curvature 12: a 90 % bound of about 4 deg) force a high IoU threshold under a loose bound limit; a limit
@@ -212,6 +220,40 @@ def test_the_library_bound_limit_chosen_trusts_the_most_correct_answers(shipped)
     bound = np.sqrt(np.asarray(cal.library_floor_deg) ** 2 + (12.0 * np.asarray(cal.library_scale)) ** 2).max()
     assert cal.library_max_bound_deg < bound <= checker.calibration.max_bound_deg, (cal.library_max_bound_deg, bound)
     assert cal.library_iou_min == pytest.approx(np.quantile(ious, 0.01) - 0.005, abs=1e-4)
+
+
+def test_the_library_ambiguity_margin_chosen_flags_wrong_answers_a_rival_fits_nearly_as_well(shipped):
+    """The rule, on made-up answers: wrong ones (its other branch, 60 deg off) that fit well (IoU 0.93) but whose
+    rival, the truth's side, fits 0.01 worse force a high IoU threshold under the cube's 0.002 margin; a margin over
+    0.01 flags them as ambiguous instead, so the threshold drops to the correct answers' 1st percentile and every
+    correct answer (no rival within 0.05) is trusted. The chosen margin is that one, and it holds for the library
+    path's answers alone: an answer inside the cube, found by the networks, keeps the 0.002."""
+    from dataclasses import replace
+
+    from inference.trust import Alternative
+
+    _, checker = shipped
+
+    def answer(angles, iou, gap, searched=1.0):
+        feats = {"median": 0.3, "doubt": 0.05, "iou": iou, "searched": searched, **{f"raw_{a}": 1.0 for a in "zyx"}}
+        rival = [Alternative((120.0, 0.0, 0.0), iou - gap, gap, 60.0, "other-branch")]
+        return Checked(np.array(angles, float), None, True, Quality(iou, (1.0,) * 3, True, []), rival, feats)
+
+    ious = np.linspace(0.80, 0.95, 40)
+    checks = [answer((120.5, 0.0, 0.0), iou, 0.05) for iou in ious]
+    checks += [answer((120.0, 30.0, 50.0), 0.93, 0.01), answer((120.0, -30.0, 50.0), 0.935, 0.01)]
+    truth = np.tile([120.0, 0.0, 0.0], (len(checks), 1))
+    cal = library_limits(
+        checker, replace(checker.calibration, ambiguity_margin=0.002), checks, truth, np.ones(42, bool)
+    )
+    assert cal.library_ambiguity_margin > 0.01, cal.library_ambiguity_margin
+    assert cal.library_iou_min == pytest.approx(np.quantile(ious, 0.01) - 0.005, abs=1e-4)
+    inside = answer((10.0, 5.0, 0.0), 0.99, 0.005, searched=0.0)  # the networks' answer in the cube, a rival 0.005 off
+    compare = [answer((120.0, 30.0, 50.0), 0.93, 0.005)]  # a library answer with the same rival
+    from inference.trust import trusted_under
+
+    assert trusted_under(checker, cal, [inside]).tolist() == [True]
+    assert trusted_under(checker, cal, compare).tolist() == [False]
 
 
 def test_the_library_search_is_triggered_by_its_own_threshold_not_the_trust_threshold(shipped):
