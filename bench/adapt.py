@@ -157,7 +157,7 @@ def variant_key(stored: dict[str, Any], point: str, note: str) -> str:
 
 
 def run_point(
-    standin: str, frames: int, scenes: int, minutes: float, work: Path, data: dict[str, Any], name: str = ""
+    standin: str, frames: int, scenes: int, minutes: float, work: Path, data: dict[str, Any], name: str
 ) -> dict[str, Any]:
     from inference.runtime import DEFAULT_MODEL_DIR
     from inference.training.adapt import AdaptOptions, adapt
@@ -165,7 +165,7 @@ def run_point(
     model_dir = DEFAULT_MODEL_DIR
     row: dict[str, Any] = {"frames": frames, "scenes": scenes}
     if frames:
-        out = work / f"{standin}-{name or f'{frames}-{scenes}'}"
+        out = work / f"{standin}-{name}"
         t0 = time.perf_counter()
         rec = adapt(DEFAULT_MODEL_DIR, subset(data["pool"], frames, scenes), out, AdaptOptions(max_minutes=minutes))
         row.update(
@@ -355,20 +355,17 @@ def main(argv: list[str] | None = None) -> int:
         for point in args.points.split(","):
             if args.note and not args.rescore:
                 point = variant_key(stored, point, args.note)
+            name = point.replace("/", "-")  # the adapted set's folder under --work
             if args.rescore:
                 if point not in stored:
                     raise SystemExit(f"bench.adapt: no stored point {point} to score again")
-                stored[point] = rescore_point(
-                    args.standin, stored[point], Path(args.work), data, point.replace("/", "-")
-                )
+                stored[point] = rescore_point(args.standin, stored[point], Path(args.work), data, name)
             elif point in stored:
                 continue
             else:
                 frames, scenes = (int(v) for v in point.split("/")[:2])
                 _log(f"point {point}")
-                stored[point] = run_point(
-                    args.standin, frames, scenes, args.minutes, Path(args.work), data, point.replace("/", "-")
-                )
+                stored[point] = run_point(args.standin, frames, scenes, args.minutes, Path(args.work), data, name)
                 if args.note:
                     stored[point]["note"] = args.note
             path.write_text(json.dumps(stored, indent=1))

@@ -307,8 +307,8 @@ def _coverage_kernel(
     n_h, nr, na = out.shape
     stride = na + 2
     size = (nr + 2) * stride
-    last = size - stride - 2
-    grid = np.zeros(size + stride + 2)
+    last = size - stride - 2  # the last index whose four cells (i, i + 1, i + stride, i + stride + 1) fit the grid
+    grid = np.zeros(size)
     one = np.float32(1.0)
     zero = np.float32(0.0)
     half = np.float32(0.5)

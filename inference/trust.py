@@ -827,8 +827,7 @@ def run(args: Any) -> int:
 
     from inference.errors import DatasetError
     from inference.runtime import DEFAULT_MODEL_DIR, Estimator
-    from inference.simulation.catalogue import good_frames, simulated
-    from inference.simulation.dataset import DatasetSpec
+    from inference.simulation.catalogue import good_frames
     from inference.simulation.targets import builtin_target
 
     if args.frames < 50:
@@ -859,8 +858,9 @@ def run(args: Any) -> int:
         more, more_truth, _ = good_frames(args.so3_frames, args.seed + 1, radar, builtin_target(target), "so3")
         frames, truth = np.concatenate([frames, more]), np.concatenate([truth, more_truth])
     if args.so3_robust_frames:
-        spec = DatasetSpec(n=args.so3_robust_frames, seed=args.seed + 2, attitudes="so3", variety="robust")
-        more, more_truth, _, _ = simulated(spec, radar, builtin_target(target))
+        more, more_truth, _ = good_frames(
+            args.so3_robust_frames, args.seed + 2, radar, builtin_target(target), "so3", "robust"
+        )
         frames, truth = np.concatenate([frames, more]), np.concatenate([truth, more_truth])
     res = est.estimate(frames)
     robust = f" --so3-robust-frames {args.so3_robust_frames}" if args.so3_robust_frames else ""

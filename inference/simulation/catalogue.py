@@ -97,12 +97,15 @@ def good_frames(
     radar: Radar | None = None,
     model: TargetModel | None = None,
     attitudes: str = "cube",
+    variety: str | None = None,
 ) -> tuple[NDArray[np.float32], NDArray[np.float64], NDArray[np.float64]]:
     """Return n fresh normalised frames of ``model`` (default: the default target), their angles and SNRs.
 
-    ``attitudes``: "cube" (each Euler angle within +-45 deg) or "so3" (uniform over every rotation).
+    ``attitudes``: "cube" (each Euler angle within +-45 deg) or "so3" (uniform over every rotation); ``variety``: a
+    scattering preset each frame draws from (``DatasetSpec.variety``; None: the default scattering).
     """
-    frames, angles, snrs, _ = simulated(DatasetSpec(n=n, seed=seed, attitudes=attitudes), radar, model)
+    spec = DatasetSpec(n=n, seed=seed, attitudes=attitudes, variety=variety)
+    frames, angles, snrs, _ = simulated(spec, radar, model)
     return frames, angles, snrs
 
 
