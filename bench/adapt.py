@@ -125,7 +125,7 @@ def evaluate(model_dir: Path, frames: np.ndarray, truth: np.ndarray) -> dict[str
     est = Estimator.load(model_dir)
     checker = load_checkers(model_dir, est.img_size).get("tiangong-like")
     res = est.estimate(frames)
-    checks = checker.check_many(frames, res.enhanced, res.angles_deg)
+    checks = checker.check_many(frames, res.enhanced, res.angles_deg, search_enhancer=est.search_enhancer)
     fitted = np.array([c.angles_deg for c in checks])
     geo = geodesic_deg(fitted, truth)
     trusted = np.array([c.quality.trusted for c in checks])

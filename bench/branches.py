@@ -53,7 +53,7 @@ def score(frames: np.ndarray, truth: np.ndarray, keep: bool) -> dict[str, Any]:
         checker = load_checkers(DEFAULT_MODEL_DIR, est.img_size).get("tiangong-like")
         t0 = time.perf_counter()
         res = est.estimate(frames)
-        checks = checker.check_many(frames, res.enhanced, res.angles_deg)
+        checks = checker.check_many(frames, res.enhanced, res.angles_deg, search_enhancer=est.search_enhancer)
         seconds = time.perf_counter() - t0
     finally:
         trust.fit = real_fit  # type: ignore[attr-defined]

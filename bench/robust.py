@@ -139,7 +139,12 @@ def main(argv: list[str] | None = None) -> None:
             t0 = time.perf_counter()
             res = est.estimate(frames)
             fitted = np.array(
-                [checker.check(frames[i], res.enhanced[i], res.angles_deg[i]).angles_deg for i in range(len(frames))]
+                [
+                    checker.check(
+                        frames[i], res.enhanced[i], res.angles_deg[i], search_enhancer=est.search_enhancer
+                    ).angles_deg
+                    for i in range(len(frames))
+                ]
             )
             iou = float(mask_iou(res.enhanced > 0.5, labels).mean())
             ms, mf = np.abs(res.angles_deg - truth).mean(axis=0), np.abs(fitted - truth).mean(axis=0)

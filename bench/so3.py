@@ -62,7 +62,7 @@ def flipped_trusted(calibration: str | None, n: int = 24) -> tuple[int, int, int
     est, checker = _checker(calibration)
     frames = bad_frames("cross-range-flipped", n)
     res = est.estimate(frames)
-    checks = checker.check_many(frames, res.enhanced, res.angles_deg)
+    checks = checker.check_many(frames, res.enhanced, res.angles_deg, search_enhancer=est.search_enhancer)
     shown = np.array([reversed_reading(c.angles_deg) for c in checks])
     err = geodesic_deg(shown, bad_frames_truth("cross-range-flipped", n))
     trusted = np.array([c.quality.trusted for c in checks])
@@ -85,11 +85,14 @@ def score(
     build_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     res = est.estimate(frames)
-    checks = checker.check_many(frames, res.enhanced, res.angles_deg)
+    checks = checker.check_many(frames, res.enhanced, res.angles_deg, search_enhancer=est.search_enhancer)
     seconds = time.perf_counter() - t0
     from inference.frames import silhouette_ious
 
     unet_iou = float(np.mean(silhouette_ious(res.enhanced, labels))) if labels is not None else float("nan")
+    search_iou = float("nan")  # the search UNet++'s silhouettes (the set's, where it has one: what a search fits)
+    if labels is not None and est.search_enhancer is not None:
+        search_iou = float(np.mean(silhouette_ious(np.stack([est.search_enhancer(f) for f in frames]), labels)))
     answers = np.array([c.angles_deg for c in checks])
     err = geodesic_deg(answers, truth)
     mirrored = np.array([mirror(t) for t in truth])
@@ -109,6 +112,7 @@ def score(
     return {
         "frames": len(frames),
         "unet_iou": unet_iou,
+        "search_iou": search_iou,
         "median": float(np.median(err)),
         "p95": float(np.percentile(err, 95)),
         "beyond_10": float(np.mean(err > 10.0)),
@@ -166,7 +170,7 @@ def plot(ours: dict[str, np.ndarray], robust: dict[str, np.ndarray], calibration
             ax.axvline(cal.library_iou_min, color="k", ls="--", lw=1, label="library search's IoU threshold")
         ax.axhline(10.0, color="grey", ls=":", lw=1)
         ax.set_yscale("log")
-        ax.set_xlabel("fitted projection's IoU with UNet++'s silhouette")
+        ax.set_xlabel("fitted projection's IoU with the silhouette it was fitted to")
         ax.set_title(f"uniform SO(3), {name}")
         ax.legend(loc="upper left", fontsize=8)
     axes[0].set_ylabel("geodesic error (deg)")
@@ -221,22 +225,24 @@ def main(argv: list[str] | None = None) -> int:
         "cube no worse, <= 300 ms a frame. Trust: the checks and bounds of "
         f"`{args.calibration or (args.models or 'inference/models/shipped') + '/trust.json'}` "
         f"({_calibration_command(args.calibration)}); an answer of the library search is held to the thresholds and bounds "
-        "calibrated on the search's own answers over SO(3) (`Calibration.library_*`). Trusted outside their bound: "
+        "calibrated on the search's own answers over SO(3) (`Calibration.library_*`), and fits the silhouette of the "
+        "set's search UNet++ (trained over every rotation) where it has one. Trusted outside their bound: "
         "the share of trusted answers whose error exceeds their 90 % bound, on the worst axis.",
         "",
         f"![Error against the fit's silhouette IoU over SO(3)]({PLOT})",
         "",
         "| frames | median (deg) | p95 (deg) | beyond 10 deg | of them trusted | wrong branch | of them trusted | "
         "of them listing the truth | trusted | good (<= 2 deg) flagged | trusted outside their bound | "
-        "bound coverage z / y / x | ms a frame | UNet++ IoU with the label |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "bound coverage z / y / x | ms a frame | UNet++ IoU with the label | search UNet++ IoU |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, r in rows.items():
         cov = " / ".join(f"{100 * c:.0f} %" for c in r["covered"])
         lines.append(
             f"| {name} | {r['median']:.2f} | {r['p95']:.1f} | {100 * r['beyond_10']:.1f} % | {r['beyond_10_trusted']} | "
             f"{r['wrong']} | {r['wrong_trusted']} | {r['wrong_listing']} | {100 * r['trusted']:.0f} % | "
-            f"{100 * r['good_flagged']:.0f} % | {100 * r['trusted_outside_bound']:.0f} % | {cov} | {r['ms']:.0f} | {r['unet_iou']:.3f} |"
+            f"{100 * r['good_flagged']:.0f} % | {100 * r['trusted_outside_bound']:.0f} % | {cov} | {r['ms']:.0f} | {r['unet_iou']:.3f} | "
+            f"{'-' if np.isnan(r['search_iou']) else format(r['search_iou'], '.3f')} |"
         )
     lines += [
         "",

@@ -66,7 +66,10 @@ def _log(msg: str) -> None:
 
 def _run(est, checker, frames):
     res = est.estimate(frames)
-    checks = [checker.check(frames[k], res.enhanced[k], res.angles_deg[k]) for k in range(len(frames))]
+    checks = [
+        checker.check(frames[k], res.enhanced[k], res.angles_deg[k], search_enhancer=est.search_enhancer)
+        for k in range(len(frames))
+    ]
     return res, checks
 
 
@@ -193,7 +196,7 @@ def main() -> None:
     frames, truth, _, labels = simulated(spec, model=other.model)
     res = est.estimate(frames)
     t0 = time.perf_counter()
-    oc = [other.check(frames[k], res.enhanced[k], None) for k in range(spec.n)]
+    oc = [other.check(frames[k], res.enhanced[k], None, search_enhancer=est.search_enhancer) for k in range(spec.n)]
     per = (time.perf_counter() - t0) / spec.n
     gf = geodesic_deg(np.array([c.angles_deg for c in oc]), truth)
     # comsat-like is nearly symmetric under a half turn about each body axis (a box with two wings), which draws
@@ -228,7 +231,7 @@ def main() -> None:
 
     def with_fit():
         r = est.estimate(one)
-        checker.check(one[0], r.enhanced[0], r.angles_deg[0])
+        checker.check(one[0], r.enhanced[0], r.angles_deg[0], search_enhancer=est.search_enhancer)
 
     t = interleaved_medians({"without": without_fit, "with": with_fit}, repeat=15)
     lines += [

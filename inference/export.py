@@ -322,6 +322,115 @@ def int8_unet(path: Path, swin: torch.nn.Module, unet: torch.nn.Module, frames: 
     }
 
 
+SEARCH_INT8_MIN_IOU = 0.97  # the int8 search UNet++'s silhouettes' mean IoU with the float one's that is accepted
+
+
+def export_search_enhancer(
+    run_dir: str | Path, model_dir: str | Path, frames: np.ndarray | None = None, int8: bool = False, half: bool = False
+) -> dict[str, Any]:
+    """Add a run's UNet++ to the model set in ``model_dir`` as its search UNet++ (``search_unetpp.onnx``); return
+    its card entry. The set's networks are left as they are; the card (written last) names the new file.
+
+    The library search fits this UNet++'s silhouette (``inference.trust.Checker.check``), so a UNet++ trained over
+    every rotation serves the frames outside the networks' cube while Swin keeps reading the UNet++ it was tuned
+    on. Float parity as ``export``; with ``int8`` the check is the silhouette the search fits, not Swin's angles:
+    the int8 silhouettes (> 0.5) of the second half of ``frames`` must reach a mean IoU of ``SEARCH_INT8_MIN_IOU``
+    with the float network's.
+    """
+    from inference.files import read_json
+    from inference.runtime import SEARCH_ROLE, read_card
+
+    if int8 and (frames is None or len(frames) < INT8_MIN_FRAMES):
+        raise InferenceError(
+            f"int8 quantisation needs at least {INT8_MIN_FRAMES} real frames to calibrate and check on; "
+            "give --frames DATA (a data set from gsa simulate)"
+        )
+    d = Path(model_dir)
+    card = read_card(d)
+    unet, _, cfg, _ = load_trained(run_dir)
+    size = int(cfg["img_size"])
+    if size != int(card["config"]["img_size"]):
+        raise InferenceError(f"{run_dir} takes {size} px frames, the model set in {d} {card['config']['img_size']} px")
+    stage = Path(tempfile.mkdtemp(prefix=f".{d.name}-search-", dir=d.parent))
+    try:
+        path = stage / f"{SEARCH_ROLE}.onnx"
+        export_onnx(unet, path, size)
+        tests = [np.random.default_rng(0).random((2, 1, size, size), dtype=np.float32)]
+        if frames is not None:
+            tests.append(frames[:PARITY_FRAMES, None].astype(np.float32))
+        worst = max(parity(unet, path, t) for t in tests)
+        if worst > PARITY_RTOL:
+            raise InferenceError(f"{path.name}: ONNX Runtime differs from torch by {worst:.2e} (> {PARITY_RTOL})")
+        entry: dict[str, Any] = {"weights": "float32", "parity_max_rel_diff": worst}
+        if int8 and frames is not None:
+            x = frames[:, None].astype(np.float32)
+            calib, check = x[: len(x) // 2], x[len(x) // 2 :]
+            nodes = quantize_int8(path, path, calib)
+            sess = _session(path)
+            got = np.concatenate([sess.run(None, {"frame": check[k : k + 8]})[0] for k in range(0, len(check), 8)])
+            with torch.no_grad():
+                ref = torch.cat([unet(torch.from_numpy(check[k : k + 8])) for k in range(0, len(check), 8)]).numpy()
+            a, b = got[:, 0] > 0.5, ref[:, 0] > 0.5
+            union = (a | b).sum(axis=(1, 2))
+            iou = np.where(union > 0, (a & b).sum(axis=(1, 2)) / np.maximum(union, 1), 1.0)  # both empty: they agree
+            if float(iou.mean()) < SEARCH_INT8_MIN_IOU:
+                raise InferenceError(
+                    f"{path.name}: the int8 UNet++'s silhouettes overlap the float one's by IoU {iou.mean():.3f} on "
+                    f"average (< {SEARCH_INT8_MIN_IOU}); export without --int8, or calibrate on more frames"
+                )
+            entry.update(
+                {
+                    "weights": "int8 (static, per-channel 7-bit weights, QDQ)",
+                    "int8_quantized_activations": nodes,
+                    "int8_calibration_frames": len(calib),
+                    "int8_check_frames": len(check),
+                    "int8_enhanced_mean_abs_diff": float(np.abs(got - ref).mean()),
+                    "int8_silhouette_iou": {"mean": round(float(iou.mean()), 4), "min": round(float(iou.min()), 4)},
+                }
+            )
+        elif half:
+            entry["float16_tensors"] = store_half(path)
+            entry["half_max_rel_diff"] = max(parity(unet, path, t) for t in tests)
+            entry["weights"] = "float16 (computed in float32)"
+            if entry["half_max_rel_diff"] > HALF_RTOL:
+                raise InferenceError(
+                    f"{path.name}: float16 weights change the output by {entry['half_max_rel_diff']:.2e} "
+                    f"(> {HALF_RTOL}); export without --half"
+                )
+        selfcheck = selfcheck_reference(unet, size) if size % SELFCHECK_POOL == 0 else None
+        if selfcheck is not None:
+            check_computes_here(selfcheck, _session(path), stage)
+        training_path = Path(run_dir) / "training.json"
+        training = read_json(training_path) if training_path.is_file() else {}
+        data = training.get("data") or {}
+        entry = {
+            "file": path.name,
+            "sha256": sha256_file(path),
+            "bytes": path.stat().st_size,
+            **entry,
+            "exported": datetime.now(UTC).isoformat(timespec="seconds"),
+            "training": {
+                "data": {k: data.get(k) for k in ("content_sha256", "frames", "train", "target", "variety")},
+                **{k: training.get(k) for k in ("mode", "unet_epochs", "train_seconds", "hardware", "complete")},
+                "final_epoch": (training.get("history") or [{}])[-1],
+            },
+            **({"selfcheck": selfcheck} if selfcheck else {}),
+        }
+        # Under a name of its own content, so the card (written last) and the file it names always agree; the file
+        # an earlier export added goes once the card no longer names it.
+        name = f"{SEARCH_ROLE}-{entry['sha256'][:12]}.onnx"
+        entry["file"] = name
+        os.replace(path, d / name)
+        old = (card["files"].get(SEARCH_ROLE) or {}).get("file")
+        card["files"][SEARCH_ROLE] = entry
+        write_json(d / "model_card.json", card)
+        if old and old != name and (d / old).is_file():
+            (d / old).unlink()
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+    return entry
+
+
 def calibration_frames(data_dir: str | Path, n: int) -> tuple[np.ndarray, str]:
     """Return the first ``n`` training frames of a data set [n, H, W] (its manifest's split, or the first 80 %).
 
@@ -358,6 +467,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--frames", metavar="DATA", help="data set whose first training frames check parity (and calibrate --int8)"
     )
     p.add_argument("--n-frames", type=int, default=256, help="how many of its frames (default 256)")
+    p.add_argument(
+        "--search-unet",
+        action="store_true",
+        help="add only the run's UNet++ to the model set in --out as the one the library search fits "
+        "(search_unetpp.onnx; a UNet++ trained over every rotation), leaving the set's networks as they are",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -371,6 +486,14 @@ def run(args: argparse.Namespace) -> int:
     if args.frames:
         frames, sha = calibration_frames(args.frames, args.n_frames)
         options["frames"] = {"data": str(args.frames), "content_sha256": sha, "first_training_frames": len(frames)}
+    if args.search_unet:
+        entry = export_search_enhancer(args.run, args.out or DEFAULT_MODEL_DIR, frames, args.int8, args.half)
+        shown = f", int8 silhouettes IoU {entry['int8_silhouette_iou']['mean']:.3f}" if args.int8 else ""
+        print(
+            f"search UNet++: {entry['file']} {entry['bytes'] / 1e6:.1f} MB sha256 {entry['sha256'][:16]} "
+            f"parity {entry['parity_max_rel_diff']:.1e}{shown}"
+        )
+        return 0
     card = export(
         args.run,
         args.out or DEFAULT_MODEL_DIR,

@@ -20,7 +20,7 @@ from __future__ import annotations
 import json
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -33,6 +33,9 @@ from inference.files import sha256_file
 
 DEFAULT_MODEL_DIR = Path(__file__).resolve().parent / "models" / "shipped"
 DEFAULT_RUN_BATCH = 4
+# A set's optional second UNet++, trained over every rotation, whose silhouettes the library search fits
+# (``Estimator.search_enhancer``); the networks' own UNet++ stays the one Swin reads.
+SEARCH_ROLE = "search_unetpp"
 
 
 def read_card(model_dir: str | Path) -> dict[str, Any]:
@@ -45,9 +48,11 @@ def read_card(model_dir: str | Path) -> dict[str, Any]:
         card: dict[str, Any] = json.loads(card_path.read_text())
     except json.JSONDecodeError as exc:
         raise ModelFileError(f"model card {card_path} is not JSON: {exc.msg}", field="model") from None
-    for role in ("unetpp", "swin"):
+    for role in ("unetpp", "swin", SEARCH_ROLE):
         entry = card.get("files", {}).get(role)
         if not entry:
+            if role == SEARCH_ROLE:  # optional: without it the library search fits the networks' own silhouettes
+                continue
             raise ModelFileError(f"model card {card_path} lists no {role} file", field="model")
         f = d / entry["file"]
         if not f.is_file():
@@ -176,6 +181,18 @@ class Estimator:
                 raise ModelFileError(f"model file {path} cannot be loaded: {exc}", field="model") from None
         if card.get("selfcheck"):
             check_computes_here(card["selfcheck"], sessions["unetpp"], d)
+        search = card["files"].get(SEARCH_ROLE)
+        if search:
+            # One intra-op thread: the fit's threads call it, a frame each, one a core (``Checker.check_many``).
+            path = d / search["file"]
+            try:
+                sessions[SEARCH_ROLE] = ort.InferenceSession(
+                    str(path), session_options(1), providers=["CPUExecutionProvider"]
+                )
+            except Exception as exc:
+                raise ModelFileError(f"model file {path} cannot be loaded: {exc}", field="model") from None
+            if search.get("selfcheck"):
+                check_computes_here(search["selfcheck"], sessions[SEARCH_ROLE], d)
         return cls(d, card, sessions, run_batch)
 
     @property
@@ -185,6 +202,7 @@ class Estimator:
             "config": self.card["config"]["name"],
             "unetpp_sha256": self.card["files"]["unetpp"]["sha256"],
             "swin_sha256": self.card["files"]["swin"]["sha256"],
+            "search_unetpp_sha256": (self.card["files"].get(SEARCH_ROLE) or {}).get("sha256"),
             "trained_on": card_target(self.card),
             # an adapted version of the target's set (the service's /v1/model-sets); 0: the set as configured
             "version": int((self.card.get("version") or {}).get("number", 0)),
@@ -203,6 +221,16 @@ class Estimator:
         ``estimate`` skips this for models whose card says their Swin was trained on raw frames.
         """
         return np.asarray(self._run("unetpp", frames)[:, 0], np.float32)
+
+    @property
+    def search_enhancer(self) -> Callable[[NDArray[np.float32]], NDArray[np.float32]] | None:
+        """The UNet++ whose silhouette the library search fits (``Checker.check``), or None for a set without one."""
+        return self.search_enhance if SEARCH_ROLE in self._sessions else None
+
+    def search_enhance(self, frame: NDArray[np.float32]) -> NDArray[np.float32]:
+        """Run the search's UNet++ on one normalised frame [H, W] (thread-safe); return its enhanced frame [H, W]."""
+        x = np.asarray(frame, np.float32)[None, None]
+        return np.asarray(self._sessions[SEARCH_ROLE].run(None, {"frame": x})[0][0, 0], np.float32)
 
     def attitude(self, frames: NDArray[np.float32]) -> NDArray[np.float32]:
         """Run Swin on (enhanced) frames [N, H, W]; return Euler z, y, x in degrees [N, 3]."""

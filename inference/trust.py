@@ -57,6 +57,7 @@ from inference.simulation.radar import Radar
 from inference.simulation.targets import TargetModel
 
 Vec = NDArray[np.float64]
+Enhancer = Callable[[NDArray[np.float32]], NDArray[np.float32]]  # a normalised frame [H, W] -> its enhanced frame
 
 TRUST_FILE = "trust.json"
 CUBE_DEG = 45.0  # the networks' training range per Euler angle
@@ -264,6 +265,7 @@ class Checker:
         search: bool = True,
         progress: Callable[[int, int], None] | None = None,
         cancelled: Callable[[], bool] | None = None,
+        search_enhancer: Enhancer | None = None,
     ) -> list[Checked]:
         """``check`` every frame [N, H, W], ``threads`` frames at once; the same answers as one by one.
 
@@ -286,7 +288,7 @@ class Checker:
             if cancelled is not None and cancelled():
                 raise Cancelled(f"stopped before frame {k} of {len(frames)}")
             net = None if network_deg is None else network_deg[k]
-            checked = self.check(frames[k], enhanced[k], net, refine, search)
+            checked = self.check(frames[k], enhanced[k], net, refine, search, search_enhancer)
             if progress is not None:
                 with lock:
                     done[0] += 1
@@ -306,12 +308,18 @@ class Checker:
         network_deg: NDArray[np.floating] | None,
         refine: bool = True,
         search: bool = True,
+        search_enhancer: Enhancer | None = None,
     ) -> Checked:
         """Fit (unless ``refine`` is off), bound, and check one frame; ``network_deg`` None means no networks.
 
         ``search`` off skips the library search where Swin's answer does not fit (a pass, whose
         other frames stand in for one that fails, saves its cost: design/measurements.md, "A pass
         skips the library search").
+
+        ``search_enhancer`` (the model set's ``Estimator.search_enhancer``: normalised frame [H, W] -> enhanced
+        [H, W]): the UNet++ whose silhouette a library search fits, every fit of that frame then scored on it;
+        None: the frame's ``enhanced``. One trained over every rotation draws the silhouettes outside the cube
+        that the networks' UNet++ blurs (design/measurements.md, "A search UNet++ over every rotation").
         """
         cal = self.calibration
         net = None if network_deg is None else np.asarray(network_deg, float)
@@ -329,7 +337,15 @@ class Checker:
                 # and the brightness tie-break.
                 fits = fit(self.renderer, enh, {"network": net, "mirror": mirror(net)}, prior_at=net, keep=("mirror",))
             if net is None or (search and self._hard_iou(fits[0].angles_deg, enh) < cal.search_below):
-                # No networks, or their answer does not fit: search the library too.
+                # No networks, or their answer does not fit: search the library too, on the search's own
+                # silhouette where there is one (the network's starts fitted again on it, so every fit is
+                # scored on the one silhouette).
+                if search_enhancer is not None:
+                    enh = np.asarray(search_enhancer(np.asarray(frame, np.float32)), np.float64)
+                    features["doubt"] = enhancer_doubt(enh)
+                    if net is not None:
+                        starts = {"network": net, "mirror": mirror(net)}
+                        fits = fit(self.renderer, enh, starts, prior_at=net, keep=("mirror",))
                 fits = sorted(fits + self.search(enh), key=lambda f: f.cost)
                 searched = True
                 scale, floor = cal.bounds_model(searched)
@@ -529,6 +545,28 @@ def fit_bounds(raw: Vec, errors: Vec, coverage: float = 0.9) -> tuple[float, flo
     return best[1], best[2]
 
 
+def memoised(enhancer: Enhancer) -> Enhancer:
+    """``enhancer`` run once per distinct frame (keyed by its bytes' digest; thread-safe): a calibration checks
+    its frames three times."""
+    import hashlib
+    import threading
+
+    done: dict[bytes, NDArray[np.float32]] = {}
+    lock = threading.Lock()
+
+    def run(frame: NDArray[np.float32]) -> NDArray[np.float32]:
+        key = hashlib.blake2b(np.ascontiguousarray(frame, np.float32).tobytes(), digest_size=16).digest()
+        with lock:
+            hit = done.get(key)
+        if hit is None:
+            hit = enhancer(frame)
+            with lock:
+                done[key] = hit
+        return hit
+
+    return run
+
+
 MIN_LIBRARY_FRAMES = 30  # searched answers a calibration needs before the library path gets thresholds of its own
 
 
@@ -541,6 +579,7 @@ def calibrate(
     made: dict[str, Any] | None = None,
     progress: bool = False,
     search_iou_min: float | None = None,
+    search_enhancer: Enhancer | None = None,
 ) -> tuple[Calibration, list[Checked]]:
     """Fit the thresholds and the uncertainty model on fresh good frames with known attitudes.
 
@@ -558,6 +597,7 @@ def calibrate(
 
     ``search_iou_min`` fixes the search's trigger instead (a set recalibrated on another radar's frames
     keeps its base set's: ``Calibration.search_iou_min``); None: the trigger is the IoU threshold.
+    ``search_enhancer``: the set's search UNet++ (``Checker.check``), run once a frame however often it is checked.
     """
     import sys
 
@@ -565,6 +605,7 @@ def calibrate(
 
     truth = np.asarray(truth, float)
     network_deg = np.asarray(network_deg, float)
+    searched_frames = None if search_enhancer is None else memoised(search_enhancer)
 
     def check_all(cal: Calibration, stage: str) -> list[Checked]:
         checker.calibration = cal
@@ -573,7 +614,7 @@ def calibrate(
             if progress and (done % 50 == 0 or done == total):
                 print(f"calibrate ({stage}): {done}/{total} frames", file=sys.stderr, flush=True)
 
-        return checker.check_many(frames, enhanced, network_deg, progress=say)
+        return checker.check_many(frames, enhanced, network_deg, progress=say, search_enhancer=searched_frames)
 
     def features(checks: list[Checked]) -> dict[str, Vec]:
         return {key: np.array([c.features.get(key, np.nan) for c in checks]) for key in checks[0].features}
@@ -871,7 +912,14 @@ def run(args: Any) -> int:
         "models": est.identity,
     }
     cal, checks = calibrate(
-        Checker(builtin_target(target), radar), frames, res.enhanced, res.angles_deg, truth, made, progress=True
+        Checker(builtin_target(target), radar),
+        frames,
+        res.enhanced,
+        res.angles_deg,
+        truth,
+        made,
+        progress=True,
+        search_enhancer=est.search_enhancer,
     )
     out = Path(args.out) if args.out else model_dir / TRUST_FILE
     cal.write(out)

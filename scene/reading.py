@@ -58,6 +58,7 @@ def read_frames(
         search,
         None if progress is None else (lambda done, total: progress("fitted", done, total)),
         cancelled,
+        est.search_enhancer,
     )
     t_fit = time.perf_counter() - t1
     per_frame = {"preprocess": preprocess_s / n, **{k: v / n for k, v in res.timings_s.items()}, "fit": t_fit / n}

@@ -163,7 +163,11 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         res = est.estimate(frame[None])
         t0 = time.perf_counter()
         checked = checker.check(
-            frame, res.enhanced[0], res.angles_deg[0] if checker.networks else None, not args.no_refine
+            frame,
+            res.enhanced[0],
+            res.angles_deg[0] if checker.networks else None,
+            not args.no_refine,
+            search_enhancer=est.search_enhancer,
         )
         t_fit = time.perf_counter() - t0
     except DOMAIN_ERRORS as exc:

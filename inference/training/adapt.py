@@ -488,7 +488,14 @@ def recalibrate(
         trigger = Calibration.load(base / TRUST_FILE).search_below
     _say(f"recalibrating trust on {len(val)} held-out labelled frames (the search's trigger: IoU {trigger})")
     cal, checks = calibrate(
-        Checker(model, radar), val.frames, res.enhanced, res.angles_deg, val.angles_deg, made, search_iou_min=trigger
+        Checker(model, radar),
+        val.frames,
+        res.enhanced,
+        res.angles_deg,
+        val.angles_deg,
+        made,
+        search_iou_min=trigger,
+        search_enhancer=est.search_enhancer,
     )
     cal.write(model_dir / TRUST_FILE)
     fitted = np.array([c.angles_deg for c in checks])

@@ -142,3 +142,52 @@ def test_int8_export_refuses_without_enough_real_frames(smoke_run, smoke_data, t
     )
     assert "--n-frames 4 is too few" in capsys.readouterr().err
     assert not (tmp_path / "m").exists()  # refused before anything was written
+
+
+def test_a_search_unet_joins_a_set_and_is_served_beside_its_networks(smoke_run, smoke_data, tmp_path, capsys):
+    """gsa export --search-unet: a run's UNet++ added to a set as the one the library search fits. The set's networks
+    stay as they were; the service runs it and it computes what torch does; an int8 one is checked on the silhouette
+    the search fits; the card always names the file there; a tampered file is refused by name."""
+    from inference.errors import ModelFileError
+    from inference.export import SEARCH_INT8_MIN_IOU, main
+    from inference.files import sha256_file
+    from inference.simulation.dataset import load_arrays
+
+    out, _ = smoke_run
+    frames = load_arrays(smoke_data)["image"][:16].astype(np.float32)
+    export(out, tmp_path / "m")
+    assert Estimator.load(tmp_path / "m").search_enhancer is None
+    networks = {n: sha256_file(tmp_path / "m" / n) for n in ("unetpp.onnx", "swin.onnx")}
+    assert main(["--run", str(out), "--out", str(tmp_path / "m"), "--search-unet"]) == 0
+    assert "search UNet++: search_unetpp-" in capsys.readouterr().out
+    est = Estimator.load(tmp_path / "m")
+    assert {n: sha256_file(tmp_path / "m" / n) for n in networks} == networks
+    unet, _ = build_models(get_config("smoke"))
+    unet.load_state_dict(torch.load(out / "unetpp.pt", weights_only=False)["state_dict"])
+    unet.eval()
+    with torch.no_grad():
+        ref = unet(torch.from_numpy(frames[:2, None])).numpy()[:, 0]
+    got = np.stack([est.search_enhancer(f) for f in frames[:2]])
+    np.testing.assert_allclose(got, ref, rtol=1e-3, atol=1e-4)
+    float_file = est.card["files"]["search_unetpp"]["file"]
+    assert est.identity["search_unetpp_sha256"] == est.card["files"]["search_unetpp"]["sha256"]
+    # int8 in its place: checked on its silhouettes; the float file it replaced is gone.
+    entry = main(
+        ["--run", str(out), "--out", str(tmp_path / "m"), "--search-unet", "--int8", "--frames", str(smoke_data)]
+    )
+    assert entry == 0
+    card = json.loads((tmp_path / "m" / "model_card.json").read_text())
+    e = card["files"]["search_unetpp"]
+    assert e["weights"].startswith("int8") and e["int8_silhouette_iou"]["mean"] >= SEARCH_INT8_MIN_IOU
+    assert e["file"] != float_file and not (tmp_path / "m" / float_file).exists()
+    assert (tmp_path / "m" / e["file"]).is_file() and e["selfcheck"]["img_size"] == 64
+    # Too few frames for int8: refused, the set unchanged.
+    with pytest.raises(InferenceError, match="needs at least 8 real frames"):
+        from inference.export import export_search_enhancer
+
+        export_search_enhancer(out, tmp_path / "m", frames[:4], int8=True)
+    assert json.loads((tmp_path / "m" / "model_card.json").read_text()) == card
+    with open(tmp_path / "m" / e["file"], "ab") as f:
+        f.write(b"0")
+    with pytest.raises(ModelFileError, match=e["file"]):
+        Estimator.load(tmp_path / "m")

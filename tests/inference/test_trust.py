@@ -37,7 +37,9 @@ def good(shipped):
     est, checker = shipped
     frames, truth, snr = good_frames(N_GOOD, FRESH_SEED)
     res = est.estimate(frames)
-    checks = checker.check_many(frames, res.enhanced, res.angles_deg)  # one by one's answers, on every core
+    checks = checker.check_many(
+        frames, res.enhanced, res.angles_deg, search_enhancer=est.search_enhancer
+    )  # one by one's answers, on every core
     return truth, snr, res.angles_deg, checks
 
 
@@ -87,7 +89,7 @@ def test_untrustworthy_frames_are_flagged(shipped, kind):
     est, checker = shipped
     frames = bad_frames(kind, N_BAD)
     res = est.estimate(frames)
-    checks = checker.check_many(frames, res.enhanced, res.angles_deg)
+    checks = checker.check_many(frames, res.enhanced, res.angles_deg, search_enhancer=est.search_enhancer)
     flagged = np.mean([not c.quality.trusted for c in checks])
     assert flagged >= 0.95, (kind, flagged)
     assert all(c.quality.reasons for c in checks if not c.quality.trusted)
@@ -97,11 +99,14 @@ def test_frames_checked_on_several_threads_get_the_answers_they_get_one_by_one(s
     est, checker = shipped
     frames, _, _ = good_frames(6, FRESH_SEED + 900)
     res = est.estimate(frames)
-    alone = [checker.check(frames[k], res.enhanced[k], res.angles_deg[k]) for k in range(len(frames))]
+    alone = [
+        checker.check(frames[k], res.enhanced[k], res.angles_deg[k], search_enhancer=est.search_enhancer)
+        for k in range(len(frames))
+    ]
     threads = checker.threads
     try:
         checker.threads = 3
-        together = checker.check_many(frames, res.enhanced, res.angles_deg)
+        together = checker.check_many(frames, res.enhanced, res.angles_deg, search_enhancer=est.search_enhancer)
     finally:
         checker.threads = threads
     for a, b in zip(alone, together, strict=True):
@@ -115,7 +120,7 @@ def over_so3(shipped):
     est, checker = shipped
     frames, truth, _ = good_frames(N_SO3, FRESH_SEED + 43, attitudes="so3")
     res = est.estimate(frames)
-    return truth, checker.check_many(frames, res.enhanced, res.angles_deg)
+    return truth, checker.check_many(frames, res.enhanced, res.angles_deg, search_enhancer=est.search_enhancer)
 
 
 def test_the_shipped_calibration_holds_the_library_search_to_its_own_figures(shipped):
@@ -137,7 +142,7 @@ def test_a_cross_range_flipped_frame_is_read_as_the_attitude_it_shows(shipped):
     n = 2 * N_BAD
     frames, truth = bad_frames("cross-range-flipped", n), bad_frames_truth("cross-range-flipped", n)
     res = est.estimate(frames)
-    checks = checker.check_many(frames, res.enhanced, res.angles_deg)
+    checks = checker.check_many(frames, res.enhanced, res.angles_deg, search_enhancer=est.search_enhancer)
     err = geodesic_deg(np.array([reversed_reading(c.angles_deg) for c in checks]), truth)
     trusted = np.array([c.quality.trusted for c in checks])
     assert np.median(err) <= 3.0, err
@@ -273,7 +278,7 @@ def test_the_library_search_is_triggered_by_its_own_threshold_not_the_trust_thre
             "no trigger, trust threshold above": replace(kept, iou_min=1.0, search_iou_min=None),
         }.items():
             checker.calibration = cal
-            c = checker.check(frames[0], res.enhanced[0], res.angles_deg[0])
+            c = checker.check(frames[0], res.enhanced[0], res.angles_deg[0], search_enhancer=est.search_enhancer)
             searched[name] = c.features["searched"] > 0.5
     finally:
         checker.calibration = kept
@@ -298,7 +303,7 @@ def test_a_wrong_branch_answer_over_so3_comes_back_to_the_truth_side(shipped, in
     angles, snr, seed = frame_truth(DatasetSpec(n=200, seed=77000, attitudes="so3"), index)
     frames, _ = at_attitudes(np.array([angles], float), np.array([np.nan if snr is None else snr]), [seed])
     res = est.estimate(frames)
-    c = checker.check(frames[0], res.enhanced[0], res.angles_deg[0])
+    c = checker.check(frames[0], res.enhanced[0], res.angles_deg[0], search_enhancer=est.search_enhancer)
     assert geodesic_deg(c.angles_deg, np.array(angles))[0] < 5.0, (angles, c.angles_deg, c.alternatives)
 
 
@@ -341,3 +346,29 @@ def test_each_threshold_is_calibrated_on_the_answers_it_judges(shipped):
     assert cal.doubt_max == pytest.approx(np.quantile(doubt, 0.99) * 1.25, abs=1e-4)
     assert cal.moved_max_deg == pytest.approx(max(np.quantile(swin_off[:half] - 0.4, 0.99) * 1.5, 3.0), abs=1e-3)
     assert trusted_under(checker, cal, checks).all(), [c.quality.reasons for c in checks if not c.quality.trusted]
+
+
+def test_a_library_search_fits_the_search_unets_silhouette_not_the_networks(shipped):
+    """``search_enhancer``: the UNet++ whose silhouette a search fits. Here the networks' enhanced frame is blank (no
+    answer fits it, so the frame is searched) and the search's silhouette is the simulator's own label of an attitude
+    far outside the networks' cube: the answer must be that attitude (or list it: a silhouette alone leaves the
+    near-mirror pair), fitting the label, never the blank frame."""
+    from inference.simulation.catalogue import at_attitudes
+
+    est, checker = shipped
+    truth = np.array([150.0, -55.0, 120.0])
+    frames, labels = at_attitudes(truth[None], np.array([10.0]), [4301])
+    blank = np.zeros_like(frames[0])
+    calls = []
+
+    def label_of(frame):
+        calls.append(frame.shape)
+        return labels[0].astype(np.float32)
+
+    c = checker.check(frames[0], blank, np.zeros(3), search_enhancer=label_of)
+    assert calls == [frames[0].shape] and c.features["searched"] > 0.5
+    found = [np.asarray(c.angles_deg), *[np.array(a.angles_deg) for a in c.alternatives]]
+    assert min(geodesic_deg(np.array(found), truth)) < 3.0, (c.angles_deg, c.alternatives)
+    assert c.quality.silhouette_iou > 0.85  # scored on the search's silhouette
+    without = checker.check(frames[0], blank, np.zeros(3))
+    assert without.quality.silhouette_iou == 0.0 and not without.quality.trusted
