@@ -6,7 +6,8 @@ the target's projection (``inference.fit``), and returns a ``Checked``:
 
 * ``angles_deg``: the fitted attitude (Swin's own when ``refine`` is off);
 * ``quality.silhouette_iou``: the hard IoU of the fitted projection (the label
-  ``label_mask`` would draw) with the enhanced frame's silhouette (> 0.5);
+  ``label_mask`` would draw) with the silhouette (> 0.5) it was fitted to: the enhanced frame's, or for a
+  frame the library search answered, the set's search UNet++'s where it has one;
 * ``quality.uncertainty_deg``: a 90 % bound per axis (z, y, x) on the error. From the fit's
   curvature: ``raw = sqrt(inv(H)_ii * (1 - soft IoU))``, the error a residual of that size
   would leave along a valley of that curvature, then ``bound = sqrt(floor^2 + (scale raw)^2)``
