@@ -162,7 +162,9 @@ def test_answers_over_so3_are_held_to_the_library_search_s_own_calibration(over_
     trusted = np.array([c.quality.trusted for c in checks])
     assert not np.any(trusted & (err > 10.0)), err[trusted].max()
     good = err <= 2.0
-    assert good.mean() >= 0.7 and trusted[good].mean() >= 0.3, (good.mean(), trusted[good].mean())
+    # Measured with the search UNet++ (its silhouettes are what the search fits): 93 % good, 88 % of them trusted
+    # (bench.so3 before it: 73 % of the good answers trusted, 27 % flagged).
+    assert good.mean() >= 0.85 and trusted[good].mean() >= 0.7, (good.mean(), trusted[good].mean())
     assert np.any(trusted & (np.max(np.abs(answers), axis=1) > 90.0))
     bound = np.array([c.quality.uncertainty_deg for c in checks])
     coverage = (np.abs(euler_difference(answers, truth)) <= bound).mean(axis=0)
