@@ -24,7 +24,7 @@ import torch
 
 from inference.errors import InferenceError, module_main
 from inference.files import sha256_file, write_json
-from inference.frames import ANGLE_SCALE_DEG
+from inference.frames import ANGLE_SCALE_DEG, silhouette_ious
 from inference.runtime import SELFCHECK_POOL, check_computes_here, pooled, selfcheck_frames
 from inference.training.checkpoints import load_trained
 
@@ -127,6 +127,65 @@ def quantize_int8(src: Path, dst: Path, frames: np.ndarray) -> int:
     return sum(n.op_type == "QuantizeLinear" for n in model.graph.node)
 
 
+def parity_inputs(size: int, frames: np.ndarray | None) -> list[np.ndarray]:
+    """What parity is checked on: two seeded random frames [2, 1, size, size] and up to PARITY_FRAMES real ones."""
+    tests = [np.random.default_rng(0).random((2, 1, size, size), dtype=np.float32)]
+    if frames is not None:
+        tests.append(frames[:PARITY_FRAMES, None].astype(np.float32))
+    return tests
+
+
+def exported_float(model: torch.nn.Module, path: Path, size: int, inputs: list[np.ndarray]) -> dict[str, Any]:
+    """Export ``model`` to ``path`` and hold ONNX Runtime to torch on ``inputs`` (PARITY_RTOL); its card entry."""
+    export_onnx(model, path, size)
+    worst = max(parity(model, path, t) for t in inputs)
+    if worst > PARITY_RTOL:
+        raise InferenceError(f"{path.name}: ONNX Runtime differs from torch by {worst:.2e} (> {PARITY_RTOL})")
+    return {"weights": "float32", "parity_max_rel_diff": worst}
+
+
+def stored_half(model: torch.nn.Module, path: Path, inputs: list[np.ndarray]) -> dict[str, Any]:
+    """Store the exported file's large weights in float16 (``store_half``) and hold it to torch again (HALF_RTOL)."""
+    entry: dict[str, Any] = {"float16_tensors": store_half(path)}
+    entry["half_max_rel_diff"] = max(parity(model, path, t) for t in inputs)
+    entry["weights"] = "float16 (computed in float32)"
+    if entry["half_max_rel_diff"] > HALF_RTOL:
+        raise InferenceError(
+            f"{path.name}: float16 weights change the output by {entry['half_max_rel_diff']:.2e} "
+            f"(> {HALF_RTOL}); export without --half"
+        )
+    return entry
+
+
+def check_int8_frames(frames: np.ndarray | None) -> None:
+    """Refuse int8 without enough real frames to calibrate on and check."""
+    if frames is None or len(frames) < INT8_MIN_FRAMES:
+        raise InferenceError(
+            f"int8 quantisation needs at least {INT8_MIN_FRAMES} real frames to calibrate and check on; "
+            "give --frames DATA (a data set from gsa simulate)"
+        )
+
+
+def quantised_unet(path: Path, unet: torch.nn.Module, frames: np.ndarray) -> tuple[dict[str, Any], Any, Any]:
+    """Quantise the exported float32 UNet++ at ``path`` in place on the first half of ``frames`` [N, H, W]; return
+    the card's int8 entries and, on the second half, the int8 file's output and the float network's [M, 1, H, W]."""
+    x = frames[:, None].astype(np.float32)
+    calib, check = x[: len(x) // 2], x[len(x) // 2 :]
+    nodes = quantize_int8(path, path, calib)
+    sess = _session(path)
+    got = np.concatenate([sess.run(None, {"frame": check[k : k + 8]})[0] for k in range(0, len(check), 8)])
+    with torch.no_grad():
+        ref = torch.cat([unet(torch.from_numpy(check[k : k + 8])) for k in range(0, len(check), 8)]).numpy()
+    entry = {
+        "weights": "int8 (static, per-channel 7-bit weights, QDQ)",
+        "int8_quantized_activations": nodes,
+        "int8_calibration_frames": len(calib),
+        "int8_check_frames": len(check),
+        "int8_enhanced_mean_abs_diff": float(np.abs(got - ref).mean()),
+    }
+    return entry, got, ref
+
+
 def parity(model: torch.nn.Module, path: Path, frames: np.ndarray) -> float:
     """Return the largest relative difference between ONNX Runtime and torch on ``frames`` [N, 1, H, W]."""
     sess = _session(path)
@@ -154,11 +213,8 @@ def export(
     the second half checks it: Swin's angles from the int8 UNet++ may differ from those
     from the float one by at most INT8_ANGLE_TOL_DEG on average, per axis.
     """
-    if int8 and (frames is None or len(frames) < INT8_MIN_FRAMES):
-        raise InferenceError(
-            f"int8 quantisation needs at least {INT8_MIN_FRAMES} real frames to calibrate and check on; "
-            "give --frames DATA (a data set from gsa simulate)"
-        )
+    if int8:
+        check_int8_frames(frames)
     unet, swin, cfg, enhance = load_trained(run_dir)
     if int8 and not enhance:
         raise InferenceError("--int8 quantises UNet++, which this run's Swin (trained on raw frames) does not use")
@@ -192,31 +248,17 @@ def _export_into(
 ) -> dict[str, Any]:
     """Write both ONNX files and the model card into ``out``, checking each step; return the card."""
     size = cfg["img_size"]
-    rng = np.random.default_rng(0)
-    tests = [rng.random((2, 1, size, size), dtype=np.float32)]
-    if frames is not None:
-        tests.append(frames[:PARITY_FRAMES, None].astype(np.float32))
+    tests = parity_inputs(size, frames)
     with torch.no_grad():
         enhanced = [unet(torch.from_numpy(t)).numpy() for t in tests]
     report: dict[str, Any] = {}
     for role, model, inputs in (("unetpp", unet, tests), ("swin", swin, tests + enhanced)):
         path = out / f"{role}.onnx"
-        export_onnx(model, path, size)
-        worst = max(parity(model, path, t) for t in inputs)
-        if worst > PARITY_RTOL:
-            raise InferenceError(f"{path.name}: ONNX Runtime differs from torch by {worst:.2e} (> {PARITY_RTOL})")
-        entry: dict[str, Any] = {"weights": "float32", "parity_max_rel_diff": worst}
+        entry = exported_float(model, path, size, inputs)
         if int8 and role == "unetpp" and frames is not None:
             entry.update(int8_unet(path, swin, unet, frames))
         elif half:
-            entry["float16_tensors"] = store_half(path)
-            entry["half_max_rel_diff"] = max(parity(model, path, t) for t in inputs)
-            entry["weights"] = "float16 (computed in float32)"
-            if entry["half_max_rel_diff"] > HALF_RTOL:
-                raise InferenceError(
-                    f"{path.name}: float16 weights change the output by {entry['half_max_rel_diff']:.2e} "
-                    f"(> {HALF_RTOL}); export without --half"
-                )
+            entry.update(stored_half(model, path, inputs))
         report[role] = {"file": path.name, "sha256": sha256_file(path), "bytes": path.stat().st_size, **entry}
     training_path = Path(run_dir) / "training.json"
     training = json.loads(training_path.read_text()) if training_path.is_file() else {}
@@ -292,14 +334,9 @@ def int8_unet(path: Path, swin: torch.nn.Module, unet: torch.nn.Module, frames: 
     Calibrates on the first half of ``frames`` [N, H, W] and checks on the second: Swin's
     angles from the int8 UNet++'s output against those from the float UNet++ (torch).
     """
-    x = frames[:, None].astype(np.float32)
-    calib, check = x[: len(x) // 2], x[len(x) // 2 :]
-    nodes = quantize_int8(path, path, calib)
-    sess = _session(path)
-    enh8 = np.concatenate([sess.run(None, {"frame": check[k : k + 8]})[0] for k in range(0, len(check), 8)])
+    entry, enh8, enh = quantised_unet(path, unet, frames)
     with torch.no_grad():
-        enh = torch.cat([unet(torch.from_numpy(check[k : k + 8])) for k in range(0, len(check), 8)])
-        ref = swin(enh).numpy() * ANGLE_SCALE_DEG
+        ref = swin(torch.from_numpy(enh)).numpy() * ANGLE_SCALE_DEG
         got = swin(torch.from_numpy(enh8)).numpy() * ANGLE_SCALE_DEG
     change = np.abs(got - ref)
     mean = change.mean(axis=0)
@@ -309,11 +346,7 @@ def int8_unet(path: Path, swin: torch.nn.Module, unet: torch.nn.Module, frames: 
             "export without --int8, or calibrate on more frames"
         )
     return {
-        "weights": "int8 (static, per-channel 7-bit weights, QDQ)",
-        "int8_quantized_activations": nodes,
-        "int8_calibration_frames": len(calib),
-        "int8_check_frames": len(check),
-        "int8_enhanced_mean_abs_diff": float(np.abs(enh8 - enh.numpy()).mean()),
+        **entry,
         "int8_angle_change_deg": {
             "mean": mean.round(4).tolist(),
             "p95": np.percentile(change, 95, axis=0).round(4).tolist(),
@@ -328,7 +361,7 @@ SEARCH_INT8_MIN_IOU = 0.97  # the int8 search UNet++'s silhouettes' mean IoU wit
 def export_search_enhancer(
     run_dir: str | Path, model_dir: str | Path, frames: np.ndarray | None = None, int8: bool = False, half: bool = False
 ) -> dict[str, Any]:
-    """Add a run's UNet++ to the model set in ``model_dir`` as its search UNet++ (``search_unetpp.onnx``); return
+    """Add a run's UNet++ to the model set in ``model_dir`` as its search UNet++ (``search_unetpp-<sha256 prefix>.onnx``); return
     its card entry. The set's networks are left as they are; the card (written last) names the new file.
 
     The library search fits this UNet++'s silhouette (``inference.trust.Checker.check``), so a UNet++ trained over
@@ -340,11 +373,8 @@ def export_search_enhancer(
     from inference.files import read_json
     from inference.runtime import SEARCH_ROLE, read_card
 
-    if int8 and (frames is None or len(frames) < INT8_MIN_FRAMES):
-        raise InferenceError(
-            f"int8 quantisation needs at least {INT8_MIN_FRAMES} real frames to calibrate and check on; "
-            "give --frames DATA (a data set from gsa simulate)"
-        )
+    if int8:
+        check_int8_frames(frames)
     d = Path(model_dir)
     card = read_card(d)
     unet, _, cfg, _ = load_trained(run_dir)
@@ -354,58 +384,35 @@ def export_search_enhancer(
     stage = Path(tempfile.mkdtemp(prefix=f".{d.name}-search-", dir=d.parent))
     try:
         path = stage / f"{SEARCH_ROLE}.onnx"
-        export_onnx(unet, path, size)
-        tests = [np.random.default_rng(0).random((2, 1, size, size), dtype=np.float32)]
-        if frames is not None:
-            tests.append(frames[:PARITY_FRAMES, None].astype(np.float32))
-        worst = max(parity(unet, path, t) for t in tests)
-        if worst > PARITY_RTOL:
-            raise InferenceError(f"{path.name}: ONNX Runtime differs from torch by {worst:.2e} (> {PARITY_RTOL})")
-        entry: dict[str, Any] = {"weights": "float32", "parity_max_rel_diff": worst}
+        tests = parity_inputs(size, frames)
+        entry = exported_float(unet, path, size, tests)
         if int8 and frames is not None:
-            x = frames[:, None].astype(np.float32)
-            calib, check = x[: len(x) // 2], x[len(x) // 2 :]
-            nodes = quantize_int8(path, path, calib)
-            sess = _session(path)
-            got = np.concatenate([sess.run(None, {"frame": check[k : k + 8]})[0] for k in range(0, len(check), 8)])
-            with torch.no_grad():
-                ref = torch.cat([unet(torch.from_numpy(check[k : k + 8])) for k in range(0, len(check), 8)]).numpy()
-            a, b = got[:, 0] > 0.5, ref[:, 0] > 0.5
-            union = (a | b).sum(axis=(1, 2))
-            iou = np.where(union > 0, (a & b).sum(axis=(1, 2)) / np.maximum(union, 1), 1.0)  # both empty: they agree
+            int8_entry, got, ref = quantised_unet(path, unet, frames)
+            iou = silhouette_ious(got[:, 0], ref[:, 0])
             if float(iou.mean()) < SEARCH_INT8_MIN_IOU:
                 raise InferenceError(
                     f"{path.name}: the int8 UNet++'s silhouettes overlap the float one's by IoU {iou.mean():.3f} on "
                     f"average (< {SEARCH_INT8_MIN_IOU}); export without --int8, or calibrate on more frames"
                 )
             entry.update(
-                {
-                    "weights": "int8 (static, per-channel 7-bit weights, QDQ)",
-                    "int8_quantized_activations": nodes,
-                    "int8_calibration_frames": len(calib),
-                    "int8_check_frames": len(check),
-                    "int8_enhanced_mean_abs_diff": float(np.abs(got - ref).mean()),
-                    "int8_silhouette_iou": {"mean": round(float(iou.mean()), 4), "min": round(float(iou.min()), 4)},
-                }
+                int8_entry,
+                int8_silhouette_iou={"mean": round(float(iou.mean()), 4), "min": round(float(iou.min()), 4)},
             )
         elif half:
-            entry["float16_tensors"] = store_half(path)
-            entry["half_max_rel_diff"] = max(parity(unet, path, t) for t in tests)
-            entry["weights"] = "float16 (computed in float32)"
-            if entry["half_max_rel_diff"] > HALF_RTOL:
-                raise InferenceError(
-                    f"{path.name}: float16 weights change the output by {entry['half_max_rel_diff']:.2e} "
-                    f"(> {HALF_RTOL}); export without --half"
-                )
+            entry.update(stored_half(unet, path, tests))
         selfcheck = selfcheck_reference(unet, size) if size % SELFCHECK_POOL == 0 else None
         if selfcheck is not None:
             check_computes_here(selfcheck, _session(path), stage)
         training_path = Path(run_dir) / "training.json"
         training = read_json(training_path) if training_path.is_file() else {}
         data = training.get("data") or {}
+        sha = sha256_file(path)
+        # Under a name of its own content, so the card (written last) and the file it names always agree; the file
+        # an earlier export added goes once the card no longer names it.
+        name = f"{SEARCH_ROLE}-{sha[:12]}.onnx"
         entry = {
-            "file": path.name,
-            "sha256": sha256_file(path),
+            "file": name,
+            "sha256": sha,
             "bytes": path.stat().st_size,
             **entry,
             "exported": datetime.now(UTC).isoformat(timespec="seconds"),
@@ -416,10 +423,6 @@ def export_search_enhancer(
             },
             **({"selfcheck": selfcheck} if selfcheck else {}),
         }
-        # Under a name of its own content, so the card (written last) and the file it names always agree; the file
-        # an earlier export added goes once the card no longer names it.
-        name = f"{SEARCH_ROLE}-{entry['sha256'][:12]}.onnx"
-        entry["file"] = name
         os.replace(path, d / name)
         old = (card["files"].get(SEARCH_ROLE) or {}).get("file")
         card["files"][SEARCH_ROLE] = entry
