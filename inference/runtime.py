@@ -173,26 +173,19 @@ class Estimator:
         card = read_card(d)
         opts = session_options(threads)
         sessions = {}
-        for role in ("unetpp", "swin"):
+        for role in (r for r in ("unetpp", "swin", SEARCH_ROLE) if r in card["files"]):
             path = d / card["files"][role]["file"]
+            # The search's UNet++ on one intra-op thread: the fit's threads call it, a frame each, one a core
+            # (``Checker.check_many``).
+            role_opts = session_options(1) if role == SEARCH_ROLE else opts
             try:
-                sessions[role] = ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
+                sessions[role] = ort.InferenceSession(str(path), role_opts, providers=["CPUExecutionProvider"])
             except Exception as exc:  # onnxruntime raises its own exception types
                 raise ModelFileError(f"model file {path} cannot be loaded: {exc}", field="model") from None
         if card.get("selfcheck"):
             check_computes_here(card["selfcheck"], sessions["unetpp"], d)
-        search = card["files"].get(SEARCH_ROLE)
-        if search:
-            # One intra-op thread: the fit's threads call it, a frame each, one a core (``Checker.check_many``).
-            path = d / search["file"]
-            try:
-                sessions[SEARCH_ROLE] = ort.InferenceSession(
-                    str(path), session_options(1), providers=["CPUExecutionProvider"]
-                )
-            except Exception as exc:
-                raise ModelFileError(f"model file {path} cannot be loaded: {exc}", field="model") from None
-            if search.get("selfcheck"):
-                check_computes_here(search["selfcheck"], sessions[SEARCH_ROLE], d)
+        if (card["files"].get(SEARCH_ROLE) or {}).get("selfcheck"):
+            check_computes_here(card["files"][SEARCH_ROLE]["selfcheck"], sessions[SEARCH_ROLE], d)
         return cls(d, card, sessions, run_batch)
 
     @property
