@@ -421,6 +421,11 @@ class FitOptions:
     prior_sigma_deg: float = 10.0
     prior_weight: float = 0.002  # cost at one sigma from the start: 0.2 % of IoU
     prune: float = 0.03  # drop a hypothesis whose cost is this far behind the best after the first step
+    # Prune on the starts' own costs too, before any has moved (off: only after the first step's iterations). A
+    # library entry lies up to about half a spacing from its basin, and its cost there says little about the basin's:
+    # an entry 13 deg from the truth started 0.06 behind the best and ended 0.14 ahead of it
+    # (design/measurements.md, "Neighbouring basins and the library's starts").
+    prune_at_start: bool = True
     coarse: bool = False  # fit the 4x-pooled coverage instead (Renderer.coverage): smooth but biased, for far starts
     # Step in a rotation vector about each start (deg, observation-frame axes) instead of in the Euler angles:
     # the same step turns the body the same whatever the attitude, where near y = +-90 deg two Euler angles turn it
@@ -485,7 +490,7 @@ def fit(
     # Score every start first, and refine only those that begin within ``prune`` of the best.
     c0, iou0 = cost(best[:, None, :], np.arange(len(names)))
     best_cost, best_iou = c0[:, 0].copy(), iou0[:, 0].copy()
-    if opt.prune > 0:
+    if opt.prune > 0 and opt.prune_at_start:
         alive &= (best_cost <= best_cost.min() + opt.prune) | kept
     for step_no, h in enumerate(opt.steps_deg):
         for _ in range(opt.max_iter[min(step_no, len(opt.max_iter) - 1)]):
