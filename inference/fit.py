@@ -423,7 +423,7 @@ class FitOptions:
     prune: float = 0.03  # drop a hypothesis whose cost is this far behind the best after the first step
     # Prune on the starts' own costs too, before any has moved (off: only after the first step's iterations). A
     # library entry lies up to about half a spacing from its basin, and its cost there says little about the basin's:
-    # an entry 13 deg from the truth started 0.06 behind the best and ended 0.14 ahead of it
+    # an entry 13 deg from the truth started 0.06 behind the best and ended the coarse fit 0.09 ahead of it
     # (design/measurements.md, "Neighbouring basins and the library's starts").
     prune_at_start: bool = True
     coarse: bool = False  # fit the 4x-pooled coverage instead (Renderer.coverage): smooth but biased, for far starts

@@ -15,7 +15,7 @@ the target's projection (``inference.fit``), and returns a ``Checked``:
   inside (``calibrate``). Without refinement: the calibration frames' 90 % quantile of
   Swin's own error;
 * ``quality.trusted`` and ``quality.reasons``: every check the answer failed, in words;
-* ``alternatives``: other attitudes (the near-mirror (z, -y, -x), library matches) whose
+* ``alternatives``: other attitudes (the near-mirror (z, -y, -x), library matches, the answer's tilts) whose
   fit is within ``ALTERNATIVE_MARGIN`` of the best, each with its own IoU.
 
 The checks, each a threshold from the calibration (``trust.json`` beside the models):
@@ -83,7 +83,7 @@ LIBRARY_FINE = FitOptions(steps_deg=(2.0, 1.0, 0.5, 0.25, 0.12), max_iter=(4, 4,
 # cross-range axes: a silhouette pins the turn within the image plane, but near a pose it barely tells from its
 # tilted neighbours the landscape holds several basins 10-25 deg apart, which the coarse fit merges (its pooled
 # pixels) and the fine fit, started in one, never leaves. Two rounds at most: another only where one moved the
-# answer into another basin. The tilts go down to 0.5 deg steps; the one that beats the answer is polished.
+# answer into another basin. The tilts go down to 0.5 deg steps; the one that beats the answer is polished
 # (design/measurements.md, "Neighbouring basins and the library's starts").
 TILT_DEG = 12.0
 TILT_ROUNDS = 2

@@ -322,7 +322,7 @@ def test_a_search_answer_settles_in_the_basin_that_fits_best_not_the_first_it_fi
     - 141: the fine fit settled in a basin 21 deg off, tilted out of the image plane; the truth's basin fits better
       (soft IoU 0.948 against 0.940): the answer's tilts reach it.
     - 293 (trusted, 179 deg off): the library entry 13 deg from the truth began 0.06 behind the best entry, and the
-      coarse fit pruned it before it moved; refined, it ends 0.14 ahead.
+      coarse fit pruned it before it moved; refined, it ends the coarse fit 0.09 ahead.
     - 96, 312: the cube's frames at the noise floor (both flagged), searched on the search UNet++'s poorer silhouette
       there; inside the cube the networks' UNet++ is the one trained on it. Within 10 deg before that UNet++ came."""
     from inference.simulation.catalogue import at_attitudes
