@@ -500,8 +500,13 @@ class Checker:
         winner = max([fits[0], *rivals], key=lambda f: score[id(f)])
         return [winner, *[f for f in fits if f is not winner]]
 
-    def search(self, enhanced: Vec, count: int = 4) -> list[Fit]:
-        """Fit from the library's best ``count`` matches, coarse then fine (no network needed); best first."""
+    def search(self, enhanced: Vec, count: int = 6) -> list[Fit]:
+        """Fit from the library's best ``count`` matches, coarse then fine (no network needed); best first.
+
+        Six, not four: a library entry's match is scored where it lies, up to about half a spacing from its basin,
+        and on a frame the service answered 179 deg off (trusted) the entries that lead to the truth ranked fifth and
+        sixth; their coarse fits then end 0.09 ahead of the rest. The two more coarse fits cost about 5 ms a frame
+        (design/measurements.md, "Neighbouring basins and the library's starts")."""
         starts = {f"library-{i}": a for i, a in enumerate(self.library.starts(enhanced, count))}
         coarse = fit(self.renderer, enhanced, starts, LIBRARY_COARSE)
         return fit(self.renderer, enhanced, {f.start: f.angles_deg for f in coarse[:3]}, LIBRARY_FINE)
