@@ -449,8 +449,9 @@ class Checker:
         return Checked(angles, net, bool(fits), quality, alternatives, features, cov)
 
     def _tilts(self, enhanced: Vec, fits: list[Fit]) -> list[Fit]:
-        """``fits`` with the best one's ``tilted`` neighbours refined (``LIBRARY_FINE``), best first; again from the
-        new best where one fits better, ``TILT_ROUNDS`` rounds at most."""
+        """``fits`` with the best one's ``tilted`` neighbours refined (``TILT_FIT``, the one that beats it polished
+        with ``TILT_POLISH``), best first; again from the new best where it lies in another basin (``DISTINCT_DEG``
+        away), ``TILT_ROUNDS`` rounds at most."""
         best = fits[0]
         for _ in range(TILT_ROUNDS):
             starts = {f"tilt-{i}": a for i, a in enumerate(tilted(self.renderer, best.angles_deg))}
