@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from inference.frames import normalise_frame
-from inference.simulation.dataset import DatasetSpec, frame_truth
+from inference.simulation.dataset import DatasetSpec, frame_scattering, frame_truth
 from inference.simulation.radar import Imager, Radar
 from inference.simulation.scene import DEFAULT_SCATTERING, Scattering, simulate
 from inference.simulation.targets import TargetModel, comsat_like, tiangong_like
@@ -58,13 +58,19 @@ def simulated(
     spec: DatasetSpec,
     radar: Radar | None = None,
     model: TargetModel | None = None,
-    scattering: Scattering = DEFAULT_SCATTERING,
+    scattering: Scattering | None = None,
 ) -> tuple[NDArray[np.float32], NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
-    """Return a spec's frames (normalised), angles, SNRs and labels, of ``model`` (default: the default target)."""
+    """Return a spec's frames (normalised), angles, SNRs and labels, of ``model`` (default: the default target).
+
+    ``scattering``: one for every frame; None: each frame's own, as the spec draws it for training
+    (``frame_scattering``: its variety preset and physics, or the default scattering).
+    """
     truths = [frame_truth(spec, i) for i in range(spec.n)]
     angles = np.array([t[0] for t in truths], float).reshape(-1, 3)
     snrs = np.array([np.nan if t[1] is None else t[1] for t in truths], float)
-    frames, labels = at_attitudes(angles, snrs, [t[2] for t in truths], radar, model, scattering)
+    seeds = [t[2] for t in truths]
+    each = [frame_scattering(spec, s) for s in seeds] if scattering is None else scattering
+    frames, labels = at_attitudes(angles, snrs, seeds, radar, model, each)
     return frames, angles, snrs, labels
 
 
@@ -74,19 +80,23 @@ def at_attitudes(
     seeds: list[int],
     radar: Radar | None = None,
     model: TargetModel | None = None,
-    scattering: Scattering = DEFAULT_SCATTERING,
+    scattering: Scattering | list[Scattering] = DEFAULT_SCATTERING,
 ) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
-    """Return frames (normalised) and labels of ``model`` at given attitudes [N, 3] (z, y, x deg), SNRs (NaN: none)."""
+    """Return frames (normalised) and labels of ``model`` at given attitudes [N, 3] (z, y, x deg), SNRs (NaN: none);
+    ``scattering``: one for every frame, or a list of each frame's."""
     radar = radar or Radar()
     model = model or tiangong_like()
     imager = Imager(radar)
     n = len(angles_deg)
+    each = [scattering] * n if isinstance(scattering, Scattering) else list(scattering)
+    if len(each) != n:
+        raise ValueError(f"{len(each)} scatterings for {n} frames: give one, or one a frame")
     frames = np.empty((n, radar.n_range, radar.n_azimuth), np.float32)
     labels = np.empty((n, radar.n_range, radar.n_azimuth), bool)
     for i in range(n):
         ang = (float(angles_deg[i][0]), float(angles_deg[i][1]), float(angles_deg[i][2]))
         snr = None if not np.isfinite(snrs_db[i]) else float(snrs_db[i])
-        f = simulate(model, imager, ang, snr, int(seeds[i]), scattering)
+        f = simulate(model, imager, ang, snr, int(seeds[i]), each[i])
         frames[i], labels[i] = normalise_frame(np.abs(f.image)), f.label
     return frames, labels
 

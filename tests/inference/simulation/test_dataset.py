@@ -265,3 +265,20 @@ def test_a_shard_is_the_same_bytes_whenever_it_is_written(tmp_path, monkeypatch)
     assert now["content_sha256"] == later["content_sha256"]
     with np.load(tmp_path / "later" / "shard-00000.npz") as z:  # still an ordinary .npz
         assert z["image"].shape == (2, 64, 64) and z["label"].dtype == np.uint8
+
+
+@pytest.mark.parametrize("spec_kwargs", [{"variety": "robust"}, {"variety": "robust", "attitudes": "so3"}, {}])
+def test_the_catalogues_frames_of_a_spec_are_the_frames_its_training_set_holds(spec_kwargs):
+    """``catalogue.simulated`` (the frames benchmarks and ``gsa calibrate`` score on) against ``render_frames`` (the
+    frames a training set is written from): one spec, the same frames, its variety preset included. Before, the
+    catalogue dropped the spec's variety: bench.so3's "robust preset" row and the calibration's robust frames were
+    default frames of another seed."""
+    from inference.simulation.catalogue import simulated
+    from inference.simulation.dataset import render_frames
+
+    spec = DatasetSpec(n=3, seed=5, **spec_kwargs)
+    frames, angles, _, labels = simulated(spec, SMALL)
+    stored = render_frames(spec, SMALL, 0, 3)
+    np.testing.assert_allclose(angles, stored["angles_deg"], atol=1e-4)
+    np.testing.assert_array_equal(labels, np.unpackbits(stored["label"], axis=-1).astype(bool))
+    np.testing.assert_allclose(frames, stored["image"].astype(np.float32), atol=2e-3)  # the set stores float16
