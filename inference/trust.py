@@ -90,6 +90,12 @@ TILT_ROUNDS = 2
 TILT_FIT = FitOptions(steps_deg=(2.0, 1.0, 0.5), max_iter=(4, 4, 3), prior_weight=0.0, local=True)
 TILT_POLISH = FitOptions(steps_deg=(0.25, 0.12), max_iter=(2, 2), prior_weight=0.0, local=True)
 
+# The other branch's best fit is tilted as the answer was only where the choice is open: it fits within
+# ALTERNATIVE_MARGIN of the answer, or the answer itself fits poorly (soft IoU below this; 5 % of SO(3) frames).
+# Tilting it on every frame cost 40-60 % more time a frame (design/measurements.md, "Both branches settle where they
+# fit best").
+TILT_OTHER_BELOW = 0.8
+
 
 def in_cube(angles_deg: Vec) -> bool:
     """Whether an attitude lies in the +-``CUBE_DEG`` the networks were trained on, every Euler angle."""
@@ -390,13 +396,15 @@ class Checker:
                 searched = True
                 scale, floor = cal.bounds_model(searched)
             first = fits[0]
-            fits = self._by_brightness(frame, enh, self._with_other_branch(enh, fits))
+            fits = self._by_brightness(frame, enh, self._with_other_branch(enh, fits, searched))
             if fits[0] is not first:
                 # The other branch's refit fits better, or the bright parts chose another fit: its own other branch
                 # may never have been refined, so refine it and choose again. (Where the best is still ``first``,
                 # its other branch was refined, even if the refit moved over DISTINCT_DEG from the exact mirror:
                 # refining the same start again gave the same fit twice: on 81 of 200 frames over SO(3).)
-                refit = self._with_other_branch(enh, fits)
+                # Its tilts too, unless that other branch is ``first``, whose neighbours the search's tilts refined.
+                again = searched and geodesic_deg(mirror(fits[0].angles_deg), first.angles_deg)[0] >= DISTINCT_DEG
+                refit = self._with_other_branch(enh, fits, again)
                 if refit is not fits:
                     fits = self._by_brightness(frame, enh, refit)
             best = fits[0]
@@ -468,19 +476,32 @@ class Checker:
                 break
         return fits
 
-    def _with_other_branch(self, enhanced: Vec, fits: list[Fit]) -> list[Fit]:
+    def _with_other_branch(self, enhanced: Vec, fits: list[Fit], tilt: bool = False) -> list[Fit]:
         """The best fit's near-mirror, refined from there where no fit already lies near it (else ``fits`` itself,
         unchanged): both branches of the pair reach the brightness tie-break and the alternatives (an answer found
         by the library search, or a network answer whose own mirror start went elsewhere, had none).
 
         Refined as the library's starts are (coarse, then fine, in steps about the start): an answer off its own
         branch by a few degrees has a mirror as far off the other one, and outside the cube Euler steps stall near
-        y = +-90 deg (design/measurements.md, "The other branch's refit")."""
+        y = +-90 deg (design/measurements.md, "The other branch's refit"). The exact mirror is refined fine as well:
+        where the answer sits on its own branch, the coarse fit's pooled pixels can drag its mirror out of the truth's
+        basin into a neighbour. ``tilt`` (a searched answer), where the choice is open (the other branch within
+        ``ALTERNATIVE_MARGIN`` of the answer, or the answer below ``TILT_OTHER_BELOW``): the other branch's best fit,
+        new or already there, is refined again from its ``tilted`` neighbours as the answer was (``_tilts``), so that
+        branch too settles in the basin that fits best (design/measurements.md, "Both branches settle where they fit
+        best")."""
         other = mirror(fits[0].angles_deg)
-        if any(geodesic_deg(f.angles_deg, other)[0] < DISTINCT_DEG for f in fits):
+        near = [f for f in fits if geodesic_deg(f.angles_deg, other)[0] < DISTINCT_DEG]
+        refined: list[Fit] = []
+        if not near:
+            coarse = fit(self.renderer, enhanced, {"other-branch": other}, LIBRARY_COARSE)
+            starts = {"other-branch": coarse[0].angles_deg, "other-branch-exact": other}
+            refined = [replace(f, start="other-branch") for f in fit(self.renderer, enhanced, starts, LIBRARY_FINE)]
+        base = near[:1] or refined[:1]
+        if tilt and (fits[0].iou < TILT_OTHER_BELOW or fits[0].iou - base[0].iou <= ALTERNATIVE_MARGIN):
+            refined += [f for f in self._tilts(enhanced, base) if f is not base[0]]
+        if not refined:
             return fits
-        coarse = fit(self.renderer, enhanced, {"other-branch": other}, LIBRARY_COARSE)
-        refined = fit(self.renderer, enhanced, {"other-branch": coarse[0].angles_deg}, LIBRARY_FINE)
         return sorted(fits + refined, key=lambda f: f.cost)
 
     def _by_brightness(self, frame: NDArray[np.floating], enhanced: Vec, fits: list[Fit]) -> list[Fit]:
