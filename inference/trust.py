@@ -385,14 +385,14 @@ class Checker:
                     if net is not None:
                         starts = {"network": net, "mirror": mirror(net)}
                         fits = fit(self.renderer, enh, starts, prior_at=net, keep=("mirror",))
-                fits = self._tilts(enh, sorted(fits + self.search(enh), key=lambda f: f.cost))
+                fits = self._searched(enh, fits)
                 if enh is not networks_enh and in_cube(fits[0].angles_deg):
                     # Inside the cube the networks' UNet++ draws the sharper silhouette: it was trained there, and
                     # the search's UNet++ is the poorer one only there, at the noise floor
                     # (design/measurements.md, "The search UNet++ inside the cube"). Search again on its silhouette.
                     enh = networks_enh
                     features["doubt"] = enhancer_doubt(enh)
-                    fits = self._tilts(enh, sorted(networks_fits + self.search(enh), key=lambda f: f.cost))
+                    fits = self._searched(enh, networks_fits)
                 searched = True
                 scale, floor = cal.bounds_model(searched)
             first = fits[0]
@@ -455,6 +455,10 @@ class Checker:
         if raw_cov is not None and np.all(np.isfinite(bound)):
             cov = bound_covariance(raw_cov, scale, floor)
         return Checked(angles, net, bool(fits), quality, alternatives, features, cov)
+
+    def _searched(self, enhanced: Vec, fits: list[Fit]) -> list[Fit]:
+        """``fits`` and the library search's on ``enhanced``, the best one then refined from its tilts, best first."""
+        return self._tilts(enhanced, sorted(fits + self.search(enhanced), key=lambda f: f.cost))
 
     def _tilts(self, enhanced: Vec, fits: list[Fit]) -> list[Fit]:
         """``fits`` with the best one's ``tilted`` neighbours refined (``TILT_FIT``, the one that beats it polished
@@ -819,7 +823,6 @@ def library_limits(
     ones 1.5 deg at the median (2.2 at the 90th percentile), so a tighter limit lets a lower IoU threshold trust more
     correct answers with fewer wrong ones (design/measurements.md, "The library path's bound limit").
     """
-    from inference.rotations import geodesic_deg
 
     correct = searched & (geodesic_deg(np.array([c.angles_deg for c in checks]), truth) <= 2.0)
     best: tuple[int, Calibration] | None = None
@@ -847,7 +850,6 @@ def library_iou_threshold(
     frames is how well the projection fits at all. The calibration frames' truth is known, so the threshold is set
     where their wrong answers stop being trusted, and ``bench.so3`` measures it on frames of another seed.
     """
-    from inference.rotations import geodesic_deg
 
     answers = np.array([c.angles_deg for c in checks])
     err = geodesic_deg(answers, truth)
