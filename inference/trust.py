@@ -92,8 +92,8 @@ TILT_POLISH = FitOptions(steps_deg=(0.25, 0.12), max_iter=(2, 2), prior_weight=0
 
 # The other branch's best fit is tilted as the answer was only where the choice is open: it fits within
 # ALTERNATIVE_MARGIN of the answer, or the answer itself fits poorly (soft IoU below this; 5 % of SO(3) frames).
-# Tilting it on every frame cost 40-60 % more time a frame (design/measurements.md, "Both branches settle where they
-# fit best").
+# Tilting it on every frame cost 40-60 % more time a frame
+# (design/measurements.md, "Both branches settle where they fit best").
 TILT_OTHER_BELOW = 0.8
 
 
@@ -492,8 +492,8 @@ class Checker:
         basin into a neighbour. ``tilt`` (a searched answer), where the choice is open (the other branch within
         ``ALTERNATIVE_MARGIN`` of the answer, or the answer below ``TILT_OTHER_BELOW``): the other branch's best fit,
         new or already there, is refined again from its ``tilted`` neighbours as the answer was (``_tilts``), so that
-        branch too settles in the basin that fits best (design/measurements.md, "Both branches settle where they fit
-        best")."""
+        branch too settles in the basin that fits best
+        (design/measurements.md, "Both branches settle where they fit best")."""
         other = mirror(fits[0].angles_deg)
         near = [f for f in fits if geodesic_deg(f.angles_deg, other)[0] < DISTINCT_DEG]
         refined: list[Fit] = []
