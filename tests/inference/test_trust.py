@@ -462,3 +462,33 @@ def test_a_library_search_fits_the_search_unets_silhouette_not_the_networks(ship
     assert c.quality.silhouette_iou > 0.85  # scored on the search's silhouette
     without = checker.check(frames[0], blank, np.zeros(3))
     assert without.quality.silhouette_iou == 0.0 and not without.quality.trusted
+
+
+def test_a_network_answer_that_cannot_fit_is_not_fitted_and_the_answers_are_those_of_fitting_it(shipped, monkeypatch):
+    """``NETWORK_FIT_GAIN``: where neither Swin's answer nor its near-mirror comes within the gain of
+    ``search_below``, the check skips their fits. Against the brute force on fresh frames over SO(3): fitting them
+    (as the check would) raises the better one's IoU by less than the gain, so it never reaches ``search_below``;
+    and the checked answers, trust and alternatives are those of the check that fits every network answer."""
+    import inference.trust as trust
+    from inference.fit import fit, mirror, silhouette_iou
+
+    est, checker = shipped
+    frames, _, _ = good_frames(12, FRESH_SEED + 47, attitudes="so3")
+    res = est.estimate(frames)
+    below = checker.calibration.search_below
+    skipped = 0
+    for k in range(len(frames)):
+        net, enh = res.angles_deg[k], res.enhanced[k].astype(np.float64)
+        raw = float(np.max(silhouette_iou(checker.renderer, np.stack([net, mirror(net)]), enh)))
+        fitted = fit(checker.renderer, enh, {"network": net, "mirror": mirror(net)}, prior_at=net, keep=("mirror",))
+        gain = float(silhouette_iou(checker.renderer, fitted[0].angles_deg, enh)[0]) - raw
+        assert gain < trust.NETWORK_FIT_GAIN, (k, raw, gain)
+        skipped += raw < below - trust.NETWORK_FIT_GAIN
+    assert skipped >= len(frames) // 2  # most of Swin's in-cube answers are far off on frames over SO(3)
+    quick = checker.check_many(frames, res.enhanced, res.angles_deg, search_enhancer=est.search_enhancer)
+    monkeypatch.setattr(trust, "NETWORK_FIT_GAIN", 10.0)  # every network answer fitted, as before
+    full = checker.check_many(frames, res.enhanced, res.angles_deg, search_enhancer=est.search_enhancer)
+    for q, f in zip(quick, full, strict=True):
+        np.testing.assert_allclose(q.angles_deg, f.angles_deg, atol=1e-9)
+        assert q.quality == f.quality
+        assert [a.angles_deg for a in q.alternatives] == [a.angles_deg for a in f.alternatives]
