@@ -638,14 +638,21 @@ def fit_bounds(raw: Vec, errors: Vec, coverage: float = 0.9) -> tuple[float, flo
 
     Of the pairs that cover, the one with the narrowest mean bound, the floor kept at or
     under the median error so the curvature, not a constant, carries the tail.
+
+    "Cover" at split conformal prediction's finite-sample rank: the scale is the ceil((n + 1) coverage)-th smallest
+    of the n frames' needs, not their empirical quantile, which covers a next frame with chance under ``coverage``
+    by about 1/n: 85.6 / 87.3 / 88.6 % at n = 20 / 40 / 100 against 89.8 / 89.4 / 89.5 % at that rank (what is
+    left is choosing the floor on the same frames), where an adapted set's held-out scenes hold some 40 frames
+    (design/measurements.md, "Bounds fitted on few frames").
     """
     err = np.abs(errors)
     finite = np.isfinite(raw)
     raw = np.where(finite, raw, 1e6)
     best = (math.inf, 1.0, 0.0)
+    rank = min(math.ceil((len(err) + 1) * coverage), len(err)) - 1
     for floor in np.quantile(err, np.linspace(0.0, 0.5, 11)):
         need = np.sqrt(np.maximum(err**2 - floor**2, 0.0)) / np.maximum(raw, 1e-9)
-        scale = float(np.quantile(need, coverage))
+        scale = float(np.sort(need)[rank])
         width = float(np.mean(np.sqrt(floor**2 + (scale * raw) ** 2)))
         if width < best[0]:
             best = (width, scale, float(floor))
