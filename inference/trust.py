@@ -380,7 +380,7 @@ class Checker:
             hopeless = (
                 net is not None
                 and search
-                and max(self._hard_iou(net, enh), self._hard_iou(mirror(net), enh))
+                and float(np.max(silhouette_iou(self.renderer, np.stack([net, mirror(net)]), enh)))
                 < cal.search_below - NETWORK_FIT_GAIN
             )
             if net is not None and not hopeless:
