@@ -765,9 +765,10 @@ def calibrate(
     feats = features(first)
     cube = np.max(np.abs(truth), axis=1) <= CUBE_DEG
     net_rows = cube if cube.sum() >= MIN_LIBRARY_FRAMES else np.ones(len(frames), bool)
-    iou_min = round(float(np.quantile(feats["iou"][net_rows], 0.01)) - 0.005, 4)
+    first_pct, share_pct = np.quantile(feats["iou"][net_rows], [0.01, SEARCH_SHARE])
+    iou_min = round(float(first_pct) - 0.005, 4)
     if search_iou_min is None:
-        search_iou_min = max(iou_min, round(float(np.quantile(feats["iou"][net_rows], SEARCH_SHARE)) - 0.005, 4))
+        search_iou_min = max(iou_min, round(float(share_pct) - 0.005, 4))
     # Who searches at that threshold, and what the search finds (the library path's own figures).
     second = check_all(replace(loose, iou_min=iou_min, search_iou_min=search_iou_min), "library search")
     searched = features(second)["searched"] > 0.5
