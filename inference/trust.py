@@ -137,6 +137,8 @@ class Calibration:
     median_range: tuple[float, float] = (0.1, 0.65)
     moved_max_deg: float = 5.0
     angle_limit_deg: float = 50.0
+    # The network path's ambiguity margin and widest trusted 90 % bound: these defaults on our own radar; a set
+    # recalibrated on another radar's frames chooses its own on them (``network_limits``).
     ambiguity_margin: float = 0.002
     max_bound_deg: float = 5.0
     scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
@@ -706,6 +708,7 @@ def calibrate(
     progress: bool = False,
     search_iou_min: float | None = None,
     search_enhancer: Enhancer | None = None,
+    own_limits: bool = False,
 ) -> tuple[Calibration, list[Checked]]:
     """Fit the thresholds and the uncertainty model on fresh good frames with known attitudes.
 
@@ -725,6 +728,8 @@ def calibrate(
     the same frames (less the same 0.005). ``search_iou_min`` fixes it instead (a set recalibrated on another radar's
     frames keeps its base set's: ``Calibration.search_iou_min``).
     ``search_enhancer``: the set's search UNet++ (``Checker.check``), run once a frame however often it is checked.
+    ``own_limits``: choose the network path's bound limit and ambiguity margin on these frames too
+    (``network_limits``; a set recalibrated on another radar's frames), instead of keeping the defaults.
     """
     import sys
 
@@ -825,11 +830,55 @@ def calibrate(
     )
     if library:
         cal = library_limits(checker, cal, checks, truth, searched)
+    if own_limits:
+        cal = network_limits(checker, cal, checks, truth)
     return cal, check_all(cal, "checked")
 
 
 LIBRARY_BOUND_LIMITS_DEG = (1.5, 2.0, 2.5, 3.0, 4.0, 5.0)  # the library path's bound limits tried (up to max_bound_deg)
 LIBRARY_AMBIGUITY_MARGINS = (0.002, 0.005, 0.01, 0.02)  # and its ambiguity margins (soft IoU)
+
+
+NETWORK_BOUND_LIMITS_DEG = (5.0, 6.0, 7.0, 8.0, 10.0)  # a recalibration's network-path bound limits tried
+NETWORK_AMBIGUITY_MARGINS = (0.002, 0.001, 0.0)  # and its ambiguity margins (0: flagged where a rival fits better)
+NETWORK_WRONG_DEG = 5.0  # a network-path answer this far off is wrong: ``network_limits`` trusts none
+
+
+def network_limits(checker: Checker, cal: Calibration, checks: list[Checked], truth: Vec) -> Calibration:
+    """The network path's bound limit and ambiguity margin, for a set recalibrated on another radar's frames: of the
+    limits from ``cal.max_bound_deg`` up (``NETWORK_BOUND_LIMITS_DEG``) and the margins from ``cal.ambiguity_margin``
+    down (``NETWORK_AMBIGUITY_MARGINS``), the pair that trusts the most correct (<= 2 deg) calibration answers while
+    trusting none over ``NETWORK_WRONG_DEG`` off; ties go to the stricter pair (the wider margin, then the tighter
+    limit), so without a gain ``cal``'s own are kept. The choice and its count go into ``made["network_limits"]``.
+
+    The bounds are calibrated on the same frames (90 % coverage), so a bound of 6 deg on this radar is as honest as
+    one of 1 deg on ours; the fixed 5 deg limit sits on another radar's typical bound and flags its good answers
+    for their width alone, and there a rival within 0.002 does not tell good answers from bad
+    (design/measurements.md, "Good answers flagged on another radar: the bound limit and the ambiguity margin").
+    """
+    err = geodesic_deg(np.array([c.angles_deg for c in checks]), truth)
+    correct, wrong = err <= 2.0, err > NETWORK_WRONG_DEG
+    best: tuple[int, Calibration] | None = None
+    for margin in (m for m in NETWORK_AMBIGUITY_MARGINS if m <= cal.ambiguity_margin):
+        for limit in (b for b in NETWORK_BOUND_LIMITS_DEG if b >= cal.max_bound_deg):
+            trial = replace(cal, max_bound_deg=limit, ambiguity_margin=margin)
+            trusted = trusted_under(checker, trial, checks)
+            if (trusted & wrong).any():
+                continue
+            kept = int((trusted & correct).sum())
+            if best is None or kept > best[0]:
+                best = (kept, trial)
+    if best is None:
+        return cal
+    chosen = best[1]
+    choice = {
+        "max_bound_deg": chosen.max_bound_deg,
+        "ambiguity_margin": chosen.ambiguity_margin,
+        "correct_trusted": best[0],
+        "correct": int(correct.sum()),
+        "frames": len(checks),
+    }
+    return replace(chosen, made={**chosen.made, "network_limits": choice})
 
 
 def trusted_under(checker: Checker, cal: Calibration, checks: list[Checked]) -> NDArray[np.bool_]:

@@ -463,6 +463,7 @@ def recalibrate(
     (copied) and the record says so: thresholds from a handful of frames would be noise. The library
     search's trigger stays the base set's (``Calibration.search_iou_min``): this radar's poorer
     silhouettes lower the trust threshold, and a trigger that low would stop the search where Swin is wrong.
+    The network path's bound limit and ambiguity margin are chosen on the held-out frames (``network_limits``).
     """
     from inference.runtime import Estimator
     from inference.trust import TRUST_FILE, Calibration, Checker, calibrate
@@ -496,6 +497,7 @@ def recalibrate(
         made,
         search_iou_min=trigger,
         search_enhancer=est.search_enhancer,
+        own_limits=True,
     )
     cal.write(model_dir / TRUST_FILE)
     fitted = np.array([c.angles_deg for c in checks])
@@ -506,6 +508,8 @@ def recalibrate(
         "fitted_geodesic_median_deg": round(float(np.median(geo)), 3),
         "flagged_share": round(float(np.mean([not c.quality.trusted for c in checks])), 3),
         "search_iou_min": trigger,
+        "max_bound_deg": cal.max_bound_deg,
+        "ambiguity_margin": cal.ambiguity_margin,
     }
 
 

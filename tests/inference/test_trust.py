@@ -263,6 +263,39 @@ def test_the_library_ambiguity_margin_chosen_flags_wrong_answers_a_rival_fits_ne
     assert trusted_under(checker, cal, compare).tolist() == [False]
 
 
+def test_a_recalibrated_network_path_widens_its_bound_limit_and_margin_as_far_as_its_wrong_answers_allow(shipped):
+    """The rule, on made-up network answers of another radar (inside the cube, every other check passed; bound =
+    raw under a unit scale and no floor): the correct ones are bounded at 5.5-6.5 deg with a rival 0.0015 behind,
+    the wrong ones (8 and 20 deg off) at 9 deg or with a rival that fits 0.003 better. The 5 deg limit and 0.002
+    margin flag every correct answer; the tightest limit over the correct answers' bounds (7 deg; 10 would trust the
+    wrong one's 9) and the widest margin under the correct answers' rival gap (0.001: none still flags the rival that fits better)
+    trust them all. The choice is recorded; the base limits stay where nothing is gained."""
+    from dataclasses import replace
+
+    from inference.trust import Alternative, network_limits, trusted_under
+
+    _, checker = shipped
+    base = replace(checker.calibration, scale=(1.0, 1.0, 1.0), floor_deg=(0.0, 0.0, 0.0), iou_min=0.9)
+
+    def answer(angles, raw, gap):
+        feats = {"median": 0.3, "doubt": 0.0, "iou": 0.97, "searched": 0.0, **{f"raw_{a}": raw for a in "zyx"}}
+        rival = [Alternative((-10.0, 5.0, 0.0), 0.97 - gap, gap, 30.0, "other-branch")]
+        return Checked(np.array(angles, float), None, True, Quality(0.97, (raw,) * 3, True, []), rival, feats)
+
+    right = [answer((10.0, 5.0, 0.3), raw, 0.0015) for raw in np.linspace(5.5, 6.5, 20)]
+    wrong = [answer((10.0, 13.0, 0.0), 9.0, 0.05), answer((30.0, 5.0, 0.0), 3.0, -0.003)]
+    truth = np.tile([10.0, 5.0, 0.0], (22, 1))
+    assert not trusted_under(checker, base, right).any()
+    cal = network_limits(checker, base, right + wrong, truth)
+    assert (cal.max_bound_deg, cal.ambiguity_margin) == (7.0, 0.001)
+    assert trusted_under(checker, cal, right).all() and not trusted_under(checker, cal, wrong).any()
+    assert cal.made["network_limits"]["correct_trusted"] == 20
+    # Correct answers the base limits already trust: nothing to gain, the base limits kept.
+    tight = [answer((10.0, 5.0, 0.3), raw, 0.05) for raw in np.linspace(1.0, 3.0, 20)]
+    kept = network_limits(checker, base, tight + wrong, truth)
+    assert (kept.max_bound_deg, kept.ambiguity_margin) == (base.max_bound_deg, base.ambiguity_margin)
+
+
 def test_the_library_search_is_triggered_by_its_own_threshold_not_the_trust_threshold(shipped):
     """A set recalibrated on another radar keeps its base set's search trigger (Calibration.search_iou_min) while
     its trust threshold falls: whether a frame is searched follows the trigger alone, and without one, iou_min."""
