@@ -143,6 +143,8 @@ def evaluate(model_dir: Path, frames: np.ndarray, truth: np.ndarray) -> dict[str
         "trusted_outside_any_bound": round(float(np.mean(~inside[trusted].all(axis=1))), 4) if trusted.any() else None,
         "bound_coverage": [round(float(v), 4) for v in inside.mean(axis=0)],
         "good_flagged": round(float(np.mean(~trusted[good])), 4) if good.any() else None,
+        "trusted_over_5_deg": int(np.sum(trusted & (geo > 5.0))),
+        "trusted_over_10_deg": int(np.sum(trusted & (geo > 10.0))),
         "swin_median_deg": round(float(np.median(geodesic_deg(res.angles_deg, truth))), 3),
     }
 

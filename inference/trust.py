@@ -848,8 +848,9 @@ def network_limits(checker: Checker, cal: Calibration, checks: list[Checked], tr
     """The network path's bound limit and ambiguity margin, for a set recalibrated on another radar's frames: of the
     limits from ``cal.max_bound_deg`` up (``NETWORK_BOUND_LIMITS_DEG``) and the margins from ``cal.ambiguity_margin``
     down (``NETWORK_AMBIGUITY_MARGINS``), the pair that trusts the most correct (<= 2 deg) calibration answers while
-    trusting none over ``NETWORK_WRONG_DEG`` off; ties go to the stricter pair (the wider margin, then the tighter
-    limit), so without a gain ``cal``'s own are kept. The choice and its count go into ``made["network_limits"]``.
+    trusting no answer over ``NETWORK_WRONG_DEG`` off that ``cal``'s own pair does not (every pair tried is looser,
+    so it trusts all that ``cal``'s trusts); ties go to the stricter pair (the wider margin, then the tighter limit),
+    so without a gain ``cal``'s own are kept. The choice and its counts go into ``made["network_limits"]``.
 
     The bounds are calibrated on the same frames (90 % coverage), so a bound of 6 deg on this radar is as honest as
     one of 1 deg on ours; the fixed 5 deg limit sits on another radar's typical bound and flags its good answers
@@ -858,24 +859,25 @@ def network_limits(checker: Checker, cal: Calibration, checks: list[Checked], tr
     """
     err = geodesic_deg(np.array([c.angles_deg for c in checks]), truth)
     correct, wrong = err <= 2.0, err > NETWORK_WRONG_DEG
-    best: tuple[int, Calibration] | None = None
+    allowed = trusted_under(checker, cal, checks) & wrong  # the wrong answers the base pair trusts already
+    best = (int((trusted_under(checker, cal, checks) & correct).sum()), cal)
     for margin in (m for m in NETWORK_AMBIGUITY_MARGINS if m <= cal.ambiguity_margin):
         for limit in (b for b in NETWORK_BOUND_LIMITS_DEG if b >= cal.max_bound_deg):
             trial = replace(cal, max_bound_deg=limit, ambiguity_margin=margin)
             trusted = trusted_under(checker, trial, checks)
-            if (trusted & wrong).any():
+            if (trusted & wrong & ~allowed).any():
                 continue
             kept = int((trusted & correct).sum())
-            if best is None or kept > best[0]:
+            if kept > best[0]:
                 best = (kept, trial)
-    if best is None:
-        return cal
     chosen = best[1]
     choice = {
         "max_bound_deg": chosen.max_bound_deg,
         "ambiguity_margin": chosen.ambiguity_margin,
         "correct_trusted": best[0],
         "correct": int(correct.sum()),
+        "wrong_trusted": int((trusted_under(checker, chosen, checks) & wrong).sum()),
+        "wrong": int(wrong.sum()),
         "frames": len(checks),
     }
     return replace(chosen, made={**chosen.made, "network_limits": choice})
