@@ -228,8 +228,9 @@ def section(results: dict[str, dict[str, Any]]) -> list[str]:
         f"Labels are the truth plus {LABEL_SIGMA_DEG} deg of optical error. Good answer: within {GOOD_DEG:g} deg.",
         "",
         "| stand-in radar | labelled frames / scenes | CPU min | geodesic median / p95 (deg) | beyond 10 deg | trusted | "
-        "trusted outside their 90 % bound (per axis) | bound coverage z / y / x | good answers flagged | own frames: median / trusted |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "trusted outside their 90 % bound (per axis) | trusted over 5 / 10 deg off | bound coverage z / y / x | "
+        "good answers flagged | own frames: median / trusted |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for standin, rows in results.items():
         for key in sorted(rows, key=lambda k: tuple(int(v) for v in k.split("/"))):
@@ -238,11 +239,12 @@ def section(results: dict[str, dict[str, Any]]) -> list[str]:
             tob = "-" if h["trusted_outside_bound"] is None else f"{100 * h['trusted_outside_bound']:.0f} %"
             gf = "-" if h["good_flagged"] is None else f"{100 * h['good_flagged']:.0f} %"
             cov = " / ".join(f"{100 * v:.0f}" for v in h["bound_coverage"])
+            wrong = f"{h['trusted_over_5_deg']} / {h['trusted_over_10_deg']}" if "trusted_over_5_deg" in h else "-"
             label = f"{r['frames']} / {r['scenes']}" + (f" ({r['note']})" if r.get("note") else "")
             lines.append(
                 f"| {DESCRIBE[standin]} | {label} | {r.get('cpu_minutes', 0):.1f} | "
                 f"{h['geodesic_median_deg']:.2f} / {h['geodesic_p95_deg']:.1f} | {100 * h['beyond_10_deg']:.0f} % | "
-                f"{100 * h['trusted']:.0f} % | {tob} | {cov} % | {gf} | {o['geodesic_median_deg']:.2f} / "
+                f"{100 * h['trusted']:.0f} % | {tob} | {wrong} | {cov} % | {gf} | {o['geodesic_median_deg']:.2f} / "
                 f"{100 * o['trusted']:.0f} % |"
             )
     lines += [
@@ -280,13 +282,26 @@ def section(results: dict[str, dict[str, Any]]) -> list[str]:
         "bound 4 % per axis (9 % on any axis), 54 % of good answers flagged, 96 of the 100 held-out frames searched. "
         "Of the 28 good answers flagged, 21 have a 90 % bound over 5 deg (the good answers' widest bound is 4.8 deg at "
         "the median: this radar's honest bound sits at the limit) and 13 another attitude within the 0.002 margin. The "
-        "single runs differ by more than the changes between them (2.61, 2.09 and 1.95 deg). The budget buys the first "
-        "steps of the curve, not the trust. On smooth physical optics 100 frames from 5 scenes take the median from 28.6 to 18.4 deg "
+        "single runs differ by more than the changes between them (2.61, 2.09 and 1.95 deg): the epochs are capped by "
+        "wall time, so a faster or busier machine trains another number of them. Since 2026-12-06 late a set "
+        "recalibrated on another radar chooses its network path's bound limit (5-10 deg) and ambiguity margin "
+        "(0.002-0) on its held-out frames (`inference/trust.py:network_limits`: the pair that trusts the most correct "
+        "answers and no answer over 5 deg off that the base pair does not; design/measurements.md, 'The network "
+        "path's limits chosen on the radar's own frames'). Harsh 100/5 again (26.4 CPU minutes; the 14th epoch did "
+        "not improve, so the weights are epoch 13's, as before): the held-out frames chose 10 deg and 0.002, and on "
+        "the test scenes 60 % are trusted (34), 29 % of good answers flagged (54), 5.6 % of trusted answers outside "
+        "their bound per axis (3.9), 3 trusted over 5 deg off (5.8-6.8 deg, each within its x bound of 5.7-7.8 deg), "
+        "none over 10. Rough physical optics 100/5 within the budget (26.3 CPU minutes, 13 epochs, the last chosen): "
+        "its held-out frames kept 5 deg and 0.002 (the base pair trusted all 34 correct answers there); 1.22 deg, p95 "
+        "7.4, 3 % beyond 10 deg, 77 % trusted, 4.8 % of them outside their bound per axis, 13 % of good answers "
+        "flagged, none over 5 deg off trusted, our own frames 0.37 deg and 90 % trusted. That point meets the "
+        "issue's two trust goals within the budget; beyond 10 deg (3 %) and the median (1.22 deg against 1.5 x 0.32) "
+        "do not. On smooth physical optics 100 frames from 5 scenes take the median from 28.6 to 18.4 deg "
         "only (71 % beyond 10 deg; int8 refused, UNet++ in float16) and nothing is trusted. The accuracy goal is not "
-        "met on any stand-in at this budget. Of the trust goals: good answers flagged 15 % (rough physical optics 100/5, "
-        "goal 20 %) to 32 % (harsh), where what is left is honest (a 90 % bound over 5 deg on a poorly constrained axis, "
-        "or another attitude fitting nearly as well); trusted answers outside a bound 5.6-8.6 % per axis (goal 5 %): "
-        "bounds fitted on the 40 frames of 2 held-out scenes under-cover the next scenes' worst axis.",
+        "met on any stand-in at this budget. Of the trust goals, within the budget: good answers flagged 13 % (rough "
+        "physical optics) and 29 % (harsh; goal 20 %), where what is left on harsh is mostly another attitude fitting "
+        "within 0.002 (12 of 15); trusted answers outside a bound 4.8 % and 5.6 % per axis (goal 5 %): bounds fitted "
+        "on the 40 frames of 2 held-out scenes under-cover the next scenes' worst axis.",
         "",
         f"![learning curves]({PLOT.name})",
         "",
@@ -317,6 +332,16 @@ def plot(results: dict[str, dict[str, Any]]) -> None:
             color=c,
             label=f"{standin}: good flagged",
         )
+        # The latest run within the goal's 30 CPU minutes (a variant row), a star at its size.
+        within = [k for k in rows if rows[k].get("note") and 0 < rows[k].get("cpu_minutes", 99) <= 30.0]
+        if within:
+            w = rows[max(within, key=lambda k: (rows[k].get("rescored", ""), int(k.split("/")[-1])))]
+            hw, nw = w["held_out"], w["frames"]
+            axes[0].plot([nw], [hw["geodesic_median_deg"]], "*", ms=12, color=c, label=f"{standin}: within 30 CPU min")
+            axes[1].plot([nw], [100 * hw["beyond_10_deg"]], "*", ms=12, color=c)
+            axes[2].plot([nw], [100 * hw["trusted"]], "*", ms=12, color=c)
+            if hw["good_flagged"] is not None:
+                axes[2].plot([nw], [100 * hw["good_flagged"]], "*", ms=12, mfc="none", color=c)
     own = next(iter(results.values()))
     base = own[min(own, key=lambda k: int(k.split("/")[0]))]["own"]["geodesic_median_deg"]
     axes[0].axhline(base, color="grey", lw=0.8, ls=":", label="own frames, shipped set")
@@ -329,6 +354,8 @@ def plot(results: dict[str, dict[str, Any]]) -> None:
         ax.set_xlabel("labelled frames (0 plotted at 3)")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
+    axes[0].legend(fontsize=6, ncol=2, loc="upper right")
+    axes[0].set_ylim(top=axes[0].get_ylim()[1] * 8)  # room for the legend above the curves
     fig.suptitle("gsa adapt: the shipped set adapted to a stand-in radar, scored on held-out scenes")
     fig.tight_layout()
     fig.savefig(PLOT, dpi=110)

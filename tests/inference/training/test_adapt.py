@@ -143,6 +143,10 @@ def test_adapt_splits_by_scene_keeps_the_best_weights_and_serves(smoke_base, tmp
     trust = json.loads((out / "trust.json").read_text())
     assert rec["calibration"]["recalibrated"] and trust["made"]["frames"] == lab["validation_frames"]
     assert trust["search_iou_min"] == rec["calibration"]["search_iou_min"] == 0.9321
+    # The network path's bound limit and margin are chosen on the held-out frames (never tighter than the base's)
+    chosen = trust["made"]["network_limits"]
+    assert chosen["frames"] == lab["validation_frames"] and trust["max_bound_deg"] == chosen["max_bound_deg"] >= 5.0
+    assert rec["calibration"]["ambiguity_margin"] == trust["ambiguity_margin"] <= 0.002
     assert sorted(trust["made"]["scenes"]) == lab["validation_scenes"]
     assert set(trust["made"]["labelled_frames"]) <= {p.name for p in frames.iterdir()}
 
