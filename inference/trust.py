@@ -859,24 +859,21 @@ def network_limits(checker: Checker, cal: Calibration, checks: list[Checked], tr
     """
     err = geodesic_deg(np.array([c.angles_deg for c in checks]), truth)
     correct, wrong = err <= 2.0, err > NETWORK_WRONG_DEG
-    allowed = trusted_under(checker, cal, checks) & wrong  # the wrong answers the base pair trusts already
-    best = (int((trusted_under(checker, cal, checks) & correct).sum()), cal)
+    base = trusted_under(checker, cal, checks)
+    allowed = base & wrong  # the wrong answers the base pair trusts already
+    chosen, chosen_trusted = cal, base
     for margin in (m for m in NETWORK_AMBIGUITY_MARGINS if m <= cal.ambiguity_margin):
         for limit in (b for b in NETWORK_BOUND_LIMITS_DEG if b >= cal.max_bound_deg):
             trial = replace(cal, max_bound_deg=limit, ambiguity_margin=margin)
             trusted = trusted_under(checker, trial, checks)
-            if (trusted & wrong & ~allowed).any():
-                continue
-            kept = int((trusted & correct).sum())
-            if kept > best[0]:
-                best = (kept, trial)
-    chosen = best[1]
+            if not (trusted & wrong & ~allowed).any() and (trusted & correct).sum() > (chosen_trusted & correct).sum():
+                chosen, chosen_trusted = trial, trusted
     choice = {
         "max_bound_deg": chosen.max_bound_deg,
         "ambiguity_margin": chosen.ambiguity_margin,
-        "correct_trusted": best[0],
+        "correct_trusted": int((chosen_trusted & correct).sum()),
         "correct": int(correct.sum()),
-        "wrong_trusted": int((trusted_under(checker, chosen, checks) & wrong).sum()),
+        "wrong_trusted": int((chosen_trusted & wrong).sum()),
         "wrong": int(wrong.sum()),
         "frames": len(checks),
     }
