@@ -289,6 +289,12 @@ def bound_covariance(cov_raw: Vec, scale: Vec, floor_deg: Vec) -> Vec:
     return np.asarray(np.diag(np.asarray(floor_deg, float) ** 2) + s @ cov_raw @ s)
 
 
+def on_other_branch(f: Fit, best: Fit) -> bool:
+    """Whether ``f`` lies on ``best``'s other branch of the near-mirror pair: refined from its mirror, or within
+    ``DISTINCT_DEG`` of it."""
+    return f.start == "other-branch" or bool(geodesic_deg(f.angles_deg, mirror(best.angles_deg))[0] < DISTINCT_DEG)
+
+
 class Checker:
     """The fit and the checks for one target and radar."""
 
@@ -470,10 +476,8 @@ class Checker:
                 # ambiguity ISAR cannot rule out from a silhouette, and a pass resolves it across frames. Swin's
                 # answer and its mirror are each other's other branch only where one of them is the answer: beside
                 # a search's answer, Swin's mirror was listed on frames over SO(3) at soft IoU 0.25-0.77 behind it.
-                other_branch = (
-                    f.start == "other-branch"
-                    or (not searched and {f.start, fits[0].start} == {"network", "mirror"})
-                    or geodesic_deg(f.angles_deg, mirror(fits[0].angles_deg))[0] < DISTINCT_DEG
+                other_branch = on_other_branch(f, fits[0]) or (
+                    not searched and {f.start, fits[0].start} == {"network", "mirror"}
                 )
                 if (
                     dist >= DISTINCT_DEG
@@ -555,16 +559,14 @@ class Checker:
         best fit's other branch (its near-mirror, or its refit) within ``BRANCH_BRIGHTNESS_MARGIN`` too, where its
         bright parts agree better by ``BRANCH_BRIGHTNESS_LEAD``."""
         best = fits[0]
-        other = mirror(best.angles_deg)
-
-        def branch(f: Fit) -> bool:
-            return f.start == "other-branch" or geodesic_deg(f.angles_deg, other)[0] < DISTINCT_DEG
-
         near = [
             f
             for f in fits[1:]
             if geodesic_deg(f.angles_deg, best.angles_deg)[0] >= DISTINCT_DEG
-            and (best.iou - f.iou < BRIGHTNESS_MARGIN or (best.iou - f.iou < BRANCH_BRIGHTNESS_MARGIN and branch(f)))
+            and (
+                best.iou - f.iou < BRIGHTNESS_MARGIN
+                or (best.iou - f.iou < BRANCH_BRIGHTNESS_MARGIN and on_other_branch(f, best))
+            )
         ]
         if not near:
             return fits
