@@ -159,7 +159,14 @@ def variant_key(stored: dict[str, Any], point: str, note: str) -> str:
 
 
 def run_point(
-    standin: str, frames: int, scenes: int, minutes: float, work: Path, data: dict[str, Any], name: str
+    standin: str,
+    frames: int,
+    scenes: int,
+    minutes: float,
+    work: Path,
+    data: dict[str, Any],
+    name: str,
+    options: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     from inference.runtime import DEFAULT_MODEL_DIR
     from inference.training.adapt import AdaptOptions, adapt
@@ -169,7 +176,12 @@ def run_point(
     if frames:
         out = work / f"{standin}-{name}"
         t0 = time.perf_counter()
-        rec = adapt(DEFAULT_MODEL_DIR, subset(data["pool"], frames, scenes), out, AdaptOptions(max_minutes=minutes))
+        rec = adapt(
+            DEFAULT_MODEL_DIR,
+            subset(data["pool"], frames, scenes),
+            out,
+            AdaptOptions(max_minutes=minutes, **(options or {})),
+        )
         row.update(
             cpu_minutes=rec["cpu_minutes"],
             minutes=round((time.perf_counter() - t0) / 60.0, 2),
@@ -368,6 +380,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--points", default=",".join(f"{f}/{s}" for f, s in POINTS), help="FRAMES/SCENES,... to run")
     p.add_argument("--minutes", type=float, default=20.0, help="each adaptation's max_minutes (default 20)")
     p.add_argument("--work", default="/tmp/gsa-bench-adapt", help="where the adapted sets go")
+    p.add_argument("--lr-unet", type=float, help="UNet++'s rate (default: gsa adapt's)")
+    p.add_argument("--crop-px", type=int, help="train on windows of this many pixels (default: gsa adapt's)")
     p.add_argument(
         "--note",
         help="run the points as a variant of the stored rows (e.g. another --minutes), kept beside them as "
@@ -406,7 +420,11 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 frames, scenes = (int(v) for v in point.split("/")[:2])
                 _log(f"point {point}")
-                stored[point] = run_point(args.standin, frames, scenes, args.minutes, Path(args.work), data, name)
+                options = {k: v for k, v in (("lr_unet", args.lr_unet), ("crop_px", args.crop_px)) if v is not None}
+                stored[point] = run_point(
+                    args.standin, frames, scenes, args.minutes, Path(args.work), data, name, options
+                )
+                stored[point]["options"] = options
                 if args.note:
                     stored[point]["note"] = args.note
             path.write_text(json.dumps(stored, indent=1))

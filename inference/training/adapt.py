@@ -78,6 +78,10 @@ class AdaptOptions:
     train_swin: bool = False
     validation_share: float = 0.3
     shift_px: int = 6  # translations up to this many pixels (frame and label alike)
+    # Each step on a square window of this many pixels about a point of the target (0: whole frames; a multiple of
+    # 16, UNet++'s four halvings). UNet++ is convolutional: a window teaches it the same look at a fraction of the
+    # cost, so the budget buys more steps (design/measurements.md, "Adapting on windows of the frame").
+    crop_px: int = 0
     noise_share: float = 0.5  # share of frames given extra noise
     seed: int = 0
     precision: str = "auto"  # "auto": bf16 where the CPU computes it natively
@@ -92,12 +96,19 @@ class AdaptOptions:
             ("lr_swin", 0.0 <= self.lr_swin < 1.0),
             ("validation_share", 0.05 <= self.validation_share <= 0.8),
             ("shift_px", 0 <= self.shift_px <= 32),
+            ("crop_px", self.crop_px == 0 or (32 <= self.crop_px <= 4096 and self.crop_px % 16 == 0)),
             ("noise_share", 0.0 <= self.noise_share <= 1.0),
             ("precision", self.precision in ("auto", "bf16", "fp32")),
         )
+        if self.crop_px and self.train_swin:
+            raise DatasetError(
+                "crop_px and train_swin: Swin reads whole frames; train on windows (UNet++ alone) or with Swin, not both",
+                field="crop_px",
+            )
         for name, ok in checks:
             if not ok:
-                raise DatasetError(f"{name} = {getattr(self, name)!r} is out of range", field=name)
+                hint = ": 0 (whole frames) or a multiple of 16 from 32" if name == "crop_px" else ""
+                raise DatasetError(f"{name} = {getattr(self, name)!r} is out of range{hint}", field=name)
 
 
 def label_masks(angles_deg: NDArray[np.floating], radar: Any, model: Any) -> NDArray[np.bool_]:
@@ -136,6 +147,24 @@ def _augment(
             x = x.clone()
             x[pick] = ((db + 40.0) / 40.0).clamp(0.0, 1.0)
     return x, y
+
+
+def _windows(x: torch.Tensor, y: torch.Tensor, size: int, gen: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
+    """A ``size`` x ``size`` window of each frame and its label alike, centred on a pixel of the label drawn at
+    random (so each window shows part of the target's silhouette and the clutter about it), kept inside the frame.
+    Frames no larger than ``size`` come back whole."""
+    h, w = x.shape[-2:]
+    if size <= 0 or (size >= h and size >= w):
+        return x, y
+    sh, sw = min(size, h), min(size, w)
+    weights = y.flatten(1) + 1e-6  # a frame with no silhouette gets a window anywhere
+    at = torch.multinomial(weights, 1, generator=gen)[:, 0]
+    r0 = (at // w - sh // 2).clamp(0, h - sh)
+    c0 = (at % w - sw // 2).clamp(0, w - sw)
+    at_rc = [(int(r), int(c)) for r, c in zip(r0.tolist(), c0.tolist(), strict=True)]
+    xs = torch.stack([x[k, :, r : r + sh, c : c + sw] for k, (r, c) in enumerate(at_rc)])
+    ys = torch.stack([y[k, :, r : r + sh, c : c + sw] for k, (r, c) in enumerate(at_rc)])
+    return xs, ys
 
 
 @torch.no_grad()
@@ -309,10 +338,14 @@ def adapt(
     best = (before["score"], 0, copy.deepcopy(unet.state_dict()), copy.deepcopy(swin.state_dict())) if lead else None
     history = [{"epoch": 0, **before, "seconds": 0.0}]
     deadline = t0 + 60.0 * opts.max_minutes
+    h, w = x_all.shape[-2:]
+    repeats = max(1, round(h * w / min(opts.crop_px, h) / min(opts.crop_px, w))) if opts.crop_px else 1
     for epoch in range(1, opts.epochs + 1):
         unet.train()
         swin.train()
-        order = rng.permutation(len(x_all))
+        # On windows, an epoch passes over the frames as many times as a frame holds windows: about the pixels (and
+        # the seconds) of a whole-frame epoch, so each validation still follows as much training.
+        order = np.concatenate([rng.permutation(len(x_all)) for _ in range(repeats)])
         sums = [0.0, 0.0]
         seen = 0  # frames this process stepped on (its share of each batch under DDP)
         for k in range(0, len(order), opts.batch_size):
@@ -325,6 +358,8 @@ def adapt(
             y = torch.from_numpy(y_all[sel, None].astype(np.float32))
             a = torch.from_numpy(a_all[sel] / ANGLE_SCALE_DEG).float()
             x, y = _augment(x, y, opts, gen)
+            if opts.crop_px:
+                x, y = _windows(x, y, opts.crop_px, gen)
             with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
                 enh = step_u(x)
                 loss_u = relative_frobenius_loss(enh.float(), y)
@@ -395,7 +430,8 @@ def adapt(
         "simulated_frames": n_sim,
         "labelled_share_of_training": round(labelled_share, 4),
         "options": asdict(opts),
-        "augmentations": [f"translation up to {opts.shift_px} px, label alike", f"noise on {opts.noise_share:.0%}"],
+        "augmentations": [f"translation up to {opts.shift_px} px, label alike", f"noise on {opts.noise_share:.0%}"]
+        + ([f"windows of {opts.crop_px} px about the target, label alike"] if opts.crop_px else []),
         "chosen_epoch": best[1],
         "history": history,
         "before": before,
@@ -538,6 +574,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--validation-share", type=float, default=d.validation_share, help="share of frames held out, by whole scenes"
     )
     p.add_argument("--batch-size", type=int, default=d.batch_size)
+    p.add_argument("--lr-unet", type=float, default=d.lr_unet, help=f"UNet++'s Adam rate ({d.lr_unet:g})")
+    p.add_argument(
+        "--crop-px",
+        type=int,
+        default=d.crop_px,
+        help=f"train on windows of this many pixels about the target, a multiple of 16; 0 whole frames ({d.crop_px})",
+    )
     p.add_argument("--train-swin", action="store_true", help="also fine-tune Swin's last stage (default: UNet++ only)")
     p.add_argument("--seed", type=int, default=d.seed)
     p.add_argument(
@@ -554,6 +597,8 @@ def run(args: argparse.Namespace) -> int:
         max_minutes=args.max_minutes,
         validation_share=args.validation_share,
         batch_size=args.batch_size,
+        lr_unet=args.lr_unet,
+        crop_px=args.crop_px,
         seed=args.seed,
         train_swin=args.train_swin,
     )

@@ -14,7 +14,7 @@ from inference.labelled import write_frame
 from inference.networks.build import build_models, get_config
 from inference.runtime import Estimator
 from inference.simulation.dataset import DatasetSpec, render_frames
-from inference.training.adapt import AdaptOptions, adapt
+from inference.training.adapt import AdaptOptions, _windows, adapt
 from inference.training.checkpoints import save_checkpoint
 from inference.training.recover import recover, recover_swin, recover_unet
 from inference.trust import Calibration
@@ -163,6 +163,11 @@ def test_adapt_refusals_leave_nothing(smoke_base, tmp_path, capsys):
     rec = adapt(smoke_base, [one, two], tmp_path / "both", AdaptOptions(epochs=1, sim_ratio=0.0, train_swin=True))
     assert rec["labelled"]["frames"] == 12 and len(rec["labelled"]["train_scenes"]) == 1
     assert rec["history"][1]["train_swin_loss"] > 0  # with train_swin, Swin's last stage trains too
+    with pytest.raises(DatasetError, match="Swin reads whole frames"):
+        AdaptOptions(crop_px=32, train_swin=True)
+    rec = adapt(smoke_base, [one, two], tmp_path / "windows", AdaptOptions(epochs=1, sim_ratio=0.0, crop_px=32))
+    assert "windows of 32 px about the target, label alike" in rec["augmentations"]
+    assert rec["history"][1]["train_unet_loss"] > 0
     capsys.readouterr()
     code = gsa(
         ["adapt", "--frames", str(tmp_path / "missing"), "--base", str(smoke_base), "--out", str(tmp_path / "o")]
@@ -171,3 +176,30 @@ def test_adapt_refusals_leave_nothing(smoke_base, tmp_path, capsys):
     assert code == 2 and "not a folder of labelled frames" in err and len(err.strip().splitlines()) == 1
     code = gsa(["adapt", "--frames", str(one), "--base", str(smoke_base), "--out", str(smoke_base)])
     assert code == 2 and "new folder" in capsys.readouterr().err
+    code = gsa(
+        ["adapt", "--frames", str(one), "--base", str(smoke_base), "--out", str(tmp_path / "o"), "--crop-px", "100"]
+    )
+    err = capsys.readouterr().err
+    assert code == 2 and "crop_px = 100" in err and "multiple of 16" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()
+
+
+def test_windows_cut_frame_and_label_at_the_same_place_about_the_target():
+    # Each pixel of the frame holds its own index, so a window's first pixel says where it was cut.
+    h = w = 64
+    x = torch.arange(h * w, dtype=torch.float32).view(1, 1, h, w).repeat(50, 1, 1, 1)
+    y = torch.zeros(50, 1, h, w)
+    y[:, :, 40:60, 2:12] = 1.0  # a silhouette near a corner: windows about it must stay inside the frame
+    y[:25, :, 5:9, 50:54] = 1.0
+    xs, ys = _windows(x, y, 32, torch.Generator().manual_seed(1))
+    assert xs.shape == ys.shape == (50, 1, 32, 32)
+    for k in range(50):
+        r, c = divmod(int(xs[k, 0, 0, 0]), w)
+        assert torch.equal(xs[k], x[k, :, r : r + 32, c : c + 32])  # a contiguous window of the frame
+        assert torch.equal(ys[k], y[k, :, r : r + 32, c : c + 32])  # the label cut at the same place
+        assert ys[k].sum() > 0  # showing part of the target
+    corners = {divmod(int(v), w) for v in xs[25:, 0, 0, 0]}  # one silhouette: every window about it
+    assert all(8 <= r <= 32 and c == 0 for r, c in corners)
+    # frames no larger than the window come back whole
+    same = _windows(x[:, :, :32, :32], y[:, :, :32, :32], 32, torch.Generator())
+    assert torch.equal(same[0], x[:, :, :32, :32])
