@@ -5,7 +5,7 @@ from __future__ import annotations
 from datetime import datetime
 from typing import TYPE_CHECKING, Any
 
-from pydantic import Field
+from pydantic import Field, field_validator, model_validator
 
 from app.schemas.common import Described, Strict, utc_or_none
 
@@ -28,6 +28,24 @@ class AdaptationCreate(Strict):
     """the split's and training's seed (default 0)"""
     train_swin: bool | None = None
     """also fine-tune Swin's last stage (default: UNet++ alone, where a radar's look enters)"""
+    lr_unet: float | None = Field(default=None, gt=0, lt=1)
+    """UNet++'s Adam rate (default 3e-5)"""
+    crop_px: int | None = Field(default=None, ge=0, le=4096)
+    """train UNet++ on square windows of this many pixels about the target, a multiple of 16 from 32; 0 whole
+    frames (default 0); not with ``train_swin``, since Swin reads whole frames"""
+
+    @field_validator("crop_px")
+    @classmethod
+    def _window(cls, value: int | None) -> int | None:
+        if value and (value < 32 or value % 16):
+            raise ValueError(f"must be 0 (whole frames) or a multiple of 16 from 32; {value} is not")
+        return value
+
+    @model_validator(mode="after")
+    def _windows_without_swin(self) -> AdaptationCreate:
+        if self.crop_px and self.train_swin:
+            raise ValueError("crop_px and train_swin: Swin reads whole frames; ask for one or the other")
+        return self
 
 
 class AdaptationPublic(Described):

@@ -187,7 +187,7 @@ def run_adaptation(ctx: Any) -> dict[str, Any]:
         shutil.rmtree(partial, ignore_errors=True)
         cmd = [sys.executable, "-m", "inference.training.adapt", "--frames", str(folder), "--base", str(base)]
         cmd += ["--out", str(partial), "--target", target]
-        for key in ("epochs", "max_minutes", "sim_ratio", "validation_share", "seed"):
+        for key in ("epochs", "max_minutes", "sim_ratio", "validation_share", "seed", "lr_unet", "crop_px"):
             if opts.get(key) is not None:
                 cmd += [f"--{key.replace('_', '-')}", str(opts[key])]
         if opts.get("train_swin"):

@@ -49,7 +49,11 @@ def _estimate_version(client):
 def test_adapt_list_promote_answer_and_roll_back(client, labelled):
     sets = client.get("/v1/model-sets", headers=A).json()["data"]
     assert [s["target"] for s in sets] == [T] and sets[0]["answering_version"] == 0
-    r = client.post(f"/v1/model-sets/{T}/adaptations", json={"epochs": 1, "sim_ratio": 0.5}, headers=A)
+    r = client.post(
+        f"/v1/model-sets/{T}/adaptations",
+        json={"epochs": 1, "sim_ratio": 0.5, "crop_px": 32, "lr_unet": 1e-4},
+        headers=A,
+    )
     assert r.status_code == 202, r.text
     job = r.json()
     assert job["state"] in ("queued", "running") and job["frames"] == 24
@@ -121,3 +125,8 @@ def test_adaptation_refusals(client, labelled):
     assert bad.status_code == 422 and "epochs" in str(bad.json()["detail"][0]["loc"])
     extra = client.post(f"/v1/model-sets/{T}/adaptations", json={"epoch": 3}, headers=A)
     assert extra.status_code == 422
+    odd = client.post(f"/v1/model-sets/{T}/adaptations", json={"crop_px": 100}, headers=A)
+    assert odd.status_code == 422 and "crop_px" in str(odd.json()["detail"][0]["loc"])
+    assert "multiple of 16" in odd.json()["detail"][0]["msg"]
+    both = client.post(f"/v1/model-sets/{T}/adaptations", json={"crop_px": 128, "train_swin": True}, headers=A)
+    assert both.status_code == 422 and "Swin reads whole frames" in both.json()["detail"][0]["msg"]
