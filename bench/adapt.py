@@ -318,7 +318,9 @@ def section(results: dict[str, dict[str, Any]]) -> list[str]:
         "128 px windows about the target (`--crop-px 128`, 600 steps against about 200) gave 1.52 deg, 66 % trusted, "
         "19 % of good answers flagged, but our own frames 0.52 deg and one answer over 10 deg off trusted; UNet++ at "
         "1e-4 (`--lr-unet 1e-4`) 1.67 deg, 42 % trusted, 47 % flagged, our own frames 0.40 deg. Both buy this radar's "
-        "accuracy with ours, and neither set passed the int8 export (UNet++ served in float16), so the defaults stay.",
+        "accuracy with ours, and neither set passed the int8 export (UNet++ served in float16), so the defaults stay; "
+        "at equal seconds whole-frame steps drew the better silhouette on both radars, so the windows' median may "
+        "be the run's as much as theirs.",
         "",
         f"![learning curves]({PLOT.name})",
         "",
