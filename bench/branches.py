@@ -47,7 +47,7 @@ def score(frames: np.ndarray, truth: np.ndarray, keep: bool) -> dict[str, Any]:
     real_other = trust.Checker._with_other_branch
     trust.fit = real_fit if keep else fit_without_keep  # type: ignore[attr-defined]
     if not keep:  # as before: no refit from the answer's own near-mirror either
-        trust.Checker._with_other_branch = lambda self, enhanced, fits: fits  # type: ignore[method-assign]
+        trust.Checker._with_other_branch = lambda self, enhanced, fits, tilt=False: fits  # type: ignore[method-assign]
     try:
         est = Estimator.load(DEFAULT_MODEL_DIR)
         checker = load_checkers(DEFAULT_MODEL_DIR, est.img_size).get("tiangong-like")
