@@ -16,7 +16,8 @@ the target's projection (``inference.fit``), and returns a ``Checked``:
   Swin's own error;
 * ``quality.trusted`` and ``quality.reasons``: every check the answer failed, in words;
 * ``alternatives``: other attitudes (the near-mirror (z, -y, -x), library matches, the answer's tilts) whose
-  fit is within ``ALTERNATIVE_MARGIN`` of the best, each with its own IoU.
+  fit is within ``ALTERNATIVE_MARGIN`` of the best, each with its own IoU; the other branch's best fit whatever its
+  gap; and the answer's exact near-mirror itself where that fit settled over ``DISTINCT_DEG`` from it.
 
 The checks, each a threshold from the calibration (``trust.json`` beside the models):
 the frame's brightness statistics lie where fresh frames' do (the median pixel; catches
@@ -88,6 +89,12 @@ LIBRARY_COARSE = FitOptions(
     local=True,
 )
 LIBRARY_FINE = FitOptions(steps_deg=(2.0, 1.0, 0.5, 0.25, 0.12), max_iter=(4, 4, 3, 2, 2), prior_weight=0.0, local=True)
+UNREFINED = FitOptions(steps_deg=(), prior_weight=0.0)  # a start's own soft IoU, not moved
+# An alternative's ``start`` where it is the answer's exact near-mirror, listed unrefined (``Checker._near_mirror``).
+NEAR_MIRROR = "near-mirror"
+# A listed fit this close to the answer's exact near-mirror reads that branch as the twin does (about a good answer's
+# 90 % bound on our frames); farther, the twin is listed beside it: the truth side lies within 5 deg of one of them.
+TWIN_SAME_DEG = 2.0
 
 
 # A search's answer is refined again from tilts of this size out of the image plane, about the range and the
@@ -493,6 +500,9 @@ class Checker:
                             f.start,
                         )
                     )
+            twin = self._near_mirror(enh, fits[0], angles, alternatives)
+            if twin is not None:
+                alternatives.append(twin)
         if net is not None:
             features["moved_deg"] = float(geodesic_deg(angles, net)[0])
         reasons = self._reasons(features, angles, bound, alternatives, net is not None and refine, searched)
@@ -501,6 +511,34 @@ class Checker:
         if raw_cov is not None and np.all(np.isfinite(bound)):
             cov = bound_covariance(raw_cov, scale, floor)
         return Checked(angles, net, bool(fits), quality, alternatives, features, cov)
+
+    def _near_mirror(
+        self, enhanced: Vec, best: Fit, angles: Vec, alternatives: list[Alternative]
+    ) -> Alternative | None:
+        """The answer's exact near-mirror (z, -y, -x), unrefined (``start`` ``NEAR_MIRROR``), where no listed
+        alternative lies within ``TWIN_SAME_DEG`` of it and it lies ``DISTINCT_DEG`` from the answer; else None.
+
+        The mirror is an isometry of the rotations (conjugation by the reflection through the image plane), so the
+        answer's twin lies exactly as far from the truth as the answer from the truth's twin: an answer read well on
+        the wrong branch lists the truth. The fit on that branch, refined from the twin, can settle elsewhere where
+        the silhouette is drawn unlike our renderer's (another radar's look pulls both branches, and the truth side
+        need not hold a minimum near the truth): on harsh scattering it settled 6-9 deg from the truth where the
+        answer lay 2-5 deg from the truth's twin (design/measurements.md, "The answer's exact near-mirror listed").
+        Listed with its own fit, and not judged by the ambiguity margin: the refit from it fits at least as well."""
+        twin = mirror(angles)
+        dist = float(geodesic_deg(twin, angles)[0])
+        if dist < DISTINCT_DEG or any(
+            geodesic_deg(twin, np.array(a.angles_deg))[0] < TWIN_SAME_DEG for a in alternatives
+        ):
+            return None
+        soft = fit(self.renderer, enhanced, {NEAR_MIRROR: twin}, UNREFINED)[0].iou
+        return Alternative(
+            tuple(float(x) for x in twin),  # type: ignore[arg-type]
+            self._hard_iou(twin, enhanced),
+            float(best.iou - soft),
+            dist,
+            NEAR_MIRROR,
+        )
 
     def _searched(self, enhanced: Vec, fits: list[Fit]) -> list[Fit]:
         """``fits`` and the library search's on ``enhanced``, the best one then refined from its tilts, best first."""
@@ -647,7 +685,7 @@ class Checker:
             if library and cal.library_ambiguity_margin is not None
             else cal.ambiguity_margin
         )
-        close = [a for a in alternatives if a.fit_gap < margin]
+        close = [a for a in alternatives if a.fit_gap < margin and a.start != NEAR_MIRROR]
         if close:
             a = close[0]
             out.append(

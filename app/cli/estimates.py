@@ -76,8 +76,9 @@ def _print_checked(body: EstimateResult, prefix: str = "") -> None:
             print(f"  - {r}")
     for alt in body.alternatives:
         az, ay, ax = alt.euler_zyx_deg
+        what = "also fits" if alt.fitted else "the answer's near-mirror (unrefined)"
         print(
-            f"also fits: z {az:.2f} y {ay:.2f} x {ax:.2f} deg ({alt.distance_deg:.0f} deg away, "
+            f"{what}: z {az:.2f} y {ay:.2f} x {ax:.2f} deg ({alt.distance_deg:.0f} deg away, "
             f"IoU {alt.silhouette_iou:.3f}, fit {alt.fit_gap:+.4f})"
         )
 

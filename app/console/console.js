@@ -370,7 +370,7 @@ async function estimatePage(id) {
   const verdict = !q ? "" : q.trusted
     ? `<p class="verdict good">Trusted: silhouette IoU ${num(q.silhouette_iou, 3)}, 90 % bound z / y / x ${q.uncertainty_deg.map((v) => num(v, 2)).join(" / ")} deg.</p>`
     : `<p class="verdict bad">Not trusted: ${esc(q.reasons.join("; "))}.</p>`;
-  const alts = (e.alternatives || []).map((a) => `<li>${euler(a)} deg (IoU ${num(a.silhouette_iou, 3)}, ${num(a.distance_deg, 1)} deg away)</li>`).join("");
+  const alts = (e.alternatives || []).map((a) => `<li>${euler(a)} deg (IoU ${num(a.silhouette_iou, 3)}, ${num(a.distance_deg, 1)} deg away${a.fitted === false ? ", the answer's near-mirror, unrefined" : ""})</li>`).join("");
   view.innerHTML = `<h1>Estimate ${esc(e.input_name)}</h1>
     <p class="muted">${esc(e.id)} · created ${utc(e.created_at)} · target ${esc(e.target || "-")} · frame ${e.shape.join(" x ")} · ${snr}
     ${e.plan_id ? ` · plan <a href="#/plans/${esc(e.plan_id)}">${esc(e.plan_id.slice(0, 8))}</a> observed ${utc(e.observed_at)}` : ""}</p>

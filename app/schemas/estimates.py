@@ -76,14 +76,23 @@ class AlternativePublic(AttitudePublic):
         "stays nearer Swin's estimate (Swin saw the brightness the silhouette lacks)"
     )
     distance_deg: float = Field(description="rotation angle between it and the answer")
+    fitted: bool = Field(
+        default=True,
+        description="false for the answer's exact near-mirror (z, -y, -x), listed as it is where the fit on that "
+        "branch settled over 5 deg from it: the other branch read as accurately as the answer's own, which the "
+        "silhouette alone does not single out (never counted as a rival fit by the ambiguity check)",
+    )
 
     @classmethod
     def from_alternative(cls, a: Alternative) -> AlternativePublic:
+        from inference.trust import NEAR_MIRROR  # loaded already: ``a`` came from it
+
         return cls(
             **_attitude_fields(a.angles_deg),
             silhouette_iou=round(a.silhouette_iou, 4),
             fit_gap=round(a.fit_gap, 5),
             distance_deg=round(a.distance_deg, 2),
+            fitted=a.start != NEAR_MIRROR,
         )
 
 
@@ -128,7 +137,8 @@ class EstimateResult(CheckedPublic, StoredResult):
     alternatives: list[AlternativePublic] = Field(
         default_factory=list,
         description="other attitudes that fit nearly as well, and always the other branch of the near-mirror pair "
-        "(z, -y, -x), fitted, with how much worse it fits (fit_gap)",
+        "(z, -y, -x), fitted, with how much worse it fits (fit_gap); and the answer's exact near-mirror (fitted "
+        "false) where that fit settled over 2 deg from it",
     )
     attitude_lvlh: AttitudePublic | None = None
     """the attitude in the target's LVLH frame (with plan_id and observed_at)"""

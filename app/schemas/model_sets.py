@@ -5,9 +5,10 @@ from __future__ import annotations
 from datetime import datetime
 from typing import TYPE_CHECKING, Any
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, ValidationInfo, field_validator
 
 from app.schemas.common import Described, Strict, utc_or_none
+from inference.training.options import crop_problem
 
 if TYPE_CHECKING:
     from app.db.models import Job, ModelVersion
@@ -36,16 +37,12 @@ class AdaptationCreate(Strict):
 
     @field_validator("crop_px")
     @classmethod
-    def _window(cls, value: int | None) -> int | None:
-        if value and (value < 32 or value % 16):
-            raise ValueError(f"must be 0 (whole frames) or a multiple of 16 from 32; {value} is not")
+    def _window(cls, value: int | None, info: ValidationInfo) -> int | None:
+        # gsa adapt's own rule (train_swin is declared before crop_px, so it is already read)
+        problem = crop_problem(value or 0, bool(info.data.get("train_swin")))
+        if problem:
+            raise ValueError(problem)
         return value
-
-    @model_validator(mode="after")
-    def _windows_without_swin(self) -> AdaptationCreate:
-        if self.crop_px and self.train_swin:
-            raise ValueError("crop_px and train_swin: Swin reads whole frames; ask for one or the other")
-        return self
 
 
 class AdaptationPublic(Described):

@@ -38,7 +38,7 @@ import shutil
 import sys
 import tempfile
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, cast
@@ -54,61 +54,10 @@ from inference.labelled import LabelledFrames, concatenated, read_folder, scene_
 from inference.networks.swin import angle_loss
 from inference.networks.unetpp import relative_frobenius_loss
 from inference.rotations import geodesic_deg
+from inference.training.options import AdaptOptions
 
 SIM_SEED = 31_000  # the simulated frames mixed in: a seed no other set uses
 MIN_CALIBRATION_FRAMES = 20
-
-
-@dataclass(frozen=True)
-class AdaptOptions:
-    """How to adapt (``gsa adapt``'s flags)."""
-
-    sim_ratio: float = 1.0  # simulated frames per labelled training frame
-    epochs: int = 30
-    max_minutes: float = 25.0  # stop after the epoch in which this runs out
-    batch_size: int = 8
-    # The shipped networks' last training rates were 2-3e-5 (lr decayed x0.9 a epoch; Swin's tail fine-tuned at
-    # 2.4e-5): fine-tuning faster than they ended makes them forget our own frames (at 1e-4 the default
-    # frames' median went from 0.29 to 9 deg in 20 minutes on physical-optics frames).
-    lr_unet: float = 3e-5
-    lr_swin: float = 5e-6
-    # Swin's reading of the silhouette is left as it is unless asked: on small sets it forgets more than it learns
-    # (measured: 12 steps on 48 of our own frames moved its median 1.26 -> 1.5-2.1 deg at every rate and optimiser
-    # tried, Adam 5e-6..2e-5, SGD 1e-3; UNet++ alone 1.26 -> 1.31-1.47). With it, only its last stage, norm and head.
-    train_swin: bool = False
-    validation_share: float = 0.3
-    shift_px: int = 6  # translations up to this many pixels (frame and label alike)
-    # Each step on a square window of this many pixels about a point of the target (0: whole frames; a multiple of
-    # 16, UNet++'s four halvings). UNet++ is convolutional: a window teaches it the same look at a fraction of the
-    # cost, so the budget buys more steps (design/measurements.md, "Adapting on windows of the frame").
-    crop_px: int = 0
-    noise_share: float = 0.5  # share of frames given extra noise
-    seed: int = 0
-    precision: str = "auto"  # "auto": bf16 where the CPU computes it natively
-
-    def __post_init__(self) -> None:
-        checks = (
-            ("sim_ratio", 0.0 <= self.sim_ratio <= 20.0),
-            ("epochs", 1 <= self.epochs <= 1000),
-            ("max_minutes", 0.0 < self.max_minutes <= 24 * 60),
-            ("batch_size", 1 <= self.batch_size <= 256),
-            ("lr_unet", 0.0 <= self.lr_unet < 1.0),
-            ("lr_swin", 0.0 <= self.lr_swin < 1.0),
-            ("validation_share", 0.05 <= self.validation_share <= 0.8),
-            ("shift_px", 0 <= self.shift_px <= 32),
-            ("crop_px", self.crop_px == 0 or (32 <= self.crop_px <= 4096 and self.crop_px % 16 == 0)),
-            ("noise_share", 0.0 <= self.noise_share <= 1.0),
-            ("precision", self.precision in ("auto", "bf16", "fp32")),
-        )
-        if self.crop_px and self.train_swin:
-            raise DatasetError(
-                "crop_px and train_swin: Swin reads whole frames; train on windows (UNet++ alone) or with Swin, not both",
-                field="crop_px",
-            )
-        for name, ok in checks:
-            if not ok:
-                hint = ": 0 (whole frames) or a multiple of 16 from 32" if name == "crop_px" else ""
-                raise DatasetError(f"{name} = {getattr(self, name)!r} is out of range{hint}", field=name)
 
 
 def label_masks(angles_deg: NDArray[np.floating], radar: Any, model: Any) -> NDArray[np.bool_]:

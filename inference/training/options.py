@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, get_type_hints
 
-from inference.errors import InferenceError
+from inference.errors import DatasetError, InferenceError
 
 VAL_SEED = (
     20_000  # fine-tuning's fresh validation set: no training set (seed 0..) or SNR test set (10,000 + dB) uses it
@@ -229,3 +229,63 @@ def options_from_args(cls: type, args: argparse.Namespace, base: Any = None) -> 
     if given.get("ema") == 0:  # `--ema 0` turns the averaging off
         given["ema"] = None
     return dataclasses.replace(base, **given) if base is not None else cls(**given)
+
+
+def crop_problem(crop_px: int, train_swin: bool) -> str | None:
+    """What is wrong with adapting on ``crop_px`` windows (``AdaptOptions.crop_px``), in words after the field's name;
+    None where nothing is. The one rule of ``gsa adapt --crop-px`` and the API's ``crop_px``."""
+    if crop_px and not (32 <= crop_px <= 4096 and crop_px % 16 == 0):
+        return f"must be 0 (whole frames) or a multiple of 16 from 32 to 4096; {crop_px} is not"
+    if crop_px and train_swin:
+        return (
+            "cannot go with train_swin: Swin reads whole frames; train on windows (UNet++ alone) or with Swin, not both"
+        )
+    return None
+
+
+@dataclass(frozen=True)
+class AdaptOptions:
+    """How to adapt (``gsa adapt``'s flags; torch-free, so the service checks an adaptation's options with it)."""
+
+    sim_ratio: float = 1.0  # simulated frames per labelled training frame
+    epochs: int = 30
+    max_minutes: float = 25.0  # stop after the epoch in which this runs out
+    batch_size: int = 8
+    # The shipped networks' last training rates were 2-3e-5 (lr decayed x0.9 a epoch; Swin's tail fine-tuned at
+    # 2.4e-5): fine-tuning faster than they ended makes them forget our own frames (at 1e-4 the default
+    # frames' median went from 0.29 to 9 deg in 20 minutes on physical-optics frames).
+    lr_unet: float = 3e-5
+    lr_swin: float = 5e-6
+    # Swin's reading of the silhouette is left as it is unless asked: on small sets it forgets more than it learns
+    # (measured: 12 steps on 48 of our own frames moved its median 1.26 -> 1.5-2.1 deg at every rate and optimiser
+    # tried, Adam 5e-6..2e-5, SGD 1e-3; UNet++ alone 1.26 -> 1.31-1.47). With it, only its last stage, norm and head.
+    train_swin: bool = False
+    validation_share: float = 0.3
+    shift_px: int = 6  # translations up to this many pixels (frame and label alike)
+    # Each step on a square window of this many pixels about a point of the target (0: whole frames; a multiple of
+    # 16, UNet++'s four halvings). UNet++ is convolutional: a window teaches it the same look at a fraction of the
+    # cost, so the budget buys more steps (design/measurements.md, "Adapting on windows of the frame").
+    crop_px: int = 0
+    noise_share: float = 0.5  # share of frames given extra noise
+    seed: int = 0
+    precision: str = "auto"  # "auto": bf16 where the CPU computes it natively
+
+    def __post_init__(self) -> None:
+        checks = (
+            ("sim_ratio", 0.0 <= self.sim_ratio <= 20.0),
+            ("epochs", 1 <= self.epochs <= 1000),
+            ("max_minutes", 0.0 < self.max_minutes <= 24 * 60),
+            ("batch_size", 1 <= self.batch_size <= 256),
+            ("lr_unet", 0.0 <= self.lr_unet < 1.0),
+            ("lr_swin", 0.0 <= self.lr_swin < 1.0),
+            ("validation_share", 0.05 <= self.validation_share <= 0.8),
+            ("shift_px", 0 <= self.shift_px <= 32),
+            ("noise_share", 0.0 <= self.noise_share <= 1.0),
+            ("precision", self.precision in ("auto", "bf16", "fp32")),
+        )
+        problem = crop_problem(self.crop_px, self.train_swin)
+        if problem:
+            raise DatasetError(f"crop_px {problem}", field="crop_px")
+        for name, ok in checks:
+            if not ok:
+                raise DatasetError(f"{name} = {getattr(self, name)!r} is out of range", field=name)

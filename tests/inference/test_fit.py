@@ -272,3 +272,60 @@ def test_the_near_mirror_start_is_refined_however_far_the_prior_puts_it(tiangong
         assert min(geodesic_deg(s, truth)[0] for s in sides) < 5.0, (truth, checked.angles_deg)
         if geodesic_deg(checked.angles_deg, truth)[0] > 5.0:
             assert not checked.quality.trusted
+
+
+def test_the_answers_exact_near_mirror_lies_as_far_from_the_truth_as_the_answer_from_the_truths_mirror():
+    """The near-mirror is conjugation by M = diag(1, 1, -1) (an isometry of the rotations): for any answer A and
+    truth T, angle(mirror(A), T) = angle(A, mirror(T)), each angle taken by scipy from the matrices. So an answer read
+    well on the wrong branch has a twin that reads the truth as well."""
+    rng = np.random.default_rng(43)
+    a = Rotation.random(50, random_state=rng).as_euler("ZYX", degrees=True)
+    t = Rotation.random(50, random_state=rng).as_euler("ZYX", degrees=True)
+
+    def angle(p, q):
+        return np.degrees(
+            (
+                Rotation.from_euler("ZYX", p, degrees=True).inv() * Rotation.from_euler("ZYX", q, degrees=True)
+            ).magnitude()
+        )
+
+    np.testing.assert_allclose(
+        angle(np.array([mirror(x) for x in a]), t), angle(a, np.array([mirror(x) for x in t])), atol=1e-9
+    )
+
+
+def test_the_answers_exact_near_mirror_is_listed_unless_a_listed_fit_or_the_answer_holds_it(tiangong):
+    """Checker._near_mirror: on the silhouette of the truth, an answer 3 deg off the truth's near-mirror lists its
+    twin, 3 deg from the truth (scipy's angle), scored on the silhouette as silhouette_iou scores it; beside a fit
+    4 deg from the twin too, but not beside one within 2 deg of it, nor where the twin is the answer itself
+    (y = x = 0)."""
+    from inference.trust import NEAR_MIRROR, Alternative
+
+    checker = Checker(tiangong_like(), RADAR, networks=True)
+    truth = np.array([20.0, 25.0, 30.0])
+    off = Rotation.from_rotvec(np.radians(3.0) * np.array([0.0, 0.6, 0.8]))
+    answer = (Rotation.from_euler("ZYX", mirror(truth), degrees=True) * off).as_euler("ZYX", degrees=True)
+    label = _label(tiangong.model, truth).astype(float)
+    best = fit(tiangong, label, {"answer": answer}, prior_at=None)[0]
+    twin = checker._near_mirror(label, best, best.angles_deg, [])
+    assert twin is not None and twin.start == NEAR_MIRROR
+    err = np.degrees(
+        (
+            Rotation.from_euler("ZYX", twin.angles_deg, degrees=True).inv()
+            * Rotation.from_euler("ZYX", truth, degrees=True)
+        ).magnitude()
+    )
+    ans_err = np.degrees(
+        (
+            Rotation.from_euler("ZYX", best.angles_deg, degrees=True).inv()
+            * Rotation.from_euler("ZYX", mirror(truth), degrees=True)
+        ).magnitude()
+    )
+    assert err == pytest.approx(ans_err, abs=1e-6) and err < 5.0
+    assert twin.silhouette_iou == pytest.approx(float(silhouette_iou(tiangong, mirror(best.angles_deg), label)[0]))
+    beside = Alternative(tuple(mirror(best.angles_deg) + [0.0, 4.0, 0.0]), 0.9, 0.01, 60.0, "other-branch")
+    assert checker._near_mirror(label, best, best.angles_deg, [beside]) is not None
+    held = Alternative(tuple(mirror(best.angles_deg) + [0.0, 1.5, 0.0]), 0.9, 0.01, 60.0, "other-branch")
+    assert checker._near_mirror(label, best, best.angles_deg, [held]) is None
+    flat = np.array([20.0, 0.5, -0.5])
+    assert checker._near_mirror(label, best, flat, []) is None

@@ -600,3 +600,25 @@ def test_network_answers_that_fit_under_the_search_trigger_are_searched_and_keep
             assert c.features["soft_iou"] >= alone.features["soft_iou"] - margin, k
         assert not (c.quality.trusted and geodesic_deg(c.angles_deg, truth[k])[0] > 5.0), k
     assert between >= 3  # the frames the trigger adds: trusted by the threshold, now searched
+
+
+def test_the_answers_unrefined_near_mirror_is_listed_but_never_judged_as_a_rival_fit(shipped):
+    """The same answer with one alternative fitting as well (gap 0): flagged as ambiguous where that alternative is
+    a fit, not where it is the answer's exact near-mirror listed unrefined (the fit refined from it fits at least as
+    well and is judged instead); the API says which is which."""
+    from app.schemas.estimates import AlternativePublic
+    from inference.trust import AMBIGUOUS, NEAR_MIRROR, Alternative, trusted_under
+
+    _, checker = shipped
+    feats = {"median": 0.3, "doubt": 0.0, "iou": 0.99, "searched": 0.0, **{f"raw_{a}": 0.1 for a in "zyx"}}
+
+    def answer(start):
+        rival = [Alternative((10.0, -20.0, -30.0), 0.99, 0.0, 70.0, start)]
+        return Checked(np.array([10.0, 20.0, 30.0]), None, True, Quality(0.99, (0.5,) * 3, True, []), rival, feats)
+
+    fitted, twin = answer("other-branch"), answer(NEAR_MIRROR)
+    assert trusted_under(checker, checker.calibration, [fitted, twin]).tolist() == [False, True]
+    bound = np.full(3, 0.5)
+    reasons = checker._reasons(feats, fitted.angles_deg, bound, fitted.alternatives, False, False)
+    assert reasons and reasons[0].endswith(AMBIGUOUS)
+    assert [AlternativePublic.from_alternative(c.alternatives[0]).fitted for c in (fitted, twin)] == [True, False]

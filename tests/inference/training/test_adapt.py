@@ -180,7 +180,13 @@ def test_adapt_refusals_leave_nothing(smoke_base, tmp_path, capsys):
         ["adapt", "--frames", str(one), "--base", str(smoke_base), "--out", str(tmp_path / "o"), "--crop-px", "100"]
     )
     err = capsys.readouterr().err
-    assert code == 2 and "crop_px = 100" in err and "multiple of 16" in err and len(err.strip().splitlines()) == 1
+    assert (
+        code == 2
+        and "crop_px must be" in err
+        and "multiple of 16" in err
+        and "100 is not" in err
+        and len(err.strip().splitlines()) == 1
+    )
     assert not (tmp_path / "o").exists()
 
 
