@@ -17,7 +17,7 @@ the target's projection (``inference.fit``), and returns a ``Checked``:
 * ``quality.trusted`` and ``quality.reasons``: every check the answer failed, in words;
 * ``alternatives``: other attitudes (the near-mirror (z, -y, -x), library matches, the answer's tilts) whose
   fit is within ``ALTERNATIVE_MARGIN`` of the best, each with its own IoU; the other branch's best fit whatever its
-  gap; and the answer's exact near-mirror itself where that fit settled over ``DISTINCT_DEG`` from it.
+  gap; and the answer's exact near-mirror itself where that fit settled over ``TWIN_SAME_DEG`` from it.
 
 The checks, each a threshold from the calibration (``trust.json`` beside the models):
 the frame's brightness statistics lie where fresh frames' do (the median pixel; catches
@@ -93,7 +93,8 @@ UNREFINED = FitOptions(steps_deg=(), prior_weight=0.0)  # a start's own soft IoU
 # An alternative's ``start`` where it is the answer's exact near-mirror, listed unrefined (``Checker._near_mirror``).
 NEAR_MIRROR = "near-mirror"
 # A listed fit this close to the answer's exact near-mirror reads that branch as the twin does (about a good answer's
-# 90 % bound on our frames); farther, the twin is listed beside it: the truth side lies within 5 deg of one of them.
+# 90 % bound on our frames); farther, the twin is listed beside it, so an answer read within 5 deg of the wrong branch
+# lists the truth whichever way the fit on the truth's side went.
 TWIN_SAME_DEG = 2.0
 
 
