@@ -604,8 +604,8 @@ def test_network_answers_that_fit_under_the_search_trigger_are_searched_and_keep
 
 def test_the_answers_unrefined_near_mirror_is_listed_but_never_judged_as_a_rival_fit(shipped):
     """The same answer with one alternative fitting as well (gap 0): flagged as ambiguous where that alternative is
-    a fit, not where it is the answer's exact near-mirror listed unrefined (the fit refined from it fits at least as
-    well and is judged instead); the API says which is which."""
+    a fit, not where it is the answer's exact near-mirror listed unrefined (the margins were calibrated on the fitted
+    alternatives, which are judged instead); the API says which is which."""
     from app.schemas.estimates import AlternativePublic
     from inference.trust import AMBIGUOUS, NEAR_MIRROR, Alternative, trusted_under
 
