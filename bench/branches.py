@@ -25,7 +25,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench.common import machine  # noqa: E402
+from bench.common import branches, machine  # noqa: E402
 from bench.sections import replace_section  # noqa: E402
 
 TITLE = "Near-mirror branches"
@@ -36,8 +36,6 @@ CLOSE_DEG = 5.0
 def score(frames: np.ndarray, truth: np.ndarray, keep: bool) -> dict[str, Any]:
     import inference.trust as trust
     from inference.fit import fit as real_fit
-    from inference.fit import mirror
-    from inference.rotations import geodesic_deg
     from inference.runtime import DEFAULT_MODEL_DIR, Estimator
     from inference.trust import load_checkers
 
@@ -62,19 +60,9 @@ def score(frames: np.ndarray, truth: np.ndarray, keep: bool) -> dict[str, Any]:
         trust.Checker._with_other_branch = real_other  # type: ignore[method-assign]
         trust.Checker._near_mirror = real_twin  # type: ignore[method-assign]
     answers = np.array([c.angles_deg for c in checks])
-    err = geodesic_deg(answers, truth)
-    mirrored = np.array([mirror(t) for t in truth])
-    wrong = (err > CLOSE_DEG) & (geodesic_deg(answers, mirrored) < err)
+    b = branches(answers, truth, checks, CLOSE_DEG)
+    err, wrong, on_mirror, listed = b["err"], b["wrong"], b["on_mirror"], b["listed"]
     trusted = np.array([c.quality.trusted for c in checks])
-    listed = np.array(
-        [
-            any(geodesic_deg(np.array(a.angles_deg), truth[k])[0] <= CLOSE_DEG for a in checks[k].alternatives)
-            for k in range(len(checks))
-        ]
-    )
-    # Read well on the wrong branch: within 5 deg of the truth's near-mirror (the answer's own twin then lies within
-    # 5 deg of the truth: the mirror is an isometry); the others are wrong on either branch.
-    on_mirror = wrong & (geodesic_deg(answers, mirrored) <= CLOSE_DEG)
     n_wrong = int(wrong.sum())
     return {
         "frames": len(frames),

@@ -8,6 +8,7 @@ import statistics
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -53,3 +54,35 @@ def machine() -> str:
     except OSError:
         pass
     return f"{cpu}{isa}, {os.cpu_count()} cores, Python {platform.python_version()}, numpy {np.__version__}"
+
+
+def branches(
+    answers: np.ndarray, truth: np.ndarray, checks: list[Any], close_deg: float = 5.0
+) -> dict[str, np.ndarray]:
+    """Each checked answer against the near-mirror pair (issue 43), per frame:
+
+    * ``err``: its angle from the truth; ``to_mirror``: from the truth's near-mirror (z, -y, -x);
+    * ``wrong``: a wrong-branch answer, over ``close_deg`` from the truth and nearer its near-mirror;
+    * ``on_mirror``: of those, read within ``close_deg`` of the truth's near-mirror (its own near-mirror, listed, then
+      lies as near the truth: the mirror is an isometry);
+    * ``listed``: some alternative within ``close_deg`` of the truth."""
+    from inference.fit import mirror
+    from inference.rotations import geodesic_deg
+
+    err = geodesic_deg(answers, truth)
+    to_mirror = geodesic_deg(answers, np.array([mirror(t) for t in truth]))
+    wrong = (err > close_deg) & (to_mirror < err)
+    listed = np.array(
+        [
+            any(geodesic_deg(np.array(a.angles_deg), t)[0] <= close_deg for a in c.alternatives)
+            for c, t in zip(checks, truth, strict=True)
+        ],
+        bool,
+    )
+    return {
+        "err": err,
+        "to_mirror": to_mirror,
+        "wrong": wrong,
+        "on_mirror": wrong & (to_mirror <= close_deg),
+        "listed": listed,
+    }

@@ -23,7 +23,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench.common import machine  # noqa: E402
+from bench.common import branches, machine  # noqa: E402
 from bench.sections import replace_section  # noqa: E402
 
 TITLE = "Any attitude"
@@ -93,8 +93,8 @@ def score(
     calibration: str | None = None,
     labels: np.ndarray | None = None,
 ) -> dict[str, Any]:
-    from inference.fit import Library, mirror
-    from inference.rotations import euler_difference, geodesic_deg
+    from inference.fit import Library
+    from inference.rotations import euler_difference
 
     est, checker = _checker(calibration)
     t0 = time.perf_counter()
@@ -111,28 +111,17 @@ def score(
     if labels is not None and est.search_enhancer is not None:
         search_iou = float(np.mean(silhouette_ious(np.stack([est.search_enhancer(f) for f in frames]), labels)))
     answers = np.array([c.angles_deg for c in checks])
-    err = geodesic_deg(answers, truth)
-    mirrored = np.array([mirror(t) for t in truth])
-    wrong = (err > 5.0) & (geodesic_deg(answers, mirrored) < err)
+    b = branches(answers, truth, checks)
+    err, to_mirror, wrong, on_mirror, listed = b["err"], b["to_mirror"], b["wrong"], b["on_mirror"], b["listed"]
     trusted = np.array([c.quality.trusted for c in checks])
-    listed = np.array(
-        [
-            any(geodesic_deg(np.array(a.angles_deg), truth[k])[0] <= 5.0 for a in checks[k].alternatives)
-            for k in range(len(checks))
-        ]
-    )
-    # Read well on the wrong branch: within 5 deg of the truth's near-mirror, so the answer's own near-mirror (always
-    # listed, unrefined where the fit on that branch went elsewhere) lies within 5 deg of the truth.
-    to_mirror = geodesic_deg(answers, mirrored)
-    on_mirror = wrong & (to_mirror <= 5.0)
-    for k in np.flatnonzero(wrong):
-        _log(
-            f"wrong branch: frame {k}, {err[k]:.1f} deg off, {to_mirror[k]:.1f} deg from the truth's near-mirror, "
-            f"listing the truth: {bool(listed[k])}, trusted: {bool(trusted[k])}"
-        )
     basinless = np.zeros(len(checks), bool)
     for k in np.flatnonzero(wrong):
         basinless[k] = truth_leaves(checker, est, frames[k], res.enhanced[k], checks[k], truth[k]) > 5.0
+        _log(
+            f"wrong branch: frame {k}, {err[k]:.1f} deg off, {to_mirror[k]:.1f} deg from the truth's near-mirror, "
+            f"listing the truth: {bool(listed[k])}, trusted: {bool(trusted[k])}, no minimum near the truth: "
+            f"{bool(basinless[k])}"
+        )
     axis_err = np.abs(euler_difference(answers, truth))
     bounds = np.array([c.quality.uncertainty_deg for c in checks], float)
     covered = np.mean(axis_err <= bounds, axis=0)

@@ -524,10 +524,10 @@ class Checker:
         the wrong branch lists the truth. The fit on that branch, refined from the twin, can settle elsewhere where
         the silhouette is drawn unlike our renderer's (another radar's look pulls both branches, and the truth side
         need not hold a minimum near the truth): on harsh scattering it settled 6-9 deg from the truth where the
-        answer lay 2-5 deg from the truth's twin (design/measurements.md, "The answer's exact near-mirror listed").
-        Listed with its own fit, and not judged by the ambiguity margin, which was calibrated on the fitted
-        alternatives: a fit on that branch beside it fitted better on 145 of 150 harsh frames, and where it did not,
-        the answer was flagged already (design/measurements.md, "The answer's exact near-mirror listed")."""
+        answer lay 2-5 deg from the truth's twin. Listed with its own fit, and not judged by the ambiguity margin,
+        which was calibrated on the fitted alternatives: a fit on that branch beside it fitted better on 145 of 150
+        harsh frames, and where it did not, the answer was flagged already
+        (design/measurements.md, "The answer's exact near-mirror listed")."""
         twin = mirror(angles)
         dist = float(geodesic_deg(twin, angles)[0])
         if dist < DISTINCT_DEG or any(

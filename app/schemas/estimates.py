@@ -79,7 +79,7 @@ class AlternativePublic(AttitudePublic):
     fitted: bool = Field(
         default=True,
         description="false for the answer's exact near-mirror (z, -y, -x), listed as it is where the fit on that "
-        "branch settled over 5 deg from it: the other branch read as accurately as the answer's own, which the "
+        "branch settled over 2 deg from it: the other branch read as accurately as the answer's own, which the "
         "silhouette alone does not single out (never counted as a rival fit by the ambiguity check)",
     )
 

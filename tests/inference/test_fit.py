@@ -274,6 +274,12 @@ def test_the_near_mirror_start_is_refined_however_far_the_prior_puts_it(tiangong
             assert not checked.quality.trusted
 
 
+def _scipy_angle(p, q):
+    """The rotation angle (deg) between ZYX Euler attitudes, scipy's own."""
+    rp, rq = Rotation.from_euler("ZYX", p, degrees=True), Rotation.from_euler("ZYX", q, degrees=True)
+    return np.degrees((rp.inv() * rq).magnitude())
+
+
 def test_the_answers_exact_near_mirror_lies_as_far_from_the_truth_as_the_answer_from_the_truths_mirror():
     """The near-mirror is conjugation by M = diag(1, 1, -1) (an isometry of the rotations): for any answer A and
     truth T, angle(mirror(A), T) = angle(A, mirror(T)), each angle taken by scipy from the matrices. So an answer read
@@ -281,16 +287,8 @@ def test_the_answers_exact_near_mirror_lies_as_far_from_the_truth_as_the_answer_
     rng = np.random.default_rng(43)
     a = Rotation.random(50, random_state=rng).as_euler("ZYX", degrees=True)
     t = Rotation.random(50, random_state=rng).as_euler("ZYX", degrees=True)
-
-    def angle(p, q):
-        return np.degrees(
-            (
-                Rotation.from_euler("ZYX", p, degrees=True).inv() * Rotation.from_euler("ZYX", q, degrees=True)
-            ).magnitude()
-        )
-
     np.testing.assert_allclose(
-        angle(np.array([mirror(x) for x in a]), t), angle(a, np.array([mirror(x) for x in t])), atol=1e-9
+        _scipy_angle(np.array([mirror(x) for x in a]), t), _scipy_angle(a, np.array([mirror(x) for x in t])), atol=1e-9
     )
 
 
@@ -309,18 +307,8 @@ def test_the_answers_exact_near_mirror_is_listed_unless_a_listed_fit_or_the_answ
     best = fit(tiangong, label, {"answer": answer}, prior_at=None)[0]
     twin = checker._near_mirror(label, best, best.angles_deg, [])
     assert twin is not None and twin.start == NEAR_MIRROR
-    err = np.degrees(
-        (
-            Rotation.from_euler("ZYX", twin.angles_deg, degrees=True).inv()
-            * Rotation.from_euler("ZYX", truth, degrees=True)
-        ).magnitude()
-    )
-    ans_err = np.degrees(
-        (
-            Rotation.from_euler("ZYX", best.angles_deg, degrees=True).inv()
-            * Rotation.from_euler("ZYX", mirror(truth), degrees=True)
-        ).magnitude()
-    )
+    err = _scipy_angle(np.array(twin.angles_deg), truth)
+    ans_err = _scipy_angle(best.angles_deg, mirror(truth))
     assert err == pytest.approx(ans_err, abs=1e-6) and err < 5.0
     assert twin.silhouette_iou == pytest.approx(float(silhouette_iou(tiangong, mirror(best.angles_deg), label)[0]))
     beside = Alternative(tuple(mirror(best.angles_deg) + [0.0, 4.0, 0.0]), 0.9, 0.01, 60.0, "other-branch")
