@@ -318,9 +318,17 @@ def section(results: dict[str, dict[str, Any]]) -> list[str]:
         "128 px windows about the target (`--crop-px 128`, 600 steps against about 200) gave 1.52 deg, 66 % trusted, "
         "19 % of good answers flagged, but our own frames 0.52 deg and one answer over 10 deg off trusted; UNet++ at "
         "1e-4 (`--lr-unet 1e-4`) 1.67 deg, 42 % trusted, 47 % flagged, our own frames 0.40 deg. Both buy this radar's "
-        "accuracy with ours, and neither set passed the int8 export (UNet++ served in float16), so the defaults stay; "
-        "at equal seconds whole-frame steps drew the better silhouette on both radars, so the windows' median may "
-        "be the run's as much as theirs.",
+        "accuracy with ours, so the defaults stay (neither passed the int8 export; no harsh set here has: UNet++ "
+        "served in float16); at equal seconds whole-frame steps drew the better silhouette on both radars, so the "
+        "windows' median may be the run's as much as theirs. A third way changes nothing that is learnt: UNet++ "
+        "trains channels-last since 2026-12-07 (design/measurements.md, 'bf16 training on the CPU'), 35 s an "
+        "epoch against 50, so 19 epochs fit the 11 minutes instead of 13. The validation score was lowest at epoch "
+        "13 again, and that set gave 1.88 deg, p95 8.2, 4 % beyond 10 deg, 61 % trusted, 8 % of trusted answers "
+        "outside a bound per axis, 35 % of good answers flagged, our own frames 0.31 deg and 89 % trusted: within "
+        "the spread of single runs at this point (1.88-2.61 deg), its trust figures worse on the same 40 "
+        "calibration frames. Past about epoch 13 more steps of the same kind do not lower the held-out loss here, "
+        "so more compute inside the 30 minutes is not what the accuracy goal lacks (design/measurements.md, 'An "
+        "adapted set's error is its silhouette's': neither the loss nor a learnt look of the radar moves it).",
         "",
         f"![learning curves]({PLOT.name})",
         "",

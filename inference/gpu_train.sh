@@ -9,11 +9,19 @@
 #                                       newest epoch's float16 weights and the records into $OUT (4 files, under 16 MB
 #                                       each). UNet++ learns every attitude; Swin learns the cube only (its loss skips
 #                                       frames outside it: inference/networks/swin.py:cube_angle_loss), and the
-#                                       library search answers the rest. Sizes from the H100 figure (0.105 s a step of
-#                                       32 frames, eager): an epoch of 29,000 training frames is about 95 s, so the run
-#                                       stops after the epoch that crosses 4.5 minutes (about 4.8); the simulation
-#                                       takes about 1 minute on 16 cores. A hard stop (GSA_GPU_LIMIT_S, 420 s) on
-#                                       training leaves the newest checkpoint, which is packed all the same.
+#                                       library search answers the rest. A share of the frames (GSA_GPU_VARIETY_SHARE,
+#                                       0.3 here) has its scattering drawn from the robust preset (GSA_GPU_VARIETY,
+#                                       robust here; none: off): the wrong-branch answers that list nothing near the
+#                                       truth are on such frames, where the search UNet++'s silhouette holds no minimum
+#                                       near it (design/measurements.md, "The answer's exact near-mirror listed").
+#                                       Sizes from the H100 figure (0.105 s a step of 32 frames, eager): an epoch of
+#                                       29,000 training frames is about 95 s, so the run stops after the epoch that
+#                                       crosses 4.5 minutes (about 4.8). The simulation takes about 1 minute on 16
+#                                       cores for default frames, and the robust preset's 9,000 about 1 more (9.3
+#                                       frames/s a core, BENCHMARKS.md "ISAR simulation"). A hard stop on training
+#                                       (GSA_GPU_LIMIT_S; default what is left of GSA_GPU_BUDGET_S, 500 s from the
+#                                       start, after the simulation) leaves the newest checkpoint, which is packed all
+#                                       the same, so the command ends inside its 9 minutes however long the data took.
 #                                       Run it as:  timeout 560 inference/gpu_train.sh oneshot
 #   Back home:  python -m inference.training.pipeline join --pieces OUT --run runs/so3
 #               gsa export --run runs/so3 --half --int8 --frames DATA   (then gsa calibrate --frames 600 --so3-frames 1000)
@@ -117,18 +125,22 @@ oneshot)
     MINUTES=${GSA_GPU_MINUTES:-4.5}
     SO3_SHARE=${GSA_GPU_SO3_SHARE:-0.5}
     FROM=${GSA_GPU_FROM:-records/checkpoints/compact-e15-cpu-tail}
-    LIMIT_S=${GSA_GPU_LIMIT_S:-420}
+    VARIETY=()
+    [ "${GSA_GPU_VARIETY:-robust}" != none ] &&
+        VARIETY=(--variety "${GSA_GPU_VARIETY:-robust}" --variety-share "${GSA_GPU_VARIETY_SHARE:-0.3}")
     command -v nvidia-smi >/dev/null && nvidia-smi --query-gpu=name,memory.total --format=csv
     python3 -c "import torch; print('torch', torch.__version__, 'cuda', torch.cuda.is_available())"
     mkdir -p "$W" "$OUT"
     python3 -m inference.training.pipeline prepare --work "$W" --n "$N" --n-train "$((N - TEST))" \
-        --attitudes so3 --so3-share "$SO3_SHARE" 2>&1 | grep -E '000/|error|ready' | tail -3
-    echo "[$(( $(date +%s) - T0 )) s] data ready"
+        --attitudes so3 --so3-share "$SO3_SHARE" "${VARIETY[@]}" 2>&1 | grep -E '000/|error|ready' | tail -3
+    LIMIT_S=${GSA_GPU_LIMIT_S:-$(( ${GSA_GPU_BUDGET_S:-500} - ($(date +%s) - T0) ))}
+    (( LIMIT_S < 60 )) && { echo "only ${LIMIT_S} s left for training: give a smaller GSA_GPU_N" >&2; exit 2; }
+    echo "[$(( $(date +%s) - T0 )) s] data ready; training stops by ${LIMIT_S} s from now"
     python3 -m inference.training.pipeline join --pieces "$FROM" --run "$W/from" || exit 2
     # No --out: the newest epoch is packed below whether training ended or the hard stop cut it.
     timeout --signal=INT "$LIMIT_S" python3 -m inference.training.pipeline run --work "$W" --name so3 \
         --recipe "$RECIPE" --from "$W/from" --n "$N" --n-train "$((N - TEST))" --attitudes so3 \
-        --so3-share "$SO3_SHARE" --max-minutes "$MINUTES" --lr "${GSA_GPU_COMPACT_LR:-4e-5}" \
+        --so3-share "$SO3_SHARE" "${VARIETY[@]}" --max-minutes "$MINUTES" --lr "${GSA_GPU_COMPACT_LR:-4e-5}" \
         --epochs "${GSA_GPU_COMPACT_EPOCHS:-20}" "${EMA[@]}" >"$W/so3.log" 2>&1
     echo "[$(( $(date +%s) - T0 )) s] training ended (rc $?)"
     grep -E 'epoch .* done|stopping|Traceback|error' "$W/so3.log" | tail -8

@@ -251,6 +251,7 @@ def adapt(
     torch.manual_seed(opts.seed)
     gen = torch.Generator().manual_seed(opts.seed)
     rng = np.random.default_rng(opts.seed)
+    unet.to(memory_format=torch.channels_last)  # type: ignore[call-overload]  # as training does: a third faster a step
     opt_u = torch.optim.Adam(unet.parameters(), lr=opts.lr_unet)
     tail = cast(Any, swin).tail_modules(1).parameters() if opts.train_swin else iter(())
     opt_s = torch.optim.Adam(list(tail) or [torch.zeros(1, requires_grad=True)], lr=opts.lr_swin)
@@ -309,6 +310,7 @@ def adapt(
             x, y = _augment(x, y, opts, gen)
             if opts.crop_px:
                 x, y = _windows(x, y, opts.crop_px, gen)
+            x = x.contiguous(memory_format=torch.channels_last)
             with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
                 enh = step_u(x)
                 loss_u = relative_frobenius_loss(enh.float(), y)

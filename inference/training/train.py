@@ -348,8 +348,9 @@ def _set_up(data_dir: Path, out: Path, opts: TrainOptions) -> _Run:
         torch.backends.cudnn.benchmark = True
         torch.backends.cuda.matmul.allow_tf32 = True
         torch.backends.cudnn.allow_tf32 = True
-    if dev.type == "cuda" or bf16:  # NHWC convolutions are what tensor cores and oneDNN's bf16 kernels run natively
-        unet.to(memory_format=torch.channels_last)  # type: ignore[call-overload]
+    # NHWC convolutions are what tensor cores and oneDNN's kernels run natively, bf16 or float32 (design/measurements.md,
+    # "bf16 training on the CPU")
+    unet.to(memory_format=torch.channels_last)  # type: ignore[call-overload]
     opt_u = torch.optim.Adam(unet.parameters(), lr=opts.lr)
     opt_s = torch.optim.Adam(swin.parameters(), lr=opts.lr)
     averaged: dict[str, torch.optim.swa_utils.AveragedModel] = {}
@@ -446,8 +447,7 @@ def _epoch(
         run.frames_seen += len(sel)
         images = run.dev_data["image"] if run.cache is None else run.cache
         x, y, a = _tensors(images, run.dev_data, np.sort(sel), dev)
-        if dev.type == "cuda" or run.bf16:
-            x = x.contiguous(memory_format=torch.channels_last)
+        x = x.contiguous(memory_format=torch.channels_last)
         with amp:
             if opts.enhance and run.cache is None:
                 enhanced = run_u(x) if train_unet else run_u(x).detach()
