@@ -58,6 +58,10 @@ from inference.training.options import AdaptOptions
 
 SIM_SEED = 31_000  # the simulated frames mixed in: a seed no other set uses
 MIN_CALIBRATION_FRAMES = 20
+# Held-out scenes under which a recalibration's record carries a caution: the scale of the bounds a scene needs varies
+# about 2x from scene to scene, so bounds from 1-2 scenes covered the next scenes 85-99 % per axis
+# (design/measurements.md, "Bounds fitted on few frames").
+MIN_CALIBRATION_SCENES = 3
 
 
 def label_masks(angles_deg: NDArray[np.floating], radar: Any, model: Any) -> NDArray[np.bool_]:
@@ -451,6 +455,7 @@ def recalibrate(
     search's trigger stays the base set's (``Calibration.search_iou_min``): this radar's poorer
     silhouettes lower the trust threshold, and a trigger that low would stop the search where Swin is wrong.
     The network path's bound limit and ambiguity margin are chosen on the held-out frames (``network_limits``).
+    Under ``MIN_CALIBRATION_SCENES`` held-out scenes the record carries a ``caution`` (and the log says it).
     """
     from inference.runtime import Estimator
     from inference.trust import TRUST_FILE, Calibration, Checker, calibrate
@@ -489,9 +494,20 @@ def recalibrate(
     cal.write(model_dir / TRUST_FILE)
     fitted = np.array([c.angles_deg for c in checks])
     geo = geodesic_deg(fitted, val.angles_deg)
+    scenes = len(set(val.scenes))
+    caution = {}
+    if scenes < MIN_CALIBRATION_SCENES:
+        caution["caution"] = (
+            f"trust was calibrated on {scenes} held-out scene(s): the bounds a scene needs vary about 2x from scene to "
+            f"scene, and bounds from 2 scenes covered the next ones 85-99 % per axis, not 90 %; hold out "
+            f"{MIN_CALIBRATION_SCENES} or more (label more scenes, or raise --validation-share)"
+        )
+        _say(caution["caution"])
     return {
         "recalibrated": True,
         "frames": len(val),
+        "scenes": scenes,
+        **caution,
         "fitted_geodesic_median_deg": round(float(np.median(geo)), 3),
         "flagged_share": round(float(np.mean([not c.quality.trusted for c in checks])), 3),
         "search_iou_min": trigger,

@@ -148,6 +148,10 @@ def test_adapt_splits_by_scene_keeps_the_best_weights_and_serves(smoke_base, tmp
     assert chosen["frames"] == lab["validation_frames"] and trust["max_bound_deg"] == chosen["max_bound_deg"] >= 5.0
     assert rec["calibration"]["ambiguity_margin"] == trust["ambiguity_margin"] <= 0.002
     assert sorted(trust["made"]["scenes"]) == lab["validation_scenes"]
+    # One held-out scene: bounds fitted on it say so, in the record and the log
+    assert rec["calibration"]["scenes"] == len(lab["validation_scenes"]) == 1
+    assert "calibrated on 1 held-out scene" in rec["calibration"]["caution"]
+    assert "calibrated on 1 held-out scene" in capsys.readouterr().err
     assert set(trust["made"]["labelled_frames"]) <= {p.name for p in frames.iterdir()}
 
 
