@@ -59,7 +59,7 @@ from inference.training.options import AdaptOptions
 SIM_SEED = 31_000  # the simulated frames mixed in: a seed no other set uses
 MIN_CALIBRATION_FRAMES = 20
 # Held-out scenes under which a recalibration's record carries a caution: the scale of the bounds a scene needs varies
-# about 2x from scene to scene, so bounds from 1-2 scenes covered the next scenes 85-99 % per axis
+# about 2x from scene to scene, so bounds from 1-2 scenes covered the next scenes 83-99 % per axis
 # (design/measurements.md, "Bounds fitted on few frames").
 MIN_CALIBRATION_SCENES = 3
 
@@ -499,7 +499,7 @@ def recalibrate(
     if scenes < MIN_CALIBRATION_SCENES:
         caution["caution"] = (
             f"trust was calibrated on {scenes} held-out scene(s): the bounds a scene needs vary about 2x from scene to "
-            f"scene, and bounds from 2 scenes covered the next ones 85-99 % per axis, not 90 %; hold out "
+            f"scene, and bounds from 2 scenes covered the next ones 83-99 % per axis, not 90 %; hold out "
             f"{MIN_CALIBRATION_SCENES} or more (label more scenes, or raise --validation-share)"
         )
         _say(caution["caution"])
