@@ -408,6 +408,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--lr-unet", type=float, help="UNet++'s rate (default: gsa adapt's)")
     p.add_argument("--crop-px", type=int, help="train on windows of this many pixels (default: gsa adapt's)")
     p.add_argument(
+        "--validation-share", type=float, help="share of the labelled frames held out, by scenes (default: gsa adapt's)"
+    )
+    p.add_argument(
         "--note",
         help="run the points as a variant of the stored rows (e.g. another --minutes), kept beside them as "
         "FRAMES/SCENES/N with this note in the table",
@@ -445,7 +448,12 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 frames, scenes = (int(v) for v in point.split("/")[:2])
                 _log(f"point {point}")
-                options = {k: v for k, v in (("lr_unet", args.lr_unet), ("crop_px", args.crop_px)) if v is not None}
+                flags = (
+                    ("lr_unet", args.lr_unet),
+                    ("crop_px", args.crop_px),
+                    ("validation_share", args.validation_share),
+                )
+                options = {k: v for k, v in flags if v is not None}
                 stored[point] = run_point(
                     args.standin, frames, scenes, args.minutes, Path(args.work), data, name, options
                 )
