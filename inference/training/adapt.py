@@ -499,8 +499,8 @@ def recalibrate(
     if scenes < MIN_CALIBRATION_SCENES:
         caution["caution"] = (
             f"trust was calibrated on {scenes} held-out scene(s): the bounds a scene needs vary about 2x from scene to "
-            f"scene, and bounds from 2 scenes covered the next ones 83-99 % per axis, not 90 %; hold out "
-            f"{MIN_CALIBRATION_SCENES} or more (label more scenes, or raise --validation-share)"
+            f"scene, and bounds from 2 scenes covered the next ones 83-99 % per axis, not 90 %; label more scenes, "
+            f"so that {MIN_CALIBRATION_SCENES} or more are held out and as many are left to learn from"
         )
         _say(caution["caution"])
     return {
