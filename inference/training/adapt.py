@@ -59,7 +59,7 @@ from inference.training.options import AdaptOptions
 SIM_SEED = 31_000  # the simulated frames mixed in: a seed no other set uses
 MIN_CALIBRATION_FRAMES = 20
 # Held-out scenes under which a recalibration's record carries a caution: the scale of the bounds a scene needs varies
-# about 2x from scene to scene, so bounds from 1-2 scenes covered the next scenes 83-99 % per axis
+# about 2x from scene to scene, so bounds from 2 scenes covered the next scenes 83-99 % per axis
 # (design/measurements.md, "Bounds fitted on few frames").
 MIN_CALIBRATION_SCENES = 3
 
