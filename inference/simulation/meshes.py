@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from inference.errors import ModelFileError
-from inference.simulation.po import Mesh
+from inference.simulation.mesh import Mesh
 from inference.simulation.targets import FLAT, ISOTROPIC, TargetModel
 
 Vec = NDArray[np.float64]

@@ -19,7 +19,8 @@ from numpy.typing import NDArray
 
 from inference.errors import ModelFileError, RadarError
 from inference.rotations import rotation_matrix
-from inference.simulation.po import Mesh, POOptions, checked_mesh, po_echo, po_sources, prepared
+from inference.simulation.mesh import Mesh, checked_mesh
+from inference.simulation.po import POOptions, po_echo, po_sources, prepared
 from inference.simulation.radar import (
     Imager,
     Radar,

@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from inference.errors import ModelFileError
-from inference.simulation.po import Mesh, box_mesh, cylinder_mesh, join, orthonormal_frame, plate_mesh, sphere_mesh
+from inference.simulation.mesh import Mesh, box_mesh, cylinder_mesh, join, orthonormal_frame, plate_mesh, sphere_mesh
 
 Vec = NDArray[np.float64]
 

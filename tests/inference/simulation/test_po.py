@@ -13,20 +13,22 @@ from scipy.spatial.transform import Rotation
 
 from inference.errors import ModelFileError, RadarError
 from inference.rotations import rotation_matrix
-from inference.simulation.po import (
+from inference.simulation.mesh import (
     Mesh,
-    POOptions,
-    PreparedMesh,
     box_mesh,
     checked_mesh,
     cylinder_mesh,
     disc_mesh,
     join,
     plate_mesh,
+    sphere_mesh,
+)
+from inference.simulation.po import (
+    POOptions,
+    PreparedMesh,
     po_echo,
     po_echo_direct,
     rcs_m2,
-    sphere_mesh,
     triangle_integral,
 )
 from inference.simulation.radar import Imager, Radar
