@@ -81,12 +81,12 @@ def validate_station(station: Station) -> None:
         if not (math.isfinite(value) and lo <= value <= hi):
             raise StationError(f"{name} {value} is outside [{lo}, {hi}]", field=name)
     rate = station.max_azimuth_rate_deg_s
-    if not (math.isfinite(rate) and 0.0 < rate <= 360.0):
+    if not (math.isfinite(rate) and 0.001 <= rate <= 360.0):
         raise StationError(
-            f"max_azimuth_rate_deg_s {rate} must be over 0 and at most 360", field="max_azimuth_rate_deg_s"
+            f"max_azimuth_rate_deg_s {rate} must be between 0.001 and 360", field="max_azimuth_rate_deg_s"
         )
-    if station.max_range_km is not None and not (math.isfinite(station.max_range_km) and station.max_range_km > 0):
-        raise StationError(f"max_range_km {station.max_range_km} must be positive", field="max_range_km")
+    if station.max_range_km is not None and not (math.isfinite(station.max_range_km) and station.max_range_km >= 0.001):
+        raise StationError(f"max_range_km {station.max_range_km} must be at least 0.001 km", field="max_range_km")
     validate_mask(station.mask)
 
 

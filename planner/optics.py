@@ -48,9 +48,9 @@ class ObserverOptics:
             ("aperture_m", 0.01 <= self.aperture_m <= 10.0, "between 0.01 and 10 m"),
             ("wavelength_nm", 100.0 <= self.wavelength_nm <= 20000.0, "between 100 and 20000 nm (UV to thermal IR)"),
             ("gsd_m", 0.001 <= self.gsd_m <= 100.0, "between 0.001 and 100 m"),
-            ("max_rate_deg_s", 0.0 < self.max_rate_deg_s <= 180.0, "over 0 and at most 180 deg/s"),
+            ("max_rate_deg_s", 0.001 <= self.max_rate_deg_s <= 180.0, "between 0.001 and 180 deg/s"),
             ("sun_exclusion_deg", 0.0 <= self.sun_exclusion_deg < 180.0, "within [0, 180) deg"),
-            ("max_phase_angle_deg", 0.0 < self.max_phase_angle_deg <= 180.0, "over 0 and at most 180 deg"),
+            ("max_phase_angle_deg", 0.001 <= self.max_phase_angle_deg <= 180.0, "between 0.001 and 180 deg"),
         )
         for name, ok, allowed in checks:
             value = getattr(self, name)

@@ -82,16 +82,16 @@ class PlanOptions:
             raise PlannerError(f"reading {self.reading!r} must be 'osculating' or 'mean'", field="reading")
         if not all(k in (1, 2) for k in self.revolutions_before) or not self.revolutions_before:
             raise PlannerError("revolutions_before must be a non-empty subset of (1, 2)", field="revolutions_before")
-        for name in ("access_step_s", "sample_s", "max_miss_km"):
+        for name, least in (("access_step_s", 0.001), ("sample_s", 0.001), ("max_miss_km", 0.001)):
             value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise SearchRangeError(f"{name} {value} must be a positive number", field=name)
+            if not (math.isfinite(value) and value >= least):
+                raise SearchRangeError(f"{name} {value} must be a number of at least {least:g}", field=name)
         if self.max_dv_m_s is not None and not (math.isfinite(self.max_dv_m_s) and self.max_dv_m_s >= 0.0):
             raise SearchRangeError(f"max_dv_m_s {self.max_dv_m_s} must be a non-negative number", field="max_dv_m_s")
         cap = self.max_imaging_range_km
-        if cap is not None and not (math.isfinite(cap) and cap > 0):
+        if cap is not None and not (math.isfinite(cap) and cap >= 0.001):
             raise SearchRangeError(
-                f"max_imaging_range_km {cap} must be a positive number", field="max_imaging_range_km"
+                f"max_imaging_range_km {cap} must be a number of at least 0.001 km", field="max_imaging_range_km"
             )
         d = self.standoff_km
         if d is not None and not (math.isfinite(d) and STANDOFF_RANGE_KM[0] <= d <= STANDOFF_RANGE_KM[1]):

@@ -42,7 +42,7 @@ class CampaignCreate(Strict):
     observer_optics: ObserverOpticsIn = Field(default_factory=lambda: ObserverOpticsIn())
     """what the observer images with (as a plan's)"""
     start: IsoDateTime | None = Field(default=None, description="the campaign's start (default: the target's epoch)")
-    duration_days: Finite = Field(default=60.0, gt=0.0, le=90.0)
+    duration_days: Finite = Field(default=60.0, ge=0.001, le=90.0)
     """the campaign's span, days (at most 90)"""
     dv_budget_m_s: Finite = Field(default=1000.0, ge=0.0, le=20000.0)
     """the Delta-v the whole campaign may spend, m/s"""

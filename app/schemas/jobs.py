@@ -118,7 +118,7 @@ class DatasetRadar(Strict):
     """range cells (rows)"""
     n_azimuth: int = Field(default=256, ge=8, le=1024)
     """cross-range cells (columns); a multiple of 8"""
-    aperture_deg: float = Field(default=5.1, gt=0, le=45)
+    aperture_deg: float = Field(default=5.1, ge=0.01, le=45)
     """synthetic aperture"""
 
     @field_validator("n_azimuth")
@@ -150,11 +150,11 @@ class DatasetCreate(Strict):
     """split after this many training frames (the rest the test set)"""
     variety: Literal["robust"] | None = None
     """draw each frame's scattering from this preset"""
-    variety_share: float = Field(default=1.0, gt=0, le=1)
+    variety_share: float = Field(default=1.0, ge=0.001, le=1)
     """under variety, the share of frames drawn from the preset"""
     physics: Literal["centres", "po"] = "centres"
     """centres (scattering centres) or po (physical optics on the target's facets)"""
-    physics_share: float = Field(default=1.0, gt=0, le=1)
+    physics_share: float = Field(default=1.0, ge=0.001, le=1)
     """under po, the share of frames made by physical optics"""
     radar: DatasetRadar = Field(default_factory=DatasetRadar)
     """the radar"""

@@ -21,7 +21,7 @@ class AdaptationCreate(Strict):
     """simulated frames mixed in per labelled frame, so what the simulator taught is kept (default 1)"""
     epochs: int | None = Field(default=None, ge=1, le=1000)
     """at most this many epochs (default 30)"""
-    max_minutes: float | None = Field(default=None, gt=0, le=24 * 60)
+    max_minutes: float | None = Field(default=None, ge=0.1, le=24 * 60)
     """stop after the epoch in which this runs out (default 25)"""
     validation_share: float | None = Field(default=None, ge=0.05, le=0.8)
     """share of the frames held out for validation and trust calibration, by whole scenes (default 0.3)"""
@@ -29,7 +29,7 @@ class AdaptationCreate(Strict):
     """the split's and training's seed (default 0)"""
     train_swin: bool | None = None
     """also fine-tune Swin's last stage (default: UNet++ alone, where a radar's look enters)"""
-    lr_unet: float | None = Field(default=None, gt=0, lt=1)
+    lr_unet: float | None = Field(default=None, ge=1e-8, lt=1)
     """UNet++'s Adam rate (default 3e-5)"""
     crop_px: int | None = Field(default=None, ge=0, le=4096)
     """train UNet++ on square windows of this many pixels about the target, a multiple of 16 from 32; 0 whole

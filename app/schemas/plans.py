@@ -34,12 +34,12 @@ class SceneSearchIn(Strict):
     """the highest perigee height change, km"""
     step_km: Finite = Field(default=0.1, ge=0.001, le=100.0)
     """the (dHa, dHp) grid step, km"""
-    max_miss_km: Finite = Field(default=10.0, gt=0.0, le=1.0e5)
-    """a candidate's node-line miss may be at most this, km"""
+    max_miss_km: Finite = Field(default=10.0, ge=0.001, le=1.0e5)
+    """a candidate's node-line miss may be at most this, km (0.001-100000)"""
     revolutions_before: list[Literal[1, 2]] = Field(default=[1, 2], min_length=1, max_length=2)
     """how many target revolutions before t_access the phasing burn may be"""
-    max_imaging_range_km: Finite | None = Field(default=None, gt=0.0)
-    """a range cap below the optics' own, km (default: observer_optics' diffraction range, gsd x aperture /
+    max_imaging_range_km: Finite | None = Field(default=None, ge=0.001, le=1.0e6)
+    """a range cap below the optics' own, km, 0.001-1000000 (default: observer_optics' diffraction range, gsd x aperture /
     (1.22 wavelength))"""
     standoff_km: Finite | None = Field(
         default=None,
@@ -70,8 +70,8 @@ class SearchIn(SceneSearchIn):
     """The search: span, element reading, the (dHa, dHp) box and the choice criterion."""
 
     start: IsoDateTime | None = Field(default=None, description="default: the target's epoch")
-    duration_days: Finite = Field(default=10.0, gt=0.0, le=30.0)
-    """the span to search from start, days (at most 30)"""
+    duration_days: Finite = Field(default=10.0, ge=0.001, le=30.0)
+    """the span to search from start, days (0.001-30)"""
     reading: Literal["osculating", "mean"] = "osculating"
     """osculating (the instantaneous orbit, numerical J2) or mean (J2 secular rates)"""
     criterion: Literal["smallest_change", "least_dv"] = "least_dv"
@@ -79,14 +79,15 @@ class SearchIn(SceneSearchIn):
     least_dv, the cheapest, or smallest_change, the best-ranked"""
     max_dv_m_s: Finite | None = Field(default=None, ge=0.0, le=20000.0)
     """a candidate dearer than this (height change plus phasing), m/s, is infeasible (default: no cap)"""
-    max_phase_angle_deg: Finite | None = Field(default=None, gt=0.0, le=180.0)
-    """replaced by observer_optics.max_phase_angle_deg, and still read when given here: the largest Sun phase angle"""
+    max_phase_angle_deg: Finite | None = Field(default=None, ge=0.001, le=180.0)
+    """replaced by observer_optics.max_phase_angle_deg, and still read when given here: the largest Sun phase angle
+    (0.001-180 deg)"""
     max_tracking_rate_deg_s: Finite | None = Field(
         default=None,
-        gt=0.0,
+        ge=0.001,
         le=180.0,
         description="replaced by observer_optics.max_rate_deg_s, and still read when given here: the fastest "
-        "line-of-sight rate the observer's pointing follows",
+        "line-of-sight rate the observer's pointing follows (0.001-180 deg/s)",
     )
 
 
@@ -129,18 +130,19 @@ class ObserverOpticsIn(Strict):
     0.25 m ground sample distance, 10 deg/s tracking, 30 deg Sun exclusion, 90 deg largest phase angle.
     """
 
-    aperture_m: Finite = _OPTICS.aperture_m
+    aperture_m: Finite = Field(default=_OPTICS.aperture_m, ge=0.01, le=10.0)
     """the telescope's aperture diameter, m (0.01-10)"""
-    wavelength_nm: Finite = _OPTICS.wavelength_nm
+    wavelength_nm: Finite = Field(default=_OPTICS.wavelength_nm, ge=100.0, le=20000.0)
     """the imaging wavelength, nm (100-20000)"""
-    gsd_m: Finite = _OPTICS.gsd_m
-    """the ground sample distance the attitude work needs, m: with the aperture, it sets the largest range"""
-    max_rate_deg_s: Finite = _OPTICS.max_rate_deg_s
-    """the fastest line-of-sight rate the pointing follows, deg/s"""
-    sun_exclusion_deg: Finite = _OPTICS.sun_exclusion_deg
-    """the boresight's least angle from the Sun, deg"""
-    max_phase_angle_deg: Finite = _OPTICS.max_phase_angle_deg
-    """the largest Sun-target-observer angle that still shows the target's lit side, deg"""
+    gsd_m: Finite = Field(default=_OPTICS.gsd_m, ge=0.001, le=100.0)
+    """the ground sample distance the attitude work needs, m (0.001-100): with the aperture, it sets the largest
+    range"""
+    max_rate_deg_s: Finite = Field(default=_OPTICS.max_rate_deg_s, ge=0.001, le=180.0)
+    """the fastest line-of-sight rate the pointing follows, deg/s (0.001-180)"""
+    sun_exclusion_deg: Finite = Field(default=_OPTICS.sun_exclusion_deg, ge=0.0, lt=180.0)
+    """the boresight's least angle from the Sun, deg (0 up to 180)"""
+    max_phase_angle_deg: Finite = Field(default=_OPTICS.max_phase_angle_deg, ge=0.001, le=180.0)
+    """the largest Sun-target-observer angle that still shows the target's lit side, deg (0.001-180)"""
 
 
 class PlanCreate(Strict):
@@ -177,8 +179,8 @@ class AccessCreate(Strict):
     ground_station: GroundStationIn = Field(description="the radar site, or the name of one stored under /v1/stations")
     start: IsoDateTime | None = None
     """the start of the span (ISO 8601, UTC; default: the target's epoch)"""
-    duration_days: Finite = Field(default=7.0, gt=0.0, le=30.0)
-    """the span, days (at most 30)"""
+    duration_days: Finite = Field(default=7.0, ge=0.001, le=30.0)
+    """the span, days (0.001-30)"""
     reading: Literal["osculating", "mean"] = "osculating"
     """osculating (numerical J2) or mean (J2 secular rates)"""
 

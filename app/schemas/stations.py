@@ -45,12 +45,14 @@ class StationIn(Strict):
     min_elevation_deg: Finite = Field(
         default=0.0, ge=-5.0, le=89.0, description="the lowest elevation the radar tracks at, in every direction (deg)"
     )
-    max_range_km: Finite | None = Field(default=None, gt=0.0, le=1.0e5, description="the radar's longest slant range")
+    max_range_km: Finite | None = Field(
+        default=None, ge=0.001, le=1.0e5, description="the radar's longest slant range, km (0.001-100000)"
+    )
     max_azimuth_rate_deg_s: Finite = Field(
         default=10.0,
-        gt=0.0,
+        ge=0.001,
         le=360.0,
-        description="the fastest the antenna turns in azimuth, deg/s (10: a conservative rate for a large tracking "
+        description="the fastest the antenna turns in azimuth, deg/s, 0.001-360 (10: a conservative rate for a large tracking "
         "antenna; give the site's own): a pass that needs more near the zenith is flagged a keyhole",
     )
     mask: Annotated[list[MaskPoint] | None, AfterValidator(_mask_in_order)] = Field(

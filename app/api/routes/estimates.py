@@ -71,8 +71,8 @@ def estimate_form(
     normalised: Annotated[bool, Form(description=NORMALISED)] = False,
     refine: Annotated[bool, Form(description=REFINE)] = True,
     target: Annotated[Text | None, Form(max_length=200, description=TARGET)] = None,
-    range_cell_m: Annotated[float | None, Form(gt=0, le=100, description=RANGE_CELL)] = None,
-    cross_range_cell_m: Annotated[float | None, Form(gt=0, le=100, description=CROSS_RANGE_CELL)] = None,
+    range_cell_m: Annotated[float | None, Form(ge=0.001, le=100, description=RANGE_CELL)] = None,
+    cross_range_cell_m: Annotated[float | None, Form(ge=0.001, le=100, description=CROSS_RANGE_CELL)] = None,
 ) -> svc.EstimateRequest:
     """The form fields both estimate routes take, read once."""
     return svc.EstimateRequest(

@@ -69,12 +69,12 @@ async def create_pass(
         Text | None, Form(max_length=200, description="the target model (default GSA_DEFAULT_TARGET)")
     ] = None,
     normalised: Annotated[bool, Form(description="the frames already are the models' input (gsa simulate)")] = False,
-    range_cell_m: Annotated[float | None, Form(gt=0, le=100, description="the frames' range cell (m)")] = None,
+    range_cell_m: Annotated[float | None, Form(ge=0.001, le=100, description="the frames' range cell (m)")] = None,
     cross_range_cell_m: Annotated[
-        float | None, Form(gt=0, le=100, description="the frames' cross-range cell (m)")
+        float | None, Form(ge=0.001, le=100, description="the frames' cross-range cell (m)")
     ] = None,
     integration_s: Annotated[list[float] | None, Form(description=INTEGRATION_S)] = None,
-    aperture_deg: Annotated[float | None, Form(gt=0, le=30, description=APERTURE_DEG)] = None,
+    aperture_deg: Annotated[float | None, Form(ge=0.01, le=30, description=APERTURE_DEG)] = None,
 ) -> PassPublic | JSONResponse:
     """Fit every frame of a pass, place each in the plan target's LVLH frame at its time, and fuse them; stored.
 

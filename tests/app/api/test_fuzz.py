@@ -9,11 +9,13 @@ With ``GSA_FUZZ_REPORT=path`` the counts by route and status are written there.
 from __future__ import annotations
 
 import atexit
+import io
 import json
 import os
 from collections import Counter
 from pathlib import Path
 
+import numpy as np
 import pytest
 import schemathesis
 from fastapi.testclient import TestClient
@@ -178,3 +180,149 @@ def test_control_characters_in_every_string_parameter(fuzz_app):
                     assert r.status_code == 422, (method, url, p["name"], r.status_code, r.text[:300])
                     assert p["name"] in r.text
     assert sent >= 6 * len(CONTROL_STRINGS)
+
+
+# --- extremes on purpose (issue 77): denormals, the largest floats, -0.0, one ulp either side of each bound ------
+
+TINY, HUGE = 5e-324, 1.7976931348623157e308
+
+
+def _numeric_fields(spec, schema, prefix=()):
+    """Yield (path, is_integer, bounds) for every number or integer property of a JSON body schema, nested objects too."""
+    comps = spec["components"]["schemas"]
+
+    def resolve(s):
+        while "$ref" in s:
+            s = comps[s["$ref"].split("/")[-1]]
+        return s
+
+    schema = resolve(schema)
+    for name, prop in schema.get("properties", {}).items():
+        options = [resolve(p) for p in prop.get("anyOf", [prop])]
+        for p in options:
+            if p.get("type") in ("number", "integer"):
+                bounds = {k: p[k] for k in ("minimum", "exclusiveMinimum", "maximum", "exclusiveMaximum") if k in p}
+                yield (*prefix, name), p["type"] == "integer", bounds
+            elif p.get("type") == "object" or "properties" in p:
+                yield from _numeric_fields(spec, p, (*prefix, name))
+
+
+def _extremes(is_integer, bounds):
+    if is_integer:
+        return [-1, 2**63, *(b + d for b in bounds.values() for d in (-1, 1))]
+    steps = (float(np.nextafter(b, t)) for b in bounds.values() for t in (-np.inf, np.inf))
+    return [TINY, HUGE, -HUGE, -0.0, *steps]
+
+
+def _outside(value, bounds):
+    """Whether the schema itself refuses ``value`` (its stated bounds, or an integer out of 64 bits)."""
+    return (
+        value < bounds.get("minimum", -np.inf)
+        or value <= bounds.get("exclusiveMinimum", -np.inf)
+        or value > bounds.get("maximum", np.inf)
+        or value >= bounds.get("exclusiveMaximum", np.inf)
+        or abs(value) >= 2**63
+    )
+
+
+def _with(body, path, value):
+    out = json.loads(json.dumps(body))
+    node = out
+    for key in path[:-1]:
+        node = node.setdefault(key, {})
+    node[path[-1]] = value
+    return out
+
+
+def _bases():
+    from app.schemas import PAPER_EXAMPLE
+
+    plan = _with(_with(PAPER_EXAMPLE, ("search", "duration_days"), 0.01), ("search", "step_km"), 5.0)
+    station = {"name": "Extremes", "latitude_deg": 31.1, "longitude_deg": 121.3}
+    return {
+        ("/v1/plans", None): plan,
+        ("/v1/access-windows", None): {
+            "target": PAPER_EXAMPLE["target"],
+            "ground_station": PAPER_EXAMPLE["ground_station"],
+            "duration_days": 0.01,
+        },
+        ("/v1/stations", None): station,
+        ("/v1/datasets", None): {"n": 2},
+        ("/v1/model-sets/{target}/adaptations", "tiangong"): {},
+        ("/v1/campaigns", ("duration_days", "dv_budget_m_s", "scene_span_days", "max_scenes")): {
+            **{k: v for k, v in plan.items() if k != "search"},
+            "duration_days": 0.01,
+        },
+    }
+
+
+def test_numeric_fields_at_their_extremes_answer_4xx_naming_the_field(fuzz_app):
+    """Every number of every JSON body given a denormal, the largest floats, -0.0 and one ulp either side of each
+    bound the schema states: never a 5xx, and a 422 names the field (the plan's 5e-324 tracking rate was a 500)."""
+    spec = fuzz_app.openapi()
+    client = TestClient(fuzz_app)
+    sent = refused = 0
+    for (path, only), base in _bases().items():
+        url = path.replace("{target}", only) if isinstance(only, str) else path
+        schema = spec["paths"][path]["post"]["requestBody"]["content"]["application/json"]["schema"]
+        for field, is_integer, bounds in _numeric_fields(spec, schema):
+            if isinstance(only, tuple) and field not in [(f,) for f in only]:
+                continue
+            for value in _extremes(is_integer, bounds):
+                r = client.post(url, json=_with(base, field, value), headers={"X-API-Key": KEY_A})
+                sent += 1
+                assert r.status_code < 500, (url, field, value, r.text[:300])
+                if _outside(value, bounds):  # what the schema refuses is refused, by the field's name
+                    refused += 1
+                    assert r.status_code == 422 and field[-1] in r.text, (url, field, value, r.text[:300])
+    assert sent > 300 and refused > sent / 2
+
+
+@pytest.mark.parametrize(
+    "path, value",
+    [
+        (("search", "max_tracking_rate_deg_s"), TINY),
+        (("search", "max_imaging_range_km"), TINY),
+        (("search", "max_phase_angle_deg"), TINY),
+        (("search", "max_miss_km"), TINY),
+        (("observer_optics", "max_rate_deg_s"), TINY),
+        (("observer_optics", "gsd_m"), TINY),
+        (("ground_station", "max_range_km"), TINY),
+        (("ground_station", "max_azimuth_rate_deg_s"), TINY),
+    ],
+)
+def test_the_denormal_plan_request_and_its_siblings_are_422_naming_the_field(fuzz_app, path, value):
+    """The request the schema fuzzer found (a 500 from ZeroDivisionError in standoff_window) and its siblings."""
+    from app.schemas import PAPER_EXAMPLE
+
+    r = TestClient(fuzz_app).post("/v1/plans", json=_with(PAPER_EXAMPLE, path, value), headers={"X-API-Key": KEY_A})
+    assert r.status_code == 422, r.text[:300]
+    assert path[-1] in r.text
+
+
+def test_denormal_cells_and_apertures_of_frames_are_422(fuzz_app):
+    """Estimates' and passes' cell sizes and aperture, sent as form fields: a denormal is refused by name."""
+    client = TestClient(fuzz_app)
+    frame = io.BytesIO()
+    np.save(frame, np.zeros((64, 64), np.float32))
+    for url, fields in (
+        ("/v1/estimates", {"range_cell_m": TINY}),
+        ("/v1/estimates", {"cross_range_cell_m": TINY}),
+        ("/v1/passes", {"aperture_deg": TINY}),
+        ("/v1/passes", {"range_cell_m": TINY}),
+    ):
+        files = {"file" if url == "/v1/estimates" else "files": ("f.npy", frame.getvalue(), "application/octet-stream")}
+        r = client.post(url, data={k: str(v) for k, v in fields.items()}, files=files, headers={"X-API-Key": KEY_A})
+        assert r.status_code == 422, (url, fields, r.text[:300])
+        assert next(iter(fields)) in r.text
+
+
+def test_the_planner_refuses_the_same_values_by_name():
+    """A library caller gets the planner's own refusal (PlannerError naming the field), not a ZeroDivisionError."""
+    from planner.errors import PlannerError
+    from planner.optics import ObserverOptics, standoff_window
+
+    for name in ("max_rate_deg_s", "max_phase_angle_deg", "gsd_m"):
+        with pytest.raises(PlannerError) as err:
+            standoff_window(13.4, ObserverOptics(**{name: TINY}))
+        assert err.value.field == name
