@@ -128,6 +128,52 @@ def accuracy(model, imager: Imager, facet_m: float, n_samples: int = 400) -> lis
     return errors
 
 
+def plate_closed_form(radar: Radar, rot: np.ndarray, a: float, b: float) -> np.ndarray:
+    """The closed-form PO echo of a centred a x b plate (body normal x, sides along y and z) turned by ``rot``."""
+    nr, na = radar.n_range, radar.n_azimuth
+    kc = 4 * np.pi * radar.carrier_hz / 299_792_458.0
+    kx = kc + 2 * np.pi / (nr * radar.range_cell_m) * np.arange(-nr // 2, nr // 2)
+    ky = 2 * np.pi / (na * radar.cross_range_cell_m) * np.arange(-na // 2, na // 2)
+    kv = np.stack(np.broadcast_arrays(kx[:, None], ky[None, :], 0.0), -1)
+    n, u, v = rot[:, 0], rot[:, 1], rot[:, 2]
+    sincs = np.sinc(kv @ u * a / (2 * np.pi)) * np.sinc(kv @ v * b / (2 * np.pi))
+    return np.asarray(np.sqrt(4 * np.pi) / (4 * np.pi) * np.abs(kv @ n) * a * b * sincs)
+
+
+def off_specular(imager: Imager) -> dict[str, list[tuple[float, float, float]]]:
+    """The fast path against closed forms off specular: (angle, energy error dB, windowed rms error) per aspect.
+
+    The default target's larger wing (5.5 m x 2.2 m) alone, turned 30-80 deg off its normal about two axes, on the
+    paper's radar; a 0.5 m plate at 10 GHz from broadside to edge-on (64 x 64).
+    """
+    from scipy.spatial.transform import Rotation
+
+    from inference.simulation.mesh import plate_mesh
+    from inference.simulation.po import PreparedMesh
+
+    out: dict[str, list[tuple[float, float, float]]] = {}
+    small = Imager(Radar(carrier_hz=10e9, n_range=64, n_azimuth=64))
+    cases = (
+        ("lone wing 5.5 m x 2.2 m, 0.2 m facets, 30-80 deg off", imager, 5.5, 2.2, (30, 39, 50, 60, 70, 74, 80)),
+        ("plate 0.5 m, 10 GHz, broadside to edge-on", small, 0.5, 0.5, (0, 10, 30, 60, 80, 85, 88, 89, 89.5, 90)),
+    )
+    for name, im, a, b, degrees in cases:
+        pm = PreparedMesh(plate_mesh(np.zeros(3), [0, 1, 0], [0, 0, 1], a, b), 0.2)
+        w = im.window_2d()
+        rows = []
+        for axis in ([0.0, 0.0, 1.0], [0.0, 0.6, 0.8]):
+            for deg in degrees:
+                rot = Rotation.from_rotvec(np.radians(deg) * np.asarray(axis)).as_matrix()
+                fast = po_echo(pm, rot, im, POOptions(), np.random.default_rng(0))
+                exact = plate_closed_form(im.radar, rot, a, b)
+                db = 20 * np.log10(np.linalg.norm(w * fast) / np.linalg.norm(w * exact))
+                rms = np.linalg.norm(w * (fast - exact)) / np.linalg.norm(w * exact)
+                rows.append((float(deg), float(db), float(rms)))
+        out[name] = rows
+        _log(f"{name}: worst {max(abs(r[1]) for r in rows):.3f} dB, {100 * max(r[2] for r in rows):.2f} % rms")
+    return out
+
+
 def main() -> int:
     model = tiangong_like()
     imager = Imager(Radar())
@@ -136,6 +182,7 @@ def main() -> int:
     _log(f"figure written to {PLOT}")
     times = speed(model, imager)
     err = {fm: accuracy(model, imager, fm) for fm in (0.2, 0.1)}
+    off = off_specular(imager)
     for fm, e in err.items():
         _log(f"facets {fm} m: fast-path error median {np.median(e):.3f}, max {max(e):.3f}")
     mesh, _ = po_mesh(model)
@@ -153,17 +200,36 @@ def main() -> int:
         f"| `generate` on 2 processes, 80 PO frames written (mesh preparation and all) | {1000 * times['generate']:.0f} | "
         f"{1 / times['generate']:.1f} |",
         "",
-        "The fast path's error: `po_echo` (each facet a point source whose amplitude is its exact integral at 3 x 3",
-        "wave vectors of the frame's k-patch, interpolated) against the exact PO integral of every lit facet at 400",
-        "random samples of the echo, windowed, 6 attitudes:",
+        "The fast path's error off specular, against closed forms (the plate's PO echo on the frame's k-grid): each",
+        "aspect turned about two axes, the windowed image's energy in dB and its rms pixel error:",
+        "",
+        "| surface | aspects | energy error median / worst (dB) | rms error median / worst |",
+        "|---|---|---|---|",
+        *(
+            f"| {name} | {len(rows)} | {np.median([abs(r[1]) for r in rows]):.3f} / {max(abs(r[1]) for r in rows):.3f} | "
+            f"{100 * np.median([r[2] for r in rows]):.2f} / {100 * max(r[2] for r in rows):.2f} % |"
+            for name, rows in off.items()
+        ),
+        "",
+        "The whole target: `po_echo` against the exact PO integral of every facet lit along each sample's own",
+        "direction (`po_echo_direct`, shadows ray-traced per cross-range column) at 400 random samples of the echo,",
+        "windowed, 6 attitudes:",
         "",
         "| facets | median error | largest |",
         "|---|---|---|",
         *(f"| {fm} m | {100 * np.median(e):.1f} % | {100 * max(e):.1f} % |" for fm, e in err.items()),
         "",
-        "No GPU was at hand for this measurement. The station's echo is dominated by its specular returns, which",
-        "the fast path keeps; weak returns far from specular are where it errs (tests/inference/simulation/test_po.py:",
-        "a box and a plate within 6 % with 5 cm facets at every aspect, 0.2 m facets within 10 % at specular only).",
+        "How the fast path works (issue 71): each lit facet's exact integral is written by the divergence theorem",
+        "as sources on its edges (Gordon 1975): an edge's two corners, whose amplitudes are smooth in K and are",
+        "interpolated from 3 x 3 nodes of the k-patch, so the corners that neighbouring coplanar facets share cancel",
+        "exactly, as they do in the integral; an edge nearly at one range (its corner terms blow up and cancel) as",
+        "Gauss-Legendre points along it; facets within a few degrees of specular as 5 cm pieces. Obliquity is taken",
+        "at each node, the lit set at each cross-range node. Before this, each facet was one point at its centroid,",
+        "and the interpolation errors of 0.2 m facets did not cancel: 17-28 dB too bright off specular, a facet",
+        "texture over hulls and wings. What still differs from the per-column reference on the whole target is where",
+        "a cast shadow's edge moves during the aperture: the fast path fades a facet across the 3 cross-range nodes,",
+        "the reference switches it column by column; both are the staircase of 0.2 m facets along the shadow line.",
+        "No GPU was at hand for this measurement.",
         "",
         f"![both physics]({PLOT.as_posix()})",
     ]
