@@ -7,8 +7,9 @@ Run with `python -m bench.physics` (about 3 minutes on 2 cores).
    0.3), the label's outline over each.
 2. Speed: `simulate` alone, 20 attitudes (seed 85000), one process, the PO mesh prepared once (as a data set
    does); `generate` of an 80-frame PO set on 2 processes (label, normalisation, files and mesh preparation included).
-3. The fast path's error: the echo of `po.po_echo` (facets at 3 x 3 nodes, NUFFT) against the exact
-   per-sample PO integral (`po.po_echo_direct` evaluated on 400 random k-samples), windowed, for 6 attitudes.
+3. The fast path's error: off specular against the closed-form plate echo (a lone wing, a plate to edge-on);
+   on the whole target against the exact per-sample PO integral (`po.po_echo_direct` on 400 random k-samples,
+   shadows per column), windowed, for 6 attitudes.
 """
 
 from __future__ import annotations

@@ -170,33 +170,38 @@ def _split4(mesh: Mesh) -> Mesh:
     return Mesh(np.concatenate([mesh.vertices, mids]), faces.astype(np.int64), np.tile(mesh.two_sided, 4))
 
 
-def subdivide(mesh: Mesh, max_edge_m: float) -> Mesh:
-    """Return the mesh with facets halved at their longest edge until no edge is longer than ``max_edge_m``.
+def bisect(tri: Vec, max_edge_m: float) -> tuple[Vec, NDArray[np.int64]]:
+    """Halve triangles (N, 3, 3) at their longest edge until no edge is longer than ``max_edge_m``.
 
-    Longest-edge bisection keeps well-shaped facets well shaped (no slivers); the result is a soup
-    of triangles with the original facets' orientation and sidedness.
+    Longest-edge bisection keeps well-shaped facets well shaped (no slivers). Returns the pieces and, for
+    each, the index of the triangle it came from.
     """
-    if not max_edge_m > 0:
-        raise RadarError(f"facet_m = {max_edge_m} must be positive", field="facet_m")
-    tri = mesh.triangles
-    side = mesh.two_sided
-    done_t, done_s = [], []
+    parent = np.arange(len(tri))
+    done_t, done_p = [np.zeros((0, 3, 3))], [np.zeros(0, np.int64)]
     while len(tri):
         edges = np.linalg.norm(tri[:, [1, 2, 0]] - tri, axis=2)  # edge i runs from corner i to corner i+1
         longest = edges.argmax(axis=1)
         small = edges.max(axis=1) <= max_edge_m
         done_t.append(tri[small])
-        done_s.append(side[small])
-        tri, side, longest = tri[~small], side[~small], longest[~small]
+        done_p.append(parent[small])
+        tri, parent, longest = tri[~small], parent[~small], longest[~small]
         # rotate the corners so the longest edge runs from corner 0 to corner 1, then halve it
         order = (longest[:, None] + np.arange(3)) % 3
         t = np.take_along_axis(tri, order[:, :, None], axis=1)
         mid = 0.5 * (t[:, 0] + t[:, 1])
         tri = np.concatenate([np.stack([t[:, 0], mid, t[:, 2]], 1), np.stack([mid, t[:, 1], t[:, 2]], 1)])
-        side = np.concatenate([side, side])
-    tris = np.concatenate(done_t)
+        parent = np.concatenate([parent, parent])
+    return np.concatenate(done_t), np.concatenate(done_p)
+
+
+def subdivide(mesh: Mesh, max_edge_m: float) -> Mesh:
+    """Return the mesh with facets halved at their longest edge until no edge is longer than ``max_edge_m``
+    (``bisect``): a soup of triangles with the original facets' orientation and sidedness."""
+    if not max_edge_m > 0:
+        raise RadarError(f"facet_m = {max_edge_m} must be positive", field="facet_m")
+    tris, parent = bisect(mesh.triangles, max_edge_m)
     faces = np.arange(3 * len(tris), dtype=np.int64).reshape(-1, 3)
-    return Mesh(tris.reshape(-1, 3), faces, np.concatenate(done_s))
+    return Mesh(tris.reshape(-1, 3), faces, mesh.two_sided[parent])
 
 
 # --- checking an operator's mesh --------------------------------------------------------------------------

@@ -13,26 +13,27 @@ the facet's vertex phases: ``triangle_integral``), exact at every aspect, with n
 sampling. A facet is lit when it faces the radar (both sides of an open sheet, the outer side of a
 closed body) and a ray from it to the radar is clear (Intel Embree through ``embreex`` and
 ``trimesh``: a compiled BVH ray engine, tens of thousands of rays in ~20 ms on 2 cores;
-``RayEngine``). Shadowing is decided at the aperture's centre.
+``RayEngine``), decided at each of the three cross-range nodes of the aperture (``lit_across``).
 
-Fast path. Facets are subdivided once to ``facet_m`` (default 0.2 m, about two resolution cells),
-and each lit facet is one point source at its centroid whose complex amplitude is its exact PO
-integral at 3 x 3 wave vectors of the frame's k-patch (phases relative to the centroid),
-interpolated across it; the echo is then the same non-uniform FFT as the scattering-centre
-physics, times f / f_c (the 1 / lambda of the PO amplitude across the band). What the
-interpolation misses of each facet's integral across the patch is measured against the exact
-per-sample echo (``po_echo_direct``) in BENCHMARKS.md, "Physical optics": 5 % median on the
-default target with 0.2 m facets, 1 % with 0.1 m.
+Fast path (``po_echo``). Facets are subdivided once to ``facet_m`` (default 0.2 m), which sets the
+resolution of shadows. Each lit facet's exact integral is written, by the divergence theorem on its
+plane, as sources on its edges (``edge_sources``): a regular edge is two corner sources whose
+amplitudes are smooth in K, evaluated at 3 x 3 wave vectors of the frame's k-patch and interpolated
+across it, so the corners coplanar neighbours share cancel as they do in the integral; an edge nearly
+at one range is Gauss-Legendre points along it; near-specular facets are split into pieces of half a
+resolution cell with their exact node integrals (``specular_sources``). Obliquity is taken per node.
+The echo is the same non-uniform FFT as the scattering-centre physics, per node, times |K| / k_c.
+Against closed forms and the exact per-sample echo (``po_echo_direct``): BENCHMARKS.md, "Physical
+optics".
 
 Options. ``roughness`` gamma adds a diffuse term per lit facet by Lambert's law,
 sigma_f = gamma A_f cos^2(theta_f), with a random phase per facet and frame (blankets and panels
 that are not mirrors). ``bounces`` 2 or 3 follows each lit facet's specular ray (shooting and
 bouncing rays, Ling, Chou & Lee 1989, IEEE Trans. AP-37:194): a ray tube of cross-section
 A_f |n_f . r| reflected at every facet it hits, each reflection multiplying by -1 (PEC), radiating
-back from its last hit by aperture integration (a square aperture of the tube's cross-section,
-pattern sinc x sinc about its exit direction), at the path length it travelled. Left out: edge
-diffraction (PTD, the fringe currents), creeping waves, surface waves, materials other than PEC,
-and the near field.
+back from its last hit by aperture integration where the exit sees the radar
+(``inference.simulation.sbr``). Left out: edge diffraction (PTD, the fringe currents), creeping
+waves, surface waves, materials other than PEC, and the near field.
 """
 
 from __future__ import annotations
@@ -44,9 +45,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from inference.simulation.mesh import Mesh, RayEngine, subdivide
+from inference.simulation.mesh import Mesh, RayEngine, bisect, subdivide
 from inference.simulation.radar import C_M_S, Radar, line_of_sight, nufft_type1, projection_matrix
-from inference.simulation.sbr import bounce_sources, launch_tubes, split_triangles
+from inference.simulation.sbr import bounce_sources, launch_tubes
 
 Vec = NDArray[np.float64]
 
@@ -194,6 +195,8 @@ NODES = (-0.7, 0.0, 0.7)
 # interpolation err by 2-28 %, and KAPPA_EDGE 3, 4 and 6 measured alike (4: fewer line points than 6).
 KAPPA_EDGE = 4.0
 KAPPA_SPECULAR = 2.0
+# Open-sheet planes that the line of sight crosses during the aperture imaged each with its own |n . K| (po_echo).
+CROSSING_PLANES = 4
 
 
 def _lagrange(nodes: tuple[float, ...], x: Vec) -> list[Vec]:
@@ -232,13 +235,13 @@ def edge_sources(
     k2 = (kn * kn).sum(axis=1)
     corner = np.zeros((len(tri), 3, len(kn)), np.complex128)
     sing: list[tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.complex128]]] = []
+    kt2 = k2[None, :] - (normal @ kn.T) ** 2  # |K_t|^2 along each facet, (F, P)
     for m in range(3):
         a, b = tri[:, m], tri[:, (m + 1) % 3]
         e = b - a
         length = np.linalg.norm(e, axis=1)
         nu = np.cross(e, normal) / length[:, None]
-        kn_n = normal @ kn.T
-        factor = amp * 1j * (nu @ kn.T) / (k2[None, :] - kn_n**2)  # (F, P)
+        factor = amp * 1j * (nu @ kn.T) / kt2  # (F, P)
         swing_e = np.abs(e @ swing[0]) + np.abs(e @ swing[1])
         regular = np.abs(e @ k0) > KAPPA_EDGE * swing_e
         r = np.flatnonzero(regular)
@@ -304,7 +307,9 @@ def _line_sources(
     return np.concatenate(pts), np.concatenate(cols)
 
 
-def specular_sources(tri: Vec, amp: NDArray[Any], kn: Vec, fine_m: float) -> tuple[Vec, NDArray[np.complex128]]:
+def specular_sources(
+    tri: Vec, amp: NDArray[Any], kn: Vec, swing: Vec, fine_m: float
+) -> tuple[Vec, NDArray[np.complex128]]:
     """Near-specular facets, split to ``fine_m`` pieces, as point sources at the pieces' centroids.
 
     Each piece's amplitude at a node is its exact closed-form integral there (phases about its centroid),
@@ -313,16 +318,12 @@ def specular_sources(tri: Vec, amp: NDArray[Any], kn: Vec, fine_m: float) -> tup
     """
     from inference.simulation.kernels import node_integrals
 
-    pieces, parent = split_triangles(tri, fine_m)
+    pieces, parent = bisect(tri, fine_m)
     cen = pieces.mean(axis=1)
     rel = np.ascontiguousarray(pieces - cen[:, None, :])
-    n = int(round(math.sqrt(len(kn))))
-    k0 = kn[len(kn) // 2]
-    nodes = np.asarray(NODES, float)
-    dk_r = (kn[(n - 1) * n + n // 2] - k0) / nodes[-1]
-    dk_a = (kn[n // 2 * n + n - 1] - k0) / nodes[-1]
     block = np.empty((len(pieces), len(kn)), np.complex128)
-    node_integrals(rel, k0, dk_r, dk_a, nodes, np.ones(len(pieces)), block)
+    nodes = np.asarray(NODES, float)
+    node_integrals(rel, kn[len(kn) // 2], swing[0], swing[1], nodes, np.ones(len(pieces)), block)
     return cen, block * amp[parent]
 
 
@@ -381,14 +382,11 @@ def po_echo(
         cols = np.concatenate([cols, np.repeat(extra_a[:, None], len(kn), axis=1)])
     echo = _image_sources(pts, cols, k0, imager, scale)
     if planes:
-        grid = _grid_wave_vectors(radar)
+        grid = grid_wave_vectors(radar)
         for g, normal in enumerate(planes):
             p, c = _facet_sources(pm, rot, idx[plane_of == g], amp[plane_of == g], kn, swing, radar)
             echo += _image_sources(p, c, k0, imager, scale) * np.sign(grid @ normal)
     return np.asarray(echo * band_factor(radar), np.complex128)
-
-
-CROSSING_PLANES = 4
 
 
 def _crossing_planes(nrm: Vec, crossing: NDArray[np.bool_]) -> tuple[list[Vec], NDArray[np.int64]]:
@@ -407,7 +405,7 @@ def _crossing_planes(nrm: Vec, crossing: NDArray[np.bool_]) -> tuple[list[Vec], 
     return planes, plane_of
 
 
-def _grid_wave_vectors(radar: Radar) -> Vec:
+def grid_wave_vectors(radar: Radar) -> Vec:
     """Return the Cartesian k-grid's wave vectors (N_r, N_a, 3), obs frame."""
     nr, na = radar.n_range, radar.n_azimuth
     a = projection_matrix(radar)
@@ -431,7 +429,7 @@ def _facet_sources(
         tri[rest], normal[rest], amp[rest], kn, swing, pm.vertex_id[idx[rest]], pm.unique_vertices @ rot.T
     )
     fine_m = 0.5 * min(radar.range_cell_m, radar.cross_range_cell_m)
-    spec_pts, spec_cols = specular_sources(tri[spec], amp[spec], kn, fine_m)
+    spec_pts, spec_cols = specular_sources(tri[spec], amp[spec], kn, swing, fine_m)
     pts = np.concatenate([pm.unique_vertices[used] @ rot.T, line_pts, spec_pts])
     return pts, np.concatenate([corner_cols, line_cols, spec_cols])
 
@@ -528,13 +526,8 @@ def rcs_m2(pm: PreparedMesh, rot: Vec, wavelength_m: float, bounces: int = 1, tu
 
 def band_factor(radar: Radar) -> Vec:
     """Return |K| / k_c on the Cartesian k-grid (N_r, N_a): the 1 / lambda of the PO amplitude across the patch."""
-    nr, na = radar.n_range, radar.n_azimuth
-    dkx = 2.0 * math.pi / (nr * radar.range_cell_m)
-    dky = 2.0 * math.pi / (na * radar.cross_range_cell_m)
-    kc = 4.0 * math.pi * radar.carrier_hz / C_M_S
-    kx = kc + dkx * np.arange(-nr // 2, nr // 2)
-    ky = dky * np.arange(-na // 2, na // 2)
-    return np.asarray(np.hypot(kx[:, None], ky[None, :]) / kc)
+    k = np.linalg.norm(grid_wave_vectors(radar), axis=-1)
+    return np.asarray(k / k[radar.n_range // 2, radar.n_azimuth // 2])
 
 
 def po_echo_direct(
@@ -552,20 +545,17 @@ def po_echo_direct(
     in their order.
     """
     nr, na = radar.n_range, radar.n_azimuth
-    kc = 4.0 * math.pi * radar.carrier_hz / C_M_S
-    dkx = 2.0 * math.pi / (nr * radar.range_cell_m)
-    dky = 2.0 * math.pi / (na * radar.cross_range_cell_m)
-    a = projection_matrix(radar)
+    grid = grid_wave_vectors(radar)
     if samples is None:
         rows, cols = (g.ravel() for g in np.meshgrid(np.arange(nr), np.arange(na), indexing="ij"))
     else:
         rows, cols = (np.asarray(g) for g in samples)
-    kvec = (kc + dkx * (rows - nr // 2))[:, None] * a[0] + (dky * (cols - na // 2))[:, None] * a[1]
+    kvec = grid[rows, cols]
     kmag = np.linalg.norm(kvec, axis=1)
     out = np.zeros(len(kvec), np.complex128)
     for col in np.unique(cols):
         at = np.flatnonzero(cols == col)
-        direction = kc * a[0] + dky * (col - na // 2) * a[1]
+        direction = grid[nr // 2, col]  # the column's direction at the carrier
         idx, nrm = lit_facets(pm, rot, direction / np.linalg.norm(direction))
         tri = pm.mesh.triangles[idx] @ rot.T
         for s in range(0, len(at), chunk):

@@ -21,29 +21,9 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from inference.simulation.mesh import RayEngine
+from inference.simulation.mesh import RayEngine, bisect
 
 Vec = NDArray[np.float64]
-
-
-def split_triangles(tri: Vec, max_edge_m: float) -> tuple[Vec, NDArray[np.int64]]:
-    """Split triangles (N, 3, 3) into four at their edges' midpoints until no edge exceeds ``max_edge_m``.
-
-    Returns the pieces and, for each, the index of the triangle it came from.
-    """
-    parent = np.arange(len(tri))
-    out_t, out_p = [np.zeros((0, 3, 3))], [np.zeros(0, np.int64)]
-    while len(tri):
-        longest = np.linalg.norm(tri[:, [1, 2, 0]] - tri, axis=2).max(axis=1)
-        small = longest <= max_edge_m
-        out_t.append(tri[small])
-        out_p.append(parent[small])
-        tri, parent = tri[~small], parent[~small]
-        a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
-        ab, bc, ca = (a + b) / 2, (b + c) / 2, (c + a) / 2
-        tri = np.concatenate([np.stack(t, 1) for t in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
-        parent = np.tile(parent, 4)
-    return np.concatenate(out_t), np.concatenate(out_p)
 
 
 def _basis(d: Vec) -> tuple[Vec, Vec]:
@@ -81,7 +61,7 @@ def launch_tubes(
     dirs = np.repeat(d[:, None, :], 4, axis=1)
     hits = engine.first_hit(((probes + lift).reshape(-1, 3)) @ rot, np.ascontiguousarray(dirs.reshape(-1, 3) @ rot))
     busy = (hits.reshape(-1, 4) >= 0).any(axis=1)
-    pieces, parent = split_triangles(tri_obs[busy], tube_m)
+    pieces, parent = bisect(tri_obs[busy], tube_m)
     parent = np.flatnonzero(busy)[parent]
     start = np.concatenate([cen[~busy], pieces.mean(axis=1)])
     owner = np.concatenate([np.flatnonzero(~busy), parent])
