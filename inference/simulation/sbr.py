@@ -62,12 +62,10 @@ def launch_tubes(
     hits = engine.first_hit(((probes + lift).reshape(-1, 3)) @ rot, np.ascontiguousarray(dirs.reshape(-1, 3) @ rot))
     busy = (hits.reshape(-1, 4) >= 0).any(axis=1)
     pieces, parent = bisect(tri_obs[busy], tube_m)
-    parent = np.flatnonzero(busy)[parent]
-    start = np.concatenate([cen[~busy], pieces.mean(axis=1)])
-    owner = np.concatenate([np.flatnonzero(~busy), parent])
-    area = 0.5 * np.linalg.norm(np.cross(pieces[:, 1] - pieces[:, 0], pieces[:, 2] - pieces[:, 0]), axis=1)
-    full = 0.5 * np.linalg.norm(np.cross(tri_obs[:, 1] - tri_obs[:, 0], tri_obs[:, 2] - tri_obs[:, 0]), axis=1)
-    areas = np.concatenate([full[~busy], area])
+    tubes = np.concatenate([tri_obs[~busy], pieces])
+    owner = np.concatenate([np.flatnonzero(~busy), np.flatnonzero(busy)[parent]])
+    start = tubes.mean(axis=1)
+    areas = 0.5 * np.linalg.norm(np.cross(tubes[:, 1] - tubes[:, 0], tubes[:, 2] - tubes[:, 0]), axis=1)
     nrm = nrm_obs[owner]
     return start, nrm, areas * np.abs(nrm @ los)
 
