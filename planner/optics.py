@@ -25,6 +25,18 @@ Vec = NDArray[np.float64]
 RAYLEIGH = 1.22  # the first zero of the Airy pattern: the least resolved angle is 1.22 lambda / D
 
 
+# Each field of ObserverOptics: (least, most, what the refusal says). The API's schema states the same bounds.
+OPTICS_LIMITS: dict[str, tuple[float, float, str]] = {
+    "aperture_m": (0.01, 10.0, "between 0.01 and 10 m"),
+    "wavelength_nm": (100.0, 20000.0, "between 100 and 20000 nm (UV to thermal IR)"),
+    "gsd_m": (0.001, 100.0, "between 0.001 and 100 m"),
+    "max_rate_deg_s": (0.001, 180.0, "between 0.001 and 180 deg/s"),
+    "sun_exclusion_deg": (0.0, 180.0, "within [0, 180) deg"),
+    "max_phase_angle_deg": (0.001, 180.0, "between 0.001 and 180 deg"),
+}
+EXCLUSIVE_MOST = frozenset({"sun_exclusion_deg"})  # 180 deg from the Sun would leave no sky
+
+
 @dataclass(frozen=True, slots=True)
 class ObserverOptics:
     """The observer's telescope and pointing, as far as imaging the target goes.
@@ -44,17 +56,10 @@ class ObserverOptics:
     max_phase_angle_deg: float = 90.0
 
     def __post_init__(self) -> None:
-        checks = (
-            ("aperture_m", 0.01 <= self.aperture_m <= 10.0, "between 0.01 and 10 m"),
-            ("wavelength_nm", 100.0 <= self.wavelength_nm <= 20000.0, "between 100 and 20000 nm (UV to thermal IR)"),
-            ("gsd_m", 0.001 <= self.gsd_m <= 100.0, "between 0.001 and 100 m"),
-            ("max_rate_deg_s", 0.001 <= self.max_rate_deg_s <= 180.0, "between 0.001 and 180 deg/s"),
-            ("sun_exclusion_deg", 0.0 <= self.sun_exclusion_deg < 180.0, "within [0, 180) deg"),
-            ("max_phase_angle_deg", 0.001 <= self.max_phase_angle_deg <= 180.0, "between 0.001 and 180 deg"),
-        )
-        for name, ok, allowed in checks:
+        for name, (least, most, allowed) in OPTICS_LIMITS.items():
             value = getattr(self, name)
-            if not (math.isfinite(value) and ok):
+            inside = least <= value < most if name in EXCLUSIVE_MOST else least <= value <= most
+            if not (math.isfinite(value) and inside):
                 raise PlannerError(f"{name} {value} must be {allowed}", field=name)
 
     @property

@@ -11,7 +11,7 @@ from pydantic import ConfigDict, Field, model_validator
 from app.schemas.common import Described, Finite, IsoDateTime, StoredResult, Strict, finite_or_null, utc_or_none
 from app.schemas.orbits import OrbitIn
 from app.schemas.stations import GroundStationIn
-from planner.optics import ObserverOptics
+from planner.optics import EXCLUSIVE_MOST, OPTICS_LIMITS, ObserverOptics
 from planner.propagation import utc
 
 if TYPE_CHECKING:
@@ -123,6 +123,14 @@ PAPER_EXAMPLE: dict[str, Any] = {
 _OPTICS = ObserverOptics()  # the defaults are the planner's, written once there with their sources
 
 
+def _optics_field(name: str) -> Any:
+    """The field ``name`` of the observer's optics with the planner's default and bounds (``OPTICS_LIMITS``)."""
+    least, most, _ = OPTICS_LIMITS[name]
+    if name in EXCLUSIVE_MOST:
+        return Field(default=getattr(_OPTICS, name), ge=least, lt=most)
+    return Field(default=getattr(_OPTICS, name), ge=least, le=most)
+
+
 class ObserverOpticsIn(Strict):
     """The observer's telescope and pointing: the range it resolves at, the rate it tracks, the Sun it avoids.
 
@@ -130,18 +138,18 @@ class ObserverOpticsIn(Strict):
     0.25 m ground sample distance, 10 deg/s tracking, 30 deg Sun exclusion, 90 deg largest phase angle.
     """
 
-    aperture_m: Finite = Field(default=_OPTICS.aperture_m, ge=0.01, le=10.0)
+    aperture_m: Finite = _optics_field("aperture_m")
     """the telescope's aperture diameter, m (0.01-10)"""
-    wavelength_nm: Finite = Field(default=_OPTICS.wavelength_nm, ge=100.0, le=20000.0)
+    wavelength_nm: Finite = _optics_field("wavelength_nm")
     """the imaging wavelength, nm (100-20000)"""
-    gsd_m: Finite = Field(default=_OPTICS.gsd_m, ge=0.001, le=100.0)
+    gsd_m: Finite = _optics_field("gsd_m")
     """the ground sample distance the attitude work needs, m (0.001-100): with the aperture, it sets the largest
     range"""
-    max_rate_deg_s: Finite = Field(default=_OPTICS.max_rate_deg_s, ge=0.001, le=180.0)
+    max_rate_deg_s: Finite = _optics_field("max_rate_deg_s")
     """the fastest line-of-sight rate the pointing follows, deg/s (0.001-180)"""
-    sun_exclusion_deg: Finite = Field(default=_OPTICS.sun_exclusion_deg, ge=0.0, lt=180.0)
+    sun_exclusion_deg: Finite = _optics_field("sun_exclusion_deg")
     """the boresight's least angle from the Sun, deg (0 up to 180)"""
-    max_phase_angle_deg: Finite = Field(default=_OPTICS.max_phase_angle_deg, ge=0.001, le=180.0)
+    max_phase_angle_deg: Finite = _optics_field("max_phase_angle_deg")
     """the largest Sun-target-observer angle that still shows the target's lit side, deg (0.001-180)"""
 
 
