@@ -26,6 +26,7 @@ from schemathesis.specs.openapi import checks as oa
 
 from app.main import create_app
 from tests.conftest import KEY_A
+from tests.utils.bodies import with_value
 
 EXAMPLES = int(os.environ.get("GSA_FUZZ_EXAMPLES_PER_ROUTE", "6"))
 REPORT = os.environ.get("GSA_FUZZ_REPORT")
@@ -225,19 +226,10 @@ def _outside(value, bounds):
     )
 
 
-def _with(body, path, value):
-    out = json.loads(json.dumps(body))
-    node = out
-    for key in path[:-1]:
-        node = node.setdefault(key, {})
-    node[path[-1]] = value
-    return out
-
-
 def _bases():
     from app.schemas import PAPER_EXAMPLE
 
-    plan = _with(_with(PAPER_EXAMPLE, ("search", "duration_days"), 0.01), ("search", "step_km"), 5.0)
+    plan = with_value(with_value(PAPER_EXAMPLE, ("search", "duration_days"), 0.01), ("search", "step_km"), 5.0)
     station = {"name": "Extremes", "latitude_deg": 31.1, "longitude_deg": 121.3}
     return {
         ("/v1/plans", None): plan,
@@ -269,7 +261,7 @@ def test_numeric_fields_at_their_extremes_answer_4xx_naming_the_field(fuzz_app):
             if isinstance(only, tuple) and field not in [(f,) for f in only]:
                 continue
             for value in _extremes(is_integer, bounds):
-                r = client.post(url, json=_with(base, field, value), headers={"X-API-Key": KEY_A})
+                r = client.post(url, json=with_value(base, field, value), headers={"X-API-Key": KEY_A})
                 sent += 1
                 assert r.status_code < 500, (url, field, value, r.text[:300])
                 if _outside(value, bounds):  # what the schema refuses is refused, by the field's name
@@ -295,7 +287,9 @@ def test_the_denormal_plan_request_and_its_siblings_are_422_naming_the_field(fuz
     """The request the schema fuzzer found (a 500 from ZeroDivisionError in standoff_window) and its siblings."""
     from app.schemas import PAPER_EXAMPLE
 
-    r = TestClient(fuzz_app).post("/v1/plans", json=_with(PAPER_EXAMPLE, path, value), headers={"X-API-Key": KEY_A})
+    r = TestClient(fuzz_app).post(
+        "/v1/plans", json=with_value(PAPER_EXAMPLE, path, value), headers={"X-API-Key": KEY_A}
+    )
     assert r.status_code == 422, r.text[:300]
     assert path[-1] in r.text
 

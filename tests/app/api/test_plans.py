@@ -7,6 +7,7 @@ from sqlalchemy import create_engine, func, select, text
 from app.db.models import Plan
 from app.schemas import PAPER_EXAMPLE
 from tests.conftest import KEY_A, KEY_B, SQLITE_ONLY
+from tests.utils.bodies import with_value
 from tests.utils.orbits import ISS_L1, ISS_L2
 
 A = {"X-API-Key": KEY_A}
@@ -87,12 +88,7 @@ def test_requires_a_valid_key(client, headers):
 
 
 def _with(path, value):
-    body = copy.deepcopy(PAPER_EXAMPLE)
-    node = body
-    for key in path[:-1]:
-        node = node[key]
-    node[path[-1]] = value
-    return body
+    return with_value(PAPER_EXAMPLE, path, value)
 
 
 BAD = [
