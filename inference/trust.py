@@ -35,11 +35,12 @@ import math
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
+from inference.checked import NETWORK, SILHOUETTE, Alternative, Checked, Quality
 from inference.errors import Cancelled, ModelFileError
 from inference.files import read_json, write_json
 from inference.fit import (
@@ -131,6 +132,12 @@ NETWORK_FIT_GAIN = 0.3
 # for one that fits better; it runs on about 1 in 100 of our frames in the cube
 # (design/measurements.md, "The search re-examines the worst-fitting network answers").
 SEARCH_SHARE = 0.05
+
+
+class ImageRefinement(Protocol):
+    """What refines a checked answer on the frame's image (``inference.reflectivity.serve.ImageRefiner``)."""
+
+    def refine_checked(self, checked: Checked, frame: Vec, enhanced: Vec, renderer: Renderer) -> Checked: ...
 
 
 def in_cube(angles_deg: Vec) -> bool:
@@ -225,34 +232,6 @@ class Calibration:
         return np.asarray(self.scale, float), np.asarray(self.floor_deg, float)
 
 
-@dataclass(frozen=True)
-class Quality:
-    silhouette_iou: float
-    uncertainty_deg: tuple[float, float, float]
-    trusted: bool
-    reasons: list[str]
-
-
-@dataclass(frozen=True)
-class Alternative:
-    angles_deg: tuple[float, float, float]
-    silhouette_iou: float
-    fit_gap: float  # how much lower its soft IoU is than the answer's (negative: it fits better, the prior chose)
-    distance_deg: float
-    start: str
-
-
-@dataclass(frozen=True)
-class Checked:
-    angles_deg: Vec
-    network_deg: Vec | None
-    refined: bool
-    quality: Quality
-    alternatives: list[Alternative]
-    features: dict[str, float]  # what the checks read (for calibration and the record)
-    bound_cov_deg2: Vec | None = None  # the 90 % bounds' covariance (``bound_covariance``), where the fit has one
-
-
 def frame_median(frame: Vec) -> float:
     return float(np.median(frame))
 
@@ -313,9 +292,11 @@ class Checker:
         calibration: Calibration | None = None,
         networks: bool = True,
         threads: int = 0,
+        image: ImageRefinement | None = None,
     ) -> None:
         import threading
 
+        self.image = image  # the set's map refines each fitted answer on the image (``inference.reflectivity.serve``)
         self.model = model
         self.radar = radar or Radar()
         self.renderer = Renderer(model, self.radar)
@@ -511,7 +492,12 @@ class Checker:
         cov = None
         if raw_cov is not None and np.all(np.isfinite(bound)):
             cov = bound_covariance(raw_cov, scale, floor)
-        return Checked(angles, net, bool(fits), quality, alternatives, features, cov)
+        checked = Checked(
+            angles, net, bool(fits), quality, alternatives, features, cov, SILHOUETTE if fits else NETWORK
+        )
+        if self.image is not None and fits and features.get("median") is not None:
+            return self.image.refine_checked(checked, np.asarray(frame, np.float64), enh, self.renderer)
+        return checked
 
     def _near_mirror(
         self, enhanced: Vec, best: Fit, angles: Vec, alternatives: list[Alternative]
@@ -1037,11 +1023,13 @@ class Checkers:
         trained_target: str = "tiangong-like",
         extra: TargetModel | None = None,
         threads: int = 0,
+        image: ImageRefinement | None = None,
     ) -> None:
         import threading
 
         from inference.simulation.targets import BUILTIN_TARGETS
 
+        self.image = image  # the set's map, for its trained target only
         self.radar = radar or Radar()
         self.trained_target = trained_target
         path = Path(model_dir) / TRUST_FILE
@@ -1073,7 +1061,8 @@ class Checkers:
             check_fits(model, self.radar)
             # Another target borrows the calibrated target's thresholds (and says so in every answer).
             cal = self.calibration
-            checker = Checker(model, self.radar, cal, networks=name == self.trained_target, threads=self.threads)
+            own = name == self.trained_target
+            checker = Checker(model, self.radar, cal, own, self.threads, self.image if own else None)
             self._built[name] = checker
             return checker
 
@@ -1215,7 +1204,9 @@ def load_checkers(
                 field="target_model",
             )
         check_fits(extra, radar)
-    checkers = Checkers(model_dir, radar, trained, extra, threads)
+    from inference.reflectivity.serve import load_refiner
+
+    checkers = Checkers(model_dir, radar, trained, extra, threads, load_refiner(model_dir, radar, trained))
     name = default_target or trained
     if name not in checkers.names:
         raise ModelFileError(
