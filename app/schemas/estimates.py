@@ -106,6 +106,18 @@ class CheckedPublic(Described):
         None, description="Swin's own estimate, the fit's start (null for a target without trained networks)"
     )
     refined: bool = Field(True, description="whether the attitude was fitted to the target's projection")
+    refined_on: str = Field(
+        "silhouette",
+        description="what the answer was refined on: 'image' (the frame's likelihood under the model set's "
+        "reflectivity map), 'silhouette' (the target's projection fitted to UNet++'s silhouette) or 'network' "
+        "(Swin's own answer, refine=false)",
+    )
+    likelihood: dict[str, float] | None = Field(
+        None,
+        description="where refined_on is 'image': the answer's negative log-likelihood per pixel under the map "
+        "(nll_per_pixel), and its speckle deviance per pixel (deviance) against the most the map's held-out "
+        "labelled frames showed (deviance_max); over that, the frame is flagged as not this radar's look",
+    )
     attitude_reversed: AttitudePublic | None = Field(
         None,
         description="the attitude the same frame shows read with its cross-range axis reversed: the answer turned "
@@ -123,6 +135,8 @@ class CheckedPublic(Described):
             "attitude": AttitudePublic.from_euler(c.angles_deg),
             "attitude_network": None if c.network_deg is None else AttitudePublic.from_euler(c.network_deg),
             "refined": c.refined,
+            "refined_on": c.refined_on,
+            "likelihood": c.image_fit,
             "attitude_reversed": AttitudePublic.from_euler(reversed_reading(c.angles_deg)),
             "quality": QualityPublic.from_quality(c.quality),
             "alternatives": [AlternativePublic.from_alternative(a) for a in c.alternatives],

@@ -31,6 +31,11 @@ class AdaptationCreate(Strict):
     """also fine-tune Swin's last stage (default: UNet++ alone, where a radar's look enters)"""
     lr_unet: float | None = Field(default=None, ge=1e-8, lt=1)
     """UNet++'s Adam rate (default 3e-5)"""
+    map: bool | None = None
+    """also build the reflectivity map from the frames beside the fine-tuning (default false; a few CPU minutes)"""
+    map_only: bool | None = None
+    """only build the map: the base version's networks as they are, plus a map of this radar's reflectivity learnt
+    from the labelled frames (a few CPU minutes instead of the fine-tuning's up to 30; needs frames from 2 scenes)"""
     crop_px: int | None = Field(default=None, ge=0, le=4096)
     """train UNet++ on square windows of this many pixels about the target, a multiple of 16 from 32; 0 whole
     frames (default 0); not with ``train_swin``, since Swin reads whole frames"""

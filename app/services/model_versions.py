@@ -192,6 +192,10 @@ def run_adaptation(ctx: Any) -> dict[str, Any]:
                 cmd += [f"--{key.replace('_', '-')}", str(opts[key])]
         if opts.get("train_swin"):
             cmd.append("--train-swin")
+        if opts.get("map_only"):
+            cmd.append("--map-only")
+        elif opts.get("map"):
+            cmd.append("--map")
         proc = subprocess.Popen(
             cmd,
             stdout=subprocess.PIPE,
@@ -242,6 +246,10 @@ def run_adaptation(ctx: Any) -> dict[str, Any]:
             "cpu_minutes": rec.get("cpu_minutes"),
             "export": rec.get("export"),
         }
+        if card.get("map"):
+            from inference.reflectivity.sets import summary as map_summary
+
+            summary["map"] = map_summary(card["map"])
         with ctx.session_factory() as s:
             s.add(
                 ModelVersion(

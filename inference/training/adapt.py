@@ -551,6 +551,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--train-swin", action="store_true", help="also fine-tune Swin's last stage (default: UNet++ only)")
     p.add_argument("--seed", type=int, default=d.seed)
     p.add_argument(
+        "--map",
+        action="store_true",
+        help="also build the reflectivity map from the frames beside the fine-tuning (inference.reflectivity)",
+    )
+    p.add_argument(
+        "--map-only",
+        action="store_true",
+        help="only build the map (a few CPU minutes, no training): the base set's networks as they are, plus the map",
+    )
+    p.add_argument(
         "--ray-workers", type=int, help="with GSA_RAY_ADDRESS set: Ray Train workers (default 2), DDP on their CPUs"
     )
 
@@ -575,6 +585,11 @@ def run(args: argparse.Namespace) -> int:
         raise InferenceError("--out is the base folder: write the adapted set to a new folder", field="out")
     # ``gsa adapt --plan`` reads the folder beforehand (the planner places its J2000 labels): ``args.labelled``.
     frames = getattr(args, "labelled", None) or args.frames
+    if args.map_only:
+        from inference.reflectivity.sets import map_only, summary
+
+        print(json.dumps({"map": summary(map_only(base, frames, out, args.seed, args.target))}, indent=1))
+        return 0
     address = os.environ.get("GSA_RAY_ADDRESS", "").strip()
     if address:  # Ray Train's TorchTrainer: DDP over the cluster's workers (CPUs)
         from inference.training.ray_train import adapt_on_ray
@@ -584,7 +599,12 @@ def run(args: argparse.Namespace) -> int:
         raise InferenceError("--ray-workers needs a cluster: set GSA_RAY_ADDRESS", field="ray_workers")
     else:
         record = adapt(base, frames, out, opts, args.target)
-    print(json.dumps({k: record[k] for k in ("before", "after", "chosen_epoch", "calibration", "minutes")}, indent=1))
+    shown = {k: record[k] for k in ("before", "after", "chosen_epoch", "calibration", "minutes")}
+    if args.map:
+        from inference.reflectivity.sets import add_map, summary
+
+        shown["map"] = summary(add_map(out, frames, args.seed, args.target))
+    print(json.dumps(shown, indent=1))
     return 0
 
 
