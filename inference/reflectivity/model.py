@@ -55,6 +55,7 @@ LAW_BINS = len(LAW_NODES_DEG)
 OVERSAMPLE = 16  # point-spread table samples per pixel
 PSF_FLOOR = 1e-3  # the point spread is cut where |h|^2 stays under this (-30 dB) on each axis
 PSF_MAX_HALF_PX = 5.0
+TAPER_PX = 0.5
 LOBE_WIDTH = 0.188  # sigma of the Gaussian with the sinc^2 lobe's half-power width, in lambda / extent
 DYNAMIC_RANGE_DB = 40.0  # normalise_frame's
 OCCLUSION_CELL_M = 0.25
@@ -96,10 +97,12 @@ def psf_table(n: int, window: str, sidelobe_db: float, blur_px: float) -> tuple[
 
         h2 = gaussian_filter1d(h2, blur_px * OVERSAMPLE, mode="constant")
     above = np.abs(d[h2 > PSF_FLOOR * h2.max()])
-    half = min(float(np.ceil(above.max() * OVERSAMPLE) / OVERSAMPLE) + 1.0 / OVERSAMPLE, PSF_MAX_HALF_PX + blur_px * 2)
+    reach = float(np.ceil(above.max() * OVERSAMPLE) / OVERSAMPLE) + TAPER_PX
+    half = min(reach, PSF_MAX_HALF_PX + blur_px * 2)
     keep = np.abs(d) <= half + 1e-9
-    # Tapered to 0 over the last pixel, so a site's spread has no step where a pixel enters or leaves its reach.
-    taper = np.clip(half - np.abs(d[keep]), 0.0, 1.0)
+    # Tapered to 0 over the last TAPER_PX (beyond the -30 dB reach), so a site's spread has no step where a pixel
+    # enters or leaves it.
+    taper = np.clip((half - np.abs(d[keep])) / TAPER_PX, 0.0, 1.0)
     return np.ascontiguousarray(h2[keep] * np.sin(0.5 * np.pi * taper) ** 2, np.float32), half
 
 
