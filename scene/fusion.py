@@ -28,9 +28,10 @@ from scene.geometry import Placements, Scene
 from scene.reading import Progress, read_frames
 
 if TYPE_CHECKING:  # the fit and the checks load numba's compiled renderer: imported where they run
+    from inference.checked import Checked
     from inference.fit import CommonFit, Renderer
     from inference.runtime import Estimator
-    from inference.trust import Checked, Checker
+    from inference.trust import Checker
 
 Vec = NDArray[np.float64]
 
@@ -190,7 +191,7 @@ def recheck_reversed(*, est: Estimator, checker: Checker, frames: Vec, checks: l
     pass; single frames are never given this reading (a flipped single frame must be flagged),
     but a pass can afford it, since the fusion's turning model predicts which way each frame reads.
     """
-    from inference.trust import Alternative, Checked, Quality
+    from inference.checked import Alternative, Checked, Quality
 
     todo = [k for k, c in enumerate(checks) if not c.quality.trusted]
     if not todo:

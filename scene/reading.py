@@ -11,8 +11,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:  # the checks load numba's compiled renderer: the caller has them loaded already
+    from inference.checked import Checked
     from inference.runtime import Estimator, NetworkOutput
-    from inference.trust import Checked, Checker
+    from inference.trust import Checker
 
 
 Progress = Callable[[str, int, int], None]  # (stage, done, total): long reads say how far they are

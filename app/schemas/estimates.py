@@ -16,7 +16,7 @@ from inference.rotations import euler_from_matrix, euler_to_quaternion, reversed
 
 if TYPE_CHECKING:
     from app.db.models import Estimate
-    from inference.trust import Alternative, Checked, Quality
+    from inference.checked import Alternative, Checked, Quality
 
 
 def _attitude_fields(angles_deg: Sequence[float] | NDArray[np.floating]) -> dict[str, Any]:

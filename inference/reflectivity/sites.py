@@ -119,8 +119,8 @@ def _panels(triangles: Vec, normals: Vec, areas: Vec, faces: Ints) -> tuple[Ints
     flat = np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]]) >= math.cos(math.radians(PANEL_DEG))
     panel = _components(len(faces), pairs[flat])
     n = int(panel.max()) + 1
-    area = np.bincount(panel, areas, n)
-    normal = np.stack([np.bincount(panel, areas * normals[:, i], n) for i in range(3)], axis=1)
+    area = np.asarray(np.bincount(panel, areas, n), float)
+    normal = np.asarray(np.stack([np.bincount(panel, areas * normals[:, i], n) for i in range(3)], axis=1), float)
     normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
     centroids = triangles.mean(axis=1)
     centre = np.stack([np.bincount(panel, areas * centroids[:, i], n) for i in range(3)], axis=1) / area[:, None]
@@ -131,7 +131,7 @@ def _panels(triangles: Vec, normals: Vec, areas: Vec, faces: Ints) -> tuple[Ints
         :, None, None
     ]
     cov = np.stack([np.bincount(panel, moment.reshape(-1, 9)[:, i], n) for i in range(9)], axis=1).reshape(n, 3, 3)
-    cov /= area[:, None, None]
+    cov = np.asarray(cov, float) / area[:, None, None]
     # In-plane axes: the covariance projected on the panel's plane, so a lone facet still gets two axes.
     proj = np.eye(3)[None] - np.einsum("ni,nj->nij", normal, normal)
     vals, vecs = np.linalg.eigh(proj @ cov @ proj)
@@ -185,9 +185,9 @@ def sites_of(model: TargetModel, spacing_m: float = 0.1) -> Sites:
     _, inv = np.unique(key, axis=0, return_inverse=True)
     inv = inv.ravel()
     n = int(inv.max()) + 1
-    area = np.bincount(inv, areas, n)
+    area = np.asarray(np.bincount(inv, areas, n), float)
     pts = np.stack([np.bincount(inv, areas * centroids[:, i], n) for i in range(3)], axis=1) / area[:, None]
-    nrm = np.stack([np.bincount(inv, areas * normals[:, i], n) for i in range(3)], axis=1)
+    nrm = np.asarray(np.stack([np.bincount(inv, areas * normals[:, i], n) for i in range(3)], axis=1), float)
     nrm /= np.maximum(np.linalg.norm(nrm, axis=1), 1e-300)[:, None]
     first = np.zeros(n, np.int64)
     first[inv[::-1]] = np.arange(len(inv))[::-1]  # one facet of each site, for its panel, part and sidedness

@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from app.schemas import AttitudePublic, EstimateResult
-from inference.trust import Alternative, Checked, Quality
+from inference.checked import Alternative, Checked, Quality
 
 
 def test_an_attitude_from_a_matrix_is_scipys_rotation():

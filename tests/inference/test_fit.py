@@ -297,7 +297,8 @@ def test_the_answers_exact_near_mirror_is_listed_unless_a_listed_fit_or_the_answ
     twin, 3 deg from the truth (scipy's angle), scored on the silhouette as silhouette_iou scores it; beside a fit
     4 deg from the twin too, but not beside one within 2 deg of it, nor where the twin is the answer itself
     (y = x = 0)."""
-    from inference.trust import NEAR_MIRROR, Alternative
+    from inference.checked import Alternative
+    from inference.trust import NEAR_MIRROR
 
     checker = Checker(tiangong_like(), RADAR, networks=True)
     truth = np.array([20.0, 25.0, 30.0])

@@ -184,3 +184,40 @@ def test_adapt_map_only_refuses_one_scene_in_one_line(tmp_path):
     last = [line for line in proc.stderr.splitlines() if line.strip()][-1]
     assert "at least 2 scenes" in last and "Traceback" not in proc.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_a_set_with_a_map_answers_on_the_image(tmp_path):
+    """The service's checkers (``load_checkers``, what the API loads) refine on the image where the set's card lists
+    a map: ``refined_on`` image, the likelihood, and bounds and reasons of their own; a map altered after its card was
+    written is refused by name."""
+    import json
+    import shutil
+
+    from inference.runtime import DEFAULT_MODEL_DIR, Estimator
+    from inference.trust import load_checkers
+
+    model = tiangong_like()
+    radar = Radar()
+    rng = np.random.default_rng(9)
+    angles = rng.uniform(-30, 30, (6, 3))
+    frames = _frames(model, Imager(radar), angles, Scattering(), 900)
+    rmap = ReflectivityMap(sites_of(model, 0.2), radar, Look(), record={"spacing_m": 0.2})
+    fitting.fit(rmap, fitting.prepare(rmap, frames[:5], angles[:5]), 6)
+    rmap.record["calibration"] = {"scale": [1.0, 1.0, 1.0], "floor_deg": [0.3, 0.3, 0.3], "deviance_max": 5.0}
+    d = tmp_path / "set"
+    shutil.copytree(DEFAULT_MODEL_DIR, d)
+    entry = save_map(rmap, d)
+    card = json.loads((d / "model_card.json").read_text())
+    card["files"]["map"] = entry
+    (d / "model_card.json").write_text(json.dumps(card))
+    est = Estimator.load(d)
+    checker = load_checkers(d, est.img_size).get("tiangong-like")
+    res = est.estimate(frames[5:])
+    c = checker.check_many(frames[5:], res.enhanced, res.angles_deg)[0]
+    assert c.refined_on == "image" and c.image_fit is not None
+    assert c.image_fit["deviance"] < c.image_fit["deviance_max"]
+    assert float(geodesic_deg(c.angles_deg, angles[5])[0]) < 3.0
+    with (d / "reflectivity.npz").open("ab") as fh:
+        fh.write(b"\0")
+    with pytest.raises(ModelFileError, match="sha256"):
+        load_checkers(d, est.img_size)

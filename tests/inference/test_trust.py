@@ -8,6 +8,7 @@ fitted on other frames (seed 70000), so these tests hold it against data it neve
 import numpy as np
 import pytest
 
+from inference.checked import Checked, Quality
 from inference.rotations import euler_difference, geodesic_deg, reversed_reading
 from inference.runtime import Estimator
 from inference.simulation.catalogue import (
@@ -18,7 +19,7 @@ from inference.simulation.catalogue import (
     bad_frames_truth,
     good_frames,
 )
-from inference.trust import Checked, Quality, library_iou_threshold, library_limits, load_checkers
+from inference.trust import library_iou_threshold, library_limits, load_checkers
 
 N_GOOD = 200
 N_SO3 = 60  # about 0.27 s a frame (most are searched); bench.so3 measures 200 a set
@@ -237,7 +238,7 @@ def test_the_library_ambiguity_margin_chosen_flags_wrong_answers_a_rival_fits_ne
     path's answers alone: an answer inside the cube, found by the networks, keeps the 0.002."""
     from dataclasses import replace
 
-    from inference.trust import Alternative
+    from inference.checked import Alternative
 
     _, checker = shipped
 
@@ -272,7 +273,8 @@ def test_a_recalibrated_network_path_widens_its_bound_limit_and_margin_as_far_as
     trust them all. The choice is recorded; the base limits stay where nothing is gained."""
     from dataclasses import replace
 
-    from inference.trust import Alternative, network_limits, trusted_under
+    from inference.checked import Alternative
+    from inference.trust import network_limits, trusted_under
 
     _, checker = shipped
     base = replace(checker.calibration, scale=(1.0, 1.0, 1.0), floor_deg=(0.0, 0.0, 0.0), iou_min=0.9)
@@ -607,7 +609,8 @@ def test_the_answers_unrefined_near_mirror_is_listed_but_never_judged_as_a_rival
     a fit, not where it is the answer's exact near-mirror listed unrefined (the margins were calibrated on the fitted
     alternatives, which are judged instead); the API says which is which."""
     from app.schemas.estimates import AlternativePublic
-    from inference.trust import AMBIGUOUS, NEAR_MIRROR, Alternative, trusted_under
+    from inference.checked import Alternative
+    from inference.trust import AMBIGUOUS, NEAR_MIRROR, trusted_under
 
     _, checker = shipped
     feats = {"median": 0.3, "doubt": 0.0, "iou": 0.99, "searched": 0.0, **{f"raw_{a}": 0.1 for a in "zyx"}}

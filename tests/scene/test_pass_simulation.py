@@ -18,8 +18,8 @@ from skyfield.api import EarthSatellite, wgs84
 from app.schemas import PAPER_EXAMPLE, AccessCreate
 from app.services.planning import run_access
 from app.services.scenes import scene_for, windows_of
+from inference.checked import Checked, Quality
 from inference.rotations import angle_deg, euler_from_matrix, rotation_matrix, spin_rotations
-from inference.trust import Checked, Quality
 from planner.propagation import skyfield_times, timescale
 from scene import SceneError, choose_window
 from scene.fusion import fuse_frames, fuse_pass, pass_span
