@@ -102,3 +102,29 @@ def gather(u, v, table_r, table_a, half_r, half_a, over, r0, c0, q1, q2, out1, o
             s2 += wr[i] * t2
         out1[k] = s1
         out2[k] = s2
+
+
+@numba.njit(cache=True, nogil=True)
+def site_geometry(  # type: ignore[no-untyped-def]
+    rot, points, normals, two_sided, los, across, height, cells, centre, u, v, c, depth, plane
+):
+    """Per site at rotation ``rot`` (body -> observation): fractional pixels ``u``, ``v``; the cosine ``c`` of its
+    normal with the line of sight (its magnitude where two-sided); its ``depth`` along the line of sight and its
+    coordinates across it (``plane``, for the depth buffer)."""
+    lb0 = rot[0, 0] * los[0] + rot[1, 0] * los[1] + rot[2, 0] * los[2]  # the line of sight in the body: R^T los
+    lb1 = rot[0, 1] * los[0] + rot[1, 1] * los[1] + rot[2, 1] * los[2]
+    lb2 = rot[0, 2] * los[0] + rot[1, 2] * los[1] + rot[2, 2] * los[2]
+    for k in range(points.shape[0]):
+        p0, p1, p2 = points[k, 0], points[k, 1], points[k, 2]
+        o0 = rot[0, 0] * p0 + rot[0, 1] * p1 + rot[0, 2] * p2
+        o1 = rot[1, 0] * p0 + rot[1, 1] * p1 + rot[1, 2] * p2
+        o2 = rot[2, 0] * p0 + rot[2, 1] * p1 + rot[2, 2] * p2
+        d = o0 * los[0] + o1 * los[1] + o2 * los[2]
+        a = o0 * across[0] + o1 * across[1] + o2 * across[2]
+        depth[k] = d
+        plane[k, 0] = a
+        plane[k, 1] = o0 * height[0] + o1 * height[1] + o2 * height[2]
+        u[k] = d / cells[0] + centre[0]
+        v[k] = a / cells[1] + centre[1]
+        ck = normals[k, 0] * lb0 + normals[k, 1] * lb1 + normals[k, 2] * lb2
+        c[k] = abs(ck) if two_sided[k] else ck

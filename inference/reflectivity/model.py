@@ -199,6 +199,7 @@ class ReflectivityMap:
         self._across = np.asarray(d, float)
         self._height = np.cross(self._los, self._across)
         self._cells = np.array([r.range_cell_m, r.cross_range_cell_m]) * self.look.scale
+        self._centre = np.array([r.n_range / 2, r.n_azimuth / 2], float)
         s = self.sites
         self._spec_peak = 4.0 * math.pi * s.areas * s.panel_area_m2[s.panel] / r.wavelength_m**2
         self._sigma0 = LOBE_WIDTH * r.wavelength_m / s.panel_extent_m  # (P, 2)
@@ -210,19 +211,20 @@ class ReflectivityMap:
     def geometry(self, rotation: Vec) -> Geometry:
         """The sites' pixels, cosines, visibility and specular terms at one attitude (rotation body -> observation)."""
         s, r = self.sites, self.radar
-        rot = np.asarray(rotation, float)
-        obs = s.points @ rot.T
-        u = obs @ self._los / self._cells[0] + r.n_range / 2
-        v = obs @ self._across / self._cells[1] + r.n_azimuth / 2
+        rot = np.ascontiguousarray(rotation, float)
+        n = len(s)
+        u, v, c, depth = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+        plane = np.empty((n, 2))
+        kernels.site_geometry(
+            rot, s.points, s.normals, s.two_sided, self._los, self._across, self._height, self._cells,
+            self._centre, u, v, c, depth, plane,
+        )  # fmt: skip
         los_b = rot.T @ self._los  # the line of sight and the aperture's swing direction in the body frame
         swing_b = rot.T @ self._across
-        c = s.normals @ los_b
-        c = np.where(s.two_sided, np.abs(c), c)
         front = c > 0.0
-        vis = np.ones(len(s))
+        vis = np.ones(n)
         if self.look.occlusion:
-            across = np.stack([obs @ self._across, obs @ self._height], axis=1)
-            kernels.soft_visibility(obs @ self._los, across, front, OCCLUSION_CELL_M, OCCLUSION_TOL_M, vis)
+            kernels.soft_visibility(depth, plane, front, OCCLUSION_CELL_M, OCCLUSION_TOL_M, vis)
         else:
             vis = front.astype(float)
         # Specular: the line of sight's tilt off each panel's normal along its in-plane axes, and the swing's.
