@@ -370,6 +370,7 @@ async function estimatePage(id) {
   const verdict = !q ? "" : q.trusted
     ? `<p class="verdict good">Trusted: silhouette IoU ${num(q.silhouette_iou, 3)}, 90 % bound z / y / x ${q.uncertainty_deg.map((v) => num(v, 2)).join(" / ")} deg.</p>`
     : `<p class="verdict bad">Not trusted: ${esc(q.reasons.join("; "))}.</p>`;
+  const onImage = e.refined_on === "image" && e.likelihood;
   const alts = (e.alternatives || []).map((a) => `<li>${euler(a)} deg (IoU ${num(a.silhouette_iou, 3)}, ${num(a.distance_deg, 1)} deg away${a.fitted === false ? ", the answer's near-mirror, unrefined" : ""})</li>`).join("");
   view.innerHTML = `<h1>Estimate ${esc(e.input_name)}</h1>
     <p class="muted">${esc(e.id)} · created ${utc(e.created_at)} · target ${esc(e.target || "-")} · frame ${e.shape.join(" x ")} · ${snr}
@@ -378,11 +379,14 @@ async function estimatePage(id) {
     <p id="scale" class="muted">Frames as the models read them: ${scale}${sent}; the bar is 10 m.</p>
     <div class="grid frames"><div class="card"><b>Original frame</b> <span class="muted">with the fitted outline</span>
     <canvas id="overlay" class="frame"></canvas><img id="original" alt="original frame" hidden></div>
-    <div class="card"><b>Enhanced by UNet++</b><img id="enhanced" alt="enhanced frame"></div></div>
+    <div class="card"><b>Enhanced by UNet++</b><img id="enhanced" alt="enhanced frame"></div>
+    ${onImage ? `<div class="card"><b>The map's prediction</b> <span class="muted">at the answer</span><img id="map" alt="the reflectivity map's prediction"></div>
+    <div class="card"><b>Frame over prediction</b> <span class="muted">dB: black -10, grey 0, white +10</span><img id="residual" alt="the frame over the map's prediction"></div>` : ""}</div>
+    ${onImage ? `<p class="muted">Refined on the image: ${num(e.likelihood.nll_per_pixel, 4)} negative log-likelihood per pixel under the model set's reflectivity map; deviance ${num(e.likelihood.deviance, 3)} (its held-out labelled frames at most ${num(e.likelihood.deviance_max, 3)}).</p>` : ""}
     <h2>Attitude in each frame</h2>
     <table id="attitudes"><thead><tr><th>frame</th><th>Euler z, y, x (deg)</th><th>90 % bound z / y / x (deg)</th><th>quaternion w, x, y, z</th></tr></thead><tbody>${frames}</tbody></table>
     ${alts ? `<h2>Attitudes that fit nearly as well</h2><ul>${alts}</ul>` : ""}`;
-  for (const which of ["original", "enhanced"]) {
+  for (const which of ["original", "enhanced", ...(onImage ? ["map", "residual"] : [])]) {
     const blob = await api(`/v1/estimates/${encodeURIComponent(id)}/${which}.png`, "blob");
     document.getElementById(which).src = URL.createObjectURL(blob);
   }

@@ -81,6 +81,19 @@ def sweep_blobs(*, session: Session, data_dir: Path, grace_s: float = 0.0) -> in
     return removed
 
 
+def png_frame(data: bytes) -> NDArray[np.float64]:
+    """Read back a frame ``png_bytes`` wrote (8-bit grayscale, unfiltered rows): [H, W] in [0, 1]."""
+    w, h = struct.unpack(">II", data[16:24])
+    pos, idat = 8, b""
+    while pos < len(data):
+        (length,) = struct.unpack(">I", data[pos : pos + 4])
+        if data[pos + 4 : pos + 8] == b"IDAT":
+            idat += data[pos + 8 : pos + 8 + length]
+        pos += 12 + length
+    rows = np.frombuffer(zlib.decompress(idat), np.uint8).reshape(h, w + 1)
+    return np.asarray(rows[:, 1:], np.float64) / 255.0
+
+
 def blob_path(data_dir: Path, digest: str) -> Path:
     return Path(data_dir) / "images" / digest[:2] / f"{digest}.png"
 

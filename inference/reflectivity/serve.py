@@ -44,6 +44,7 @@ REFINE_RENDERS = 120
 AMBIGUITY_GAP = 0.002  # objective per pixel within which another attitude is as likely
 MAX_BOUND_DEG = 5.0
 DISTINCT_DEG = 5.0
+RESIDUAL_DB = 10.0  # the residual view's span either way
 FRAME_REASONS = ("the frame's median brightness",)  # the silhouette path's reasons that concern the frame itself
 
 
@@ -171,6 +172,22 @@ class ImageRefiner:
             refined_on=IMAGE,
             image_fit=fit,
         )
+
+    def views(self, frame: Vec, angles_deg: Vec) -> tuple[Vec, Vec]:
+        """What the map predicts of the whole frame at an attitude, normalised as frames are (40 dB below the
+        frame's own reference, in [0, 1]), and the frame over the prediction (dB, +-``RESIDUAL_DB`` mapped to 0..1,
+        0.5 where they agree); both [H, W], for the estimate's page."""
+        from inference.reflectivity.likelihood import FrameData, profiled_gain
+        from inference.reflectivity.model import DYNAMIC_RANGE_DB
+
+        data = FrameData.of(frame)
+        g = self.map.geometry(rotation_matrix(*np.asarray(angles_deg, float)))
+        whole = (0, 0, *data.y.shape)
+        m = self.map.splat(g, self.map.intensity(g), whole)
+        mu = profiled_gain(m, data.y, data.low, data.high, data.floor) * m + data.floor
+        predicted = np.clip(1.0 + 10.0 * np.log10(mu) / DYNAMIC_RANGE_DB, 0.0, 1.0)
+        ratio_db = 10.0 * np.log10(np.maximum(data.y, 1e-12) / mu)
+        return predicted, np.clip(0.5 + ratio_db / (2 * RESIDUAL_DB), 0.0, 1.0)
 
     def _reasons(self, bound: Vec, dev: float, alternatives: list[Alternative]) -> list[str]:
         out = []

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from fastapi import APIRouter, Depends, File, Form, HTTPException, Query, Request, UploadFile
@@ -254,6 +254,43 @@ def outline_png(
     angles = np.asarray(stored.attitude.euler_zyx_deg, float)[None]
     occupancy = checker.renderer.occupancy(angles)[0] > 0.5
     return Response(images.outline_png(occupancy), media_type="image/png")
+
+
+@router.get(
+    "/{estimate_id}/{view}.png",
+    response_class=Response,
+    responses={
+        **NOT_FOUND,
+        200: {"content": {"image/png": {}}, "description": "the map's prediction, or the frame over it"},
+    },
+)
+def map_view_png(
+    session: SessionDep,
+    operator: CurrentOperator,
+    settings: SettingsDep,
+    checkers: CheckersDep,
+    estimate_id: Annotated[Text, PathParam()],
+    view: Annotated[Literal["map", "residual"], PathParam()],
+) -> Response:
+    """For an answer refined on the image: ``map``, what the model set's reflectivity map predicts of the frame at the
+    answered attitude (normalised as frames are: 40 dB below the frame's reference); ``residual``, the frame over
+    that prediction in dB, -10 black, 0 grey, +10 white. 404 where the set serving the estimate's target has no map."""
+    from inference.errors import ModelFileError
+
+    row = _owned(session, operator.id, estimate_id)
+    stored = EstimatePublic.from_row(row)
+    try:
+        checker = checkers.get(stored.target or checkers.default)
+    except ModelFileError:  # a target this service no longer has
+        raise HTTPException(status_code=404, detail="the estimate's target is not served here") from None
+    refiner = getattr(checker.image, "views", None)
+    if refiner is None:
+        raise HTTPException(
+            status_code=404, detail="the model set serving this target has no reflectivity map (gsa adapt --map-only)"
+        )
+    frame = images.png_frame(images.blob_path(Path(settings.data_dir), row.original_sha256).read_bytes())
+    predicted, residual = refiner(frame, np.asarray(stored.attitude.euler_zyx_deg, float))
+    return Response(images.png_bytes(predicted if view == "map" else residual), media_type="image/png")
 
 
 @router.delete("/{estimate_id}", status_code=204, responses=NOT_FOUND)
