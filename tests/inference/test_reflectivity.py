@@ -217,6 +217,14 @@ def test_a_set_with_a_map_answers_on_the_image(tmp_path):
     assert c.refined_on == "image" and c.image_fit is not None
     assert c.image_fit["deviance"] < c.image_fit["deviance_max"]
     assert float(geodesic_deg(c.angles_deg, angles[5])[0]) < 3.0
+    # The map's view of the frame at the answer shows where the frame is bright: the two correlate (40 dB normalised)
+    # over the frame, far more than at an attitude 20 deg off.
+    predicted, residual = checker.image.views(frames[5], c.angles_deg)
+    assert predicted.shape == residual.shape == frames[5].shape
+    off, _ = checker.image.views(frames[5], c.angles_deg + np.array([20.0, 0.0, 0.0]))
+    here = float(np.corrcoef(predicted.ravel(), frames[5].ravel())[0, 1])
+    there = float(np.corrcoef(off.ravel(), frames[5].ravel())[0, 1])
+    assert here > 0.45 and here > there + 0.2, (here, there)
     with (d / "reflectivity.npz").open("ab") as fh:
         fh.write(b"\0")
     with pytest.raises(ModelFileError, match="sha256"):

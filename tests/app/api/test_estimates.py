@@ -400,3 +400,11 @@ def test_the_fitted_outline_is_the_edge_of_the_projection(client, frame):
     assert edge.shape == (SMOKE_RADAR.n_range, SMOKE_RADAR.n_azimuth) and set(np.unique(edge)) <= {0, 255}
     assert 0 < (edge == 255).sum() < edge.size // 4  # a boundary, not a filled shape
     assert client.get(f"/v1/estimates/{eid}/outline.png", headers={"X-API-Key": KEY_B}).status_code == 404
+    # A set without a reflectivity map has no map views, and says how to make one.
+    for view in ("map", "residual"):
+        r = client.get(f"/v1/estimates/{eid}/{view}.png", headers=A)
+        assert r.status_code == 404 and "map-only" in r.json()["detail"]
+    original = client.get(f"/v1/estimates/{eid}/original.png", headers=A).content
+    from app.services.images import png_frame
+
+    assert np.array_equal(png_frame(original), np.asarray(Image.open(io.BytesIO(original)), float) / 255.0)
