@@ -10,7 +10,7 @@
    that fits the labelled frames best is not the one that refines best: on our own frames a 1 px blur lowered the
    held-out divergence and raised the refined error; design/measurements.md, "The reflectivity map's parameters".)
 3. **The objective** (the silhouette prior's weight, then the likelihood's texture shape) is chosen the same way.
-4. **Calibration**: on the held-out refinements, the 90 % bounds per Euler axis (``raw_bounds`` scaled and floored as
+4. **Calibration**: on up to ``CALIBRATION_FRAMES`` held-out frames refined from their labels turned as above, the 90 % bounds per Euler axis (``raw_bounds`` scaled and floored as
    the silhouette path's are, ``inference.trust.fit_bounds``), and the deviance above which a frame is "not this
    radar's look".
 5. The map is fitted again on every labelled frame; its record lists the choices with their figures, the divergence
@@ -43,7 +43,8 @@ Say = Callable[[str], None]
 
 SPACING_M = 0.1  # one site per 10 cm square of skin (a pixel is 9.4 x 11 cm)
 START_DEG = 2.0  # the held-out frames' starts: their labels turned this far
-SELECT_FRAMES = 12  # held-out frames refined per candidate (spread over the held-out scenes)
+SELECT_FRAMES = 20  # held-out frames refined per candidate (spread over the held-out scenes)
+CALIBRATION_FRAMES = 30  # held-out frames the bounds and the deviance limit are fitted to
 SELECT_ITERATIONS = 15
 SELECT_RENDERS = 100
 BLURS_PX = (0.0, 0.75, 1.5)
@@ -182,7 +183,16 @@ def build_map(
         err = trial(best_map, cand, f"texture shape {shape}")
         if err < best_err:
             objective, best_err = cand, err
-    calibration = _calibrate(best_map, sel_frames, sel_truth, starts, objective, sel_enh, renderer)
+    cal_idx = held_idx[_spread(len(held_idx), CALIBRATION_FRAMES)]
+    calibration = _calibrate(
+        best_map,
+        labelled.frames[cal_idx],
+        labelled.angles_deg[cal_idx],
+        _starts(labelled.angles_deg[cal_idx], seed + 1),
+        objective,
+        None if enhanced is None else np.asarray(enhanced)[cal_idx],
+        renderer,
+    )
     tell(
         f"map: chose {best_look}, {objective}; held-out median {calibration.median_deg:.2f} deg; fitting on all "
         f"{len(labelled)} frames"
