@@ -10,9 +10,9 @@
    that fits the labelled frames best is not the one that refines best: on our own frames a 1 px blur lowered the
    held-out divergence and raised the refined error; design/measurements.md, "The reflectivity map's parameters".)
 3. **The objective** (the silhouette prior's weight, then the likelihood's texture shape) is chosen the same way.
-4. **Calibration**: on up to ``CALIBRATION_FRAMES`` held-out frames refined from their labels turned as above, the 90 % bounds per Euler axis (``raw_bounds`` scaled and floored as
-   the silhouette path's are, ``inference.trust.fit_bounds``), and the deviance above which a frame is "not this
-   radar's look".
+4. **Calibration**: on up to ``CALIBRATION_FRAMES`` held-out frames refined from their labels turned as above, the
+   90 % bounds per Euler axis (``raw_bounds`` scaled and floored as the silhouette path's are,
+   ``inference.trust.fit_bounds``), and the deviance above which a frame is "not this radar's look".
 5. The map is fitted again on every labelled frame; its record lists the choices with their figures, the divergence
    per labelled scene, and the time taken.
 """

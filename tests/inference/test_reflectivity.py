@@ -229,3 +229,46 @@ def test_a_set_with_a_map_answers_on_the_image(tmp_path):
         fh.write(b"\0")
     with pytest.raises(ModelFileError, match="sha256"):
         load_checkers(d, est.img_size)
+
+
+def test_map_only_builds_a_new_set_with_its_map_and_record(tmp_path, monkeypatch):
+    """``gsa adapt --map-only``'s path end to end, at toy sizes: a new folder with the base set's files, the map and a
+    card that lists it and records every trial; the base set untouched; the new set answers on the image."""
+    import json
+
+    from inference.reflectivity import build
+    from inference.reflectivity.sets import map_only
+    from inference.runtime import DEFAULT_MODEL_DIR, Estimator
+    from inference.trust import load_checkers
+
+    for name, value in (("SPACING_M", 0.3), ("SELECT_FRAMES", 2), ("CALIBRATION_FRAMES", 3), ("SELECT_ITERATIONS", 2)):
+        monkeypatch.setattr(build, name, value)
+    monkeypatch.setattr(build, "SELECT_RENDERS", 8)
+    monkeypatch.setattr(fitting, "ITERATIONS", 3)
+    model, radar = tiangong_like(), Radar()
+    angles = np.random.default_rng(2).uniform(-30, 30, (8, 3))
+    frames = _frames(model, Imager(radar), angles, Scattering(), 40)
+    labelled = LabelledFrames(
+        frames,
+        angles,
+        tuple(f"scene-{k % 2}" for k in range(8)),
+        tuple(f"f{k}" for k in range(8)),
+        np.full(8, np.nan),
+        np.full(8, np.nan),
+        tuple(None for _ in range(8)),
+    )
+    before = (DEFAULT_MODEL_DIR / "model_card.json").read_bytes()
+    out = tmp_path / "with-map"
+    record = map_only(DEFAULT_MODEL_DIR, labelled, out)
+    assert (DEFAULT_MODEL_DIR / "model_card.json").read_bytes() == before
+    card = json.loads((out / "model_card.json").read_text())
+    assert card["files"]["map"]["file"] == "reflectivity.npz" and card["map"] == json.loads(json.dumps(record))
+    assert [t["trial"] for t in record["trials"]][:3] == ["window taylor", "window hamming", "window none"]
+    assert (
+        record["frames"] == 8
+        and record["scenes"] == 2
+        and set(record["divergence_per_scene"]) == {"scene-0", "scene-1"}
+    )
+    est = Estimator.load(out)
+    checker = load_checkers(out, est.img_size).get("tiangong-like")
+    assert checker.image is not None and checker.image.calibrated
