@@ -12,7 +12,10 @@
 3. **The objective** (the silhouette prior's weight, then the likelihood's texture shape) is chosen the same way.
 4. **Calibration**: on up to ``CALIBRATION_FRAMES`` held-out frames refined from their labels turned as above, the
    90 % bounds per Euler axis (``raw_bounds`` scaled and floored as the silhouette path's are,
-   ``inference.trust.fit_bounds``), and the deviance above which a frame is "not this radar's look".
+   ``inference.trust.fit_bounds``), and the deviance above which a frame is "not this radar's look". A map whose
+   held-out answers end no closer than three quarters of their starts' offset is recorded as not informative, and
+   the service then answers on the silhouette as without it (on smooth physical optics a map refined 2 deg starts to
+   2.3 deg, and answered frames whose silhouette answers were 60 deg off with trusted answers as far off).
 5. The map is fitted again on every labelled frame; its record lists the choices with their figures, the divergence
    per labelled scene, and the time taken.
 """
@@ -50,6 +53,7 @@ SELECT_RENDERS = 100
 BLURS_PX = (0.0, 0.75, 1.5)
 SILHOUETTE_WEIGHTS = (0.0, 3.0, 10.0, 30.0)
 SHAPES: tuple[float | None, ...] = (2.0, None)
+INFORMATIVE = 0.75
 DEVIANCE_MARGIN = 1.25  # a frame whose deviance exceeds the held-out frames' largest by this factor is flagged
 MIN_SCENES = 2
 
@@ -65,6 +69,9 @@ class MapCalibration:
     frames: int
     median_deg: float
     p90_deg: float
+    # Whether the map brought the held-out frames' answers closer than their starts (median under INFORMATIVE x
+    # START_DEG): a map that does not (smooth physical optics: a few flashes a frame) never answers.
+    informative: bool = True
 
 
 def check_frames(labelled: LabelledFrames, radar: Radar) -> None:
@@ -253,4 +260,5 @@ def _calibrate(
         len(frames),
         round(float(np.median(geo)), 3),
         round(float(np.percentile(geo, 90)), 3),
+        bool(np.median(geo) < INFORMATIVE * START_DEG),
     )

@@ -9,7 +9,8 @@ refines the answer and its listed alternatives on the frame's likelihood under t
 ``refined_on`` "image", its 90 % bounds from the likelihood's curvature (calibrated when the map was built), the other
 refined attitudes as alternatives with their gap in the objective, and the reasons not to trust it: a rival within
 ``AMBIGUITY_GAP``, a bound over ``MAX_BOUND_DEG``, or a frame the map cannot explain (its deviance over the limit the
-labelled frames set: "not this radar's look").
+labelled frames set: "not this radar's look"). A map its build found not informative (held-out answers no closer
+than their starts) leaves every answer to the silhouette path.
 """
 
 from __future__ import annotations
@@ -121,8 +122,11 @@ class ImageRefiner:
         self.floor = np.asarray(cal.get("floor_deg", (1.0, 1.0, 1.0)), float)
         self.deviance_max = float(cal.get("deviance_max", math.inf))
         self.calibrated = bool(cal)
+        self.informative = bool(cal.get("informative", True))
 
     def refine_checked(self, checked: Checked, frame: Vec, enhanced: Vec, renderer: Renderer) -> Checked:
+        if not self.informative:  # the map did not sharpen held-out answers: the silhouette's stands
+            return checked
         starts: dict[str, Vec] = {"answer": np.asarray(checked.angles_deg, float)}
         for i, a in enumerate(checked.alternatives[:MAX_ALTERNATIVES]):
             starts[f"{a.start}-{i}"] = np.asarray(a.angles_deg, float)

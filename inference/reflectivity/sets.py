@@ -62,9 +62,16 @@ def add_map(model_dir: str | Path, frames: FramesArg, seed: int = 0, target: str
     card.setdefault("files", {})[MAP_ROLE] = entry
     card["map"] = rmap.record
     write_json(card_path, card)
+    cal = rmap.record["calibration"]
     _say(
-        f"map written ({rmap.record['cpu_seconds']:.0f} CPU s): held-out median "
-        f"{rmap.record['calibration']['median_deg']:.2f} deg from {rmap.record['calibration']['frames']} frames"
+        f"map written ({rmap.record['cpu_seconds']:.0f} CPU s): held-out median {cal['median_deg']:.2f} deg from "
+        f"{cal['frames']} frames"
+        + (
+            ""
+            if cal["informative"]
+            else ": no closer than their starts, so the set answers on the silhouette as without a map (label more "
+            "scenes, or adapt the networks)"
+        )
     )
     return rmap.record
 
@@ -106,6 +113,7 @@ def summary(record: dict[str, Any]) -> dict[str, Any]:
         "objective": record.get("objective"),
         "held_out_median_deg": cal.get("median_deg"),
         "held_out_p90_deg": cal.get("p90_deg"),
+        "informative": cal.get("informative", True),
         "cpu_seconds": record.get("cpu_seconds"),
         "list_sha256": record.get("list_sha256"),
     }

@@ -272,3 +272,15 @@ def test_map_only_builds_a_new_set_with_its_map_and_record(tmp_path, monkeypatch
     est = Estimator.load(out)
     checker = load_checkers(out, est.img_size).get("tiangong-like")
     assert checker.image is not None and checker.image.calibrated
+
+
+def test_a_map_that_did_not_sharpen_held_out_answers_never_answers():
+    """A map whose build found its held-out answers no closer than their starts leaves the silhouette's answer."""
+    from inference.checked import Checked, Quality
+    from inference.reflectivity.serve import ImageRefiner
+
+    rmap = ReflectivityMap(
+        sites_of(tiangong_like(), 0.3), Radar(), Look(), record={"calibration": {"informative": False}}
+    )
+    checked = Checked(np.zeros(3), None, True, Quality(0.9, (1.0, 1.0, 1.0), True, []), [], {})
+    assert ImageRefiner(rmap).refine_checked(checked, np.zeros((256, 256)), np.zeros((256, 256)), None) is checked
