@@ -94,10 +94,36 @@ def _bad(path: Path, member: str, why: str) -> DatasetError:
     return DatasetError(f"{path.name}: {member}: {why}", field=member)
 
 
+SMALL_MEMBER_BYTES = 4096  # a label, a time, a flag: what any of them may hold
+
+
+def member_array(z: Any, path: Path, member: str, max_bytes: int = SMALL_MEMBER_BYTES) -> NDArray[Any]:
+    """One member of an open .npz, its header read first: refused (naming it) when its header promises more than
+    ``max_bytes`` or objects, and read no further than the header promises, so neither a header promising terabytes
+    nor a zip bomb behind a small header is ever decompressed or allocated in full."""
+    name = member + ".npy" if member + ".npy" in z.zip.namelist() else member
+    try:
+        with z.zip.open(name) as fh:
+            shape, dtype = npy_header(fh)
+            if dtype.hasobject:
+                raise _bad(path, member, "numbers or text, not Python objects")
+            need = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+            if need > max_bytes:
+                raise _bad(path, member, f"its header promises {need:,} bytes, over the {max_bytes:,} it may hold")
+            data = fh.read(need + 1)
+    except (ValueError, KeyError, OSError, EOFError, zipfile.BadZipFile) as exc:
+        if isinstance(exc, DatasetError):
+            raise
+        raise _bad(path, member, f"not a readable .npy array ({exc})") from None
+    if len(data) != need:
+        raise _bad(path, member, f"holds {'more' if len(data) > need else 'less'} data than its header says")
+    return np.frombuffer(data, dtype=dtype).reshape(shape)
+
+
 def _scalar(z: Any, path: Path, member: str, lo: float, hi: float) -> float | None:
     if member not in z.files:
         return None
-    arr = np.asarray(z[member])
+    arr = member_array(z, path, member)
     if arr.size != 1 or arr.dtype.kind not in "biuf":
         raise _bad(path, member, f"a number, not an array of shape {list(arr.shape)} ({arr.dtype})")
     v = float(arr.reshape(()))
@@ -109,7 +135,7 @@ def _scalar(z: Any, path: Path, member: str, lo: float, hi: float) -> float | No
 def _text(z: Any, path: Path, member: str) -> str | None:
     if member not in z.files:
         return None
-    arr = np.asarray(z[member])
+    arr = member_array(z, path, member)
     if arr.size != 1 or arr.dtype.kind not in "US":
         raise _bad(path, member, "a text, as numpy writes a str (np.savez(..., scene='pass-3'))")
     text = str(arr.reshape(()).item())
@@ -137,9 +163,10 @@ def observed_times(sources: Sequence[tuple[str, bytes | Path]]) -> list[datetime
     for name, source in sources:
         try:
             with np.load(io.BytesIO(source) if isinstance(source, bytes) else source, allow_pickle=False) as z:
-                if "observed_at" in z.files:
-                    times.append(parse_time(str(z["observed_at"]), Path(name)))
-        except (OSError, ValueError, EOFError, zipfile.BadZipFile):
+                text = _text(z, Path(name), "observed_at")
+                if text is not None:
+                    times.append(parse_time(text, Path(name)))
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile):  # DatasetError too: read_frame names it
             continue
     return times
 
@@ -244,24 +271,25 @@ def read_frame(
     with z:
         if "image" not in z.files:
             raise _bad(path, "image", f"missing (the file holds {', '.join(sorted(z.files)) or 'nothing'})")
+        # The image's header first, always: np.load would allocate whatever it promises.
+        try:
+            member = "image.npy" if "image.npy" in z.zip.namelist() else "image"
+            with z.zip.open(member) as fh:
+                shape, _dtype = npy_header(fh)
+        except (ValueError, KeyError, zipfile.BadZipFile) as exc:
+            raise _bad(path, "image", f"not a readable .npy array ({exc})") from None
+        if len(shape) != 2:
+            raise _bad(path, "image", f"a 2-D array of numbers [range, cross-range]; got shape {list(shape)}")
+        if max(shape) > MAX_SIDE:
+            raise _bad(path, "image", f"{list(shape)} is over {MAX_SIDE} pixels a side")
         if charge is not None:
-            try:
-                member = "image.npy" if "image.npy" in z.zip.namelist() else "image"
-                with z.zip.open(member) as fh:
-                    shape, _dtype = npy_header(fh)
-            except (ValueError, KeyError, zipfile.BadZipFile) as exc:
-                raise _bad(path, "image", f"not a readable .npy array ({exc})") from None
-            if len(shape) != 2:
-                raise _bad(path, "image", f"a 2-D array of numbers [range, cross-range]; got shape {list(shape)}")
-            if max(shape) > MAX_SIDE:
-                raise _bad(path, "image", f"{list(shape)} is over {MAX_SIDE} pixels a side")
             charge(shape, path.name)
         cells = [_scalar(z, path, m, 1e-4, 100.0) for m in ("range_cell_m", "cross_range_cell_m")]
         if (cells[0] is None) != (cells[1] is None):
             raise _bad(path, "range_cell_m", "give range_cell_m and cross_range_cell_m together (metres)")
         normalised = False
         if "normalised" in z.files:
-            flag = np.asarray(z["normalised"])
+            flag = member_array(z, path, "normalised")
             if flag.size != 1 or flag.dtype.kind not in "bi":
                 raise _bad(path, "normalised", "true or false")
             normalised = bool(flag.reshape(()))
@@ -277,9 +305,9 @@ def read_frame(
         when = parse_time(observed, path) if observed is not None else None
         quat = None
         if "angles_deg" in z.files:
-            angles = check_angles(z["angles_deg"], f"{path.name}: angles_deg")
+            angles = check_angles(member_array(z, path, "angles_deg"), f"{path.name}: angles_deg")
         elif "quaternion_j2000" in z.files:
-            q = np.asarray(z["quaternion_j2000"], np.float64)
+            q = np.asarray(member_array(z, path, "quaternion_j2000"), np.float64)
             if q.shape != (4,) or not np.all(np.isfinite(q)):
                 raise _bad(path, "quaternion_j2000", f"4 finite numbers (w, x, y, z); got shape {list(q.shape)}")
             norm = float(np.linalg.norm(q))

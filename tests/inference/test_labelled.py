@@ -117,3 +117,44 @@ def test_coverage_counts_cells_of_the_cube():
     centres = np.array([[-37.5, -37.5, -37.5], [7.5, 7.5, 7.5], [8.0, 9.0, 10.0], [37.5, -22.5, 7.5], [0, 0, 40]])
     assert coverage(centres) == pytest.approx(4 / 216)
     assert coverage(np.array([[60.0, 0.0, 0.0]])) == 0.0  # outside the networks' range: teaches nothing there
+
+
+def _bomb_npz(member: str, header_shape: tuple[int, ...], payload: bytes) -> bytes:
+    """An .npz whose ``member`` has a .npy header promising ``header_shape`` of U1 and ``payload`` of zeros after it
+    (deflated: megabytes of zeros take kilobytes), beside a valid image and label."""
+    import io
+    import zipfile
+
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
+        for name, arr in (("image", np.ones((32, 32))), ("angles_deg", np.array([1.0, 2.0, 3.0]))):
+            b = io.BytesIO()
+            np.save(b, arr)
+            zf.writestr(f"{name}.npy", b.getvalue())
+        head = io.BytesIO()
+        np.lib.format.write_array_header_1_0(head, {"descr": "<U1", "fortran_order": False, "shape": header_shape})
+        zf.writestr(f"{member}.npy", head.getvalue() + payload)
+    return buf.getvalue()
+
+
+@pytest.mark.parametrize(
+    "header_shape, payload",
+    [((), b"\0" * 200_000_000), ((10**12,), b"\0" * 4)],
+    ids=["zip-bomb-behind-a-small-header", "header-promising-4-TB"],
+)
+def test_a_member_is_never_read_past_its_size(tmp_path, header_shape, payload):
+    """observed_at as a zip bomb (a 1-character header, 200 MB of zeros behind it, deflated to ~200 kB) and as a
+    header promising 4 TB: both refused by name, without decompressing or allocating what they promise."""
+    import resource
+
+    from inference.labelled import observed_times, read_frame
+
+    data = _bomb_npz("observed_at", header_shape, payload)
+    assert len(data) < 1_000_000
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    with pytest.raises(DatasetError, match="observed_at") as exc:
+        read_frame(tmp_path / "bomb.npz", 32, data=data)
+    assert exc.value.field == "observed_at"
+    assert observed_times([("bomb.npz", data)]) == []  # skipped there; read_frame names it
+    grew_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
+    assert grew_mb < 100, grew_mb

@@ -48,3 +48,19 @@ def test_metrics_count_requests_by_route_template_and_time_the_work(client):
     assert grew("gsa_work_duration_seconds_count", kind="estimate") == 1
     assert grew("gsa_frames_estimated_total") == 1
     assert client.get("/metrics").status_code == 200  # no key needed, like /healthz
+
+
+def test_a_method_no_http_names_is_counted_as_other(client):
+    """A label value never comes from the request: 20 requests with 10 kB methods are one "other" series, and the
+    scrape does not carry the method."""
+    before = _samples(client)
+    for k in range(20):
+        r = client.request("X" * 10_000 + str(k), "/v1/plans", headers=A)
+        assert r.status_code in (400, 404, 405)
+    r = client.get("/metrics")
+    assert "XXXXXXXX" not in r.text and len(r.text) < 200_000
+    after = _samples(client)
+    grew = _value(after, "gsa_http_requests_total", method="other") - _value(
+        before, "gsa_http_requests_total", method="other"
+    )
+    assert grew == 20
