@@ -132,6 +132,15 @@ def _scalar(z: Any, path: Path, member: str, lo: float, hi: float) -> float | No
     return v
 
 
+# Bidirectional controls (they reorder how a name reads, so one scene can pass for another) and their marks.
+BIDI_CONTROLS = frozenset("\u061c\u200e\u200f\u202a\u202b\u202c\u202d\u202e\u2066\u2067\u2068\u2069")
+
+
+def _unprintable(c: str) -> bool:
+    """A control character, a lone surrogate (not text: it cannot be encoded) or a bidi control."""
+    return ord(c) < 32 or 0x7F <= ord(c) < 0xA0 or 0xD800 <= ord(c) <= 0xDFFF or c in BIDI_CONTROLS
+
+
 def _text(z: Any, path: Path, member: str) -> str | None:
     if member not in z.files:
         return None
@@ -140,8 +149,8 @@ def _text(z: Any, path: Path, member: str) -> str | None:
         raise _bad(path, member, "a text, as numpy writes a str (np.savez(..., scene='pass-3'))")
     text = str(arr.reshape(()).item())
     text = text.decode() if isinstance(text, bytes) else text
-    if not text.strip() or len(text) > 200 or any(ord(c) < 32 for c in text):
-        raise _bad(path, member, "1 to 200 printable characters")
+    if not text.strip() or len(text) > 200 or any(_unprintable(c) for c in text):
+        raise _bad(path, member, "1 to 200 printable characters (no control, bidi control or lone surrogate)")
     return text.strip()
 
 

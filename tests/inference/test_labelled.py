@@ -158,3 +158,20 @@ def test_a_member_is_never_read_past_its_size(tmp_path, header_shape, payload):
     assert observed_times([("bomb.npz", data)]) == []  # skipped there; read_frame names it
     grew_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
     assert grew_mb < 100, grew_mb
+
+
+@pytest.mark.parametrize(
+    "scene", ["a\ud800b", "pass\u202e3", "x\x00y", "\u2066left"], ids=["surrogate", "rlo", "nul", "isolate"]
+)
+def test_a_scene_name_is_text_an_operator_can_read(tmp_path, scene):
+    """A lone surrogate (which no database or JSON encoder takes), a bidi control or a NUL in ``scene`` is refused by
+    name, not a 500 further on."""
+    import io
+
+    from inference.labelled import read_frame
+
+    buf = io.BytesIO()
+    np.savez(buf, image=np.ones((32, 32)), angles_deg=np.array([1.0, 2.0, 3.0]), scene=np.array(scene))
+    with pytest.raises(DatasetError, match="printable") as exc:
+        read_frame(tmp_path / "f.npz", 32, data=buf.getvalue())
+    assert exc.value.field == "scene"
