@@ -36,6 +36,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from app.core.config import Settings
+from app.core.security import private_dir
 from app.db.models import JOB_ACTIVE, JOB_FINAL, Job, new_id, utcnow
 from app.errors import Conflict
 
@@ -222,7 +223,7 @@ def eta_s(job: Job, now: datetime | None = None) -> float | None:
 
 @contextmanager
 def _file_lock(path: Path) -> Iterator[None]:
-    path.parent.mkdir(parents=True, exist_ok=True)
+    private_dir(path.parent)
     with open(path, "a") as fh:
         fcntl.flock(fh, fcntl.LOCK_EX)
         try:
@@ -353,8 +354,8 @@ class Dispatcher:
     def _spawn(self, job_id: str) -> subprocess.Popen[bytes]:
         env = {**os.environ, "PYTHONUNBUFFERED": "1", "GSA_JOB_SETTINGS": self.settings.model_dump_json()}
         log = Path(self.settings.data_dir) / "jobs" / f"{job_id}.log"
-        log.parent.mkdir(parents=True, exist_ok=True)
-        with open(log, "ab") as out:
+        private_dir(log.parent)
+        with os.fdopen(os.open(log, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o600), "ab") as out:
             out.write(f"jobs: {host()}:{os.getpid()} starts a worker for {job_id}\n".encode())
             out.flush()
             return subprocess.Popen(
@@ -363,6 +364,7 @@ class Dispatcher:
                 stderr=subprocess.STDOUT,
                 env=env,
                 start_new_session=True,  # a Ctrl-C at the server's terminal is not the job's
+                umask=0o077,  # what the job and its children write (data sets, versions, frames) is 0700 / 0600
             )
 
     def wait_idle(self, timeout: float) -> bool:

@@ -8,6 +8,7 @@ stored plan to a ``scene.Scene`` once (``app.services.scenes``) and stores the t
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable
 from datetime import datetime
 from typing import TYPE_CHECKING, Any
@@ -18,6 +19,7 @@ from sqlalchemy.orm import Session
 
 from app import crud
 from app.core.config import Settings
+from app.core.security import private_dir
 from app.db.models import Pass
 from app.errors import InputError
 from app.schemas import AttitudePublic, PassResult
@@ -148,8 +150,10 @@ def submit_pass(
     )
     job_id = new_id()
     folder = jobs.job_dir(settings, job_id)
-    folder.mkdir(parents=True, exist_ok=True)
-    np.savez(folder / "frames.npz", **{f"f{k:05d}": u.magnitude for k, u in enumerate(uploads)})  # type: ignore[arg-type]  # numpy's stub reserves allow_pickle
+    private_dir(folder)
+    fd = os.open(folder / "frames.npz", os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "wb") as fh:
+        np.savez(fh, **{f"f{k:05d}": u.magnitude for k, u in enumerate(uploads)})  # type: ignore[arg-type]  # numpy's stub reserves allow_pickle
     params = {
         "plan_id": plan_id,
         "observed_at": [t.isoformat() for t in observed_at],

@@ -33,7 +33,7 @@ def wait(client, job_id, states=("done", "failed", "cancelled"), timeout=120.0):
         time.sleep(0.2)
 
 
-def test_a_data_set_job_writes_the_bytes_this_process_would(client, tmp_path):
+def test_a_data_set_job_writes_the_bytes_this_process_would(client, settings, tmp_path):
     body = {"n": 6, "seed": 5, "shard_size": 2, "n_train": 4, "radar": RADAR}
     r = client.post("/v1/datasets", json=body, headers=A)
     assert r.status_code == 202, r.text
@@ -55,6 +55,14 @@ def test_a_data_set_job_writes_the_bytes_this_process_would(client, tmp_path):
     assert shard.status_code == 200
     assert shard.content == (tmp_path / "here" / "shard-00002.npz").read_bytes()
     assert hashlib.sha256(shard.content).hexdigest() == here["shards"][2]["sha256"]
+    # What the job wrote is this user's alone, whatever the umask: folders 0700, files 0600.
+    for path in (settings.data_dir / "jobs", settings.data_dir / "datasets" / job["id"]):
+        assert path.stat().st_mode & 0o777 == 0o700, path
+    for path in (
+        settings.data_dir / "jobs" / f"{job['id']}.log",
+        settings.data_dir / "datasets" / job["id"] / "shard-00002.npz",
+    ):
+        assert path.stat().st_mode & 0o777 == 0o600, path
     with np.load(io.BytesIO(shard.content)) as z:
         assert z["image"].shape == (2, 64, 64) and list(z["index"]) == [4, 5]
     # Another operator sees none of it.
