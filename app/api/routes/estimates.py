@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
 import numpy as np
 from fastapi import APIRouter, Depends, File, Form, HTTPException, Query, Request, UploadFile
@@ -256,41 +256,56 @@ def outline_png(
     return Response(images.outline_png(occupancy), media_type="image/png")
 
 
-@router.get(
-    "/{estimate_id}/{view}.png",
-    response_class=Response,
-    responses={
-        **NOT_FOUND,
-        200: {"content": {"image/png": {}}, "description": "the map's prediction, or the frame over it"},
-    },
-)
-def map_view_png(
+MAP_VIEW_RESPONSES: dict[int | str, dict[str, Any]] = {
+    **NOT_FOUND,
+    200: {"content": {"image/png": {}}, "description": "a view of the frame under the model set's reflectivity map"},
+}
+
+
+@router.get("/{estimate_id}/map.png", response_class=Response, responses=MAP_VIEW_RESPONSES)
+def map_png(
     session: SessionDep,
     operator: CurrentOperator,
     settings: SettingsDep,
     checkers: CheckersDep,
     estimate_id: Annotated[Text, PathParam()],
-    view: Annotated[Literal["map", "residual"], PathParam()],
 ) -> Response:
-    """For an answer refined on the image: ``map``, what the model set's reflectivity map predicts of the frame at the
-    answered attitude (normalised as frames are: 40 dB below the frame's reference); ``residual``, the frame over
-    that prediction in dB, -10 black, 0 grey, +10 white. 404 where the set serving the estimate's target has no map."""
+    """What the model set's reflectivity map predicts of the frame at the answered attitude, normalised as frames are
+    (40 dB below the frame's reference). 404 where the set serving the estimate's target has no map."""
+    return Response(_map_views(session, operator.id, settings, checkers, estimate_id)[0], media_type="image/png")
+
+
+@router.get("/{estimate_id}/residual.png", response_class=Response, responses=MAP_VIEW_RESPONSES)
+def residual_png(
+    session: SessionDep,
+    operator: CurrentOperator,
+    settings: SettingsDep,
+    checkers: CheckersDep,
+    estimate_id: Annotated[Text, PathParam()],
+) -> Response:
+    """The frame over the map's prediction at the answered attitude, in dB: -10 black, 0 grey, +10 white. 404 where
+    the set serving the estimate's target has no map."""
+    return Response(_map_views(session, operator.id, settings, checkers, estimate_id)[1], media_type="image/png")
+
+
+def _map_views(session: Any, operator_id: str, settings: Any, checkers: Any, estimate_id: str) -> tuple[bytes, bytes]:
+    """The map's prediction and the residual of a stored estimate, as PNGs."""
     from inference.errors import ModelFileError
 
-    row = _owned(session, operator.id, estimate_id)
+    row = _owned(session, operator_id, estimate_id)
     stored = EstimatePublic.from_row(row)
     try:
         checker = checkers.get(stored.target or checkers.default)
     except ModelFileError:  # a target this service no longer has
         raise HTTPException(status_code=404, detail="the estimate's target is not served here") from None
-    refiner = getattr(checker.image, "views", None)
-    if refiner is None:
+    views = getattr(checker.image, "views", None)
+    if views is None:
         raise HTTPException(
             status_code=404, detail="the model set serving this target has no reflectivity map (gsa adapt --map-only)"
         )
     frame = images.png_frame(images.blob_path(Path(settings.data_dir), row.original_sha256).read_bytes())
-    predicted, residual = refiner(frame, np.asarray(stored.attitude.euler_zyx_deg, float))
-    return Response(images.png_bytes(predicted if view == "map" else residual), media_type="image/png")
+    predicted, residual = views(frame, np.asarray(stored.attitude.euler_zyx_deg, float))
+    return images.png_bytes(predicted), images.png_bytes(residual)
 
 
 @router.delete("/{estimate_id}", status_code=204, responses=NOT_FOUND)
