@@ -218,6 +218,8 @@ def recheck_reversed(*, est: Estimator, checker: Checker, frames: Vec, checks: l
                 for a in c.alternatives
             ],
             features={**c.features, "reversed": 1.0},
+            refined_on=c.refined_on,
+            image_fit=c.image_fit,
         )
     return out
 
