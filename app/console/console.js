@@ -368,7 +368,7 @@ async function estimatePage(id) {
   const sent = e.cells_m ? `; sent with cells ${num(e.cells_m[0], 3)} x ${num(e.cells_m[1], 3)} m and resampled` : "";
   const snr = e.snr_db === null || e.snr_db === undefined ? "SNR not given" : `SNR ${num(e.snr_db, 1)} dB`;
   const verdict = !q ? "" : q.trusted
-    ? `<p class="verdict good">Trusted: silhouette IoU ${num(q.silhouette_iou, 3)}, 90 % bound z / y / x ${q.uncertainty_deg.map((v) => num(v, 2)).join(" / ")} deg.</p>`
+    ? `<p class="verdict good">Trusted${e.refined_on === "image" ? " (refined on the image)" : ""}: silhouette IoU ${num(q.silhouette_iou, 3)}, 90 % bound z / y / x ${q.uncertainty_deg.map((v) => num(v, 2)).join(" / ")} deg.</p>`
     : `<p class="verdict bad">Not trusted: ${esc(q.reasons.join("; "))}.</p>`;
   const onImage = e.refined_on === "image" && e.likelihood;
   const alts = (e.alternatives || []).map((a) => `<li>${euler(a)} deg (IoU ${num(a.silhouette_iou, 3)}, ${num(a.distance_deg, 1)} deg away${a.fitted === false ? ", the answer's near-mirror, unrefined" : ""})</li>`).join("");
