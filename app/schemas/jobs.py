@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 from pydantic import Field, field_validator
 
-from app.schemas.common import Described, Strict, utc_or_none
+from app.schemas.common import Described, Strict, Text, utc_or_none
 
 if TYPE_CHECKING:
     from app.db.models import Job
@@ -165,7 +165,7 @@ class ReestimationCreate(Strict):
 
     version: int = Field(ge=0, le=100_000)
     """the version to read them with (0: the configured set; GET /v1/model-sets lists them)"""
-    plan_id: str | None = Field(default=None, max_length=36)
+    plan_id: Text | None = Field(default=None, max_length=36)
     """only the estimates tied to this plan"""
     limit: int = Field(default=1000, ge=1, le=100_000)
     """at most this many, oldest first"""

@@ -123,6 +123,9 @@ def test_adaptation_refusals(client, labelled):
     assert other.status_code == 422 and "no model set is trained on" in other.json()["detail"][0]["msg"]
     bad = client.post(f"/v1/model-sets/{T}/adaptations", json={"epochs": 0}, headers=A)
     assert bad.status_code == 422 and "epochs" in str(bad.json()["detail"][0]["loc"])
+    # A NUL in a re-estimation's plan_id is a 422 naming it, on every database (PostgreSQL stores no NUL: it was a 500).
+    nul = client.post(f"/v1/model-sets/{T}/re-estimations", json={"version": 0, "plan_id": "ab\u0000cd"}, headers=A)
+    assert nul.status_code == 422 and "plan_id" in str(nul.json()["detail"][0]["loc"])
     extra = client.post(f"/v1/model-sets/{T}/adaptations", json={"epoch": 3}, headers=A)
     assert extra.status_code == 422
     odd = client.post(f"/v1/model-sets/{T}/adaptations", json={"crop_px": 100}, headers=A)
