@@ -495,7 +495,7 @@ class Checker:
         checked = Checked(
             angles, net, bool(fits), quality, alternatives, features, cov, SILHOUETTE if fits else NETWORK
         )
-        if self.image is not None and fits and features.get("median") is not None:
+        if self.image is not None and fits:
             return self.image.refine_checked(checked, np.asarray(frame, np.float64), enh, self.renderer)
         return checked
 

@@ -57,25 +57,31 @@ def profiled_gain(m: Vec, y: Vec, low: NDArray[np.bool_], high: NDArray[np.bool_
     return g
 
 
+def profiled_mean(rmap: ReflectivityMap, data: FrameData, rotation: Vec, window: Window) -> tuple[Vec, float]:
+    """The map's mean intensity of ``data``'s ``window`` at ``rotation``, its gain profiled out (``profiled_gain``)
+    and the frame's floor added; and the gain."""
+    g = rmap.geometry(rotation)
+    m = rmap.splat(g, rmap.intensity(g), window)
+    y, low, high = data.crop(window)
+    gain = profiled_gain(m, y, low, high, data.floor)
+    return gain * m + data.floor, gain
+
+
 def score(
     rmap: ReflectivityMap, data: FrameData, rotation: Vec, window: Window, shape: float | None = None
 ) -> tuple[float, float]:
     """The negative log-likelihood per pixel of ``data`` in ``window`` under the map at ``rotation`` (``nll``'s
     ``shape``), and the gain (profiled under speckle)."""
-    g = rmap.geometry(rotation)
-    m = rmap.splat(g, rmap.intensity(g), window)
+    mu, gain = profiled_mean(rmap, data, rotation, window)
     y, low, high = data.crop(window)
-    gain = profiled_gain(m, y, low, high, data.floor)
-    return nll(gain * m + data.floor, y, low, high, shape) / y.size, gain
+    return nll(mu, y, low, high, shape) / y.size, gain
 
 
 def deviance(rmap: ReflectivityMap, data: FrameData, rotation: Vec, window: Window) -> float:
     """How far the frame is from what the map predicts at ``rotation``: the mean speckle deviance per seen pixel,
     y/mu - log(y/mu) - 1, whose expectation is Euler's gamma (0.577) where the map explains the frame."""
-    g = rmap.geometry(rotation)
-    m = rmap.splat(g, rmap.intensity(g), window)
+    mu, _ = profiled_mean(rmap, data, rotation, window)
     y, low, high = data.crop(window)
-    gain = profiled_gain(m, y, low, high, data.floor)
     seen = ~(low | high)
-    r = y[seen] / (gain * m[seen] + data.floor)
+    r = y[seen] / mu[seen]
     return float(np.mean(r - np.log(r) - 1.0)) if r.size else float("nan")

@@ -204,10 +204,6 @@ class ReflectivityMap:
         self._spec_peak = 4.0 * math.pi * s.areas * s.panel_area_m2[s.panel] / r.wavelength_m**2
         self._sigma0 = LOBE_WIDTH * r.wavelength_m / s.panel_extent_m  # (P, 2)
 
-    @property
-    def half_px(self) -> tuple[float, float]:
-        return self._half_r, self._half_a
-
     def geometry(self, rotation: Vec) -> Geometry:
         """The sites' pixels, cosines, visibility and specular terms at one attitude (rotation body -> observation)."""
         s, r = self.sites, self.radar
@@ -286,9 +282,3 @@ class ReflectivityMap:
         r1 = min(int(math.ceil(g.u.max())) + pad_r, r - 1)
         c1 = min(int(math.ceil(g.v.max())) + pad_a, a - 1)
         return r0, c0, max(r1 - r0 + 1, 1), max(c1 - c0 + 1, 1)
-
-    def mean_image(self, rotation: Vec, window: tuple[int, int, int, int] | None = None) -> tuple[Vec, tuple[int, ...]]:
-        """The map's mean intensity (before gain and floor) in ``window`` (default: about the target) at one attitude."""
-        g = self.geometry(rotation)
-        win = window or self.window_for(g)
-        return self.splat(g, self.intensity(g), win), win

@@ -181,14 +181,12 @@ class ImageRefiner:
         """What the map predicts of the whole frame at an attitude, normalised as frames are (40 dB below the
         frame's own reference, in [0, 1]), and the frame over the prediction (dB, +-``RESIDUAL_DB`` mapped to 0..1,
         0.5 where they agree); both [H, W], for the estimate's page."""
-        from inference.reflectivity.likelihood import FrameData, profiled_gain
+        from inference.reflectivity.likelihood import FrameData, profiled_mean
         from inference.reflectivity.model import DYNAMIC_RANGE_DB
 
         data = FrameData.of(frame)
-        g = self.map.geometry(rotation_matrix(*np.asarray(angles_deg, float)))
         whole = (0, 0, *data.y.shape)
-        m = self.map.splat(g, self.map.intensity(g), whole)
-        mu = profiled_gain(m, data.y, data.low, data.high, data.floor) * m + data.floor
+        mu, _ = profiled_mean(self.map, data, rotation_matrix(*np.asarray(angles_deg, float)), whole)
         predicted = np.clip(1.0 + 10.0 * np.log10(mu) / DYNAMIC_RANGE_DB, 0.0, 1.0)
         ratio_db = 10.0 * np.log10(np.maximum(data.y, 1e-12) / mu)
         return predicted, np.clip(0.5 + ratio_db / (2 * RESIDUAL_DB), 0.0, 1.0)
