@@ -25,6 +25,19 @@ def sha256_file(path: str | Path) -> str:
     return h.hexdigest()
 
 
+def checked_file(path: Path, sha256: str, what: str) -> Path:
+    """``path`` where it is there with this sha256; else ModelFileError (field ``model``) naming it as ``what``."""
+    from inference.errors import ModelFileError
+
+    if not path.is_file():
+        raise ModelFileError(f"{what} {path} is missing", field="model")
+    if sha256_file(path) != sha256:
+        raise ModelFileError(
+            f"{what} {path} does not match the sha256 in its card (truncated or altered)", field="model"
+        )
+    return path
+
+
 def _temporary(path: Path) -> Path:
     """A sibling name no other writer (process or thread) uses at the same time."""
     return path.with_name(f"{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")

@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from inference.errors import ModelFileError
-from inference.files import sha256_file
+from inference.files import checked_file
 
 DEFAULT_MODEL_DIR = Path(__file__).resolve().parent / "models" / "shipped"
 DEFAULT_RUN_BATCH = 4
@@ -54,13 +54,7 @@ def read_card(model_dir: str | Path) -> dict[str, Any]:
             if role == SEARCH_ROLE:  # optional: without it the library search fits the networks' own silhouettes
                 continue
             raise ModelFileError(f"model card {card_path} lists no {role} file", field="model")
-        f = d / entry["file"]
-        if not f.is_file():
-            raise ModelFileError(f"model file {f} is missing", field="model")
-        if sha256_file(f) != entry["sha256"]:
-            raise ModelFileError(
-                f"model file {f} does not match the sha256 in its card (truncated or altered)", field="model"
-            )
+        checked_file(d / entry["file"], entry["sha256"], "model file")
     return card
 
 

@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 
 from inference.checked import IMAGE, Alternative, Checked, Quality
 from inference.errors import ModelFileError
-from inference.files import sha256_file
+from inference.files import checked_file, sha256_file
 from inference.fit import Renderer, silhouette_iou
 from inference.reflectivity.likelihood import deviance
 from inference.reflectivity.model import LAW_BINS, Look, ReflectivityMap
@@ -100,13 +100,7 @@ def load_refiner(model_dir: str | Path, radar: Radar, target: str) -> ImageRefin
     entry = (card.get("files") or {}).get(MAP_ROLE)
     if not entry:
         return None
-    path = d / entry["file"]
-    if not path.is_file():
-        raise ModelFileError(f"map file {path} is missing", field="model")
-    if sha256_file(path) != entry["sha256"]:
-        raise ModelFileError(
-            f"map file {path} does not match the sha256 in its card (truncated or altered)", field="model"
-        )
+    path = checked_file(d / entry["file"], entry["sha256"], "map file")
     return ImageRefiner(read_map(path, builtin_target(target), radar))
 
 
