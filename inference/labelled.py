@@ -486,3 +486,14 @@ def concatenated(parts: Sequence[LabelledFrames]) -> LabelledFrames:
         np.concatenate([p.sigma_deg for p in parts]),
         tuple(t for p in parts for t in p.observed_at),
     )
+
+
+FramesArg = LabelledFrames | str | Path | Sequence[str | Path]
+
+
+def read_labelled(frames: FramesArg, size: int, cells: tuple[float, float]) -> LabelledFrames:
+    """Labelled frames from a folder or several (``read_folder``, at the models' ``size`` and ``cells``), or as given."""
+    if isinstance(frames, LabelledFrames):
+        return frames
+    folders = [frames] if isinstance(frames, str | Path) else list(frames)
+    return concatenated([read_folder(f, size, cells) for f in folders])

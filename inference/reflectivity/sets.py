@@ -17,23 +17,13 @@ from typing import Any
 
 from inference.errors import InferenceError
 from inference.files import write_json
-from inference.labelled import LabelledFrames, concatenated, read_folder
+from inference.labelled import FramesArg, read_labelled
 from inference.reflectivity.build import build_map
 from inference.reflectivity.serve import MAP_ROLE, save_map
-
-FramesArg = LabelledFrames | str | Path | list[str | Path]
 
 
 def _say(text: str) -> None:
     print(f"adapt: {text}", file=sys.stderr, flush=True)
-
-
-def read_frames(frames: FramesArg, size: int, cells: tuple[float, float]) -> LabelledFrames:
-    """Labelled frames from folders (or as given), at the set's frame size and cells."""
-    if isinstance(frames, LabelledFrames):
-        return frames
-    folders = [frames] if isinstance(frames, str | Path) else list(frames)
-    return concatenated([read_folder(f, size, cells) for f in folders])
 
 
 def add_map(model_dir: str | Path, frames: FramesArg, seed: int = 0, target: str | None = None) -> dict[str, Any]:
@@ -51,7 +41,7 @@ def add_map(model_dir: str | Path, frames: FramesArg, seed: int = 0, target: str
             f"target {target!r}: the set's networks and map are of {trained!r}; give that target", field="target"
         )
     model = builtin_target(trained)
-    labelled = read_frames(frames, est.img_size, (radar.range_cell_m, radar.cross_range_cell_m))
+    labelled = read_labelled(frames, est.img_size, (radar.range_cell_m, radar.cross_range_cell_m))
     _say(f"building the reflectivity map from {len(labelled)} labelled frames ({len(set(labelled.scenes))} scenes)")
     enhanced = est.enhance(labelled.frames) if est.enhances else None
     renderer = Renderer(model, radar) if enhanced is not None else None

@@ -50,7 +50,7 @@ from numpy.typing import NDArray
 from inference.errors import DatasetError, InferenceError, module_main
 from inference.files import write_json
 from inference.frames import ANGLE_SCALE_DEG
-from inference.labelled import LabelledFrames, concatenated, read_folder, scene_split
+from inference.labelled import FramesArg, LabelledFrames, read_labelled, scene_split
 from inference.networks.swin import angle_loss
 from inference.networks.unetpp import relative_frobenius_loss
 from inference.rotations import geodesic_deg
@@ -172,7 +172,7 @@ def _say(text: str) -> None:
 
 def adapt(
     base_dir: str | Path,
-    frames: LabelledFrames | str | Path | list[str | Path],
+    frames: FramesArg,
     out_dir: str | Path,
     opts: AdaptOptions | None = None,
     target: str | None = None,
@@ -219,10 +219,7 @@ def adapt(
         )
     model = builtin_target(trained_target)
     max_angle = float(card.get("max_angle_deg") or 45.0)
-    if not isinstance(frames, LabelledFrames):  # bad frames are refused before any work
-        folders = [frames] if isinstance(frames, str | Path) else list(frames)
-        cells = (radar.range_cell_m, radar.cross_range_cell_m)
-        frames = concatenated([read_folder(f, size, cells) for f in folders])
+    frames = read_labelled(frames, size, (radar.range_cell_m, radar.cross_range_cell_m))  # bad ones refused now
     inside = np.all(np.abs(frames.angles_deg) <= max_angle, axis=1)
     left_out = int(np.count_nonzero(~inside))
     frames = frames.subset(np.flatnonzero(inside))
