@@ -244,16 +244,21 @@ def outline_png(
     Drawn again from the stored attitude with the target the frame was fitted to; 404 where that
     target is no longer served.
     """
-    from inference.errors import ModelFileError
-
     stored = EstimatePublic.from_row(_owned(session, operator.id, estimate_id))
-    try:
-        checker = checkers.get(stored.target or checkers.default)
-    except ModelFileError:  # a target this service no longer has
-        raise HTTPException(status_code=404, detail="the estimate's target is not served here") from None
+    checker = _served_checker(checkers, stored)
     angles = np.asarray(stored.attitude.euler_zyx_deg, float)[None]
     occupancy = checker.renderer.occupancy(angles)[0] > 0.5
     return Response(images.outline_png(occupancy), media_type="image/png")
+
+
+def _served_checker(checkers: Any, stored: EstimatePublic) -> Any:
+    """The checker of the target the estimate was fitted to; 404 where this service no longer serves it."""
+    from inference.errors import ModelFileError
+
+    try:
+        return checkers.get(stored.target or checkers.default)
+    except ModelFileError:  # a target this service no longer has
+        raise HTTPException(status_code=404, detail="the estimate's target is not served here") from None
 
 
 MAP_VIEW_RESPONSES: dict[int | str, dict[str, Any]] = {
@@ -272,7 +277,7 @@ def map_png(
 ) -> Response:
     """What the model set's reflectivity map predicts of the frame at the answered attitude, normalised as frames are
     (40 dB below the frame's reference). 404 where the set serving the estimate's target has no map."""
-    return Response(_map_views(session, operator.id, settings, checkers, estimate_id)[0], media_type="image/png")
+    return Response(_map_view(session, operator.id, settings, checkers, estimate_id, 0), media_type="image/png")
 
 
 @router.get("/{estimate_id}/residual.png", response_class=Response, responses=MAP_VIEW_RESPONSES)
@@ -285,27 +290,21 @@ def residual_png(
 ) -> Response:
     """The frame over the map's prediction at the answered attitude, in dB: -10 black, 0 grey, +10 white. 404 where
     the set serving the estimate's target has no map."""
-    return Response(_map_views(session, operator.id, settings, checkers, estimate_id)[1], media_type="image/png")
+    return Response(_map_view(session, operator.id, settings, checkers, estimate_id, 1), media_type="image/png")
 
 
-def _map_views(session: Any, operator_id: str, settings: Any, checkers: Any, estimate_id: str) -> tuple[bytes, bytes]:
-    """The map's prediction and the residual of a stored estimate, as PNGs."""
-    from inference.errors import ModelFileError
-
+def _map_view(session: Any, operator_id: str, settings: Any, checkers: Any, estimate_id: str, which: int) -> bytes:
+    """A stored estimate's view under the map as a PNG: ``which`` 0 the map's prediction, 1 the residual."""
     row = _owned(session, operator_id, estimate_id)
     stored = EstimatePublic.from_row(row)
-    try:
-        checker = checkers.get(stored.target or checkers.default)
-    except ModelFileError:  # a target this service no longer has
-        raise HTTPException(status_code=404, detail="the estimate's target is not served here") from None
+    checker = _served_checker(checkers, stored)
     views = getattr(checker.image, "views", None)
     if views is None:
         raise HTTPException(
             status_code=404, detail="the model set serving this target has no reflectivity map (gsa adapt --map-only)"
         )
     frame = images.png_frame(images.blob_path(Path(settings.data_dir), row.original_sha256).read_bytes())
-    predicted, residual = views(frame, np.asarray(stored.attitude.euler_zyx_deg, float))
-    return images.png_bytes(predicted), images.png_bytes(residual)
+    return images.png_bytes(views(frame, np.asarray(stored.attitude.euler_zyx_deg, float))[which])
 
 
 @router.delete("/{estimate_id}", status_code=204, responses=NOT_FOUND)
