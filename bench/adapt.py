@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from bench.common import machine
+from bench.common import machine, stored_results
 from bench.sections import replace_section
 from inference.frames import normalise_frame
 from inference.labelled import LabelledFrames
@@ -468,11 +468,7 @@ def main(argv: list[str] | None = None) -> int:
                 if args.note:
                     stored[point]["note"] = args.note
             path.write_text(json.dumps(stored, indent=1))
-    results = {
-        s: json.loads((RESULTS / f"adapt-{s}.json").read_text())
-        for s in STANDINS
-        if (RESULTS / f"adapt-{s}.json").is_file()
-    }
+    results = stored_results(RESULTS, "adapt", STANDINS)
     replace_section(TITLE, section(results))
     plot(results)
     return 0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import platform
 import statistics
@@ -85,4 +86,13 @@ def branches(
         "wrong": wrong,
         "on_mirror": wrong & (to_mirror <= close_deg),
         "listed": listed,
+    }
+
+
+def stored_results(results: Path, prefix: str, names: Any) -> dict[str, dict[str, Any]]:
+    """Each name's stored points (``results/PREFIX-NAME.json``), for those that have a file."""
+    return {
+        name: json.loads((results / f"{prefix}-{name}.json").read_text())
+        for name in names
+        if (results / f"{prefix}-{name}.json").is_file()
     }

@@ -33,7 +33,7 @@ from bench.adapt import (
     scene_frames,
     subset,
 )
-from bench.common import machine
+from bench.common import machine, stored_results
 from bench.sections import replace_section
 
 TITLE = "Adapting to another radar: the reflectivity map"
@@ -162,11 +162,7 @@ def main(argv: list[str] | None = None) -> int:
                 _log(f"point {point}")
                 stored[point] = run_point(args.standin, frames, scenes, Path(args.work), data)
                 path.write_text(json.dumps(stored, indent=1))
-    results = {
-        s: json.loads((RESULTS / f"reflectivity-{s}.json").read_text())
-        for s in STANDINS
-        if (RESULTS / f"reflectivity-{s}.json").is_file()
-    }
+    results = stored_results(RESULTS, "reflectivity", STANDINS)
     replace_section(TITLE, section(results))
     plot(results)
     return 0
