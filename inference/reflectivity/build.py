@@ -35,7 +35,7 @@ from inference.labelled import LabelledFrames, scene_split
 from inference.reflectivity import fitting
 from inference.reflectivity.likelihood import deviance
 from inference.reflectivity.model import Look, ReflectivityMap
-from inference.reflectivity.refine import FrameCost, Objective, raw_bounds, refine, window_about
+from inference.reflectivity.refine import MAX_RENDERS, FrameCost, Objective, raw_bounds, refine, refine_on, window_about
 from inference.reflectivity.sites import sites_of
 from inference.rotations import euler_difference, euler_from_matrix, geodesic_deg, rotation_matrix, so3_exp
 from inference.simulation.radar import Radar
@@ -111,13 +111,14 @@ def _refined(
     objective: Objective,
     enhanced: NDArray[np.floating] | None,
     renderer: Any,
-    renders: int = SELECT_RENDERS,
 ) -> Vec:
-    """Each frame refined from its start: the answers [N, 3]."""
+    """Each frame refined from its start, ``SELECT_RENDERS`` at most: the answers [N, 3]."""
     out = []
     for k in range(len(frames)):
         enh = None if enhanced is None else enhanced[k]
-        out.append(refine(rmap, frames[k], {"start": starts[k]}, objective, enh, renderer, renders)[0].angles_deg)
+        out.append(
+            refine(rmap, frames[k], {"start": starts[k]}, objective, enh, renderer, SELECT_RENDERS)[0].angles_deg
+        )
     return np.array(out)
 
 
@@ -242,14 +243,15 @@ def _calibrate(
     """Refine the held-out frames fully, and fit the bounds and the deviance limit to what they show."""
     from inference.trust import fit_bounds
 
-    answers = _refined(rmap, frames, starts, objective, enhanced, renderer, renders=160)
-    raws, devs = [], []
-    for k, a in enumerate(answers):
+    found, raws, devs = [], [], []
+    for k in range(len(frames)):
         window = window_about(rmap, starts[k])
         cost = FrameCost(rmap, frames[k], window, objective, None if enhanced is None else enhanced[k], renderer)
+        a = refine_on(cost, {"start": starts[k]}, MAX_RENDERS)[0].angles_deg
+        found.append(a)
         raws.append(raw_bounds(cost, a))
         devs.append(deviance(rmap, cost.data, rotation_matrix(*a), window))
-    raw = np.array(raws)
+    answers, raw = np.array(found), np.array(raws)
     err = np.abs(euler_difference(answers, truth))
     pairs = [fit_bounds(raw[:, i], err[:, i]) for i in range(3)]
     geo = geodesic_deg(answers, truth)

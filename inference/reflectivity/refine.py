@@ -134,15 +134,19 @@ def refine(
     renderer: Renderer | None = None,
     max_renders: int = MAX_RENDERS,
 ) -> list[Refined]:
-    """Refine each start (name -> Euler z, y, x deg) on the frame under the map; best first."""
-    names = list(starts)
-    if not names:
+    """Refine each start (name -> Euler z, y, x deg) on the frame under the map, in a window about the first; best
+    first."""
+    if not starts:
         return []
-    window = window_about(rmap, np.asarray(starts[names[0]], float))
-    cost = FrameCost(rmap, frame, window, objective or Objective(), enhanced, renderer)
+    window = window_about(rmap, np.asarray(next(iter(starts.values())), float))
+    return refine_on(FrameCost(rmap, frame, window, objective or Objective(), enhanced, renderer), starts, max_renders)
+
+
+def refine_on(cost: FrameCost, starts: dict[str, Vec], max_renders: int = MAX_RENDERS) -> list[Refined]:
+    """``refine`` with the frame's objective already made (its window, data and silhouette); best first."""
     out = []
-    for name in names:
-        rot, best, start, renders = _nelder_mead(cost, rotation_matrix(*np.asarray(starts[name], float)), max_renders)
+    for name, angles in starts.items():
+        rot, best, start, renders = _nelder_mead(cost, rotation_matrix(*np.asarray(angles, float)), max_renders)
         out.append(Refined(np.asarray(euler_from_matrix(rot), float), best, name, start, renders))
     return sorted(out, key=lambda r: r.cost)
 

@@ -30,7 +30,7 @@ from inference.files import checked_file, sha256_file
 from inference.fit import Renderer, silhouette_iou
 from inference.reflectivity.likelihood import deviance
 from inference.reflectivity.model import LAW_BINS, Look, ReflectivityMap
-from inference.reflectivity.refine import FrameCost, Objective, raw_bounds, refine, window_about
+from inference.reflectivity.refine import FrameCost, Objective, raw_bounds, refine_on, window_about
 from inference.reflectivity.sites import sites_of
 from inference.rotations import geodesic_deg, rotation_matrix
 from inference.simulation.radar import Radar
@@ -128,9 +128,7 @@ class ImageRefiner:
         cost = FrameCost(self.map, frame, window, self.objective, enhanced, renderer)
         at_start = {name: cost(rotation_matrix(*a)) for name, a in starts.items()}
         chosen = ["answer"] + sorted((n for n in starts if n != "answer"), key=at_start.__getitem__)[:1]
-        refined = refine(
-            self.map, frame, {n: starts[n] for n in chosen}, self.objective, enhanced, renderer, REFINE_RENDERS
-        )
+        refined = refine_on(cost, {n: starts[n] for n in chosen}, REFINE_RENDERS)
         scored = [(r.angles_deg, r.cost, "image-" + r.start) for r in refined]
         scored += [(starts[n], at_start[n], n) for n in starts if n not in chosen]
         scored.sort(key=lambda t: t[1])
