@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from planner.errors import SearchRangeError, StationError
 from planner.propagation import EarthFrames, Station, Trajectory
+from planner.radar import validate_radar
 from planner.search import TimeFunction, bisect_roots, grid_maxima, time_grid
 
 Vec = NDArray[np.float64]
@@ -88,6 +89,7 @@ def validate_station(station: Station) -> None:
     if station.max_range_km is not None and not (math.isfinite(station.max_range_km) and station.max_range_km >= 0.001):
         raise StationError(f"max_range_km {station.max_range_km} must be at least 0.001 km", field="max_range_km")
     validate_mask(station.mask)
+    validate_radar(station.radar)
 
 
 def validate_mask(mask: tuple[tuple[float, float], ...]) -> None:

@@ -19,9 +19,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.access import mask_deg
+from planner.access import look_angles, mask_deg
 from planner.constants import F_EARTH, R_EARTH_KM
 from planner.propagation import EarthFrames, Station, Trajectory
+from planner.radar import CrossSection, RadarView, radar_view
 
 Vec = NDArray[np.float64]
 
@@ -60,6 +61,23 @@ def pass_geometry(traj: Trajectory, station: Station, frames: EarthFrames, t_s: 
     rng = np.linalg.norm(los, axis=0)
     los_lvlh = np.einsum("nji,jn->in", lvlh, los / rng)
     return PassGeometry(t, los_lvlh, rng, lvlh)
+
+
+def station_radar_view(
+    traj: Trajectory, station: Station, frames: EarthFrames, t_s: Vec, cross_section: CrossSection | None
+) -> RadarView:
+    """What the station's radar sees of the target at ``t_s`` (``planner.radar.radar_view``): elevation as the
+    station sees it (refracted when it asks), range, the aspect's turn in LVLH, integration and SNR."""
+
+    def geometry_at(t: Vec) -> tuple[Vec, Vec]:
+        g = pass_geometry(traj, station, frames, t)
+        return g.los_lvlh, g.range_km
+
+    def elevation_at(t: Vec) -> Vec:
+        r, _ = traj.state(t)
+        return look_angles(r, t, station, frames).elevation_deg
+
+    return radar_view(station.radar, np.asarray(t_s, float), geometry_at, elevation_at, cross_section)
 
 
 def observation_axes(los: Vec, t_s: Vec) -> Vec:

@@ -21,6 +21,7 @@ from planner.alignment import Candidate, HeightBox, ObserverPlaneModel, align_no
 from planner.constants import MIN_PERIGEE_HEIGHT_KM, MU_EARTH_KM3_S2, R_EARTH_KM
 from planner.elements import Elements, height_change_dv_km_s, state_to_elements
 from planner.errors import PlannerError, PlanningStopped, SearchRangeError
+from planner.frames import station_radar_view
 from planner.illumination import phase_angle_deg, sun_position_km, sunlit
 from planner.manoeuvre import Encounter, Phasing, encounter, phase, rtn_matrix
 from planner.optics import ObserverOptics, StandoffWindow, standoff_window, sun_angle_deg
@@ -35,6 +36,7 @@ from planner.propagation import (
     pole_of_date,
     seconds_between,
 )
+from planner.radar import CrossSection, RadarView, radar_limits
 from planner.search import bisect_roots
 
 Vec = NDArray[np.float64]
@@ -70,6 +72,9 @@ class PlanOptions:
     min_separation_km: float = 1.0
     max_dv_m_s: float | None = None  # a candidate dearer than this (height change + phasing) is infeasible
     max_tle_age_days: float = 30.0
+    # The target's mean radar cross section by aspect (``planner.radar.CrossSection``; the service gives the served
+    # target model's): None leaves the radar's SNR uncomputed (NaN) and unchecked.
+    cross_section: CrossSection | None = None
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.duration_s) and self.duration_s > 0):
@@ -140,6 +145,14 @@ class Feasibility:
     # The perigee height of the orbit the phasing burn puts the observer on, km (under MIN_PERIGEE_HEIGHT_KM it
     # re-enters: infeasible, and ranked after every candidate that does not).
     transfer_perigee_km: float = math.nan
+    # The radar at T_access (``planner.radar``): its elevation, slant range, the SNR the radar equation gives over the
+    # integration with the target's mean cross section there, and the time its line of sight takes to sweep the
+    # image's aperture relative to the target (held in LVLH).
+    radar_elevation_deg: float = math.nan
+    radar_range_km: float = math.nan
+    radar_snr_db: float = math.nan
+    isar_integration_s: float = math.nan
+    radar_cross_section_m2: float = math.nan
 
     @property
     def reenters(self) -> bool:
@@ -366,6 +379,7 @@ def make_plan(
 
     clock = time.perf_counter()
     lit, feas = _illumination(candidates, tgt, epoch)
+    view = station_radar_view(tgt, station, frames, np.array([c.t_access_s for c in candidates]), opts.cross_section)
     chosen_index = None
     chosen = None
     phasing = None
@@ -377,8 +391,8 @@ def make_plan(
     for k, cand in enumerate(candidates):  # every candidate's own cost, stand-off and imaging geometry
         check("the screening of the candidates")
         obs_k, ready = changed_and_ready(cand)
-        screened = screen(cand, obs_k, tgt, feas[k], epoch, opts, model, pole, ready)
-        radar = _radar_reasons(cand, windows, station)
+        screened = _with_radar(screen(cand, obs_k, tgt, feas[k], epoch, opts, model, pole, ready), view, k)
+        radar = _radar_reasons(cand, windows, station, view, k)
         feas[k] = replace(screened, feasible=screened.feasible and not radar, reasons=(*screened.reasons, *radar))
     ranked = order(candidates, feas) if order is not None else rank_candidates(feas, opts.criterion)
     if candidates and not lit.any():
@@ -412,7 +426,7 @@ def make_plan(
             *_encounter_reasons(meet, phase_deg, sun_deg, opts, window),
             *_dv_reasons(dv_total, opts),
             *_perigee_reasons(perigee),
-            *_radar_reasons(cand, windows, station),
+            *_radar_reasons(cand, windows, station, view, k),
         ]
         chosen_feas = Feasibility(
             feas[k].sunlit,
@@ -428,7 +442,7 @@ def make_plan(
             line_of_sight_rtn(r_t[:, 0], v_t[:, 0], los),
             perigee,
         )
-        feas[k] = chosen_feas
+        chosen_feas = feas[k] = _with_radar(chosen_feas, view, k)
         break
     timings["phasing"] = time.perf_counter() - clock
     if not candidates:
@@ -590,15 +604,30 @@ def screen(
     return Feasibility(lit.sunlit, d, phase_deg, not reasons, reasons, sun_deg, dv, d, speed, rate, los, perigee)
 
 
-def _radar_reasons(cand: Candidate, windows: AccessWindows, station: Station) -> list[str]:
-    """A candidate in a pass the radar cannot follow (a keyhole: its azimuth rate near the zenith), in words."""
-    k = cand.pass_index
-    if not windows.keyhole.size or not windows.keyhole[k]:
-        return []
-    return [
-        f"the radar must turn {windows.max_azimuth_rate_deg_s[k]:.1f} deg/s in azimuth at this pass's culmination, "
-        f"over its {station.max_azimuth_rate_deg_s:g} deg/s (a keyhole)"
-    ]
+def _radar_reasons(cand: Candidate, windows: AccessWindows, station: Station, view: RadarView, k: int) -> list[str]:
+    """Why the radar cannot image candidate ``k`` at T_access, in words: a pass it cannot follow (a keyhole: its
+    azimuth rate near the zenith), then each of its limits there (``planner.radar.radar_limits``)."""
+    p = cand.pass_index
+    reasons = []
+    if windows.keyhole.size and windows.keyhole[p]:
+        reasons.append(
+            f"the radar must turn {windows.max_azimuth_rate_deg_s[p]:.1f} deg/s in azimuth at this pass's culmination, "
+            f"over its {station.max_azimuth_rate_deg_s:g} deg/s (a keyhole)"
+        )
+    elevation, t_int, snr = view.elevation_deg[k], view.integration_s[k], view.snr_db[k]
+    return reasons + radar_limits(station.radar, float(elevation), float(t_int), float(snr))
+
+
+def _with_radar(f: Feasibility, view: RadarView, k: int) -> Feasibility:
+    """``f`` with candidate ``k``'s radar figures at T_access (``view``)."""
+    return replace(
+        f,
+        radar_elevation_deg=float(view.elevation_deg[k]),
+        radar_range_km=float(view.range_km[k]),
+        radar_snr_db=float(view.snr_db[k]),
+        isar_integration_s=float(view.integration_s[k]),
+        radar_cross_section_m2=float(view.rcs_m2[k]),
+    )
 
 
 def _rate_deg_s(ph: Phasing) -> float:

@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import os
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
 from functools import lru_cache
 from typing import Any, Protocol
@@ -29,6 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 from planner.constants import DAY_S, F_EARTH, J2, MU_EARTH_KM3_S2, OMEGA_EARTH_RAD_S, R_EARTH_KM
 from planner.elements import Elements, elements_to_state, secular_state, state_to_elements
 from planner.errors import PlannerError
+from planner.radar import Radar
 from planner.tle import TLE
 
 Vec = NDArray[np.float64]
@@ -281,6 +282,8 @@ class Station:
     # The fastest the antenna turns in azimuth (deg/s): a pass that needs more near the zenith is a keyhole.
     # 10 deg/s is a conservative rate for a large tracking antenna; give the site's own.
     max_azimuth_rate_deg_s: float = 10.0
+    # The imaging radar at the site: its elevation limit, radar equation and coherent time (``planner.radar``).
+    radar: Radar = field(default_factory=Radar)
 
     def itrs_km(self) -> Vec:
         """Return the site's ITRS position, shape (3,)."""

@@ -205,7 +205,8 @@ def format_plan(r: PlanResult) -> str:
     )
     out.append(
         f"{'#':>4} {'T_access (UTC)':<25} {'dHa (km)':>9} {'dHp (km)':>9} {'miss (km)':>10} {'node':>5} "
-        f"{'dv (m/s)':>9} {'stand-off (km)':>14} {'rate (deg/s)':>12} {'sunlit':>7}  feasible"
+        f"{'dv (m/s)':>9} {'stand-off (km)':>14} {'rate (deg/s)':>12} {'sunlit':>7} "
+        f"{'radar el (deg)':>14} {'SNR (dB)':>8} {'T_int (s)':>9}  feasible"
     )
     chosen_at = None if r.chosen is None else r.chosen.t_access
 
@@ -219,7 +220,9 @@ def format_plan(r: PlanResult) -> str:
         out.append(
             f"{mark}{k:3d} {utc_text(c.t_access):<25} {c.delta_ha_km:9.1f} {c.delta_hp_km:9.1f} "
             f"{c.miss_km:10.3f} {c.node:>5} {fixed(c.dv_total_m_s, 9, 1)} {fixed(c.standoff_km, 14, 1)} "
-            f"{fixed(f.target_angular_rate_deg_s, 12, 2)} {('yes' if f.sunlit else 'no'):>7}  {verdict}"
+            f"{fixed(f.target_angular_rate_deg_s, 12, 2)} {('yes' if f.sunlit else 'no'):>7} "
+            f"{fixed(f.radar_elevation_deg, 14, 1)} {fixed(f.radar_snr_db, 8, 1)} {fixed(f.isar_integration_s, 9, 1)}  "
+            f"{verdict}"
         )
     ch = r.chosen
     if ch:
@@ -246,6 +249,16 @@ def format_plan(r: PlanResult) -> str:
         )
     if ch:
         f = ch.feasibility
+        if f.radar_elevation_deg is not None:
+            out.append(
+                f"radar: elevation {f.radar_elevation_deg:.1f} deg, range {f.radar_range_km or 0.0:.0f} km, "
+                f"integration {f.isar_integration_s or 0.0:.1f} s"
+                + (
+                    ""
+                    if f.radar_snr_db is None
+                    else f", SNR {f.radar_snr_db:.1f} dB (cross section {f.radar_cross_section_m2 or 0.0:.3g} m^2)"
+                )
+            )
         out.append(f"feasible: {'yes' if f.feasible else 'no'}" + (f" ({'; '.join(f.reasons)})" if f.reasons else ""))
     for note in r.notes:
         out.append(f"note: {note}")

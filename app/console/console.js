@@ -229,6 +229,10 @@ async function planPage(id) {
         dHp ${num(ch.delta_hp_km, 1)} km<br>node-line miss ${num(ch.miss_km, 3)} km (${esc(ch.node)})<br>
         target ${f.sunlit ? "sunlit" : "in Earth's shadow"}${ch.standoff_km == null ? "" : `<br>observer aimed
         ${num(ch.standoff_km, 1)} km beside it`}</div>
+      ${f.radar_elevation_deg == null ? "" : `<div class="card"><b>Radar at T_access</b><br>elevation
+        ${num(f.radar_elevation_deg, 1)} deg, range ${num(f.radar_range_km, 0)} km<br>the line of sight sweeps the
+        frame's aperture in ${num(f.isar_integration_s, 1)} s${f.radar_snr_db == null ? "" : `<br>SNR
+        ${num(f.radar_snr_db, 1)} dB over it (mean cross section ${num(f.radar_cross_section_m2, 1)} m²)`}</div>`}
       ${ph ? `<div class="card"><b>Phasing burn</b><br>${utc(ph.t_burn)} (${ph.revolutions_before} rev before)<br>
         dv ${num(ph.dv_total_m_s, 1)} m/s, RTN [${ph.dv_rtn_m_s.map((v) => num(v, 1)).join(", ")}] m/s<br>
         verified (numerical J2): ${num(ph.verification.miss_km * 1000, 1)} m from the aim point<br>
@@ -243,7 +247,11 @@ async function planPage(id) {
       <td class="num">${num(c.miss_km, 3)}</td><td class="num">${c.dv_total_m_s == null ? "-" : num(c.dv_total_m_s, 1)}</td>
       <td class="num">${c.standoff_km == null ? "-" : num(c.standoff_km, 1)}</td>
       <td class="num">${cf.target_angular_rate_deg_s == null ? "-" : num(cf.target_angular_rate_deg_s, 2)}</td>
-      <td>${cf.sunlit ? "yes" : "no"}</td><td class="reasons">${cf.feasible ? "yes" : `no: ${esc(cf.reasons.join("; "))}`}</td></tr>`;
+      <td>${cf.sunlit ? "yes" : "no"}</td>
+      <td class="num">${cf.radar_elevation_deg == null ? "-" : num(cf.radar_elevation_deg, 1)}</td>
+      <td class="num">${cf.radar_snr_db == null ? "-" : num(cf.radar_snr_db, 1)}</td>
+      <td class="num">${cf.isar_integration_s == null ? "-" : num(cf.isar_integration_s, 1)}</td>
+      <td class="reasons">${cf.feasible ? "yes" : `no: ${esc(cf.reasons.join("; "))}`}</td></tr>`;
   }).join("");
   const exportsList = ["opm", "opm?format=xml", "oem", "oem?format=xml", "czml", "geojson", "access.csv", "pointing.csv"]
     .map((k) => `<a href="#" data-export="${k}">${k.replace("?format=xml", " (XML)")}</a>`).join(" · ");
@@ -258,8 +266,9 @@ async function planPage(id) {
     <h2>Candidates (${p.candidates.length}, every one; the chosen one highlighted)</h2>
     <table id="candidates"><thead><tr><th class="num">#</th><th>T_access (UTC)</th><th class="num">dHa (km)</th>
     <th class="num">dHp (km)</th><th class="num">miss (km)</th><th class="num">dv (m/s)</th><th class="num">stand-off (km)</th>
-    <th class="num">rate (deg/s)</th><th>sunlit</th><th>feasible</th></tr></thead><tbody>${candidates ||
-      '<tr><td colspan="10" class="muted">No pass has an alignment inside the box.</td></tr>'}</tbody></table>
+    <th class="num">rate (deg/s)</th><th>sunlit</th><th class="num">radar el (deg)</th><th class="num">SNR (dB)</th>
+    <th class="num">T_int (s)</th><th>feasible</th></tr></thead><tbody>${candidates ||
+      '<tr><td colspan="13" class="muted">No pass has an alignment inside the box.</td></tr>'}</tbody></table>
     <h2>Exports</h2><p>${exportsList} <span id="exporting" class="muted"></span></p>
     <h2>Frames of this plan</h2>
     <p id="planwork">${(p.pass_ids || []).map((x) => `<a href="#/passes/${esc(x)}">pass ${esc(x.slice(0, 8))}</a>`).join(" · ") || "no pass"};

@@ -273,6 +273,19 @@ class FeasibilityPublic(Described):
     transfer_perigee_km: float | None = None
     """the perigee height of the orbit the phasing burn puts the observer on, km (under 100 km it re-enters:
     infeasible), or null"""
+    radar_elevation_deg: float | None = None
+    """the target's elevation seen from the radar at t_access, deg (under the radar's min_elevation_deg:
+    infeasible)"""
+    radar_range_km: float | None = None
+    """the radar's slant range to the target at t_access, km"""
+    radar_snr_db: float | None = None
+    """the radar equation's SNR over the integration, with the target model's mean cross section at this aspect,
+    dB (under the radar's min_snr_db: infeasible)"""
+    isar_integration_s: float | None = None
+    """the time the radar's line of sight takes to sweep the frame's aperture relative to the target (held in its
+    orbital frame) at t_access, s (over the radar's max_integration_s, or too short for its pulses: infeasible)"""
+    radar_cross_section_m2: float | None = None
+    """the target model's mean radar cross section at this aspect (band and aperture averaged), m^2"""
 
     @classmethod
     def from_feasibility(cls, f: Feasibility) -> FeasibilityPublic:
@@ -287,6 +300,11 @@ class FeasibilityPublic(Described):
             target_angular_rate_deg_s=finite_or_null(f.target_angular_rate_deg_s),
             line_of_sight_rtn=None if f.line_of_sight_rtn is None else list(f.line_of_sight_rtn),
             transfer_perigee_km=finite_or_null(f.transfer_perigee_km),
+            radar_elevation_deg=finite_or_null(f.radar_elevation_deg),
+            radar_range_km=finite_or_null(f.radar_range_km),
+            radar_snr_db=finite_or_null(f.radar_snr_db),
+            isar_integration_s=finite_or_null(f.isar_integration_s),
+            radar_cross_section_m2=finite_or_null(f.radar_cross_section_m2),
         )
 
 

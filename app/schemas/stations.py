@@ -5,11 +5,12 @@ from __future__ import annotations
 from datetime import datetime
 from typing import TYPE_CHECKING, Annotated, Any
 
-from pydantic import AfterValidator, ConfigDict, Discriminator, Field, Tag
+from pydantic import AfterValidator, ConfigDict, Discriminator, Field, Tag, model_validator
 
 from app.schemas.common import Described, Finite, Name, Strict, normalise_name, utc_or_none
 from planner.access import validate_mask
 from planner.errors import PlannerError
+from planner.radar import RADAR_LIMITS, Radar, validate_radar
 
 if TYPE_CHECKING:
     from app.db.models import GroundStation
@@ -29,6 +30,55 @@ def _mask_in_order(mask: list[list[float]] | None) -> list[list[float]] | None:
 
 # [azimuth_deg, elevation_deg]: a two-number array, not a tuple (whose prefixItems OpenAPI 3.0 tools misread).
 MaskPoint = Annotated[list[Finite], Field(min_length=2, max_length=2)]
+
+
+_RADAR = Radar()
+
+
+def _radar_field(name: str, description: str) -> Any:
+    lo, hi = RADAR_LIMITS[name]
+    return Field(default=getattr(_RADAR, name), ge=lo, le=hi, description=f"{description} ({lo:g} to {hi:g})")
+
+
+class RadarIn(Strict):
+    """The site's imaging radar: what decides whether a scene's frames can be formed (``planner.radar``).
+
+    Defaults: the paper's Table 3 band and frame, the transmitter of a tracking-and-imaging radar in that band
+    (FHR's TIRA, Ku band), a 34 m dish; each default's source is in README.md ("The radar in the scene")."""
+
+    min_elevation_deg: Finite = _radar_field(
+        "min_elevation_deg",
+        "the elevation below which the radar does not image, deg (the station's min_elevation_deg and mask still "
+        "decide the access windows)",
+    )
+    frequency_ghz: Finite = _radar_field("frequency_ghz", "carrier frequency, GHz")
+    bandwidth_ghz: Finite = _radar_field("bandwidth_ghz", "bandwidth, GHz (range cell c / 2B)")
+    peak_power_kw: Finite = _radar_field("peak_power_kw", "peak transmit power, kW")
+    pulse_width_us: Finite = _radar_field("pulse_width_us", "pulse length, microseconds")
+    prf_hz: Finite = _radar_field("prf_hz", "pulse repetition frequency, Hz")
+    gain_dbi: Finite = _radar_field("gain_dbi", "antenna gain, dBi")
+    noise_temperature_k: Finite = _radar_field("noise_temperature_k", "system noise temperature, K")
+    losses_db: Finite = _radar_field("losses_db", "system losses, dB")
+    aperture_deg: Finite = _radar_field(
+        "aperture_deg", "the angle the line of sight sweeps for one frame, deg (cross-range cell lambda / 2 dtheta)"
+    )
+    pulses: int = _radar_field("pulses", "azimuth samples a frame holds (its pulses at least)")
+    max_integration_s: Finite = _radar_field("max_integration_s", "the longest coherent integration it holds, s")
+    min_snr_db: Finite = _radar_field(
+        "min_snr_db", "the least SNR over the integration a frame is worth reading at, dB"
+    )
+
+    @model_validator(mode="after")
+    def _consistent(self) -> RadarIn:
+        try:
+            validate_radar(self.to_radar())
+        except PlannerError as exc:
+            raise ValueError(str(exc)) from None
+        return self
+
+    def to_radar(self) -> Radar:
+        """The planner's radar."""
+        return Radar(**self.model_dump())
 
 
 class StationIn(Strict):
@@ -67,6 +117,11 @@ class StationIn(Strict):
         default=False,
         description="add atmospheric refraction to every elevation (optical, Saemundsson's formula at 10 C and "
         "1010 hPa: 0.48 deg at the horizon); off (the default), elevations are geometric",
+    )
+    radar: RadarIn = Field(
+        default_factory=RadarIn,
+        description="the site's imaging radar: its elevation limit, radar equation and coherent time (defaults: a "
+        "Ku-band tracking-and-imaging radar in the paper's Table 3 band)",
     )
 
 

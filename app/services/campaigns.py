@@ -19,6 +19,7 @@ from app.services import exports
 from app.services.planning import (
     check_epoch_gap,
     observer_optics,
+    served_cross_section,
     stored_station_lookup,
     to_orbit,
     to_station,
@@ -70,6 +71,7 @@ def campaign_options(req: CampaignCreate, max_grid_points: int | None = None) ->
             max_imaging_range_km=s.max_imaging_range_km,
             standoff_km=s.standoff_km,
             min_separation_km=s.min_separation_km,
+            cross_section=served_cross_section(),
         )
     except PlannerError as exc:
         raise InputError(["search", exc.field or "search"], str(exc)) from None

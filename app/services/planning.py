@@ -27,6 +27,7 @@ from app.schemas import (
     WindowPublic,
 )
 from app.services import exports
+from inference.simulation.targets import DEFAULT_TARGET
 from planner.access import access_windows
 from planner.alignment import HeightBox
 from planner.ccsds import elements_from_opm, omm_fields
@@ -36,7 +37,9 @@ from planner.optics import ObserverOptics
 from planner.orbits import Orbit, earth_frames, trajectory
 from planner.plan import Plan, PlanOptions, StopCheck, make_plan
 from planner.propagation import Station, as_utc
+from planner.radar import CrossSection
 from planner.tle import omm_fields_from_text, parse_tle, split_tles, tle_from_omm, tle_lines
+from scene.cross_section import for_target
 
 log = logging.getLogger(__name__)
 
@@ -142,6 +145,7 @@ def to_station(st: StationIn | str) -> Station:
         mask=tuple((float(a), float(e)) for a, e in st.mask or ()),
         refraction=st.refraction,
         max_azimuth_rate_deg_s=st.max_azimuth_rate_deg_s,
+        radar=st.radar.to_radar(),
     )
 
 
@@ -189,6 +193,12 @@ def observer_optics(req: PlanCreate | CampaignCreate) -> ObserverOptics:
         raise InputError(where.get(exc.field or "", ["observer_optics"]), str(exc)) from None
 
 
+def served_cross_section() -> CrossSection:
+    """The served target model's mean radar cross section by aspect (``scene.cross_section``): the radar equation's
+    sigma in every plan and campaign."""
+    return for_target(DEFAULT_TARGET)
+
+
 def plan_options(req: PlanCreate) -> PlanOptions:
     s = req.search
     optics = observer_optics(req)
@@ -207,6 +217,7 @@ def plan_options(req: PlanCreate) -> PlanOptions:
             standoff_km=s.standoff_km,
             min_separation_km=s.min_separation_km,
             max_dv_m_s=s.max_dv_m_s,
+            cross_section=served_cross_section(),
         )
     except PlannerError as exc:
         raise InputError(planner_loc(exc.field), str(exc)) from None
