@@ -69,9 +69,10 @@ def period_s(r_km: Vec, v_km_s: Vec) -> float:
     return 2.0 * math.pi * math.sqrt(a**3 / MU_EARTH_KM3_S2)
 
 
-def best_lambert(r1: Vec, v1: Vec, r2: Vec, tof_s: float) -> tuple[Vec, int, bool]:
-    """Return the departure velocity, revolutions and branch of the cheapest transfer from (r1, v1) to r2."""
-    best: tuple[float, Vec, int, bool] | None = None
+def lambert_options(r1: Vec, v1: Vec, r2: Vec, tof_s: float) -> list[tuple[float, Vec, int, bool]]:
+    """Every Lambert transfer from (r1, v1) to r2 in ``tof_s``: (two-body cost, departure velocity, revolutions,
+    low branch), cheapest first."""
+    found = []
     h = np.cross(r1, v1)
     for m in range(0, max_revolutions(r1, r2, tof_s) + 1):
         for low in (True, False) if m else (True,):
@@ -79,12 +80,23 @@ def best_lambert(r1: Vec, v1: Vec, r2: Vec, tof_s: float) -> tuple[Vec, int, boo
                 sol = lambert(r1, r2, tof_s, m, low, prograde_normal=h)
             except LambertError:
                 continue
-            cost = float(np.linalg.norm(sol.v1_km_s - v1))
-            if best is None or cost < best[0]:
-                best = (cost, sol.v1_km_s, m, low)
-    if best is None:
+            found.append((float(np.linalg.norm(sol.v1_km_s - v1)), sol.v1_km_s, m, low))
+    return sorted(found, key=lambda o: o[0])
+
+
+def best_lambert(r1: Vec, v1: Vec, r2: Vec, tof_s: float) -> tuple[Vec, int, bool]:
+    """Return the departure velocity, revolutions and branch of the cheapest transfer from (r1, v1) to r2."""
+    found = lambert_options(r1, v1, r2, tof_s)
+    if not found:
         raise LambertError("no Lambert transfer found for this geometry", field="phasing")
-    return best[1], best[2], best[3]
+    _, v_dep, m, low = found[0]
+    return v_dep, m, low
+
+
+# Burn options (revolutions before, Lambert branch) within this factor of the cheapest two-body one are each
+# corrected for J2 and compared on their corrected cost: J2 moves a 1-2 revolution transfer's cost by a few percent,
+# enough to reorder options that two-body cost puts close (design/measurements.md, "The cheapest option after J2").
+NEAR_TWO_BODY = 1.25
 
 
 def phase(
@@ -101,7 +113,11 @@ def phase(
     standoff_rounds: int = 2,
     propagate: bool = True,
 ) -> Phasing:
-    """Plan the phasing burn for the cheapest of ``revolutions_before`` and verify it numerically.
+    """Plan the phasing burn, one of ``revolutions_before`` revolutions before, and verify it numerically.
+
+    Every burn option (revolutions before, Lambert revolutions and branch) whose two-body cost is within
+    ``NEAR_TWO_BODY`` of the cheapest is corrected for J2, and the cheapest corrected one is taken: two-body cost
+    alone can pick an option that costs more once J2 is in.
 
     The verification integrates two-body + J2 about ``pole`` (the Earth's axis of date;
     GCRS z if None) from the burn to ``t_access_s``. The aim point lies ``standoff_km``
@@ -124,39 +140,61 @@ def phase(
             continue
         r1s, v1s = observer.state(t_burn)
         r1, v1 = r1s[:, 0], v1s[:, 0]
-        v_dep, m, low = best_lambert(r1, v1, r2, k * period)
-        options.append((float(np.linalg.norm(v_dep - v1)), k, t_burn, r1, v1, v_dep, m, low))
+        for cost, v_dep, m, low in lambert_options(r1, v1, r2, k * period):
+            options.append((cost, k, t_burn, r1, v1, v_dep, m, low))
     if not options:
+        if any(t_access_s - k * period >= t_earliest_burn_s for k in revolutions_before):
+            raise LambertError("no Lambert transfer found for this geometry", field="phasing")
         raise PlannerError(
             f"the access at {t_access_s:.0f} s is too early for a burn {min(revolutions_before)} revolution(s) "
             "before it; start the search earlier",
             field="start",
         )
-    _, k, t_burn, r1, v1, v_dep, m, low = min(options, key=lambda o: o[0])
-    tof = t_access_s - t_burn
-    h = np.cross(r1, v1)
-    corrections = 0
-    if propagate:
-        r_end, v_end = propagate_j2(r1, v_dep, t_burn, t_access_s, pole)
-        two_body_miss = float(np.linalg.norm(r_end - r2))
-        offset = np.zeros(3)
-        aim = r2.copy()
-        # The stand-off side depends on the relative velocity, which depends on the aim: twice is enough.
-        for _ in range(standoff_rounds if standoff_km > 0.0 else 1):
-            if standoff_km > 0.0:
-                offset = standoff_km * standoff_direction(r2, v_end - v2_target, sun_km)
-            goal = r2 + offset
-            aim, v_dep, r_end, v_end, n = _shoot(
-                r1, h, aim, goal, v_dep, r_end, v_end, t_burn, t_access_s, m, low, pole, tol_km, max_corrections
-            )
-            corrections += n
-        miss = float(np.linalg.norm(r_end - (r2 + offset)))
-    else:  # the plain Lambert burn: its arrival velocity, no integration, no miss measured
-        v_end = lambert(r1, r2, tof, m, low, prograde_normal=h).v2_km_s
+    options.sort(key=lambda o: o[0])
+    if not propagate:  # the plain Lambert burn: its arrival velocity, no integration, no miss measured
+        _, k, t_burn, r1, v1, v_dep, m, low = options[0]
+        h = np.cross(r1, v1)
+        v_end = lambert(r1, r2, t_access_s - t_burn, m, low, prograde_normal=h).v2_km_s
         side = standoff_direction(r2, v_end - v2_target, sun_km) if standoff_km > 0.0 else np.zeros(3)
         offset = standoff_km * side
         r_end = r2 + offset
         two_body_miss = miss = math.nan
+        corrections = 0
+    else:  # every option nearly as cheap as the cheapest, corrected for J2; the cheapest corrected one flown
+        near = [o for o in options if o[0] <= NEAR_TWO_BODY * options[0][0]]
+        flown = []
+        failed: PlannerError | None = None
+        for _, k, t_burn, r1, v1, v_dep, m, low in near:
+            h = np.cross(r1, v1)
+            offset = np.zeros(3)
+            aim = r2.copy()
+            corrections = 0
+            try:
+                r_end, v_end = propagate_j2(r1, v_dep, t_burn, t_access_s, pole)
+                two_body_miss = float(np.linalg.norm(r_end - r2))
+                # The stand-off side depends on the relative velocity, which depends on the aim: twice is enough.
+                for _ in range(standoff_rounds if standoff_km > 0.0 else 1):
+                    if standoff_km > 0.0:
+                        offset = standoff_km * standoff_direction(r2, v_end - v2_target, sun_km)
+                    goal = r2 + offset
+                    aim, v_dep, r_end, v_end, n = _shoot(
+                        r1, h, aim, goal, v_dep, r_end, v_end, t_burn, t_access_s, m, low, pole, tol_km, max_corrections
+                    )
+                    corrections += n
+            except PlannerError as exc:  # the corrected aim has no transfer on this branch (or it decays): gone
+                failed = failed or exc
+                continue
+            miss = float(np.linalg.norm(r_end - (r2 + offset)))
+            cost = float(np.linalg.norm(v_dep - v1))
+            flown.append(
+                (cost, k, t_burn, r1, v1, v_dep, m, low, r_end, v_end, offset, two_body_miss, miss, corrections)
+            )
+        if not flown:
+            assert failed is not None
+            raise failed
+        # The cheapest corrected option; a full phasing (several corrections) prefers those that met the aim.
+        flown.sort(key=lambda o: (max_corrections > 1 and o[12] > 10.0 * tol_km, o[0]))
+        _, k, t_burn, r1, v1, v_dep, m, low, r_end, v_end, offset, two_body_miss, miss, corrections = flown[0]
     dv = v_dep - v1
     return Phasing(
         t_burn_s=t_burn,

@@ -123,7 +123,9 @@ def plot_plan(plan, path: str, title: str = "") -> None:  # type: ignore[no-unty
         ax.axvline(float(mdates.date2num(when)), color="k", ls="--", label="T_access")  # type: ignore[no-untyped-call]
         ax.xaxis.set_major_formatter(mdates.DateFormatter("%H:%M:%S"))  # type: ignore[no-untyped-call]
         f = plan.chosen_feasibility
-        radar = "" if f is None else f"\nradar at T_access: {f.radar_elevation_deg:.1f} deg, {f.isar_integration_s:.0f} s"
+        radar = (
+            "" if f is None else f"\nradar at T_access: {f.radar_elevation_deg:.1f} deg, {f.isar_integration_s:.0f} s"
+        )
         if f is not None and np.isfinite(f.radar_snr_db):
             radar += f" to image, SNR {f.radar_snr_db:.0f} dB"
         ax.set(xlabel=f"UTC, {when:%Y-%m-%d}", ylabel="elevation (deg)", title="the chosen pass" + radar)
