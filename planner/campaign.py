@@ -712,6 +712,14 @@ def _reason_kind(reason: str) -> str:
         return "the phasing transfer re-enters"
     if "keyhole" in reason:
         return "radar keyhole"
+    if "min_elevation_deg" in reason:
+        return "radar under its elevation limit"
+    if "max_integration_s" in reason:
+        return "radar's integration too long"
+    if "cross-range would alias" in reason:
+        return "radar's integration too short for its pulses"
+    if "min_snr_db" in reason:
+        return "radar SNR too low"
     if "collision" in reason:
         return "closest approach too near"
     return reason.split(":")[0]
