@@ -142,3 +142,46 @@ def test_concurrent_deletes_of_one_station_answer_one_204(client):
         with ThreadPoolExecutor(8) as pool:
             codes = sorted(pool.map(delete, [name] * 8))
         assert codes == [204] + [404] * 7, codes
+
+
+def test_a_stored_radar_block_is_what_plans_are_judged_by(client):
+    """A station's radar is stored with it; a plan by the station's name is judged by its limits: raising the radar's
+    elevation limit to 60 deg makes every candidate below 60 deg infeasible, with the reason and the figures."""
+    strict = {**SITE, "name": "strict radar", "radar": {"min_elevation_deg": 60.0, "max_integration_s": 90.0}}
+    r = client.post("/v1/stations", json=strict, headers=A)
+    assert r.status_code == 201, r.text
+    assert r.json()["radar"]["min_elevation_deg"] == 60.0 and r.json()["radar"]["prf_hz"] == 55.0  # defaults kept
+    plan = client.post("/v1/plans", json={**PAPER_EXAMPLE, "ground_station": "strict radar"}, headers=A)
+    assert plan.status_code == 201, plan.text
+    for c in plan.json()["candidates"]:
+        f = c["feasibility"]
+        assert f["radar_range_km"] > 0 and f["isar_integration_s"] > 0 and f["radar_cross_section_m2"] > 0
+        assert f["radar_snr_db"] is not None
+        low = f["radar_elevation_deg"] < 60.0
+        assert low == any("min_elevation_deg 60" in reason for reason in f["reasons"])
+        assert not (low and f["feasible"])
+
+
+@pytest.mark.parametrize(
+    "radar, field",
+    [
+        ({"prf_hz": -1}, "prf_hz"),
+        ({"gain_dbi": 250}, "gain_dbi"),
+        ({"min_elevation_deg": 95}, "min_elevation_deg"),
+        ({"max_integration_s": 0}, "max_integration_s"),
+        ({"unknown_figure": 1}, "unknown_figure"),
+    ],
+)
+def test_radar_out_of_physical_range_is_a_422_naming_the_field(client, radar, field):
+    r = client.post("/v1/plans", json={**PAPER_EXAMPLE, "ground_station": {**SITE, "radar": radar}}, headers=A)
+    assert r.status_code == 422, r.text
+    locs = [e["loc"] for e in r.json()["detail"]]
+    assert any(loc[-3:] == ["ground_station", "radar", field] for loc in locs), locs
+
+
+def test_a_radar_whose_figures_do_not_fit_together_is_a_422_saying_what_to_fix(client):
+    """256 us pulses at 5 kHz are on 128 % of the time."""
+    r = client.post("/v1/stations", json={**SITE, "name": "hot radar", "radar": {"prf_hz": 5000.0}}, headers=A)
+    assert r.status_code == 422, r.text
+    text = str(r.json()["detail"])
+    assert "radar" in text and "duty cycle" in text and "pulse_width_us" in text
