@@ -135,6 +135,8 @@ def test_console_pages_in_chromium(served, tmp_path):
                 "Phasing burn",
                 'id="candidates"',
                 "stand-off (km)",
+                "Radar at T_access",
+                "radar el (deg)",
             ],
         ),
         "campaigns": (f"{console}/campaigns", [campaign["id"][:8], "first T_access"]),
