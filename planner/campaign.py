@@ -172,6 +172,7 @@ class CampaignScene:
     feasibility: Feasibility
     slot_shift_s: float | None = None  # with return_to_orbit: how far along its original orbit it returned to
     check: SceneCheck | None = None
+    reaimed: bool = False  # re-aimed by a re-plan (``planner.closed_loop``) from a measured state
 
 
 @dataclass(frozen=True, slots=True)

@@ -706,7 +706,7 @@ def _phase_at_standoff(
 
 def _first_standoff_km(opts: PlanOptions) -> float:
     """The stand-off a first burn aims at to measure the fly-by's speed: the middle of the range the optics allow."""
-    return min(STANDOFF_RANGE_KM[1], 0.5 * _range_limit_km(opts))
+    return min(STANDOFF_RANGE_KM[1], 0.5 * imaging_range_km(opts))
 
 
 def _aim_km(window: StandoffWindow) -> float:
@@ -714,7 +714,7 @@ def _aim_km(window: StandoffWindow) -> float:
     return min(max(window.choose_km(), STANDOFF_RANGE_KM[0]), STANDOFF_RANGE_KM[1])
 
 
-def _range_limit_km(opts: PlanOptions) -> float:
+def imaging_range_km(opts: PlanOptions) -> float:
     """The farthest the observer may image from: the optics' diffraction range, or a lower cap asked for."""
     cap = opts.max_imaging_range_km
     return opts.optics.max_range_km if cap is None else min(cap, opts.optics.max_range_km)
@@ -732,7 +732,7 @@ def _encounter_reasons(
             f"closest approach {meet.closest_approach_km:.2f} km is under min_separation_km "
             f"{opts.min_separation_km} km: a collision risk"
         )
-    limit = _range_limit_km(opts)
+    limit = imaging_range_km(opts)
     if meet.separation_km > limit and not (window is not None and window.reasons):
         what = (
             f"the optics resolve {optics.gsd_m:g} m only within {limit:.1f} km"
