@@ -16,6 +16,7 @@ from planner.propagation import utc
 if TYPE_CHECKING:
     from app.db.models import Campaign as CampaignRow
     from planner.campaign import Burn, Campaign, CampaignScene, Stretch
+    from planner.plan import PlanOptions
 
 # The paper's Table 1 from 2022-12-15 (its first ten days have the target in Earth's shadow) for three weeks.
 CAMPAIGN_EXAMPLE: dict[str, Any] = {
@@ -55,6 +56,33 @@ class CampaignCreate(Strict):
     """the most scenes to plan"""
     search: SceneSearchIn = Field(default_factory=lambda: SceneSearchIn())
     """how each scene is searched for (the plan's box, misses, stand-off and separation; defaults: the paper's)"""
+
+
+class CampaignReplan(Strict):
+    """Where orbit determination puts the observer after a leg flown: the campaign's later scenes are re-aimed from
+    there (``POST /v1/campaigns/{id}/replan``)."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, populate_by_name=True)
+
+    observer: OrbitIn
+    """the observer's orbit as orbit determination gives it (any orbit input of a plan: elements, a TLE, an OMM or
+    an OPM state)"""
+    from_time: IsoDateTime = Field(
+        alias="from",
+        description="the moment the new campaign starts from (UTC): within the campaign, not inside a scene's "
+        "approach (between its phasing burn and its T_access); the observer is read there",
+    )
+
+
+class ReplanRecord(Described):
+    """One re-plan a campaign came from: the campaign it re-planned, the moment and the observer given."""
+
+    campaign_id: str
+    """the campaign re-planned"""
+    from_time: datetime
+    """the moment it was re-planned from (UTC)"""
+    observer: dict[str, Any]
+    """the observer's orbit as given"""
 
 
 class BurnPublic(Described):
@@ -98,6 +126,24 @@ class SceneCheckPublic(Described):
     """when it is (UTC)"""
 
 
+class AimPublic(Described):
+    """What a scene's phasing burn aims at, for an operator who re-aims each leg from orbit determination."""
+
+    t_access: datetime
+    """the imaging moment the aim holds for (UTC)"""
+    relative_km: list[float]
+    """where the observer is aimed, relative to the target at t_access: GCRS, km"""
+    relative_rtn_km: list[float]
+    """the same in the target's radial / along-track / orbit-normal axes, km"""
+    tolerance_km: float
+    """how far from that point the observer may arrive and the scene stay feasible (the optics' range, the tracker's
+    rate and the least separation, whichever is nearest), km"""
+    lambert_revolutions: int
+    """the phasing arc's complete revolutions (a re-aim keeps the branch)"""
+    low_path: bool
+    """the phasing arc's Lambert branch"""
+
+
 class CampaignScenePublic(Described):
     index: int
     """the scene's place in the campaign (0-based)"""
@@ -118,9 +164,13 @@ class CampaignScenePublic(Described):
     """the scene measured on the whole flown burn sequence"""
     slot_shift_s: float | None
     """with return_to_orbit: how far along its original orbit the observer returned to (s; positive: ahead)"""
+    aim: AimPublic | None = None
+    """what the scene's phasing burn aims at, and the tolerance that keeps it feasible"""
+    reaimed: bool = False
+    """true when a re-plan re-aimed this scene from a measured state (its T_access and aim kept, its burns new)"""
 
     @classmethod
-    def from_scene(cls, epoch: datetime, s: CampaignScene) -> CampaignScenePublic:
+    def from_scene(cls, epoch: datetime, s: CampaignScene, opts: PlanOptions) -> CampaignScenePublic:
         plan = s.plan
         assert plan.chosen is not None and s.check is not None
         check = s.check
@@ -142,7 +192,25 @@ class CampaignScenePublic(Described):
                 closest_approach_time=utc(epoch, check.closest_approach_s),
             ),
             slot_shift_s=s.slot_shift_s,
+            aim=_aim_public(epoch, s, opts),
+            reaimed=s.reaimed,
         )
+
+
+def _aim_public(epoch: datetime, s: CampaignScene, opts: PlanOptions) -> AimPublic:
+    from planner.closed_loop import scene_aim
+
+    aim = scene_aim(s, opts)
+    ph = s.plan.phasing
+    assert ph is not None
+    return AimPublic(
+        t_access=utc(epoch, aim.t_access_s),
+        relative_km=list(aim.relative_km),
+        relative_rtn_km=list(aim.relative_rtn_km),
+        tolerance_km=aim.tolerance_km,
+        lambert_revolutions=ph.lambert_revolutions,
+        low_path=ph.low_path,
+    )
 
 
 class StretchPublic(Described):
@@ -203,6 +271,10 @@ class CampaignResult(StoredResult):
     """where the planning time went, seconds"""
     notes: list[str]
     """what the planner wants the operator to know, in words"""
+    replanned_from: str | None = None
+    """the campaign this one was re-planned from (``POST /v1/campaigns/{id}/replan``), or null"""
+    replans: list[ReplanRecord] = Field(default_factory=list)
+    """every re-plan from the first campaign to this one, oldest first"""
 
     @classmethod
     def from_campaign(cls, c: Campaign) -> CampaignResult:
@@ -223,7 +295,7 @@ class CampaignResult(StoredResult):
             dv_budget_m_s=c.options.dv_budget_m_s,
             return_to_orbit=c.options.return_to_orbit,
             dv_total_m_s=c.dv_total_km_s * 1000.0,
-            scenes=[CampaignScenePublic.from_scene(ep, s) for s in c.scenes],
+            scenes=[CampaignScenePublic.from_scene(ep, s, c.options.plan) for s in c.scenes],
             stretches=[StretchPublic.from_stretch(ep, s) for s in c.stretches],
             access_windows=windows,
             observer_state=ObserverStatePublic(epoch=ep, r_km=[float(x) for x in r0], v_km_s=[float(x) for x in v0]),

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from datetime import datetime
+from datetime import datetime, timedelta
 from typing import Any
 
 import numpy as np
@@ -14,7 +14,9 @@ from app import crud
 from app.core.config import Settings
 from app.db.models import Campaign as CampaignRow
 from app.errors import InputError
-from app.schemas import CampaignCreate, CampaignResult
+from app.schemas import CampaignCreate, CampaignReplan, CampaignResult
+from app.schemas.campaigns import CampaignScenePublic, ReplanRecord
+from app.schemas.orbits import OrbitIn
 from app.services import exports
 from app.services.planning import (
     check_epoch_gap,
@@ -37,10 +39,11 @@ from planner.campaign import (
     fly,
     plan_campaign,
 )
+from planner.closed_loop import replan
 from planner.errors import PlannerError, PlanningStopped
 from planner.orbits import earth_frames, trajectory
 from planner.plan import PlanOptions, StopCheck
-from planner.propagation import Trajectory, as_utc
+from planner.propagation import Trajectory, as_utc, seconds_between
 
 Vec = NDArray[np.float64]
 EXPORT_FILES = {"opm": "opm.txt", "oem": "oem.txt", "czml": "campaign.czml", "access.csv": "access.csv"}
@@ -137,6 +140,82 @@ def plan_and_store_campaign(
     return crud.create_campaign(session=session, operator_id=operator_id, request=campaign_in, result=result)
 
 
+def rebuild(request: dict[str, Any], result: dict[str, Any], stop: StopCheck | None = None) -> Campaign:
+    """A stored campaign as the planner's ``Campaign``: its request planned again (deterministic), then each of its
+    re-plans applied in turn."""
+    req = CampaignCreate.model_validate(request)
+    campaign, _ = run_campaign(req, stop=stop)
+    stored = CampaignResult.model_validate(CampaignResult.upgraded(result))
+    target = to_orbit(req.target, "target")
+    observer = to_orbit(req.observer, "observer")
+    station = to_station(req.ground_station)
+    for record in stored.replans:
+        state = _observer_state(OrbitIn.model_validate(record.observer), record.from_time, campaign)
+        t_from = seconds_between(campaign.epoch, record.from_time)
+        campaign = replan(campaign, target, observer, station, state, t_from, stop=stop)
+    return campaign
+
+
+def _observer_state(orbit_in: OrbitIn, when: datetime, campaign: Campaign) -> tuple[Vec, Vec]:
+    """The observer's GCRS state at ``when`` from an orbit input (as a campaign reads its start)."""
+    orbit = to_orbit(orbit_in, "observer")
+    frames = earth_frames(when, 0.0, 1.0)
+    r, v = trajectory(orbit, when, frames, 0.0, 1.0, "osculating", campaign.pole).state(0.0)
+    return r[:, 0], v[:, 0]
+
+
+def replan_and_store(
+    *,
+    session: Session,
+    operator_id: str,
+    campaign_id: str,
+    replan_in: CampaignReplan,
+    settings: Settings,
+    stop: StopCheck | None = None,
+) -> CampaignRow | None:
+    """Re-plan one of the caller's campaigns from a measured observer state and store the new campaign (the
+    original stays as it was). None when no such campaign is the caller's; a 422 names ``from`` or ``observer``."""
+    row = crud.get_campaign(session=session, operator_id=operator_id, campaign_id=campaign_id)
+    if row is None:
+        return None
+    req = CampaignCreate.model_validate(row.request)
+    stored = CampaignResult.model_validate(CampaignResult.upgraded(row.result))
+    when = as_utc(replan_in.from_time)
+    end = stored.epoch + timedelta(days=stored.duration_days)
+    if not stored.epoch <= when < end:
+        what = "a re-plan's start: the scenes before it are flown" if stored.replanned_from else "its start"
+        raise InputError(
+            ["from"],
+            f"from {when:%Y-%m-%dT%H:%M:%SZ} is outside the campaign, {stored.epoch:%Y-%m-%dT%H:%M:%SZ} ({what}) to "
+            f"{end:%Y-%m-%dT%H:%M:%SZ}: give a moment within it",
+        )
+    orbit = to_orbit(replan_in.observer, "observer")
+    if settings.max_epoch_gap_days is not None:
+        check_epoch_gap(orbit, replan_in.observer, "observer", when, 0.0, settings.max_epoch_gap_days)
+    campaign = rebuild(row.request, row.result, stop=stop)
+    try:
+        state = _observer_state(replan_in.observer, when, campaign)
+        new = replan(
+            campaign,
+            to_orbit(req.target, "target"),
+            to_orbit(req.observer, "observer"),
+            to_station(req.ground_station),
+            state,
+            seconds_between(campaign.epoch, when),
+            stop=stop,
+        )
+    except PlanningStopped:
+        raise
+    except PlannerError as exc:
+        raise InputError([exc.field if exc.field in ("from", "observer") else "from"], str(exc)) from None
+    result = CampaignResult.from_campaign(new)
+    record = ReplanRecord(
+        campaign_id=row.id, from_time=when, observer=replan_in.observer.model_dump(mode="json", exclude_none=True)
+    )
+    result = result.model_copy(update={"replanned_from": row.id, "replans": [*stored.replans, record]})
+    return crud.create_campaign(session=session, operator_id=operator_id, request=req, result=result)
+
+
 def submit_campaign(*, session: Session, settings: Settings, operator_id: str, campaign_in: CampaignCreate) -> Any:
     """Queue the campaign as a job (``Prefer: respond-async``): checked now as the planner will see it (a bad
     request is a 422 here, not a failed job), planned by a worker process without the request's time limit."""
@@ -208,6 +287,7 @@ def flight(request: dict[str, Any], result: dict[str, Any]) -> Flight:
     end = stored.duration_days * 86400.0
     pole = campaign_pole(epoch, observer, end)
     burns = [b for s in stored.scenes for b in s.burns]
+    aims = [_aim_words(s) if b.kind == "phasing" else "" for s in stored.scenes for b in s.burns]
     times = [(b.time - epoch).total_seconds() for b in burns]
     r0, v0 = np.asarray(stored.observer_state.r_km), np.asarray(stored.observer_state.v_km_s)
     flown = fly(
@@ -231,10 +311,24 @@ def flight(request: dict[str, Any], result: dict[str, Any]) -> Flight:
                 "kind": b.kind,
                 "dv_km_s": tuple(x / 1000.0 for x in b.dv_m_s),
                 "dv_rtn_m_s": tuple(b.dv_rtn_m_s),
+                "aim": aim,
             }
-            for t, b in zip(times, burns, strict=True)
+            for t, b, aim in zip(times, burns, aims, strict=True)
         ],
         tuple((s.t_access - epoch).total_seconds() for s in stored.scenes),
+    )
+
+
+def _aim_words(scene: CampaignScenePublic) -> str:
+    """A scene's aim for its phasing burn's comment: what an operator re-aims to after orbit determination."""
+    aim = scene.aim
+    if aim is None:
+        return ""
+    rel = ", ".join(f"{x:.3f}" for x in aim.relative_rtn_km)
+    return (
+        f". Aim: at {aim.t_access:%Y-%m-%dT%H:%M:%S.%fZ} the observer {sum(x * x for x in aim.relative_km) ** 0.5:.3f} km "
+        f"from the target, RTN of the target [{rel}] km, within {aim.tolerance_km:.2f} km; Lambert arc of "
+        f"{aim.lambert_revolutions} revolution(s), {'low' if aim.low_path else 'high'} branch"
     )
 
 
@@ -250,7 +344,8 @@ def export(kind: str, row: Any, fmt: ccsds.Format = "kvn") -> str:
     if kind == "opm":
         r, v = fl.observer(np.array([0.0]))
         burns = [
-            exports.Manoeuvre(b["t_s"], b["dv_km_s"], b["dv_rtn_m_s"], f"Impulsive {b['kind']} burn") for b in fl.burns
+            exports.Manoeuvre(b["t_s"], b["dv_km_s"], b["dv_rtn_m_s"], f"Impulsive {b['kind']} burn{b['aim']}")
+            for b in fl.burns
         ]
         comment = (
             f"The observer at the start of campaign {row.id}, before any burn; {len(fl.accesses_s)} scene(s), "

@@ -16,3 +16,16 @@ SSO_L2 = "2 43001  97.8000 120.0000 0012000  90.0000 270.0000 14.80000000    01"
 MOLNIYA_L1 = "1 43002U          24061.25000000  .00000000  00000-0  20000-4 0    08"
 MOLNIYA_L2 = "2 43002  63.4000  40.0000 7200000 270.0000  10.0000  2.00570000    01"
 TLE_2024_EPOCH = datetime(2024, 3, 1, 6, 0, tzinfo=UTC)
+
+
+def opm_kvn(r_km, v_km_s, epoch="2008-09-20T12:25:40.104192", frame="GCRF", version="3.0"):
+    """An OPM in KVN as 502.0-B-3 lays it out, written here by hand (the reader is what is tested)."""
+    state = "".join(
+        f"{k} = {x:.9f} [{'km' if n < 3 else 'km/s'}]\n"
+        for n, (k, x) in enumerate(zip(("X", "Y", "Z", "X_DOT", "Y_DOT", "Z_DOT"), [*r_km, *v_km_s], strict=True))
+    )
+    return (
+        f"CCSDS_OPM_VERS = {version}\nCREATION_DATE = 2026-12-01T00:00:00\nORIGINATOR = TEST\n"
+        f"OBJECT_NAME = ISS (ZARYA)\nOBJECT_ID = 1998-067A\nCENTER_NAME = EARTH\nREF_FRAME = {frame}\n"
+        f"TIME_SYSTEM = UTC\nCOMMENT the state\nEPOCH = {epoch}\n" + state
+    )

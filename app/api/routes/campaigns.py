@@ -24,12 +24,13 @@ from app.schemas import (
     CAMPAIGN_EXAMPLE,
     CampaignCreate,
     CampaignPublic,
+    CampaignReplan,
     CampaignsPublic,
     CampaignSummary,
     JobPublic,
     Text,
 )
-from app.services.campaigns import plan_and_store_campaign, submit_campaign
+from app.services.campaigns import plan_and_store_campaign, replan_and_store, submit_campaign
 
 router = APIRouter(prefix="/campaigns", tags=["campaigns"])
 
@@ -112,6 +113,49 @@ def read_campaign(
 ) -> CampaignPublic:
     """Return one of the caller's campaigns."""
     row = crud.get_campaign(session=session, operator_id=operator.id, campaign_id=campaign_id)
+    if row is None:
+        raise HTTPException(status_code=404, detail="Campaign not found")
+    return CampaignPublic.from_row(row)
+
+
+@router.post(
+    "/{campaign_id}/replan",
+    status_code=201,
+    response_model=CampaignPublic,
+    responses={
+        **NOT_FOUND,
+        503: {"description": "re-planning ran over GSA_CAMPAIGN_TIMEOUT_S and was stopped; nothing was stored"},
+    },
+)
+async def replan_campaign(
+    request: Request,
+    session: SessionDep,
+    operator: CurrentOperator,
+    settings: SettingsDep,
+    campaign_id: Annotated[Text, Path()],
+    replan_in: CampaignReplan,
+) -> CampaignPublic:
+    """Re-plan a campaign from where orbit determination puts the observer (``observer`` at ``from``).
+
+    The answer is a new campaign, starting at ``from``, that names ``replanned_from``: every later scene re-aimed
+    from that state (its T_access and aim point kept, its phasing burn solved again on the same branch), and the
+    rest of the span planned afresh from the first scene that can no longer be reached within the budget left.
+    The original campaign stays as it was. ``from`` must lie within the campaign (a re-plan's own start is the
+    earliest: the scenes before it are flown), not inside a scene's approach; an observer farther than 500 km from
+    where the campaign has it is refused as another object.
+    """
+    row = await plan_in_worker(
+        request,
+        "campaign",
+        replan_and_store,
+        settings,
+        settings.campaign_timeout_s,
+        "CAMPAIGN",
+        session=session,
+        operator_id=operator.id,
+        campaign_id=campaign_id,
+        replan_in=replan_in,
+    )
     if row is None:
         raise HTTPException(status_code=404, detail="Campaign not found")
     return CampaignPublic.from_row(row)

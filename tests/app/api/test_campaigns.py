@@ -139,3 +139,83 @@ def test_a_campaign_asked_for_asynchronously_is_a_job_whose_result_is_the_same_c
         "/v1/campaigns", json={**CAMPAIGN_EXAMPLE, "dv_budget_m_s": -1}, headers={**A, "Prefer": "respond-async"}
     )
     assert bad.status_code == 422  # checked before it is queued: no job
+
+
+def _replan_state(campaign, when, moved_km=0.0):
+    """The observer at ``when`` flown from the campaign's stored start through its burns by the independent
+    integrator, 10 m off along-track (what orbit determination would hand over), as an OPM."""
+    import numpy as np
+
+    from tests.utils.j2 import fly_tod_j2
+    from tests.utils.orbits import opm_kvn
+
+    epoch = datetime.fromisoformat(campaign["epoch"])
+    state = campaign["observer_state"]
+    burns = [
+        ((datetime.fromisoformat(b["time"]) - epoch).total_seconds(), np.array(b["dv_m_s"]) / 1000.0)
+        for s in campaign["scenes"]
+        for b in s["burns"]
+    ]
+    t = (when - epoch).total_seconds()
+    r, v = (x[:, 0] for x in fly_tod_j2(epoch, state["r_km"], state["v_km_s"], 0.0, burns, [t]))
+    r = r + 0.010 * v / np.linalg.norm(v) + np.array([moved_km, 0.0, 0.0])
+    return opm_kvn(r, v, epoch=when.strftime("%Y-%m-%dT%H:%M:%S.%f"))
+
+
+def _between_scenes(campaign, k):
+    after = max(datetime.fromisoformat(b["time"]) for b in campaign["scenes"][k]["burns"])
+    after = max(after, datetime.fromisoformat(campaign["scenes"][k]["t_access"]))
+    first_next = min(datetime.fromisoformat(b["time"]) for b in campaign["scenes"][k + 1]["burns"])
+    return after + (first_next - after) / 2
+
+
+def test_a_replan_reaims_the_later_scenes_and_leaves_the_original(client, campaign):
+    """After scene 0, orbit determination's state (the independent flight, 10 m off): the answer is a new campaign
+    that names the original, its scenes the original's later ones at the same T_access, re-aimed, each measured
+    within its aim's tolerance; the original reads back as it was; the OPM's phasing burns carry their aims."""
+    when = _between_scenes(campaign, 0)
+    body = {"observer": {"name": "Sat_Obs", "opm": _replan_state(campaign, when)}, "from": when.isoformat()}
+    r = client.post(f"/v1/campaigns/{campaign['id']}/replan", json=body, headers=A)
+    assert r.status_code == 201, r.text
+    new = r.json()
+    assert new["replanned_from"] == campaign["id"] and new["id"] != campaign["id"]
+    assert new["replans"][0]["campaign_id"] == campaign["id"]
+    assert datetime.fromisoformat(new["epoch"]) == when
+    later = campaign["scenes"][1:]
+    assert len(new["scenes"]) == len(later)
+    for s, old in zip(new["scenes"], later, strict=True):
+        assert s["reaimed"]
+        assert (
+            abs((datetime.fromisoformat(s["t_access"]) - datetime.fromisoformat(old["t_access"])).total_seconds())
+            < 1e-3
+        )
+        aim = s["aim"]
+        assert aim["relative_km"] == pytest.approx(old["aim"]["relative_km"], abs=1e-9)
+        assert abs(s["check"]["separation_km"] - sum(x * x for x in aim["relative_km"]) ** 0.5) < aim["tolerance_km"]
+    assert new["dv_total_m_s"] <= campaign["dv_budget_m_s"]
+    assert client.get(f"/v1/campaigns/{campaign['id']}", headers=A).json()["scenes"] == campaign["scenes"]
+    opm = client.get(f"/v1/campaigns/{new['id']}/export/opm", headers=A)
+    assert opm.status_code == 200 and opm.text.count("Aim: at ") == len(new["scenes"])
+    assert client.post(f"/v1/campaigns/{campaign['id']}/replan", json=body, headers=B).status_code == 404
+
+
+def test_bad_replans_are_422s_naming_the_field_and_store_nothing(client, campaign):
+    when = _between_scenes(campaign, 0)
+    opm = _replan_state(campaign, when)
+    count = client.get("/v1/campaigns", headers=A).json()["count"]
+    far = datetime.fromisoformat(campaign["epoch"]).replace(year=2030)
+    outside = client.post(
+        f"/v1/campaigns/{campaign['id']}/replan",
+        json={"observer": {"name": "Sat_Obs", "opm": opm}, "from": far.isoformat()},
+        headers=A,
+    )
+    assert outside.status_code == 422 and outside.json()["detail"][0]["loc"][-1] == "from", outside.text
+    # Another object: the same state 2,000 km away.
+    other = client.post(
+        f"/v1/campaigns/{campaign['id']}/replan",
+        json={"observer": {"name": "Sat_Obs", "opm": _replan_state(campaign, when, 2000.0)}, "from": when.isoformat()},
+        headers=A,
+    )
+    assert other.status_code == 422 and other.json()["detail"][0]["loc"][-1] == "observer", other.text
+    assert "km from where the campaign has its observer" in other.text
+    assert client.get("/v1/campaigns", headers=A).json()["count"] == count

@@ -10,7 +10,7 @@ from skyfield.api import EarthSatellite
 
 from planner.propagation import timescale
 from tests.conftest import KEY_A
-from tests.utils.orbits import ISS_EPOCH, ISS_L1, ISS_L2
+from tests.utils.orbits import ISS_EPOCH, ISS_L1, ISS_L2, opm_kvn
 
 A = {"X-API-Key": KEY_A}
 STATION = {"name": "GS", "latitude_deg": 40.0, "longitude_deg": -75.0, "altitude_m": 100.0}
@@ -80,19 +80,6 @@ KVN = (
 )
 
 
-def _opm(r_km, v_km_s, epoch="2008-09-20T12:25:40.104192", frame="GCRF", version="3.0"):
-    """An OPM in KVN as 502.0-B-3 lays it out, written here by hand (the reader is what is tested)."""
-    state = "".join(
-        f"{k} = {x:.9f} [{'km' if n < 3 else 'km/s'}]\n"
-        for n, (k, x) in enumerate(zip(("X", "Y", "Z", "X_DOT", "Y_DOT", "Z_DOT"), [*r_km, *v_km_s], strict=True))
-    )
-    return (
-        f"CCSDS_OPM_VERS = {version}\nCREATION_DATE = 2026-12-01T00:00:00\nORIGINATOR = TEST\n"
-        f"OBJECT_NAME = ISS (ZARYA)\nOBJECT_ID = 1998-067A\nCENTER_NAME = EARTH\nREF_FRAME = {frame}\n"
-        f"TIME_SYSTEM = UTC\nCOMMENT the state\nEPOCH = {epoch}\n" + state
-    )
-
-
 def _iss_state():
     ts = timescale()
     sat = EarthSatellite(ISS_L1, ISS_L2, ts=ts)
@@ -150,7 +137,7 @@ def test_an_opm_state_vector_reads_as_skyfields_osculating_elements():
     from app.services.planning import to_orbit
 
     geo = _iss_state()
-    el = to_orbit(OrbitIn.model_validate({"name": "ISS", "opm": _opm(geo.position.km, geo.velocity.km_per_s)}), "x")
+    el = to_orbit(OrbitIn.model_validate({"name": "ISS", "opm": opm_kvn(geo.position.km, geo.velocity.km_per_s)}), "x")
     ref = osculating_elements_of(geo, gm_km3_s2=398600.4418)  # the planner's GM (skyfield defaults to DE421's)
     e = el.elements
     assert abs(e.ha_km + 6378.137 - ref.apoapsis_distance.km) < 1e-6
@@ -170,7 +157,7 @@ def test_an_opm_and_keplerian_a_e_plan_as_their_elements(client):
     body = {"ground_station": STATION, "start": ISS_EPOCH.isoformat(), "duration_days": 1.0}
     r = client.post(
         "/v1/access-windows",
-        json={**body, "target": {"name": "ISS", "opm": _opm(geo.position.km, geo.velocity.km_per_s)}},
+        json={**body, "target": {"name": "ISS", "opm": opm_kvn(geo.position.km, geo.velocity.km_per_s)}},
         headers=A,
     )
     assert r.status_code == 200, r.text
@@ -180,7 +167,7 @@ def test_an_opm_and_keplerian_a_e_plan_as_their_elements(client):
         json={
             **body,
             "reading": "mean",
-            "target": {"name": "ISS", "opm": _opm(geo.position.km, geo.velocity.km_per_s)},
+            "target": {"name": "ISS", "opm": opm_kvn(geo.position.km, geo.velocity.km_per_s)},
         },
         headers=A,
     )
@@ -234,11 +221,11 @@ BAD = [
     ),
     ({"omm_kvn": KVN + "MEAN_MOTION 15.7\n"}, ["body", "target", "omm_kvn"]),
     ({"omm_kvn": KVN + KVN}, ["body", "target", "omm_kvn"]),
-    ({"opm": _opm((7000.0, 0, 0), (0, 7.5, 0), frame="ITRF")}, ["body", "target", "opm", "REF_FRAME"]),
-    ({"opm": _opm((7000.0, 0, 0), (0, 7.5, 0), version="1.0")}, ["body", "target", "opm", "CCSDS_OPM_VERS"]),
-    ({"opm": _opm((7000.0, 0, 0), (0, 12.0, 0))}, ["body", "target", "opm"]),
-    ({"opm": _opm((7000.0, 0, 0), (0, 7.5, 0), epoch="soon")}, ["body", "target", "opm", "EPOCH"]),
-    ({"opm": _opm((7000.0, 0, 0), (0, 7.5, 0)).replace("Z_DOT", "W_DOT")}, ["body", "target", "opm", "Z_DOT"]),
+    ({"opm": opm_kvn((7000.0, 0, 0), (0, 7.5, 0), frame="ITRF")}, ["body", "target", "opm", "REF_FRAME"]),
+    ({"opm": opm_kvn((7000.0, 0, 0), (0, 7.5, 0), version="1.0")}, ["body", "target", "opm", "CCSDS_OPM_VERS"]),
+    ({"opm": opm_kvn((7000.0, 0, 0), (0, 12.0, 0))}, ["body", "target", "opm"]),
+    ({"opm": opm_kvn((7000.0, 0, 0), (0, 7.5, 0), epoch="soon")}, ["body", "target", "opm", "EPOCH"]),
+    ({"opm": opm_kvn((7000.0, 0, 0), (0, 7.5, 0)).replace("Z_DOT", "W_DOT")}, ["body", "target", "opm", "Z_DOT"]),
     (
         {
             "elements": {
@@ -319,7 +306,7 @@ def test_ccsds_day_of_year_epochs_read_as_their_calendar_dates(client):
     doy = {**OMM, "EPOCH": "2008-264T12:25:40.104192"}
     assert [w["rise"] for w in _windows(client, {"omm": doy})] == [w["rise"] for w in reference]
     geo = _iss_state()
-    calendar_opm = _opm(geo.position.km, geo.velocity.km_per_s)
+    calendar_opm = opm_kvn(geo.position.km, geo.velocity.km_per_s)
     doy_opm = calendar_opm.replace("EPOCH = 2008-09-20T12:25:40.104192", "EPOCH = 2008-264T12:25:40.104192Z")
     assert doy_opm != calendar_opm
     a = to_orbit(OrbitIn.model_validate({"name": "x", "opm": calendar_opm}), "target").elements
@@ -329,7 +316,7 @@ def test_ccsds_day_of_year_epochs_read_as_their_calendar_dates(client):
     assert bad.status_code == 422 and bad.json()["detail"][0]["loc"][-1] == "EPOCH"
 
 
-def _library_opm(geo, fmt, epoch="2008-09-20T12:25:40.104192"):
+def _libraryopm_kvn(geo, fmt, epoch="2008-09-20T12:25:40.104192"):
     """An OPM written by ccsds-ndm's own writer from its own data classes (not by the service's writer)."""
     from ccsds_ndm.mapping import NDMFileFormats
     from ccsds_ndm.models.ndmxml4 import ndmxml_4_0_0_common_4_0 as c
@@ -369,15 +356,15 @@ def test_an_opm_in_xml_from_the_librarys_writer_reads_as_its_kvn_and_as_skyfield
     from app.services.planning import to_orbit
 
     geo = _iss_state()
-    xml = _library_opm(geo, "xml")
+    xml = _libraryopm_kvn(geo, "xml")
     assert xml.lstrip().startswith("<?xml") and "<stateVector>" in xml
     read = {
         name: to_orbit(OrbitIn.model_validate({"name": "x", "opm": text}), "target").elements
         for name, text in (
             ("xml", xml),
-            ("kvn", _library_opm(geo, "kvn")),
-            ("hand", _opm(geo.position.km, geo.velocity.km_per_s)),
-            ("xml-doy", _library_opm(geo, "xml", epoch="2008-264T12:25:40.104192")),
+            ("kvn", _libraryopm_kvn(geo, "kvn")),
+            ("hand", opm_kvn(geo.position.km, geo.velocity.km_per_s)),
+            ("xml-doy", _libraryopm_kvn(geo, "xml", epoch="2008-264T12:25:40.104192")),
         )
     }
     ref = read["hand"]
@@ -386,7 +373,7 @@ def test_an_opm_in_xml_from_the_librarys_writer_reads_as_its_kvn_and_as_skyfield
         assert abs((el.epoch - ref.epoch).total_seconds()) < 1e-6, name
     rises = [
         [datetime.fromisoformat(w["rise"]) for w in _windows(client, {"opm": text})]
-        for text in (xml, _opm(geo.position.km, geo.velocity.km_per_s))  # the hand-written one: 9 decimals
+        for text in (xml, opm_kvn(geo.position.km, geo.velocity.km_per_s))  # the hand-written one: 9 decimals
     ]
     assert len(rises[0]) == len(rises[1]) >= 3
     assert max(abs((a - b).total_seconds()) for a, b in zip(*rises, strict=True)) < 1e-3
