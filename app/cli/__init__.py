@@ -105,7 +105,13 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
     )
     pl.set_defaults(func=_lazy("planning", "cmd_plan"))
     cp = sub.add_parser("campaign", help="plan a campaign of GSA scenes from a JSON request (POST /v1/campaigns)")
-    cp.add_argument("file", nargs="?", help="the request (JSON); or --example")
+    cp.add_argument(
+        "file",
+        nargs="?",
+        help="the request (JSON); or --example; or 'replan ID FILE': re-plan stored campaign ID from FILE, "
+        '{"observer": <an orbit input>, "from": <UTC time>} (POST /v1/campaigns/ID/replan; needs --server)',
+    )
+    cp.add_argument("replan_args", nargs="*", metavar="ID FILE", help=argparse.SUPPRESS)
     cp.add_argument(
         "--example", choices=["paper"], help="the paper's target over 60 days (examples/paper-campaign.json)"
     )

@@ -273,6 +273,10 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     from app.schemas import CampaignCreate, CampaignPublic
     from app.services.campaigns import run_campaign
 
+    if args.file == "replan":
+        return _replan_campaign(args)
+    if args.replan_args:
+        raise CliError(f"unexpected {' '.join(args.replan_args)!r}: give one request file, or replan ID FILE")
     if args.export and Path(args.export).exists() and any(Path(args.export).iterdir()):
         raise CliError(f"{args.export} is not empty: give a new or empty directory for --export")
     if args.file and args.example:
@@ -317,6 +321,30 @@ def cmd_campaign(args: argparse.Namespace) -> int:
 
         plot_campaign(campaign, args.plot, title=f"{req.target.name} / {req.observer.name} / {req.ground_station.name}")
         print(f"plot written to {args.plot}", file=sys.stderr)
+    return 0
+
+
+def _replan_campaign(args: argparse.Namespace) -> int:
+    """``gsa campaign replan ID FILE``: re-plan a stored campaign on the service from FILE's observer and time."""
+    from urllib.parse import quote
+
+    from app.schemas import CampaignPublic
+
+    if len(args.replan_args) != 2:
+        raise CliError('give replan ID FILE: the stored campaign\'s id and {"observer": ..., "from": ...} as JSON')
+    if not args.server:
+        raise CliError("replan acts on a campaign stored on the service: give --server URL (or set GSA_SERVER)")
+    if args.export or args.plot or args.example:
+        raise CliError("replan takes no --example, --export or --plot: GET /v1/campaigns/NEW_ID/export/... instead")
+    campaign_id, source = args.replan_args
+    body = call_server(
+        args, "POST", f"/v1/campaigns/{quote(campaign_id, safe='')}/replan", json=read_json(source), timeout=900
+    ).json()
+    if args.json:
+        print(json.dumps(body, indent=2))
+    else:
+        answer = CampaignPublic.model_validate(body)
+        print(f"campaign {answer.id} stored, re-planned from {campaign_id}\n" + format_campaign(answer))
     return 0
 
 
@@ -378,7 +406,8 @@ def format_campaign(r: Any) -> str:
     """Return a campaign (CampaignResult) as a readable report: its scenes, their burns, and every stretch."""
     out = [
         f"epoch {utc_text(r.epoch)}, {r.duration_days:g} days, budget {r.dv_budget_m_s:g} m/s, "
-        f"return to orbit: {'yes' if r.return_to_orbit else 'no'}",
+        f"return to orbit: {'yes' if r.return_to_orbit else 'no'}"
+        + (f", re-planned from campaign {r.replanned_from}" if r.replanned_from else ""),
         f"\n{len(r.scenes)} scene(s), {r.dv_total_m_s:.1f} m/s in all",
         f"{'#':>3} {'T_access (UTC)':<25} {'dv (m/s)':>9} {'stand-off (km)':>14} {'separation (km)':>15} "
         f"{'rate (deg/s)':>12} {'phase (deg)':>11}  line of sight (R, T, N)",
@@ -395,6 +424,11 @@ def format_campaign(r: Any) -> str:
             out.append(
                 f"      {b.kind:<8} {utc_text(b.time)}  {b.dv_total_m_s:8.1f} m/s  RTN "
                 f"[{', '.join(f'{x:.1f}' for x in b.dv_rtn_m_s)}]"
+            )
+        if s.aim is not None:
+            out.append(
+                f"      aim: RTN of the target [{', '.join(f'{x:.2f}' for x in s.aim.relative_rtn_km)}] km at T_access, "
+                f"within {s.aim.tolerance_km:.2f} km{' (re-aimed)' if s.reaimed else ''}"
             )
     out.append("\nstretches searched")
     for st in r.stretches:

@@ -92,7 +92,20 @@ def test_campaigns_and_passes_through_the_command_line(served, capsys, tmp_path)
     rc, out, _ = _run(capsys, "campaigns", "list")
     assert rc == 0 and campaign_id in out and "first T_access" in out
     rc, out, _ = _run(capsys, "campaigns", "show", campaign_id)
-    assert rc == 0 and "phasing" in out and "stretches searched" in out
+    assert rc == 0 and "phasing" in out and "stretches searched" in out and "aim: RTN of the target" in out
+    # Re-planned from its own start state (what orbit determination would give there): the same scene, re-aimed.
+    from tests.utils.orbits import opm_kvn
+
+    stored = served.get(f"/v1/campaigns/{campaign_id}", headers={"X-API-Key": KEY_A}).json()
+    start = stored["observer_state"]
+    opm = opm_kvn(start["r_km"], start["v_km_s"], epoch=stored["epoch"].rstrip("Z"))
+    (tmp_path / "od.json").write_text(
+        json.dumps({"observer": {"name": "Sat_Obs", "opm": opm}, "from": stored["epoch"]})
+    )
+    rc, out, err = _run(capsys, "campaign", "replan", campaign_id, str(tmp_path / "od.json"))
+    assert rc == 0 and f"re-planned from {campaign_id}" in out and "(re-aimed)" in out, err
+    rc, _, err = _run(capsys, "campaign", "replan", "no-such-campaign", str(tmp_path / "od.json"))
+    assert rc == 2 and "404" in err and err.count("\n") == 1
     rc, out, _ = _run(capsys, "passes", "list", "--json")
     assert rc == 0 and "count" in json.loads(out)
 
