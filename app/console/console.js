@@ -313,8 +313,12 @@ async function campaignPage(id) {
     return `<tr><td class="num">${s.index}</td><td>${utc(s.t_access)}</td><td class="num">${num(s.dv_total_m_s, 1)}</td>
       <td class="num">${num(s.candidate.standoff_km, 1)}</td><td class="num">${num(s.check.separation_km, 2)}</td>
       <td class="num">${num(s.check.target_angular_rate_deg_s, 2)}</td><td class="num">${num(s.check.phase_angle_deg, 1)}</td>
-      <td>${(f.line_of_sight_rtn || []).map((v) => num(v, 2)).join(", ")}</td><td class="reasons">${burns}</td></tr>`;
+      <td>${(f.line_of_sight_rtn || []).map((v) => num(v, 2)).join(", ")}</td>
+      <td class="num">${s.aim ? num(s.aim.tolerance_km, 2) : "-"}${s.reaimed ? " (re-aimed)" : ""}</td>
+      <td class="reasons">${burns}</td></tr>`;
   }).join("");
+  const origin = c.replanned_from ? `<p>Re-planned from campaign <a href="#/campaigns/${esc(c.replanned_from)}">${esc(
+    c.replanned_from.slice(0, 8))}</a> at ${utc(c.epoch)}: its later scenes re-aimed from the observer's measured state.</p>` : "";
   const stretches = c.stretches.map((st) => `<tr${st.scene === null ? "" : ' class="chosen"'}><td>${utc(st.start)}</td>
       <td>${utc(st.end)}</td><td class="num">${st.candidates}</td><td class="num">${st.feasible}</td>
       <td class="reasons">${esc(st.note)}</td></tr>`).join("");
@@ -325,13 +329,13 @@ async function campaignPage(id) {
     : `<p class="verdict bad">No feasible scene within the budget in the span: each stretch below says why.</p>`;
   view.innerHTML = `<h1>Campaign ${esc(c.target_name)} / ${esc(c.observer_name)} / ${esc(c.station_name)}</h1>
     <p class="muted">${esc(c.id)} · created ${utc(c.created_at)} · ${num(c.duration_days, 1)} days from ${utc(c.epoch)} ·
-    return to orbit: ${c.return_to_orbit ? "yes" : "no"}</p>${verdict}
+    return to orbit: ${c.return_to_orbit ? "yes" : "no"}</p>${verdict}${origin}
     ${(c.notes || []).map((n) => `<p class="muted">note: ${esc(n)}</p>`).join("")}
     <h2>Scenes (measured on the whole flown burn sequence)</h2>
     <div class="scroll"><table id="scenes"><thead><tr><th class="num">#</th><th>T_access (UTC)</th><th class="num">dv (m/s)</th>
     <th class="num">stand-off (km)</th><th class="num">separation (km)</th><th class="num">rate (deg/s)</th>
-    <th class="num">phase (deg)</th><th>line of sight (R, T, N)</th><th>burns</th></tr></thead><tbody>${scenes ||
-      '<tr><td colspan="9" class="muted">None.</td></tr>'}</tbody></table></div>
+    <th class="num">phase (deg)</th><th>line of sight (R, T, N)</th><th class="num">aim within (km)</th><th>burns</th></tr>
+    </thead><tbody>${scenes || '<tr><td colspan="10" class="muted">None.</td></tr>'}</tbody></table></div>
     <h2>Stretches searched</h2>
     <table id="stretches"><thead><tr><th>from (UTC)</th><th>to (UTC)</th><th class="num">candidates</th>
     <th class="num">feasible</th><th>what came of it</th></tr></thead><tbody>${stretches}</tbody></table>
