@@ -113,7 +113,7 @@ def create_plan(
 ) -> Plan:
     """Store a plan: its request as validated (a stored station's copy in it), its typed result and, in the same
     transaction, its exports (name to compressed body) as written when it was made."""
-    assert not isinstance(request.ground_station, str)  # the service resolves a station's name before planning
+    assert request.ground_station is not None and not isinstance(request.ground_station, str)  # resolved, stored
     chosen = result.chosen
     plan = Plan(
         operator_id=operator_id,
@@ -150,7 +150,7 @@ def store_plan_exports(*, session: Session, plan_id: str, exports: dict[str, byt
 
 def create_campaign(*, session: Session, operator_id: str, request: CampaignCreate, result: CampaignResult) -> Campaign:
     """Store a campaign: its request as validated (a stored station's copy in it) and its typed result."""
-    assert not isinstance(request.ground_station, str)  # the service resolves a station's name before planning
+    assert request.ground_station is not None and not isinstance(request.ground_station, str)  # resolved, stored
     row = Campaign(
         operator_id=operator_id,
         target_name=request.target.name,

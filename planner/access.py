@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -60,9 +61,48 @@ class AccessWindows:
     max_azimuth_rate_deg_s: Vec = field(default_factory=lambda: np.empty(0))
     max_elevation_rate_deg_s: Vec = field(default_factory=lambda: np.empty(0))
     keyhole: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
+    # Which station of a network each pass is over (its index in the plan's stations; ``merge_windows``): empty
+    # for one station's own windows, where every pass is over it.
+    station: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
 
     def __len__(self) -> int:
         return int(self.rise_s.size)
+
+    def station_of(self, k: int) -> int:
+        """The index of the station pass ``k`` is over (0 for one station's own windows)."""
+        return int(self.station[k]) if self.station.size else 0
+
+
+def merge_windows(parts: list[AccessWindows]) -> AccessWindows:
+    """The windows of several stations as one set in time order (by rise, stable), each pass naming its station's
+    index in ``parts`` (``station``)."""
+    station = (
+        np.concatenate([np.full(len(w), j, np.int64) for j, w in enumerate(parts)]) if parts else np.zeros(0, np.int64)
+    )
+    order = np.argsort(np.concatenate([w.rise_s for w in parts]) if parts else np.empty(0), kind="stable")
+
+    def joined(name: str, dtype: type) -> NDArray[Any]:
+        values: list[NDArray[Any]] = [np.asarray(getattr(w, name), dtype) for w in parts]
+        return (np.concatenate(values) if values else np.zeros(0, dtype))[order]
+
+    floats = (
+        "rise_s",
+        "culmination_s",
+        "set_s",
+        "max_elevation_deg",
+        "rise_azimuth_deg",
+        "culmination_azimuth_deg",
+        "set_azimuth_deg",
+        "min_range_km",
+        "max_azimuth_rate_deg_s",
+        "max_elevation_rate_deg_s",
+    )
+    flags = ("rise_clipped", "set_clipped", "keyhole")
+    return AccessWindows(
+        **{name: joined(name, float) for name in floats},
+        **{name: joined(name, bool) for name in flags},
+        station=station[order],
+    )
 
 
 MAX_MASK_POINTS = 720

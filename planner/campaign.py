@@ -37,7 +37,6 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from planner.access import validate_station
 from planner.alignment import Candidate
 from planner.constants import MU_EARTH_KM3_S2
 from planner.elements import elements_of_state, state_to_elements
@@ -54,6 +53,7 @@ from planner.plan import (
     StopCheck,
     make_plan,
     rank_candidates,
+    stations_of,
 )
 from planner.propagation import (
     NumericalJ2Trajectory,
@@ -388,7 +388,7 @@ def _shifted(pole: Pole, offset_s: float) -> Pole:
 def plan_campaign(
     target: Orbit,
     observer: Orbit,
-    station: Station,
+    station: Station | Sequence[Station],
     options: CampaignOptions | None = None,
     stop: StopCheck | None = None,
     progress: Progress | None = None,
@@ -401,7 +401,7 @@ def plan_campaign(
     with a note.
     """
     opts = options or CampaignOptions()
-    validate_station(station)
+    stations = stations_of(station)
     clock0 = time.perf_counter()
     timings: dict[str, float] = {"plans": 0.0, "returns": 0.0, "flight": 0.0}
     notes: list[str] = []
@@ -442,7 +442,7 @@ def plan_campaign(
             plan, flown_change = _plan_stretch(
                 target,
                 observer.name,
-                station,
+                stations,
                 state,
                 scene_epoch,
                 span,
@@ -563,7 +563,7 @@ def _coast(state: tuple[Vec, Vec], t0_s: float, t1_s: float, pole: Pole) -> tupl
 def _plan_stretch(
     target: Orbit,
     name: str,
-    station: Station,
+    station: tuple[Station, ...],
     state: tuple[Vec, Vec],
     scene_epoch: datetime,
     span_s: float,

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -116,7 +117,7 @@ def replan(
     campaign: Campaign,
     target: Orbit,
     observer: Orbit,
-    station: Station,
+    station: Station | Sequence[Station],
     state: tuple[Vec, Vec],
     t_from_s: float,
     stop: StopCheck | None = None,

@@ -80,6 +80,30 @@ def station_radar_view(
     return radar_view(station.radar, np.asarray(t_s, float), geometry_at, elevation_at, cross_section)
 
 
+def network_radar_view(
+    traj: Trajectory,
+    stations: tuple[Station, ...],
+    frames: EarthFrames,
+    t_s: Vec,
+    station_index: NDArray[np.int64],
+    cross_section: CrossSection | None,
+) -> RadarView:
+    """``station_radar_view`` for moments each seen by its own station of a network (``station_index``)."""
+    t = np.asarray(t_s, float)
+    n = t.size
+    el, rng, rate, t_int, rcs, snr = (np.full(n, np.nan) for _ in range(6))
+    cols = (el, rng, rate, t_int, rcs, snr)
+    los = np.full((3, n), np.nan)
+    for j in np.unique(station_index):
+        sel = station_index == j
+        view = station_radar_view(traj, stations[int(j)], frames, t[sel], cross_section)
+        parts = (view.elevation_deg, view.range_km, view.rate_deg_s, view.integration_s, view.rcs_m2, view.snr_db)
+        for col, part in zip(cols, parts, strict=True):
+            col[sel] = part
+        los[:, sel] = view.los_lvlh
+    return RadarView(el, rng, rate, t_int, rcs, snr, los)
+
+
 def observation_axes(los: Vec, t_s: Vec) -> Vec:
     """Return observation axes (N, 3, 3) from unit lines of sight (3, N) at times ``t_s``, in the lines' frame.
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import datetime, timedelta
 from typing import Literal
@@ -16,12 +16,12 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.access import MAX_SPAN_S, AccessWindows, access_windows, validate_station
+from planner.access import MAX_SPAN_S, AccessWindows, access_windows, merge_windows, validate_station
 from planner.alignment import Candidate, HeightBox, ObserverPlaneModel, align_nodes
 from planner.constants import MIN_PERIGEE_HEIGHT_KM, MU_EARTH_KM3_S2, R_EARTH_KM
 from planner.elements import Elements, height_change_dv_km_s, state_to_elements
-from planner.errors import PlannerError, PlanningStopped, SearchRangeError
-from planner.frames import station_radar_view
+from planner.errors import PlannerError, PlanningStopped, SearchRangeError, StationError
+from planner.frames import network_radar_view
 from planner.illumination import phase_angle_deg, sun_position_km, sunlit
 from planner.manoeuvre import Encounter, Phasing, encounter, phase, rtn_matrix
 from planner.optics import ObserverOptics, StandoffWindow, standoff_window, sun_angle_deg
@@ -186,8 +186,9 @@ class Plan:
     target_trajectory: Trajectory | None = None
     observer_trajectory: Trajectory | None = None
     frames: EarthFrames | None = None
-    station: Station | None = None
+    station: Station | None = None  # the chosen candidate's station (the first of a network without one)
     encounter: Encounter | None = None
+    stations: tuple[Station, ...] = ()  # every station searched; ``windows.station`` indexes it
 
 
 def tle_age_notes(orbits: tuple[Orbit, ...], start: datetime, duration_s: float, max_age_days: float) -> list[str]:
@@ -263,7 +264,7 @@ CandidateOrder = Callable[[list[Candidate], list[Feasibility]], list[int]]
 def make_plan(
     target: Orbit,
     observer: Orbit,
-    station: Station,
+    station: Station | Sequence[Station],
     options: PlanOptions | None = None,
     stop: StopCheck | None = None,
     *,
@@ -300,7 +301,7 @@ def make_plan(
         if reason:
             raise PlanningStopped(f"planning stopped during {stage}: {reason}", field="search")
 
-    validate_station(station)
+    stations = stations_of(station)
     timings: dict[str, float] = {}
     notes: list[str] = []
     clock = time.perf_counter()
@@ -335,7 +336,7 @@ def make_plan(
     check("propagation")
 
     clock = time.perf_counter()
-    windows = access_windows(tgt, station, frames, 0.0, t1, step_s=opts.access_step_s)
+    windows = merge_windows([access_windows(tgt, st, frames, 0.0, t1, step_s=opts.access_step_s) for st in stations])
     timings["access"] = time.perf_counter() - clock
     check("the access search")
 
@@ -379,7 +380,14 @@ def make_plan(
 
     clock = time.perf_counter()
     lit, feas = _illumination(candidates, tgt, epoch)
-    view = station_radar_view(tgt, station, frames, np.array([c.t_access_s for c in candidates]), opts.cross_section)
+    view = network_radar_view(
+        tgt,
+        stations,
+        frames,
+        np.array([c.t_access_s for c in candidates]),
+        np.array([windows.station_of(c.pass_index) for c in candidates], np.int64),
+        opts.cross_section,
+    )
     chosen_index = None
     chosen = None
     phasing = None
@@ -392,7 +400,7 @@ def make_plan(
         check("the screening of the candidates")
         obs_k, ready = changed_and_ready(cand)
         screened = _with_radar(screen(cand, obs_k, tgt, feas[k], epoch, opts, model, pole, ready), view, k)
-        radar = _radar_reasons(cand, windows, station, view, k)
+        radar = _radar_reasons(cand, windows, stations, view, k)
         feas[k] = replace(screened, feasible=screened.feasible and not radar, reasons=(*screened.reasons, *radar))
     ranked = order(candidates, feas) if order is not None else rank_candidates(feas, opts.criterion)
     if candidates and not lit.any():
@@ -426,7 +434,7 @@ def make_plan(
             *_encounter_reasons(meet, phase_deg, sun_deg, opts, window),
             *_dv_reasons(dv_total, opts),
             *_perigee_reasons(perigee),
-            *_radar_reasons(cand, windows, station, view, k),
+            *_radar_reasons(cand, windows, stations, view, k),
         ]
         chosen_feas = Feasibility(
             feas[k].sunlit,
@@ -468,8 +476,9 @@ def make_plan(
         target_trajectory=tgt,
         observer_trajectory=obs_chosen,
         frames=frames,
-        station=station,
+        station=stations[windows.station_of(chosen.pass_index)] if chosen is not None else stations[0],
         encounter=meet_chosen,
+        stations=stations,
     )
 
 
@@ -604,10 +613,23 @@ def screen(
     return Feasibility(lit.sunlit, d, phase_deg, not reasons, reasons, sun_deg, dv, d, speed, rate, los, perigee)
 
 
-def _radar_reasons(cand: Candidate, windows: AccessWindows, station: Station, view: RadarView, k: int) -> list[str]:
+def stations_of(station: Station | Sequence[Station]) -> tuple[Station, ...]:
+    """One station or a network as a tuple, each checked; StationError (``ground_stations``) for none."""
+    stations = (station,) if isinstance(station, Station) else tuple(station)
+    if not stations:
+        raise StationError("the list of stations is empty: give at least one", field="ground_stations")
+    for st in stations:
+        validate_station(st)
+    return stations
+
+
+def _radar_reasons(
+    cand: Candidate, windows: AccessWindows, stations: tuple[Station, ...], view: RadarView, k: int
+) -> list[str]:
     """Why the radar cannot image candidate ``k`` at T_access, in words: a pass it cannot follow (a keyhole: its
     azimuth rate near the zenith), then each of its limits there (``planner.radar.radar_limits``)."""
     p = cand.pass_index
+    station = stations[windows.station_of(p)]
     reasons = []
     if windows.keyhole.size and windows.keyhole[p]:
         reasons.append(

@@ -108,6 +108,8 @@ def _plan_for_pass(request: Any) -> tuple[dict[str, Any], list[dict[str, Any]]]:
 
     try:
         req = PlanCreate.model_validate(request)
+        if req.ground_station is None:
+            raise CliError("a pass is over one radar: give ground_station, not ground_stations")
         acc = AccessCreate(
             target=req.target,
             ground_station=req.ground_station,

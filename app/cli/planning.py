@@ -92,7 +92,7 @@ def cmd_stations(args: argparse.Namespace) -> int:
 def cmd_plan(args: argparse.Namespace) -> int:
     from app.errors import InputError
     from app.schemas import PlanCreate, PlanPublic
-    from app.services.planning import run_plan
+    from app.services.planning import run_plan, with_radar_of
 
     if args.export and Path(args.export).exists() and any(Path(args.export).iterdir()):
         raise CliError(f"{args.export} is not empty: give a new or empty directory for --export")
@@ -120,7 +120,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
         raise CliError(validation_line(exc)) from None
     except InputError as exc:
         raise CliError(input_line(exc)) from None
-    assert not isinstance(req.ground_station, str)  # run_plan refuses a station name: only the server resolves one
+    req = with_radar_of(req, plan.station.name if plan.station is not None else None)
+    assert req.ground_station is not None and not isinstance(req.ground_station, str)  # only the server resolves names
     if args.json:
         print(json.dumps(result.model_dump(mode="json"), indent=2))
     else:
@@ -272,6 +273,7 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     from app.errors import InputError
     from app.schemas import CampaignCreate, CampaignPublic
     from app.services.campaigns import run_campaign
+    from app.services.planning import with_radar_of
 
     if args.file == "replan":
         return _replan_campaign(args)
@@ -312,7 +314,9 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     finally:
         if shown:
             print(file=sys.stderr)
-    assert not isinstance(req.ground_station, str)  # run_campaign refuses a station name: only the server resolves one
+    first = campaign.scenes[0].plan.station if campaign.scenes else None
+    req = with_radar_of(req, first.name if first is not None else None)
+    assert req.ground_station is not None and not isinstance(req.ground_station, str)  # only the server resolves names
     print(json.dumps(result.model_dump(mode="json"), indent=2) if args.json else format_campaign(result))
     if args.export:
         _export_campaign(req, result, Path(args.export))

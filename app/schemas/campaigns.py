@@ -5,12 +5,12 @@ from __future__ import annotations
 from datetime import datetime
 from typing import TYPE_CHECKING, Any, Literal
 
-from pydantic import ConfigDict, Field
+from pydantic import ConfigDict, Field, model_validator
 
 from app.schemas.common import Described, Finite, IsoDateTime, StoredResult, Strict, utc_or_none
 from app.schemas.orbits import OrbitIn
 from app.schemas.plans import PAPER_EXAMPLE, CandidatePublic, ObserverOpticsIn, SceneSearchIn, WindowPublic
-from app.schemas.stations import GroundStationIn
+from app.schemas.stations import GroundStationIn, StationsIn, checked_network
 from planner.propagation import utc
 
 if TYPE_CHECKING:
@@ -37,8 +37,15 @@ class CampaignCreate(Strict):
     """the satellite to image"""
     observer: OrbitIn
     """the optical observer satellite that manoeuvres, scene after scene"""
-    ground_station: GroundStationIn = Field(
-        description="the radar site, or the name of one stored under /v1/stations (the campaign keeps a copy)"
+    ground_station: GroundStationIn | None = Field(
+        default=None,
+        description="the radar site, or the name of one stored under /v1/stations (the campaign keeps a copy)",
+    )
+    ground_stations: StationsIn | None = Field(
+        default=None,
+        description="instead of ground_station, a network of radars (sites or stored names, each its own name; at "
+        "most 20): every station's passes are searched, each candidate names the radar that images it, and the "
+        "cheapest feasible scene is chosen across them",
     )
     observer_optics: ObserverOpticsIn = Field(default_factory=lambda: ObserverOpticsIn())
     """what the observer images with (as a plan's)"""
@@ -56,6 +63,11 @@ class CampaignCreate(Strict):
     """the most scenes to plan"""
     search: SceneSearchIn = Field(default_factory=lambda: SceneSearchIn())
     """how each scene is searched for (the plan's box, misses, stand-off and separation; defaults: the paper's)"""
+
+    @model_validator(mode="after")
+    def _one_radar_or_a_network(self) -> CampaignCreate:
+        checked_network(self.ground_station, self.ground_stations)
+        return self
 
 
 class CampaignReplan(Strict):

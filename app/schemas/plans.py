@@ -10,7 +10,7 @@ from pydantic import ConfigDict, Field, model_validator
 
 from app.schemas.common import Described, Finite, IsoDateTime, StoredResult, Strict, finite_or_null, utc_or_none
 from app.schemas.orbits import OrbitIn
-from app.schemas.stations import GroundStationIn
+from app.schemas.stations import GroundStationIn, StationsIn, checked_network
 from planner.optics import EXCLUSIVE_MOST, OPTICS_LIMITS, ObserverOptics
 from planner.propagation import utc
 
@@ -162,13 +162,25 @@ class PlanCreate(Strict):
     """the satellite to image"""
     observer: OrbitIn
     """the optical observer satellite that manoeuvres"""
-    ground_station: GroundStationIn = Field(
-        description="the radar site, or the name of one stored under /v1/stations (the plan keeps a copy)"
+    ground_station: GroundStationIn | None = Field(
+        default=None,
+        description="the radar site, or the name of one stored under /v1/stations (the plan keeps a copy)",
+    )
+    ground_stations: StationsIn | None = Field(
+        default=None,
+        description="instead of ground_station, a network of radars (sites or stored names, each its own name; at "
+        "most 20): every station's passes are searched, each candidate names the radar that images it, and the "
+        "cheapest feasible scene is chosen across them",
     )
     search: SearchIn = Field(default_factory=SearchIn)
     """the search: span, box, ranking and encounter limits (defaults: the paper's)"""
     observer_optics: ObserverOpticsIn = Field(default_factory=lambda: ObserverOpticsIn())
     """what the observer images with (defaults: a 0.3 m telescope at 550 nm resolving 0.25 m, within 111.8 km)"""
+
+    @model_validator(mode="after")
+    def _one_radar_or_a_network(self) -> PlanCreate:
+        checked_network(self.ground_station, self.ground_stations)
+        return self
 
 
 class AccessCreate(Strict):
@@ -224,12 +236,15 @@ class WindowPublic(Described):
     keyhole: bool = False
     """true when max_azimuth_rate_deg_s is over the station's max_azimuth_rate_deg_s: the radar loses the target
     near the zenith"""
+    station: str | None = None
+    """the station the pass is over (a plan over a network of stations; null for one station)"""
 
     @classmethod
-    def from_windows(cls, epoch: datetime, w: AccessWindows) -> list[WindowPublic]:
-        """Return the planner's windows (seconds after ``epoch``) as UTC records."""
+    def from_windows(cls, epoch: datetime, w: AccessWindows, names: list[str] | None = None) -> list[WindowPublic]:
+        """Return the planner's windows (seconds after ``epoch``) as UTC records; ``names``: a network's stations."""
         return [
             cls(
+                station=None if not names else names[w.station_of(k)],
                 rise=utc(epoch, w.rise_s[k]),
                 culmination=utc(epoch, w.culmination_s[k]),
                 set=utc(epoch, w.set_s[k]),
@@ -333,11 +348,16 @@ class CandidatePublic(Described):
     """where the observer is aimed beside the target at t_access, km (chosen from the optics, or as asked)"""
     feasibility: FeasibilityPublic
     """whether this candidate can be imaged: light, range, rate, Sun, phase angle, cost"""
+    station: str | None = None
+    """the radar that images it (a plan over a network of stations; null for one station)"""
 
     @classmethod
-    def from_candidate(cls, epoch: datetime, c: Candidate, f: Feasibility) -> CandidatePublic:
+    def from_candidate(
+        cls, epoch: datetime, c: Candidate, f: Feasibility, station: str | None = None
+    ) -> CandidatePublic:
         dv = finite_or_null(f.dv_total_km_s)
         return cls(
+            station=station,
             dv_total_m_s=None if dv is None else dv * 1000.0,
             standoff_km=finite_or_null(f.standoff_km),
             pass_index=c.pass_index,
@@ -452,16 +472,22 @@ class PlanResult(StoredResult):
     def from_plan(cls, plan: Plan) -> PlanResult:
         """Return the planner's ``Plan`` as the stored and returned result (times in UTC, speeds in m/s)."""
         ep = plan.epoch
+        names = network_names(plan)
+
+        def station(c: Candidate) -> str | None:
+            return None if names is None else names[plan.windows.station_of(c.pass_index)]
+
         chosen = None
         if plan.chosen is not None and plan.chosen_feasibility is not None:
-            chosen = CandidatePublic.from_candidate(ep, plan.chosen, plan.chosen_feasibility)
+            chosen = CandidatePublic.from_candidate(ep, plan.chosen, plan.chosen_feasibility, station(plan.chosen))
         return cls(
             epoch=ep,
             duration_days=plan.duration_s / 86400.0,
             reading=plan.reading,
-            access_windows=WindowPublic.from_windows(ep, plan.windows),
+            access_windows=WindowPublic.from_windows(ep, plan.windows, names),
             candidates=[
-                CandidatePublic.from_candidate(ep, c, f) for c, f in zip(plan.candidates, plan.feasibility, strict=True)
+                CandidatePublic.from_candidate(ep, c, f, station(c))
+                for c, f in zip(plan.candidates, plan.feasibility, strict=True)
             ],
             chosen=chosen,
             alignment_dv_m_s=None if plan.alignment_dv_km_s is None else plan.alignment_dv_km_s * 1000.0,
@@ -469,6 +495,11 @@ class PlanResult(StoredResult):
             timings_s={k: round(v, 4) for k, v in plan.timings_s.items()},
             notes=plan.notes,
         )
+
+
+def network_names(plan: Plan) -> list[str] | None:
+    """The names of a plan's stations when it searched a network (more than one), else None."""
+    return [st.name for st in plan.stations] if len(plan.stations) > 1 else None
 
 
 class PlanPublic(PlanResult):

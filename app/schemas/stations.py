@@ -148,6 +148,40 @@ GroundStationIn = Annotated[
 ]
 
 
+MAX_NETWORK = 20  # stations a plan or campaign may search at once (each one's passes are searched)
+
+
+def station_name_of(st: StationIn | str) -> str:
+    """A station's name, given as a site or as a stored station's name."""
+    return st if isinstance(st, str) else st.name
+
+
+def _unique_names(stations: list[StationIn | str]) -> list[StationIn | str]:
+    """Each station of a network its own name (candidates and scenes name their radar by it)."""
+    names = [station_name_of(st) for st in stations]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ValueError(f"names {', '.join(twice)} more than once: give each station its own name")
+    return stations
+
+
+StationsIn = Annotated[
+    list[GroundStationIn], Field(min_length=1, max_length=MAX_NETWORK), AfterValidator(_unique_names)
+]
+
+
+def checked_network(ground_station: StationIn | str | None, ground_stations: list[StationIn | str] | None) -> None:
+    """One radar (``ground_station``) or a network (``ground_stations``, names unique), not neither; both only in a
+    stored request, whose ``ground_station`` is then the radar of the chosen scene, one of the network."""
+    if ground_stations is None:
+        if ground_station is None:
+            raise ValueError("give ground_station (one radar) or ground_stations (a network of radars)")
+        return
+    names = [station_name_of(st) for st in ground_stations]
+    if ground_station is not None and station_name_of(ground_station) not in names:
+        raise ValueError("give ground_station or ground_stations, not both")
+
+
 STATION_EXAMPLE: dict[str, Any] = {
     "name": "Shanghai",
     "latitude_deg": 31.1,

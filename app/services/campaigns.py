@@ -24,7 +24,8 @@ from app.services.planning import (
     served_cross_section,
     stored_station_lookup,
     to_orbit,
-    to_station,
+    to_stations,
+    with_radar_of,
     with_stored_station,
 )
 from planner import ccsds
@@ -52,7 +53,9 @@ CAMPAIGN_OEM_STEP_S = 120.0  # a campaign's ephemerides span weeks: 2-min sample
 _TOP = ("duration_days", "dv_budget_m_s", "scene_span_days", "max_scenes", "return_to_orbit", "start")
 
 
-def campaign_options(req: CampaignCreate, max_grid_points: int | None = None) -> CampaignOptions:
+def campaign_options(
+    req: CampaignCreate, max_grid_points: int | None = None, target_model: str | None = None
+) -> CampaignOptions:
     """The planner's options from a request; out of range: a 422 naming the field."""
     s = req.search
     optics = observer_optics(req)
@@ -74,7 +77,7 @@ def campaign_options(req: CampaignCreate, max_grid_points: int | None = None) ->
             max_imaging_range_km=s.max_imaging_range_km,
             standoff_km=s.standoff_km,
             min_separation_km=s.min_separation_km,
-            cross_section=served_cross_section(),
+            cross_section=served_cross_section(target_model),
         )
     except PlannerError as exc:
         raise InputError(["search", exc.field or "search"], str(exc)) from None
@@ -98,12 +101,13 @@ def run_campaign(
     max_epoch_gap_days: float | None = None,
     stop: StopCheck | None = None,
     progress: Progress | None = None,
+    target_model: str | None = None,
 ) -> tuple[Campaign, CampaignResult]:
     """Validate a campaign request against the planner, plan it, and return the campaign and its result."""
     target = to_orbit(req.target, "target")
     observer = to_orbit(req.observer, "observer")
-    station = to_station(req.ground_station)
-    opts = campaign_options(req, max_grid_points)
+    station = to_stations(req)
+    opts = campaign_options(req, max_grid_points, target_model)
     if max_epoch_gap_days is not None:
         start = opts.start or target.epoch
         for orbit, orbit_in, where in ((target, req.target, "target"), (observer, req.observer, "observer")):
@@ -130,25 +134,30 @@ def plan_and_store_campaign(
 ) -> CampaignRow:
     """Plan a campaign within the service's limits (``run_campaign``) and store it with its result."""
     campaign_in = with_stored_station(campaign_in, stored_station_lookup(session, operator_id))
-    _, result = run_campaign(
+    campaign, result = run_campaign(
         campaign_in,
         max_grid_points=settings.max_grid_points,
         max_epoch_gap_days=settings.max_epoch_gap_days,
         stop=stop,
         progress=progress,
+        target_model=settings.default_target,
     )
+    first = campaign.scenes[0].plan.station if campaign.scenes else None
+    campaign_in = with_radar_of(campaign_in, first.name if first is not None else None)
     return crud.create_campaign(session=session, operator_id=operator_id, request=campaign_in, result=result)
 
 
-def rebuild(request: dict[str, Any], result: dict[str, Any], stop: StopCheck | None = None) -> Campaign:
+def rebuild(
+    request: dict[str, Any], result: dict[str, Any], stop: StopCheck | None = None, target_model: str | None = None
+) -> Campaign:
     """A stored campaign as the planner's ``Campaign``: its request planned again (deterministic), then each of its
     re-plans applied in turn."""
     req = CampaignCreate.model_validate(request)
-    campaign, _ = run_campaign(req, stop=stop)
+    campaign, _ = run_campaign(req, stop=stop, target_model=target_model)
     stored = CampaignResult.model_validate(CampaignResult.upgraded(result))
     target = to_orbit(req.target, "target")
     observer = to_orbit(req.observer, "observer")
-    station = to_station(req.ground_station)
+    station = to_stations(req)
     for record in stored.replans:
         state = _observer_state(OrbitIn.model_validate(record.observer), record.from_time, campaign)
         t_from = seconds_between(campaign.epoch, record.from_time)
@@ -169,7 +178,7 @@ def replan_and_store(
     session: Session,
     operator_id: str,
     campaign_id: str,
-    replan_in: CampaignReplan,
+    replan_in: CampaignReplan | None,
     settings: Settings,
     stop: StopCheck | None = None,
 ) -> CampaignRow | None:
@@ -178,6 +187,8 @@ def replan_and_store(
     row = crud.get_campaign(session=session, operator_id=operator_id, campaign_id=campaign_id)
     if row is None:
         return None
+    if replan_in is None:  # checked once the campaign is the caller's: another's is a 404 whatever the body
+        raise InputError([], 'give the body {"observer": <an orbit input>, "from": <UTC time>}')
     req = CampaignCreate.model_validate(row.request)
     stored = CampaignResult.model_validate(CampaignResult.upgraded(row.result))
     when = as_utc(replan_in.from_time)
@@ -192,14 +203,14 @@ def replan_and_store(
     orbit = to_orbit(replan_in.observer, "observer")
     if settings.max_epoch_gap_days is not None:
         check_epoch_gap(orbit, replan_in.observer, "observer", when, 0.0, settings.max_epoch_gap_days)
-    campaign = rebuild(row.request, row.result, stop=stop)
+    campaign = rebuild(row.request, row.result, stop=stop, target_model=settings.default_target)
     try:
         state = _observer_state(replan_in.observer, when, campaign)
         new = replan(
             campaign,
             to_orbit(req.target, "target"),
             to_orbit(req.observer, "observer"),
-            to_station(req.ground_station),
+            to_stations(req),
             state,
             seconds_between(campaign.epoch, when),
             stop=stop,
@@ -224,7 +235,7 @@ def submit_campaign(*, session: Session, settings: Settings, operator_id: str, c
     checked = with_stored_station(campaign_in, stored_station_lookup(session, operator_id))
     to_orbit(checked.target, "target")
     to_orbit(checked.observer, "observer")
-    to_station(checked.ground_station)
+    to_stations(checked)
     campaign_options(checked, settings.max_grid_points)
     return jobs.submit(
         session,

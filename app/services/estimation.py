@@ -119,7 +119,7 @@ def estimate_and_store(
             raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
         if observed_at is not None:  # a frame the station could not have made is refused, not placed
             try:
-                check_times(windows_of(plan.result), [observed_at])
+                check_times(windows_of(plan.result, plan.station_name), [observed_at])
             except SceneError as exc:
                 raise InputError(["observed_at"], str(exc).replace("frame 0's time", "observed_at")) from None
     read = check_frames(

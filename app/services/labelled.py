@@ -57,7 +57,7 @@ def _placing(
                 f"plan {plan_id} already labels frames of target {sorted(others)[0]!r}: a plan's scene images one "
                 f"target, not {target!r}",
             )
-        return Placing(plan.request, windows_of(plan.result), plan.station_name, plan_id=plan.id)
+        return Placing(plan.request, windows_of(plan.result, plan.station_name), plan.station_name, plan_id=plan.id)
     if campaign_id is not None:
         campaign = crud.get_campaign(session=session, operator_id=operator_id, campaign_id=campaign_id)
         if campaign is None:
@@ -65,7 +65,9 @@ def _placing(
         # A campaign's scenes image its target from its station: the scene's geometry is the plan's, over any of
         # the campaign's access windows (the observer, which the campaign moves, plays no part in it).
         req = {k: campaign.request[k] for k in ("target", "observer", "ground_station")}
-        return Placing(req, windows_of(campaign.result), campaign.station_name, campaign_id=campaign.id)
+        return Placing(
+            req, windows_of(campaign.result, campaign.station_name), campaign.station_name, campaign_id=campaign.id
+        )
     return None
 
 

@@ -112,7 +112,7 @@ def _check_pass(
     plan = crud.get_plan(session=session, operator_id=operator_id, plan_id=plan_id)
     if plan is None:
         raise InputError(["plan_id"], f"no plan {plan_id} belongs to you")
-    check_times(windows_of(plan.result), observed_at)
+    check_times(windows_of(plan.result, plan.station_name), observed_at)
     sweeps_from(integration_s, aperture_deg, len(uploads), model_aperture_deg)
     return plan
 

@@ -27,7 +27,7 @@ from app.schemas import (
     WindowPublic,
 )
 from app.services import exports
-from inference.simulation.targets import DEFAULT_TARGET
+from inference.runtime import UNNAMED_CARD_TARGET
 from planner.access import access_windows
 from planner.alignment import HeightBox
 from planner.ccsds import elements_from_opm, omm_fields
@@ -146,6 +146,7 @@ def to_station(st: StationIn | str) -> Station:
         refraction=st.refraction,
         max_azimuth_rate_deg_s=st.max_azimuth_rate_deg_s,
         radar=st.radar.to_radar(),
+        name=st.name,
     )
 
 
@@ -164,17 +165,47 @@ def stored_station_lookup(session: Any, operator_id: str) -> Callable[[str], dic
 
 
 def with_stored_station(req: R, lookup: Callable[[str], dict[str, Any] | None]) -> R:
-    """The request with a station given by name replaced by the stored one (``lookup(name)``, None if absent)."""
-    if not isinstance(req.ground_station, str):
+    """The request with every station given by name (``ground_station``, or each of ``ground_stations``) replaced by
+    the stored one (``lookup(name)``, None if absent)."""
+
+    def resolved(st: StationIn | str, loc: list[str | int]) -> StationIn:
+        if not isinstance(st, str):
+            return st
+        stored = lookup(st)
+        if stored is None:
+            raise InputError(
+                loc,
+                f"no station named {st!r} is stored: POST it to /v1/stations first "
+                "(GET /v1/stations lists yours), or give its coordinates here",
+            )
+        return StationIn.model_validate(stored)
+
+    update: dict[str, Any] = {}
+    if req.ground_station is not None:
+        update["ground_station"] = resolved(req.ground_station, ["ground_station"])
+    network = getattr(req, "ground_stations", None)
+    if network is not None:
+        update["ground_stations"] = [resolved(st, ["ground_stations", k]) for k, st in enumerate(network)]
+    return req.model_copy(update=update)
+
+
+def to_stations(req: PlanCreate | CampaignCreate) -> list[Station]:
+    """The planner's stations of a request: its one radar, or its network (names resolved first)."""
+    if req.ground_stations is not None:
+        return [to_station(st) for st in req.ground_stations]
+    assert req.ground_station is not None  # the request's own check: one or the other
+    return [to_station(req.ground_station)]
+
+
+def with_radar_of(req: R, station_name: str | None) -> R:
+    """A network request as it is stored: ``ground_station`` the radar named (the chosen scene's, else the first), so
+    what reads a stored request's one station (exports, passes, labelled frames) reads that one."""
+    network = getattr(req, "ground_stations", None)
+    if network is None:
         return req
-    stored = lookup(req.ground_station)
-    if stored is None:
-        raise InputError(
-            ["ground_station"],
-            f"no station named {req.ground_station!r} is stored: POST it to /v1/stations first "
-            "(GET /v1/stations lists yours), or give its coordinates here",
-        )
-    return req.model_copy(update={"ground_station": StationIn.model_validate(stored)})
+    sites = [st for st in network if isinstance(st, StationIn)]
+    chosen = next((st for st in sites if st.name == station_name), sites[0])
+    return req.model_copy(update={"ground_station": chosen})
 
 
 def observer_optics(req: PlanCreate | CampaignCreate) -> ObserverOptics:
@@ -193,13 +224,13 @@ def observer_optics(req: PlanCreate | CampaignCreate) -> ObserverOptics:
         raise InputError(where.get(exc.field or "", ["observer_optics"]), str(exc)) from None
 
 
-def served_cross_section() -> CrossSection:
-    """The served target model's mean radar cross section by aspect (``scene.cross_section``): the radar equation's
-    sigma in every plan and campaign."""
-    return for_target(DEFAULT_TARGET)
+def served_cross_section(target_model: str | None = None) -> CrossSection:
+    """The served target model's mean radar cross section by aspect (``scene.cross_section``; GSA_DEFAULT_TARGET, the
+    shipped tiangong-like by default): the radar equation's sigma in every plan and campaign."""
+    return for_target(target_model or UNNAMED_CARD_TARGET)
 
 
-def plan_options(req: PlanCreate) -> PlanOptions:
+def plan_options(req: PlanCreate, target_model: str | None = None) -> PlanOptions:
     s = req.search
     optics = observer_optics(req)
     try:
@@ -217,7 +248,7 @@ def plan_options(req: PlanCreate) -> PlanOptions:
             standoff_km=s.standoff_km,
             min_separation_km=s.min_separation_km,
             max_dv_m_s=s.max_dv_m_s,
-            cross_section=served_cross_section(),
+            cross_section=served_cross_section(target_model),
         )
     except PlannerError as exc:
         raise InputError(planner_loc(exc.field), str(exc)) from None
@@ -250,13 +281,14 @@ def run_plan(
     max_epoch_gap_days: float | None = None,
     max_tle_age_days: float | None = None,
     stop: StopCheck | None = None,
+    target_model: str | None = None,
 ) -> tuple[Plan, PlanResult]:
     """Validate a plan request against the planner, run it, and return the plan and its result."""
     _osculating_states(((req.target, "target"), (req.observer, "observer")), req.search.reading, ["search", "reading"])
     target = to_orbit(req.target, "target")
     observer = to_orbit(req.observer, "observer")
-    station = to_station(req.ground_station)
-    opts = plan_options(req)
+    station = to_stations(req)
+    opts = plan_options(req, target_model)
     if max_tle_age_days is not None:
         opts = replace(opts, max_tle_age_days=max_tle_age_days)
     if max_epoch_gap_days is not None:
@@ -308,9 +340,11 @@ def plan_and_store(
         max_epoch_gap_days=settings.max_epoch_gap_days,
         max_tle_age_days=settings.max_tle_age_days,
         stop=stop,
+        target_model=settings.default_target,
     )
     plan_id = new_id()
-    assert not isinstance(plan_in.ground_station, str)  # resolved above
+    plan_in = with_radar_of(plan_in, plan.station.name if plan.station is not None else None)
+    assert plan_in.ground_station is not None and not isinstance(plan_in.ground_station, str)  # resolved above
     names = {"target": plan_in.target.name, "observer": plan_in.observer.name, "station": plan_in.ground_station.name}
     try:  # the exports, from the plan in hand: stored with it, so each is a read (app.services.exports)
         texts = exports.render(

@@ -23,16 +23,21 @@ def scene_for(
     ``field`` names what set the span, for the error where it lies too far from the target's epoch.
     """
     req = plan_request(request)
+    assert req.ground_station is not None  # a stored request names its (chosen) radar
     return Scene.over(
         to_orbit(req.target, "target"), to_station(req.ground_station), plan_options(req).reading, start, end, field
     )
 
 
-def windows_of(result: dict[str, Any] | AccessPublic | PlanResult) -> list[Window]:
-    """A plan's (or an access search's) access windows, stored or typed, as the scene takes them."""
+def windows_of(result: dict[str, Any] | AccessPublic | PlanResult, station: str | None = None) -> list[Window]:
+    """A plan's (or an access search's) access windows, stored or typed, as the scene takes them; of a network's,
+    only ``station``'s (the stored request's one radar)."""
     if isinstance(result, AccessPublic | PlanResult):
-        return [Window(w.rise, w.set, w.max_elevation_deg) for w in result.access_windows]
+        rows = [w.model_dump(mode="json") for w in result.access_windows]
+    else:
+        rows = list(result.get("access_windows", []))
     return [
         Window(datetime.fromisoformat(w["rise"]), datetime.fromisoformat(w["set"]), float(w["max_elevation_deg"]))
-        for w in result.get("access_windows", [])
+        for w in rows
+        if w.get("station") is None or station is None or w["station"] == station
     ]

@@ -10,15 +10,9 @@ from inference.simulation.mesh import plate_mesh
 from inference.simulation.po import po_echo_direct, prepared
 from inference.simulation.radar import Radar
 from inference.simulation.targets import DEFAULT_TARGET
-from scene.cross_section import (
-    FACET_M,
-    direction,
-    for_target,
-    grid,
-    mean_rcs_m2,
-    observation_rotation,
-    target_mesh,
-)
+from inference.simulation.targets import BUILTIN_TARGETS
+from scene.cross_section import DATA, direction, for_target, grid
+from scene.cross_section_build import FACET_M, mean_rcs_m2, mesh_fingerprint, observation_rotation, target_mesh
 from scene.errors import SceneError
 
 C = 299_792_458.0
@@ -81,4 +75,11 @@ def test_table_covers_the_sphere_and_interpolates_between_nodes():
 def test_a_target_without_a_table_is_refused():
     with pytest.raises(SceneError) as info:
         for_target("no-such-target")
-    assert "no-such-target" in str(info.value) and "python -m scene.cross_section build" in str(info.value)
+    assert "no-such-target" in str(info.value) and "python -m scene.cross_section_build" in str(info.value)
+
+
+@pytest.mark.parametrize("name", sorted(BUILTIN_TARGETS))
+def test_each_shipped_table_was_made_from_todays_mesh(name):
+    """A mesh changed since its table was made would plan with another target's cross section."""
+    with np.load(DATA / f"{name}-rcs.npz", allow_pickle=False) as f:
+        assert str(f["mesh_sha256"]) == mesh_fingerprint(target_mesh(name)), "python -m scene.cross_section_build"

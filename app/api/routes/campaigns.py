@@ -133,7 +133,7 @@ async def replan_campaign(
     operator: CurrentOperator,
     settings: SettingsDep,
     campaign_id: Annotated[Text, Path()],
-    replan_in: CampaignReplan,
+    replan_in: Annotated[CampaignReplan | None, Body()] = None,
 ) -> CampaignPublic:
     """Re-plan a campaign from where orbit determination puts the observer (``observer`` at ``from``).
 

@@ -185,3 +185,56 @@ def test_a_radar_whose_figures_do_not_fit_together_is_a_422_saying_what_to_fix(c
     assert r.status_code == 422, r.text
     text = str(r.json()["detail"])
     assert "radar" in text and "duty cycle" in text and "pulse_width_us" in text
+
+
+TIRA_SITE = {
+    "name": "Tira",
+    "latitude_deg": 50.6166,
+    "longitude_deg": 7.1296,
+    "altitude_m": 307,
+    "min_elevation_deg": 5,
+}
+
+
+def test_a_plan_over_a_network_names_each_candidates_radar(client, stored):
+    """A stored station by name and a site given inline: every pass and candidate names its radar, the chosen one's
+    radar is the plan's station, and the plan's exports are over it."""
+    body = {**PAPER_EXAMPLE, "ground_station": None, "ground_stations": ["Shanghai radar", TIRA_SITE]}
+    del body["ground_station"]
+    r = client.post("/v1/plans", json=body, headers=A)
+    assert r.status_code == 201, r.text
+    plan = r.json()
+    assert {w["station"] for w in plan["access_windows"]} == {"Shanghai radar", "Tira"}
+    assert {c["station"] for c in plan["candidates"]} <= {"Shanghai radar", "Tira"}
+    assert plan["chosen"]["station"] == plan["station_name"]
+    for c in plan["candidates"]:
+        window = next(
+            w for w in plan["access_windows"] if w["rise"] <= c["t_access"] <= w["set"] and w["station"] == c["station"]
+        )
+        assert window is not None
+    csv_text = client.get(f"/v1/plans/{plan['id']}/export/pointing.csv", headers=A)
+    assert csv_text.status_code == 200, csv_text.text
+
+
+@pytest.mark.parametrize(
+    "network, loc_end, words",
+    [
+        ([], "ground_stations", "at least 1"),
+        (["Shanghai radar", "Shanghai radar"], "ground_stations", "more than once"),
+        (["no such radar", TIRA_SITE], 0, "no station named 'no such radar'"),
+    ],
+)
+def test_bad_networks_are_422s_naming_the_field(client, stored, network, loc_end, words):
+    body = {k: v for k, v in PAPER_EXAMPLE.items() if k != "ground_station"}
+    r = client.post("/v1/plans", json={**body, "ground_stations": network}, headers=A)
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"]
+    assert any("ground_stations" in e["loc"] for e in detail) and words in r.text, detail
+
+
+def test_a_station_and_a_network_together_or_neither_are_refused(client):
+    both = client.post("/v1/plans", json={**PAPER_EXAMPLE, "ground_stations": [TIRA_SITE]}, headers=A)
+    assert both.status_code == 422 and "not both" in both.text
+    body = {k: v for k, v in PAPER_EXAMPLE.items() if k != "ground_station"}
+    neither = client.post("/v1/plans", json=body, headers=A)
+    assert neither.status_code == 422 and "ground_station (one radar) or ground_stations" in neither.text
