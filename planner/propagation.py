@@ -284,7 +284,7 @@ class Station:
     max_azimuth_rate_deg_s: float = 10.0
     # The imaging radar at the site: its elevation limit, radar equation and coherent time (``planner.radar``).
     radar: Radar = field(default_factory=Radar)
-    name: str = ""  # what a network's windows and candidates call it
+    name: str = field(default="", compare=False)  # what a network's windows and candidates call it (a label)
 
     def itrs_km(self) -> Vec:
         """Return the site's ITRS position, shape (3,)."""
