@@ -9,7 +9,14 @@ from pydantic import ConfigDict, Field, model_validator
 
 from app.schemas.common import Described, Finite, IsoDateTime, StoredResult, Strict, utc_or_none
 from app.schemas.orbits import OrbitIn
-from app.schemas.plans import PAPER_EXAMPLE, CandidatePublic, ObserverOpticsIn, SceneSearchIn, WindowPublic
+from app.schemas.plans import (
+    PAPER_EXAMPLE,
+    CandidatePublic,
+    ObserverOpticsIn,
+    SceneSearchIn,
+    WindowPublic,
+    network_names,
+)
 from app.schemas.stations import GroundStationIn, StationsIn, checked_network
 from planner.propagation import utc
 
@@ -186,14 +193,15 @@ class CampaignScenePublic(Described):
         plan = s.plan
         assert plan.chosen is not None and s.check is not None
         check = s.check
-        window = WindowPublic.from_windows(plan.epoch, plan.windows)[plan.chosen.pass_index]
+        names = network_names(plan)
+        window = WindowPublic.from_windows(plan.epoch, plan.windows, names)[plan.chosen.pass_index]
         return cls(
             index=s.index,
             t_access=utc(epoch, s.t_access_s),
             feasible=s.feasibility.feasible,
             dv_total_m_s=s.dv_total_km_s * 1000.0,
             burns=[BurnPublic.from_burn(epoch, b) for b in s.burns],
-            candidate=CandidatePublic.from_candidate(plan.epoch, plan.chosen, s.feasibility),
+            candidate=CandidatePublic.from_candidate(plan.epoch, plan.chosen, s.feasibility, window.station),
             access_window=window,
             check=SceneCheckPublic(
                 separation_km=check.separation_km,
@@ -297,7 +305,10 @@ class CampaignResult(StoredResult):
             if plan is None:
                 continue
             off = (plan.epoch - ep).total_seconds()
-            for w, rise in zip(WindowPublic.from_windows(plan.epoch, plan.windows), plan.windows.rise_s, strict=True):
+            names = network_names(plan)
+            for w, rise in zip(
+                WindowPublic.from_windows(plan.epoch, plan.windows, names), plan.windows.rise_s, strict=True
+            ):
                 if s.t0_s <= rise + off < s.t1_s:
                     windows.append(w)
         r0, v0 = c.initial_state

@@ -219,3 +219,19 @@ def test_bad_replans_are_422s_naming_the_field_and_store_nothing(client, campaig
     assert other.status_code == 422 and other.json()["detail"][0]["loc"][-1] == "observer", other.text
     assert "km from where the campaign has its observer" in other.text
     assert client.get("/v1/campaigns", headers=A).json()["count"] == count
+
+
+def test_a_campaign_over_a_network_of_radars_names_each_scenes_radar(client):
+    """Shanghai and TIRA together: every pass names its radar, each scene the one that images it (of the two), and
+    the stored request names the first scene's radar as its ground_station."""
+    tira = {"name": "Tira", "latitude_deg": 50.6166, "longitude_deg": 7.1296, "altitude_m": 307, "min_elevation_deg": 5}
+    body = {k: v for k, v in CAMPAIGN_EXAMPLE.items() if k != "ground_station"}
+    body = {**body, "duration_days": 12, "ground_stations": [CAMPAIGN_EXAMPLE["ground_station"], tira]}
+    r = client.post("/v1/campaigns", json=body, headers=A)
+    assert r.status_code == 201, r.text
+    c = r.json()
+    names = {CAMPAIGN_EXAMPLE["ground_station"]["name"], "Tira"}
+    assert {w["station"] for w in c["access_windows"]} == names
+    assert c["scenes"] and all(s["candidate"]["station"] in names for s in c["scenes"])
+    assert all(s["access_window"]["station"] == s["candidate"]["station"] for s in c["scenes"])
+    assert c["station_name"] == c["scenes"][0]["candidate"]["station"]
