@@ -9,8 +9,7 @@ import pytest
 from inference.simulation.mesh import plate_mesh
 from inference.simulation.po import po_echo_direct, prepared
 from inference.simulation.radar import Radar
-from inference.simulation.targets import DEFAULT_TARGET
-from inference.simulation.targets import BUILTIN_TARGETS
+from inference.simulation.targets import BUILTIN_TARGETS, DEFAULT_TARGET
 from scene.cross_section import DATA, direction, for_target, grid
 from scene.cross_section_build import FACET_M, mean_rcs_m2, mesh_fingerprint, observation_rotation, target_mesh
 from scene.errors import SceneError
