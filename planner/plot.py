@@ -153,10 +153,12 @@ def plot_plan(plan, path: str, title: str = "") -> None:  # type: ignore[no-unty
     plt.close(fig)
 
 
-def plot_campaign(campaign, path: str, title: str = "") -> None:  # type: ignore[no-untyped-def]
+def plot_campaign(campaign, path: str, title: str = "", dispersions=None) -> None:  # type: ignore[no-untyped-def]
     """Write a two-panel PNG of ``campaign`` (a planner.campaign.Campaign) to ``path``: the Delta-v spent over
-    the span against the budget, each stretch shaded by what came of it; and each scene's line of sight in the
-    target's orbital frame (the imaging geometry the labelled frames will cover)."""
+    the span against the budget, each stretch shaded by what came of it (with ``dispersions``, a list of
+    planner.dispersion.SceneDispersion, the trims' 95th-percentile margin on top, and each scene's feasible share);
+    and each scene's line of sight in the target's orbital frame (the imaging geometry the labelled frames will
+    cover)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -168,20 +170,30 @@ def plot_campaign(campaign, path: str, title: str = "") -> None:  # type: ignore
     for s in campaign.stretches:
         colour = "#2ca02c" if s.scene is not None else "#d62728"
         ax.axvspan(utc(ep, s.t0_s), utc(ep, s.t1_s), color=colour, alpha=0.08, lw=0)
+    # The spend as a staircase; with dispersions, each scene's trims' reserve added at its first burn.
+    trims = {d.scene: d.trim_p95_km_s * 1000.0 for d in dispersions or () if np.isfinite(d.trim_p95_km_s)}
+    firsts = {min(b.t_s for b in s.burns): trims.get(s.index, 0.0) for s in campaign.scenes}
     times = [utc(ep, 0.0)]
     spent = [0.0]
+    margin = [0.0]
     for b in campaign.burns:
         times += [utc(ep, b.t_s), utc(ep, b.t_s)]
         spent += [spent[-1], spent[-1] + b.dv_total_km_s * 1000.0]
+        margin += [margin[-1], margin[-1] + firsts.get(b.t_s, 0.0)]
     times.append(utc(ep, campaign.duration_s))
     spent.append(spent[-1])
+    margin.append(margin[-1])
     ax.plot(times, spent, color="#1f77b4", lw=2, label="Delta-v spent")
+    if dispersions:
+        top = np.asarray(spent) + np.asarray(margin)
+        ax.fill_between(times, spent, top, color="#9467bd", alpha=0.35, lw=0, label="with the trims' 95th percentile")
     ax.axhline(campaign.options.dv_budget_m_s, color="k", ls="--", lw=1, label="budget")
     for s in campaign.scenes:
         t = utc(ep, s.t_access_s)
         ax.axvline(t, color="#ff7f0e", lw=1)
+        share = next((d.feasible_share for d in dispersions or () if d.scene == s.index), None)
         ax.annotate(
-            f"{s.index}: {s.dv_total_km_s * 1000.0:.0f} m/s",
+            f"{s.index}: {s.dv_total_km_s * 1000.0:.0f} m/s" + ("" if share is None else f", {share:.0%} feasible"),
             (t, campaign.options.dv_budget_m_s),
             rotation=90,
             va="top",
