@@ -321,9 +321,26 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     if args.export:
         _export_campaign(req, result, Path(args.export))
     if args.plot:
+        from planner.dispersion import SceneDispersion
         from planner.plot import plot_campaign
 
-        plot_campaign(campaign, args.plot, title=f"{req.target.name} / {req.observer.name} / {req.ground_station.name}")
+        nan = float("nan")
+        dispersions = [
+            SceneDispersion(
+                sc.index,
+                d.samples,
+                d.feasible_share,
+                nan if d.trim_p95_m_s is None else d.trim_p95_m_s / 1000.0,
+                nan if d.trim_max_m_s is None else d.trim_max_m_s / 1000.0,
+                nan if d.miss_p95_km is None else d.miss_p95_km,
+                sc.aim.tolerance_km if sc.aim else nan,
+                d.failed,
+            )
+            for sc in result.scenes
+            if (d := sc.dispersion) is not None
+        ]
+        title = f"{req.target.name} / {req.observer.name} / {req.ground_station.name}"
+        plot_campaign(campaign, args.plot, title=title, dispersions=dispersions or None)
         print(f"plot written to {args.plot}", file=sys.stderr)
     return 0
 
@@ -408,11 +425,13 @@ def cmd_campaigns(args: argparse.Namespace) -> int:
 
 def format_campaign(r: Any) -> str:
     """Return a campaign (CampaignResult) as a readable report: its scenes, their burns, and every stretch."""
+    margin = getattr(r, "trim_margin_m_s", None)
     out = [
         f"epoch {utc_text(r.epoch)}, {r.duration_days:g} days, budget {r.dv_budget_m_s:g} m/s, "
         f"return to orbit: {'yes' if r.return_to_orbit else 'no'}"
         + (f", re-planned from campaign {r.replanned_from}" if r.replanned_from else ""),
-        f"\n{len(r.scenes)} scene(s), {r.dv_total_m_s:.1f} m/s in all",
+        f"\n{len(r.scenes)} scene(s), {r.dv_total_m_s:.1f} m/s in all"
+        + ("" if margin is None else f", {margin:.1f} m/s kept for the trims (95th percentile)"),
         f"{'#':>3} {'T_access (UTC)':<25} {'dv (m/s)':>9} {'stand-off (km)':>14} {'separation (km)':>15} "
         f"{'rate (deg/s)':>12} {'phase (deg)':>11}  line of sight (R, T, N)",
     ]
@@ -433,6 +452,12 @@ def format_campaign(r: Any) -> str:
             out.append(
                 f"      aim: RTN of the target [{', '.join(f'{x:.2f}' for x in s.aim.relative_rtn_km)}] km at T_access, "
                 f"within {s.aim.tolerance_km:.2f} km{' (re-aimed)' if s.reaimed else ''}"
+            )
+        if s.dispersion is not None:
+            d = s.dispersion
+            out.append(
+                f"      with errors ({d.samples} samples): {d.feasible_share:.0%} feasible, trims p95 "
+                f"{d.trim_p95_m_s or 0.0:.1f} m/s, miss p95 {d.miss_p95_km or 0.0:.3f} km"
             )
     out.append("\nstretches searched")
     for st in r.stretches:

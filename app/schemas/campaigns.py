@@ -23,6 +23,7 @@ from planner.propagation import utc
 if TYPE_CHECKING:
     from app.db.models import Campaign as CampaignRow
     from planner.campaign import Burn, Campaign, CampaignScene, Stretch
+    from planner.dispersion import DispersionOptions, SceneDispersion
     from planner.plan import PlanOptions
 
 # The paper's Table 1 from 2022-12-15 (its first ten days have the target in Earth's shadow) for three weeks.
@@ -33,6 +34,69 @@ CAMPAIGN_EXAMPLE: dict[str, Any] = {
     "dv_budget_m_s": 1000,
     "return_to_orbit": False,
 }
+
+
+class DispersionIn(Strict):
+    """Fly every scene with errors, as an operator flies it (``planner.dispersion``): the phasing burn re-aimed from
+    orbit determination, two trims re-aimed at the scene's aim; each scene's feasible share and trims' 95th percentile,
+    and the budget's margin for them. Defaults: 10 m / 1 cm/s navigation, 1 % / 0.1 deg burns, 50 samples a scene."""
+
+    samples: int = Field(default=50, ge=2, le=500)
+    """Monte Carlo samples a scene (about 0.05 s each on one core)"""
+    position_sigma_m: Finite = Field(default=10.0, ge=0.0, le=100_000.0)
+    """orbit determination's position error, 1-sigma per axis, m"""
+    velocity_sigma_mm_s: Finite = Field(default=10.0, ge=0.0, le=100_000.0)
+    """its velocity error, 1-sigma per axis, mm/s"""
+    burn_magnitude_sigma_pct: Finite = Field(default=1.0, ge=0.0, le=50.0)
+    """each burn's size error, 1-sigma, % of the burn"""
+    burn_pointing_sigma_deg: Finite = Field(default=0.1, ge=0.0, le=30.0)
+    """each burn's pointing error, 1-sigma, deg"""
+    trim_coast_s: Finite = Field(default=2700.0, ge=60.0, le=864_000.0)
+    """the least coast after a burn before orbit determination and the next trim, s"""
+    seed: int = Field(default=0, ge=0, le=2**31 - 1)
+    """the draws' seed (the same seed, the same answer)"""
+
+    def to_options(self) -> DispersionOptions:
+        from planner.dispersion import DispersionOptions
+
+        return DispersionOptions(
+            samples=self.samples,
+            position_sigma_km=self.position_sigma_m / 1000.0,
+            velocity_sigma_km_s=self.velocity_sigma_mm_s / 1e6,
+            burn_magnitude_sigma=self.burn_magnitude_sigma_pct / 100.0,
+            burn_pointing_sigma_deg=self.burn_pointing_sigma_deg,
+            trim_coast_s=self.trim_coast_s,
+            seed=self.seed,
+        )
+
+
+class SceneDispersionPublic(Described):
+    samples: int
+    """how many times the scene was flown with errors"""
+    feasible_share: float
+    """the share of them that arrived within the aim's tolerance"""
+    trim_p95_m_s: float | None
+    """the 95th percentile of a sample's trims together, m/s (what the budget keeps for this scene)"""
+    trim_max_m_s: float | None
+    """the largest, m/s"""
+    miss_p95_km: float | None
+    """the 95th percentile of the distance from the aim point at t_access, km"""
+    failed: int
+    """samples whose re-aim found no transfer (counted infeasible)"""
+
+    @classmethod
+    def from_dispersion(cls, d: SceneDispersion) -> SceneDispersionPublic:
+        def m_s(x: float) -> float | None:
+            return None if x != x else x * 1000.0
+
+        return cls(
+            samples=d.samples,
+            feasible_share=d.feasible_share,
+            trim_p95_m_s=m_s(d.trim_p95_km_s),
+            trim_max_m_s=m_s(d.trim_max_km_s),
+            miss_p95_km=None if d.miss_p95_km != d.miss_p95_km else d.miss_p95_km,
+            failed=d.failed,
+        )
 
 
 class CampaignCreate(Strict):
@@ -70,6 +134,8 @@ class CampaignCreate(Strict):
     """the most scenes to plan"""
     search: SceneSearchIn = Field(default_factory=lambda: SceneSearchIn())
     """how each scene is searched for (the plan's box, misses, stand-off and separation; defaults: the paper's)"""
+    dispersion: DispersionIn | None = None
+    """fly every scene with navigation and burn errors and report each one's feasible share and trims (null: not)"""
 
     @model_validator(mode="after")
     def _one_radar_or_a_network(self) -> CampaignCreate:
@@ -187,9 +253,13 @@ class CampaignScenePublic(Described):
     """what the scene's phasing burn aims at, and the tolerance that keeps it feasible"""
     reaimed: bool = False
     """true when a re-plan re-aimed this scene from a measured state (its T_access and aim kept, its burns new)"""
+    dispersion: SceneDispersionPublic | None = None
+    """the scene flown with the request's errors (``dispersion``), or null"""
 
     @classmethod
-    def from_scene(cls, epoch: datetime, s: CampaignScene, opts: PlanOptions) -> CampaignScenePublic:
+    def from_scene(
+        cls, epoch: datetime, s: CampaignScene, opts: PlanOptions, dispersion: SceneDispersion | None = None
+    ) -> CampaignScenePublic:
         plan = s.plan
         assert plan.chosen is not None and s.check is not None
         check = s.check
@@ -214,6 +284,7 @@ class CampaignScenePublic(Described):
             slot_shift_s=s.slot_shift_s,
             aim=_aim_public(epoch, s, opts),
             reaimed=s.reaimed,
+            dispersion=None if dispersion is None else SceneDispersionPublic.from_dispersion(dispersion),
         )
 
 
@@ -295,9 +366,11 @@ class CampaignResult(StoredResult):
     """the campaign this one was re-planned from (``POST /v1/campaigns/{id}/replan``), or null"""
     replans: list[ReplanRecord] = Field(default_factory=list)
     """every re-plan from the first campaign to this one, oldest first"""
+    trim_margin_m_s: float | None = None
+    """with ``dispersion``: the Delta-v the budget keeps for the trims, the sum of the scenes' 95th percentiles, m/s"""
 
     @classmethod
-    def from_campaign(cls, c: Campaign) -> CampaignResult:
+    def from_campaign(cls, c: Campaign, dispersions: list[SceneDispersion] | None = None) -> CampaignResult:
         ep = c.epoch
         windows: list[WindowPublic] = []
         for s in c.stretches:  # each stretch's own passes (a stretch's plan may reach past the next one's start)
@@ -312,18 +385,33 @@ class CampaignResult(StoredResult):
                 if s.t0_s <= rise + off < s.t1_s:
                     windows.append(w)
         r0, v0 = c.initial_state
+        by_scene = {d.scene: d for d in dispersions or ()}
+        margin = None
+        notes = list(c.notes)
+        if dispersions is not None:
+            from planner.dispersion import trim_margin_km_s
+
+            margin = trim_margin_km_s(dispersions) * 1000.0
+            total = c.dv_total_km_s * 1000.0 + margin
+            if total > c.options.dv_budget_m_s:
+                notes.append(
+                    f"with the trims' 95th-percentile margin ({margin:.1f} m/s) the campaign needs {total:.1f} m/s, "
+                    f"over its budget of {c.options.dv_budget_m_s:g} m/s: plan it within {c.options.dv_budget_m_s - margin:.0f} "
+                    "m/s, or fly fewer scenes"
+                )
         return cls(
             epoch=ep,
             duration_days=c.duration_s / 86400.0,
             dv_budget_m_s=c.options.dv_budget_m_s,
             return_to_orbit=c.options.return_to_orbit,
             dv_total_m_s=c.dv_total_km_s * 1000.0,
-            scenes=[CampaignScenePublic.from_scene(ep, s, c.options.plan) for s in c.scenes],
+            scenes=[CampaignScenePublic.from_scene(ep, s, c.options.plan, by_scene.get(s.index)) for s in c.scenes],
             stretches=[StretchPublic.from_stretch(ep, s) for s in c.stretches],
             access_windows=windows,
             observer_state=ObserverStatePublic(epoch=ep, r_km=[float(x) for x in r0], v_km_s=[float(x) for x in v0]),
             timings_s={k: round(v, 4) for k, v in c.timings_s.items()},
-            notes=c.notes,
+            notes=notes,
+            trim_margin_m_s=margin,
         )
 
 

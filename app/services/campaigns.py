@@ -41,6 +41,7 @@ from planner.campaign import (
     plan_campaign,
 )
 from planner.closed_loop import replan
+from planner.dispersion import SceneDispersion, disperse_scene
 from planner.errors import PlannerError, PlanningStopped
 from planner.orbits import earth_frames, trajectory
 from planner.plan import PlanOptions, StopCheck
@@ -120,7 +121,7 @@ def run_campaign(
         field = exc.field or "search"
         loc: list[str | int] = [field] if field in ("target", "observer", *_TOP) else ["search", field]
         raise InputError(loc, str(exc)) from None
-    return campaign, CampaignResult.from_campaign(campaign)
+    return campaign, CampaignResult.from_campaign(campaign, dispersed(req, campaign, stop))
 
 
 def plan_and_store_campaign(
@@ -145,6 +146,19 @@ def plan_and_store_campaign(
     first = campaign.scenes[0].plan.station if campaign.scenes else None
     campaign_in = with_radar_of(campaign_in, first.name if first is not None else None)
     return crud.create_campaign(session=session, operator_id=operator_id, request=campaign_in, result=result)
+
+
+def dispersed(req: CampaignCreate, campaign: Campaign, stop: StopCheck | None = None) -> list[SceneDispersion] | None:
+    """With the request's ``dispersion``, every scene flown with its errors (``planner.dispersion``); else None."""
+    if req.dispersion is None:
+        return None
+    opts = req.dispersion.to_options()
+    out = []
+    for scene in campaign.scenes:
+        if stop is not None and (reason := stop()):
+            raise PlanningStopped(f"the dispersion stopped: {reason}", field="dispersion")
+        out.append(disperse_scene(campaign, scene, opts))
+    return out
 
 
 def rebuild(
@@ -219,7 +233,7 @@ def replan_and_store(
         raise
     except PlannerError as exc:
         raise InputError([exc.field if exc.field in ("from", "observer") else "from"], str(exc)) from None
-    result = CampaignResult.from_campaign(new)
+    result = CampaignResult.from_campaign(new, dispersed(req, new, stop))
     record = ReplanRecord(
         campaign_id=row.id, from_time=when, observer=replan_in.observer.model_dump(mode="json", exclude_none=True)
     )

@@ -235,3 +235,18 @@ def test_a_campaign_over_a_network_of_radars_names_each_scenes_radar(client):
     assert c["scenes"] and all(s["candidate"]["station"] in names for s in c["scenes"])
     assert all(s["access_window"]["station"] == s["candidate"]["station"] for s in c["scenes"])
     assert c["station_name"] == c["scenes"][0]["candidate"]["station"]
+
+
+def test_a_campaign_with_dispersion_reports_each_scenes_share_and_the_trims_margin(client):
+    body = {**CAMPAIGN_EXAMPLE, "duration_days": 8, "dispersion": {"samples": 6}}
+    r = client.post("/v1/campaigns", json=body, headers=A)
+    assert r.status_code == 201, r.text
+    c = r.json()
+    assert c["scenes"]
+    for s in c["scenes"]:
+        d = s["dispersion"]
+        assert d["samples"] == 6 and 0.0 <= d["feasible_share"] <= 1.0 and d["trim_p95_m_s"] > 0.0
+        assert d["miss_p95_km"] <= s["aim"]["tolerance_km"] or d["feasible_share"] < 1.0
+    assert c["trim_margin_m_s"] == pytest.approx(sum(s["dispersion"]["trim_p95_m_s"] for s in c["scenes"]))
+    bad = client.post("/v1/campaigns", json={**body, "dispersion": {"samples": 1}}, headers=A)
+    assert bad.status_code == 422 and bad.json()["detail"][0]["loc"][-2:] == ["dispersion", "samples"], bad.text
