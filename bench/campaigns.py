@@ -23,6 +23,7 @@ from bench.sections import replace_section  # noqa: E402
 from inference.simulation.targets import DEFAULT_TARGET  # noqa: E402
 from planner.campaign import CampaignOptions, _reason_kind, plan_campaign  # noqa: E402
 from planner.closed_loop import replan  # noqa: E402
+from planner.dispersion import DispersionOptions, disperse, trim_margin_km_s  # noqa: E402
 from planner.elements import Elements  # noqa: E402
 from planner.orbits import Orbit  # noqa: E402
 from planner.plan import PlanOptions, make_plan  # noqa: E402
@@ -126,8 +127,12 @@ def _replan_row(scenario: tuple, sigma: object) -> str:  # type: ignore[type-arg
     )
 
 
+DISPERSION_SAMPLES = 100
+
+
 def main() -> int:
     rows = []
+    dispersion_rows: list[str] = []
     sigma = for_target(DEFAULT_TARGET)  # the served target model's mean cross section, as the service plans with
     for name, target, observer, station, start in scenarios():
         print(f"{name}: 30-day plan ...", flush=True)
@@ -158,6 +163,19 @@ def main() -> int:
         )
         campaign_s = time.perf_counter() - t0
         scenes = ", ".join(f"{s.dv_total_km_s * 1000.0:.0f}" for s in campaign.scenes) or "-"
+        t0 = time.perf_counter()
+        spread = disperse(campaign, DispersionOptions(samples=DISPERSION_SAMPLES))
+        spread_s = time.perf_counter() - t0
+        margin = trim_margin_km_s(spread) * 1000.0
+        met = all(d.feasible_share >= 0.9 for d in spread) and margin <= 0.1 * campaign.options.dv_budget_m_s
+        dispersion_rows.append(
+            f"| {name} | "
+            + (", ".join(f"{d.feasible_share:.0%}" for d in spread) or "-")
+            + " | "
+            + (", ".join(f"{d.trim_p95_km_s * 1000.0:.1f}" for d in spread) or "-")
+            + f" | {margin:.1f} m/s ({margin / campaign.options.dv_budget_m_s:.1%}) | "
+            f"{(campaign.dv_total_km_s * 1000.0 + margin):.0f} m/s | {'yes' if met else 'no'} | {spread_s:.1f} s |"
+        )
         rows.append(
             f"| {name} | {len(plan.candidates)} | {n_feasible} | {chosen_text} | {binding(plan.feasibility)} | "
             f"{plan_s:.2f} s | {len(campaign.scenes)} ({scenes}) | {campaign.dv_total_km_s * 1000.0:.0f} m/s | "
@@ -201,6 +219,16 @@ def main() -> int:
         *rows,
         "",
         replan_text,
+        "",
+        f"Dispersion (`planner.dispersion`, {DISPERSION_SAMPLES} samples a scene, seed 0): each campaign's scenes flown with",
+        "10 m / 1 cm/s navigation (1-sigma per axis) and 1 % / 0.1 deg burn errors, the phasing burn re-aimed from orbit",
+        "determination and two trims re-aimed as an operator trims an approach (as soon as 2700 s after the burn allows,",
+        "and a quarter revolution before T_access). Feasible: arrived within the aim's tolerance. The goal: every scene",
+        "at least 90 % feasible with the trims' margin at most 10 % of the budget.",
+        "",
+        "| scenario | feasible share by scene | trims p95 by scene (m/s) | trims margin | campaign with margin | goal met | time |",
+        "|---|---|---|---|---|---|---|",
+        *dispersion_rows,
         "",
         f"With `return_to_orbit` (the paper's Table 1, 60 days, 1000 m/s; {back_s:.1f} s): the observer goes back to",
         "its original orbit after each scene (a Lambert transfer of 1-15 revolutions to where it would have been,",
