@@ -223,7 +223,8 @@ def format_plan(r: PlanResult) -> str:
             f"{c.miss_km:10.3f} {c.node:>5} {fixed(c.dv_total_m_s, 9, 1)} {fixed(c.standoff_km, 14, 1)} "
             f"{fixed(f.target_angular_rate_deg_s, 12, 2)} {('yes' if f.sunlit else 'no'):>7} "
             f"{fixed(f.radar_elevation_deg, 14, 1)} {fixed(f.radar_snr_db, 8, 1)} {fixed(f.isar_integration_s, 9, 1)}  "
-            f"{verdict}"
+            + (f"[{c.station}] " if c.station else "")
+            + f"{verdict}"
         )
     ch = r.chosen
     if ch:
@@ -442,6 +443,7 @@ def format_campaign(r: Any) -> str:
             f"{s.index:3d} {utc_text(s.t_access):<25} {s.dv_total_m_s:9.1f} {s.candidate.standoff_km or 0.0:14.1f} "
             f"{c.separation_km:15.2f} {c.target_angular_rate_deg_s:12.2f} {c.phase_angle_deg:11.1f}  "
             f"({', '.join(f'{x:+.2f}' for x in los)})"
+            + (f"  radar {s.candidate.station}" if s.candidate.station else "")
         )
         for b in s.burns:
             out.append(

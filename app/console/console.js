@@ -239,6 +239,7 @@ async function planPage(id) {
         closest approach ${num(ph.verification.closest_approach_km, 3)} km; the target crosses the observer's sky at
         ${num(ph.verification.target_angular_rate_deg_s, 2)} deg/s</div>` : ""}
     </div>` : "";
+  const network = p.candidates.some((c) => c.station);
   const candidates = p.candidates.map((c, k) => {
     const cf = c.feasibility;
     const isChosen = ch && c.t_access === ch.t_access;
@@ -247,7 +248,7 @@ async function planPage(id) {
       <td class="num">${num(c.miss_km, 3)}</td><td class="num">${c.dv_total_m_s == null ? "-" : num(c.dv_total_m_s, 1)}</td>
       <td class="num">${c.standoff_km == null ? "-" : num(c.standoff_km, 1)}</td>
       <td class="num">${cf.target_angular_rate_deg_s == null ? "-" : num(cf.target_angular_rate_deg_s, 2)}</td>
-      <td>${cf.sunlit ? "yes" : "no"}</td>
+      <td>${cf.sunlit ? "yes" : "no"}</td>${network ? `<td>${esc(c.station || "")}</td>` : ""}
       <td class="num">${cf.radar_elevation_deg == null ? "-" : num(cf.radar_elevation_deg, 1)}</td>
       <td class="num">${cf.radar_snr_db == null ? "-" : num(cf.radar_snr_db, 1)}</td>
       <td class="num">${cf.isar_integration_s == null ? "-" : num(cf.isar_integration_s, 1)}</td>
@@ -266,7 +267,7 @@ async function planPage(id) {
     <h2>Candidates (${p.candidates.length}, every one; the chosen one highlighted)</h2>
     <table id="candidates"><thead><tr><th class="num">#</th><th>T_access (UTC)</th><th class="num">dHa (km)</th>
     <th class="num">dHp (km)</th><th class="num">miss (km)</th><th class="num">dv (m/s)</th><th class="num">stand-off (km)</th>
-    <th class="num">rate (deg/s)</th><th>sunlit</th><th class="num">radar el (deg)</th><th class="num">SNR (dB)</th>
+    <th class="num">rate (deg/s)</th><th>sunlit</th>${network ? "<th>radar</th>" : ""}<th class="num">radar el (deg)</th><th class="num">SNR (dB)</th>
     <th class="num">T_int (s)</th><th>feasible</th></tr></thead><tbody>${candidates ||
       '<tr><td colspan="13" class="muted">No pass has an alignment inside the box.</td></tr>'}</tbody></table>
     <h2>Exports</h2><p>${exportsList} <span id="exporting" class="muted"></span></p>
@@ -315,6 +316,9 @@ async function campaignPage(id) {
       <td class="num">${num(s.check.target_angular_rate_deg_s, 2)}</td><td class="num">${num(s.check.phase_angle_deg, 1)}</td>
       <td>${(f.line_of_sight_rtn || []).map((v) => num(v, 2)).join(", ")}</td>
       <td class="num">${s.aim ? num(s.aim.tolerance_km, 2) : "-"}${s.reaimed ? " (re-aimed)" : ""}</td>
+      <td>${s.candidate.station ? esc(s.candidate.station) : "-"}</td>
+      <td>${s.dispersion ? `${num(100 * s.dispersion.feasible_share, 0)} % feasible, trims p95
+        ${num(s.dispersion.trim_p95_m_s || 0, 1)} m/s` : "-"}</td>
       <td class="reasons">${burns}</td></tr>`;
   }).join("");
   const origin = c.replanned_from ? `<p>Re-planned from campaign <a href="#/campaigns/${esc(c.replanned_from)}">${esc(
@@ -324,8 +328,9 @@ async function campaignPage(id) {
       <td class="reasons">${esc(st.note)}</td></tr>`).join("");
   const exportsList = ["opm", "opm?format=xml", "oem", "oem?format=xml", "czml", "access.csv"]
     .map((k) => `<a href="#" data-export="${k}">${k.replace("?format=xml", " (XML)")}</a>`).join(" · ");
+  const margin = c.trim_margin_m_s == null ? "" : `, ${num(c.trim_margin_m_s, 1)} m/s kept for the trims`;
   const verdict = c.scenes.length
-    ? `<p class="verdict good">${c.scenes.length} feasible scene(s) for ${num(c.dv_total_m_s, 1)} of ${num(c.dv_budget_m_s, 0)} m/s.</p>`
+    ? `<p class="verdict good">${c.scenes.length} feasible scene(s) for ${num(c.dv_total_m_s, 1)} of ${num(c.dv_budget_m_s, 0)} m/s${margin}.</p>`
     : `<p class="verdict bad">No feasible scene within the budget in the span: each stretch below says why.</p>`;
   view.innerHTML = `<h1>Campaign ${esc(c.target_name)} / ${esc(c.observer_name)} / ${esc(c.station_name)}</h1>
     <p class="muted">${esc(c.id)} · created ${utc(c.created_at)} · ${num(c.duration_days, 1)} days from ${utc(c.epoch)} ·
@@ -334,8 +339,9 @@ async function campaignPage(id) {
     <h2>Scenes (measured on the whole flown burn sequence)</h2>
     <div class="scroll"><table id="scenes"><thead><tr><th class="num">#</th><th>T_access (UTC)</th><th class="num">dv (m/s)</th>
     <th class="num">stand-off (km)</th><th class="num">separation (km)</th><th class="num">rate (deg/s)</th>
-    <th class="num">phase (deg)</th><th>line of sight (R, T, N)</th><th class="num">aim within (km)</th><th>burns</th></tr>
-    </thead><tbody>${scenes || '<tr><td colspan="10" class="muted">None.</td></tr>'}</tbody></table></div>
+    <th class="num">phase (deg)</th><th>line of sight (R, T, N)</th><th class="num">aim within (km)</th><th>radar</th>
+    <th>with errors</th><th>burns</th></tr>
+    </thead><tbody>${scenes || '<tr><td colspan="12" class="muted">None.</td></tr>'}</tbody></table></div>
     <h2>Stretches searched</h2>
     <table id="stretches"><thead><tr><th>from (UTC)</th><th>to (UTC)</th><th class="num">candidates</th>
     <th class="num">feasible</th><th>what came of it</th></tr></thead><tbody>${stretches}</tbody></table>

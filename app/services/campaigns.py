@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime, timedelta
 from typing import Any
 
@@ -41,7 +41,7 @@ from planner.campaign import (
     plan_campaign,
 )
 from planner.closed_loop import replan
-from planner.dispersion import SceneDispersion, disperse_scene
+from planner.dispersion import SceneDispersion, disperse_scene, trim_margin_km_s
 from planner.errors import PlannerError, PlanningStopped
 from planner.orbits import earth_frames, trajectory
 from planner.plan import PlanOptions, StopCheck
@@ -51,6 +51,7 @@ Vec = NDArray[np.float64]
 EXPORT_FILES = {"opm": "opm.txt", "oem": "oem.txt", "czml": "campaign.czml", "access.csv": "access.csv"}
 CAMPAIGN_OEM_STEP_S = 120.0  # a campaign's ephemerides span weeks: 2-min samples (LAGRANGE 7 reads them to metres)
 # Where a planner error's field belongs in the request.
+MARGIN_ROUNDS = 2  # re-plans that shrink a campaign's budget by its trims' margin (the margin moves with the scenes)
 _TOP = ("duration_days", "dv_budget_m_s", "scene_span_days", "max_scenes", "return_to_orbit", "start")
 
 
@@ -121,7 +122,22 @@ def run_campaign(
         field = exc.field or "search"
         loc: list[str | int] = [field] if field in ("target", "observer", *_TOP) else ["search", field]
         raise InputError(loc, str(exc)) from None
-    return campaign, CampaignResult.from_campaign(campaign, dispersed(req, campaign, stop))
+    spread = dispersed(req, campaign, stop)
+    budget = opts.dv_budget_m_s
+    for _ in range(MARGIN_ROUNDS):  # the budget keeps the trims' margin: planned again within what it leaves
+        if spread is None or campaign.dv_total_km_s * 1000.0 + trim_margin_km_s(spread) * 1000.0 <= budget:
+            break
+        within = max(0.0, budget - trim_margin_km_s(spread) * 1000.0)
+        campaign = plan_campaign(
+            target, observer, station, replace(opts, dv_budget_m_s=within), stop=stop, progress=progress
+        )
+        notes = [
+            *campaign.notes,
+            f"planned within {within:.0f} m/s to keep the trims' margin inside the {budget:g} m/s",
+        ]
+        campaign = replace(campaign, options=replace(campaign.options, dv_budget_m_s=budget), notes=notes)
+        spread = dispersed(req, campaign, stop)
+    return campaign, CampaignResult.from_campaign(campaign, spread)
 
 
 def plan_and_store_campaign(
@@ -354,6 +370,7 @@ def _aim_words(scene: CampaignScenePublic) -> str:
         f". Aim: at {aim.t_access:%Y-%m-%dT%H:%M:%S.%fZ} the observer {sum(x * x for x in aim.relative_km) ** 0.5:.3f} km "
         f"from the target, RTN of the target [{rel}] km, within {aim.tolerance_km:.2f} km; Lambert arc of "
         f"{aim.lambert_revolutions} revolution(s), {'low' if aim.low_path else 'high'} branch"
+        + (f"; imaged by radar {scene.candidate.station}" if scene.candidate.station else "")
     )
 
 
