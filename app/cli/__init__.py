@@ -251,6 +251,16 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
     return p
 
 
+def _quiet_stdout() -> None:
+    """Point stdout at the null device, so the interpreter's final flush of a closed pipe raises nothing."""
+    import os
+
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except (OSError, ValueError):  # no real stdout (a test's capture): nothing to flush into a pipe
+        pass
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     args = build_parser(command_name(argv)).parse_args(argv)
@@ -261,6 +271,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:  # the reader went away (`gsa plans show ID | head`): stop quietly, as Unix tools do
+        _quiet_stdout()
+        return 0
     except Exception as exc:  # the service's settings (GSA_*) that cannot be used: one line, naming the setting
         from pydantic import ValidationError
 

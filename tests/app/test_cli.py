@@ -362,3 +362,22 @@ def test_settings_that_cannot_be_used_are_one_line_naming_them(tmp_path):
     assert "GSA_API_KEYS holds a key of 5 characters" in short.stderr
     page = _gsa("serve", cwd=tmp_path, env_extra={"GSA_MAX_PAGE_SIZE": "0", "GSA_DATA_DIR": str(tmp_path)})
     assert page.returncode == 2 and "GSA_MAX_PAGE_SIZE" in page.stderr and page.stderr.count("\n") == 1, page.stderr
+
+
+def test_a_reader_that_goes_away_ends_the_command_quietly():
+    """`gsa plan --example paper | head -1`: the rest of the report meets a closed pipe; gsa stops with exit 0 and
+    no traceback, as Unix tools do."""
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "app.cli", "plan", "--example", "paper"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    assert proc.stdout is not None and proc.stderr is not None
+    first = proc.stdout.readline()
+    proc.stdout.close()
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 0, err
+    assert first.startswith(b"epoch ") and "Traceback" not in err and "BrokenPipeError" not in err
