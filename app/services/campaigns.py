@@ -433,5 +433,6 @@ def export(kind: str, row: Any, fmt: ccsds.Format = "kvn") -> str:
             row.request["ground_station"],
             row.result.get("access_windows", []),
             step_s=CAMPAIGN_OEM_STEP_S,
+            network=row.request.get("ground_stations"),
         )
     raise InputError(["kind"], f"unknown export {kind!r}: opm, oem, czml or access.csv", where="path")

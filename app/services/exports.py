@@ -263,6 +263,17 @@ def czml(arc: Arc, plan_id: str, names: dict[str, str], station: dict[str, Any],
         names,
         station,
         windows,
+        network=[
+            {
+                "name": st.name,
+                "latitude_deg": st.latitude_deg,
+                "longitude_deg": st.longitude_deg,
+                "altitude_m": st.altitude_m,
+            }
+            for st in arc.plan.stations
+        ]
+        if len(arc.plan.stations) > 1
+        else None,
     )
 
 
@@ -279,9 +290,11 @@ def czml_text(
     station: dict[str, Any],
     windows: list[dict[str, Any]],
     step_s: float = OEM_STEP_S,
+    network: list[dict[str, Any]] | None = None,
 ) -> str:
     """CZML for Cesium: both satellites over ``[t0_s, t1_s]`` (sampled every ``step_s`` and at ``must_s``: the burns,
-    the imaging moments), the station, its access intervals, each imaging moment. ``observer`` is a state function,
+    the imaging moments), the station, its access intervals, each imaging moment; with ``network`` (every radar of a
+    plan or campaign over several), each other radar and its own access intervals too. ``observer`` is a state function,
     or a list of ``(t0_s, t1_s, states)`` pieces between burns, each its own position interval (Cesium would
     otherwise interpolate across a burn: 0.8 km off near it)."""
     t0, t1 = utc(epoch, t0_s), utc(epoch, t1_s)
@@ -334,11 +347,40 @@ def czml_text(
             },
         }
 
-    access = [
-        f"{z_time(datetime.fromisoformat(w['rise']))}/{z_time(datetime.fromisoformat(w['set']))}"
-        for w in windows
-        if datetime.fromisoformat(w["set"]) >= t0 and datetime.fromisoformat(w["rise"]) <= t1
-    ]
+    def access(name: str | None) -> list[str]:
+        """The intervals a radar sees the target (of a network's windows, only its own)."""
+        return [
+            f"{z_time(datetime.fromisoformat(w['rise']))}/{z_time(datetime.fromisoformat(w['set']))}"
+            for w in windows
+            if datetime.fromisoformat(w["set"]) >= t0
+            and datetime.fromisoformat(w["rise"]) <= t1
+            and (name is None or w.get("station") in (None, name))
+        ]
+
+    def radar(key: str, name: str, site: dict[str, Any], when: list[str]) -> list[dict[str, Any]]:
+        where = [site["longitude_deg"], site["latitude_deg"], site.get("altitude_m", 0.0)]
+        return [
+            {
+                "id": key,
+                "name": name,
+                "position": {"cartographicDegrees": where},
+                "point": {"pixelSize": 9, "color": {"rgba": [44, 160, 44, 255]}},
+                "label": {"text": name},
+            },
+            {
+                "id": "access" if key == "station" else f"access-{key}",
+                "name": f"{name} sees the target" if key != "station" else "the station sees the target",
+                "availability": when or interval,
+                "polyline": {
+                    "positions": {"references": [f"{key}#position", "target#position"]},
+                    "width": 1,
+                    "material": {"solidColor": {"color": {"rgba": [44, 160, 44, 200]}}},
+                },
+            },
+        ]
+
+    own = names["station"] if network else None
+    others = [site for site in network or [] if site.get("name") != names["station"]]
     r_access, _ = target(np.asarray(accesses_s, float))
     packets: list[dict[str, Any]] = [
         {
@@ -354,30 +396,10 @@ def czml_text(
         },
         satellite("target", target, [255, 127, 14, 255]),
         satellite("observer", observer, [31, 119, 180, 255]),
-        {
-            "id": "station",
-            "name": names["station"],
-            "position": {
-                "cartographicDegrees": [
-                    station["longitude_deg"],
-                    station["latitude_deg"],
-                    station.get("altitude_m", 0.0),
-                ]
-            },
-            "point": {"pixelSize": 9, "color": {"rgba": [44, 160, 44, 255]}},
-            "label": {"text": names["station"]},
-        },
-        {
-            "id": "access",
-            "name": "the station sees the target",
-            "availability": access or interval,
-            "polyline": {
-                "positions": {"references": ["station#position", "target#position"]},
-                "width": 1,
-                "material": {"solidColor": {"color": {"rgba": [44, 160, 44, 200]}}},
-            },
-        },
+        *radar("station", names["station"], station, access(own)),
     ]
+    for j, site in enumerate(others, start=1):
+        packets += radar(f"station-{j}", str(site.get("name", f"station {j}")), site, access(str(site.get("name"))))
     for k, t_s in enumerate(accesses_s):
         t_access = utc(epoch, t_s)
         packets.append(

@@ -235,6 +235,9 @@ def test_a_campaign_over_a_network_of_radars_names_each_scenes_radar(client):
     assert c["scenes"] and all(s["candidate"]["station"] in names for s in c["scenes"])
     assert all(s["access_window"]["station"] == s["candidate"]["station"] for s in c["scenes"])
     assert c["station_name"] == c["scenes"][0]["candidate"]["station"]
+    czml = {p["id"]: p for p in client.get(f"/v1/campaigns/{c['id']}/export/czml", headers=A).json()}
+    assert {czml["station"]["name"], czml["station-1"]["name"]} == names
+    assert "Aim: at " in client.get(f"/v1/campaigns/{c['id']}/export/opm", headers=A).text
 
 
 def test_a_campaign_with_dispersion_reports_each_scenes_share_and_the_trims_margin(client):

@@ -214,6 +214,15 @@ def test_a_plan_over_a_network_names_each_candidates_radar(client, stored):
         assert window is not None
     csv_text = client.get(f"/v1/plans/{plan['id']}/export/pointing.csv", headers=A)
     assert csv_text.status_code == 200, csv_text.text
+    # The CZML draws both radars, each with its own passes.
+    czml = {p["id"]: p for p in client.get(f"/v1/plans/{plan['id']}/export/czml", headers=A).json()}
+    other = "Tira" if plan["station_name"] == "Shanghai radar" else "Shanghai radar"
+    assert czml["station"]["name"] == plan["station_name"] and czml["station-1"]["name"] == other
+    lo, hi = czml["document"]["clock"]["interval"].split("/")
+    for key, name in (("access", plan["station_name"]), ("access-station-1", other)):
+        own = [w for w in plan["access_windows"] if w["station"] == name and w["set"] >= lo and w["rise"] <= hi]
+        shown = czml[key]["availability"]
+        assert len(shown) == len(own) if own else isinstance(shown, str), (key, shown, own)
 
 
 @pytest.mark.parametrize(
