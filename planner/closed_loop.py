@@ -34,6 +34,7 @@ from planner.campaign import (
     Shifted,
     Stretch,
     _burn,
+    _coast,
     _return,
     campaign_pole,
     check_scene,
@@ -205,7 +206,7 @@ def replan(
             progress(min(1.0, t_cur / max(end, 1.0)), f"{len(scenes)} scene(s) re-aimed")
     if lost is not None and end - t_cur > 86400.0:  # the rest planned afresh from the state reached
         fresh_start = utc(epoch, math.ceil(t_cur))
-        r_s, v_s = propagate_j2(r, v, t_cur, seconds_between(epoch, fresh_start), pole) if t_cur > 0 else (r, v)
+        r_s, v_s = _coast((r, v), t_cur, seconds_between(epoch, fresh_start), pole)
         carried = Orbit(observer.name, elements=elements_of_state(r_s, v_s, fresh_start))
         fresh_opts = replace(
             opts,
@@ -265,14 +266,14 @@ def _reaim(
         if b.kind in ("perigee", "apogee"):
             if tb < t:
                 continue  # flown before the measured state
-            r, v = propagate_j2(r, v, t, tb, pole) if tb > t else (r, v)
+            r, v = _coast((r, v), t, tb, pole)
             dv = np.asarray(b.dv_km_s, float)
             out.append(_burn(tb, dv, r, v, b.kind, index))
             t, v = tb, v + dv
         elif b.kind == "phasing":
             if tb < t:
                 raise PlannerError("its phasing burn is before the measured state", field="from")
-            r, v = propagate_j2(r, v, t, tb, pole) if tb > t else (r, v)
+            r, v = _coast((r, v), t, tb, pole)
             r_t = target.state(t_access)[0][:, 0]
             goal = r_t + np.asarray(ph.standoff_km_vec, float)
             dv, r_end, v_end = retarget(r, v, tb, goal, t_access, ph.lambert_revolutions, ph.low_path, pole)

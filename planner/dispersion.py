@@ -21,8 +21,9 @@ from numpy.typing import NDArray
 
 from planner.campaign import Campaign, CampaignScene
 from planner.closed_loop import scene_aim
-from planner.errors import PlannerError, SearchRangeError
+from planner.errors import PlannerError, PlanningStopped, SearchRangeError
 from planner.manoeuvre import lambert_options, period_s, retarget
+from planner.plan import StopCheck
 from planner.propagation import Pole, propagate_j2
 
 Vec = NDArray[np.float64]
@@ -166,9 +167,14 @@ def disperse_scene(campaign: Campaign, scene: CampaignScene, opts: DispersionOpt
     )
 
 
-def disperse(campaign: Campaign, opts: DispersionOptions) -> list[SceneDispersion]:
-    """Every scene of a campaign flown with errors."""
-    return [disperse_scene(campaign, s, opts) for s in campaign.scenes]
+def disperse(campaign: Campaign, opts: DispersionOptions, stop: StopCheck | None = None) -> list[SceneDispersion]:
+    """Every scene of a campaign flown with errors; ``stop`` is asked before each scene (PlanningStopped)."""
+    out = []
+    for scene in campaign.scenes:
+        if stop is not None and (reason := stop()):
+            raise PlanningStopped(f"the dispersion stopped: {reason}", field="dispersion")
+        out.append(disperse_scene(campaign, scene, opts))
+    return out
 
 
 def trim_margin_km_s(dispersions: list[SceneDispersion]) -> float:

@@ -272,7 +272,7 @@ EXAMPLE_CAMPAIGNS = {"paper": "paper-campaign.json"}
 
 def cmd_campaign(args: argparse.Namespace) -> int:
     from app.errors import InputError
-    from app.schemas import CampaignCreate, CampaignPublic
+    from app.schemas import CampaignCreate
     from app.services.campaigns import run_campaign
     from app.services.planning import with_radar_of
 
@@ -290,12 +290,9 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     if args.server:
         if args.export or args.plot:
             raise CliError("--export and --plot plan locally; with --server, GET /v1/campaigns/ID/export/... instead")
-        body = call_server(args, "POST", "/v1/campaigns", json=read_json(source), timeout=900).json()
-        if args.json:
-            print(json.dumps(body, indent=2))
-        else:
-            answer = CampaignPublic.model_validate(body)
-            print(f"campaign {answer.id} stored\n" + format_campaign(answer))
+        _print_stored_campaign(
+            args, call_server(args, "POST", "/v1/campaigns", json=read_json(source), timeout=900).json()
+        )
         return 0
 
     shown = []
@@ -350,8 +347,6 @@ def _replan_campaign(args: argparse.Namespace) -> int:
     """``gsa campaign replan ID FILE``: re-plan a stored campaign on the service from FILE's observer and time."""
     from urllib.parse import quote
 
-    from app.schemas import CampaignPublic
-
     if len(args.replan_args) != 2:
         raise CliError('give replan ID FILE: the stored campaign\'s id and {"observer": ..., "from": ...} as JSON')
     if not args.server:
@@ -362,12 +357,19 @@ def _replan_campaign(args: argparse.Namespace) -> int:
     body = call_server(
         args, "POST", f"/v1/campaigns/{quote(campaign_id, safe='')}/replan", json=read_json(source), timeout=900
     ).json()
+    _print_stored_campaign(args, body, f", re-planned from {campaign_id}")
+    return 0
+
+
+def _print_stored_campaign(args: argparse.Namespace, body: dict[str, Any], note: str = "") -> None:
+    """A campaign the service stored, as JSON with --json or as the report."""
+    from app.schemas import CampaignPublic
+
     if args.json:
         print(json.dumps(body, indent=2))
-    else:
-        answer = CampaignPublic.model_validate(body)
-        print(f"campaign {answer.id} stored, re-planned from {campaign_id}\n" + format_campaign(answer))
-    return 0
+        return
+    answer = CampaignPublic.model_validate(body)
+    print(f"campaign {answer.id} stored{note}\n" + format_campaign(answer))
 
 
 def _export_campaign(req: Any, result: Any, folder: Path) -> None:

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 from pydantic import ConfigDict, Field, model_validator
 
-from app.schemas.common import Described, Finite, IsoDateTime, StoredResult, Strict, utc_or_none
+from app.schemas.common import Described, Finite, IsoDateTime, StoredResult, Strict, finite_or_null, utc_or_none
 from app.schemas.orbits import OrbitIn
 from app.schemas.plans import (
     PAPER_EXAMPLE,
@@ -86,15 +86,12 @@ class SceneDispersionPublic(Described):
 
     @classmethod
     def from_dispersion(cls, d: SceneDispersion) -> SceneDispersionPublic:
-        def m_s(x: float) -> float | None:
-            return None if x != x else x * 1000.0
-
         return cls(
             samples=d.samples,
             feasible_share=d.feasible_share,
-            trim_p95_m_s=m_s(d.trim_p95_km_s),
-            trim_max_m_s=m_s(d.trim_max_km_s),
-            miss_p95_km=None if d.miss_p95_km != d.miss_p95_km else d.miss_p95_km,
+            trim_p95_m_s=finite_or_null(d.trim_p95_km_s * 1000.0),
+            trim_max_m_s=finite_or_null(d.trim_max_km_s * 1000.0),
+            miss_p95_km=finite_or_null(d.miss_p95_km),
             failed=d.failed,
         )
 

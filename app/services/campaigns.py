@@ -41,7 +41,7 @@ from planner.campaign import (
     plan_campaign,
 )
 from planner.closed_loop import replan
-from planner.dispersion import SceneDispersion, disperse_scene, trim_margin_km_s
+from planner.dispersion import SceneDispersion, disperse, trim_margin_km_s
 from planner.errors import PlannerError, PlanningStopped
 from planner.orbits import earth_frames, trajectory
 from planner.plan import PlanOptions, StopCheck
@@ -166,15 +166,7 @@ def plan_and_store_campaign(
 
 def dispersed(req: CampaignCreate, campaign: Campaign, stop: StopCheck | None = None) -> list[SceneDispersion] | None:
     """With the request's ``dispersion``, every scene flown with its errors (``planner.dispersion``); else None."""
-    if req.dispersion is None:
-        return None
-    opts = req.dispersion.to_options()
-    out = []
-    for scene in campaign.scenes:
-        if stop is not None and (reason := stop()):
-            raise PlanningStopped(f"the dispersion stopped: {reason}", field="dispersion")
-        out.append(disperse_scene(campaign, scene, opts))
-    return out
+    return None if req.dispersion is None else disperse(campaign, req.dispersion.to_options(), stop)
 
 
 def rebuild(
