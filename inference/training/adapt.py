@@ -353,6 +353,7 @@ def adapt(
         if agreed_stop(time.perf_counter() > deadline, world, torch.device("cpu")):
             say(f"max_minutes {opts.max_minutes:g} reached after epoch {epoch}")
             break
+    del step_u, step_s  # the DDP wrappers hold the process group; they go before it does (see _leave_group)
     if not lead:  # process 0 exports and recalibrates; the others are done
         _leave_group(world)
         return {}
@@ -428,10 +429,16 @@ def adapt(
 
 
 def _leave_group(world: int) -> None:
-    """Under DDP: wait for every process, then leave the group."""
+    """Under DDP: wait for every process, then leave the group.
+
+    The DDP wrappers must be gone first: one still alive at interpreter exit tears down gloo's worker threads there,
+    and the process dies with SIGABRT ("terminate called without an active exception") after its work is done."""
     if world > 1:
+        import gc
+
         import torch.distributed as dist
 
+        gc.collect()
         dist.barrier()
         dist.destroy_process_group()
 

@@ -287,7 +287,13 @@ def train(data_dir: str | Path, out_dir: str | Path, options: TrainOptions | Non
         return _finish(run)
     import torch.distributed as dist
 
+    import gc
+
     record = _finish(run) if run.rank == 0 else {}
+    # The DDP wrappers hold the process group: freed now, not at interpreter exit, where tearing down gloo's worker
+    # threads aborts the process ("terminate called without an active exception", SIGABRT) after its work is done.
+    run.ddp_u = run.ddp_s = None
+    gc.collect()
     dist.barrier()
     dist.destroy_process_group()
     return record
