@@ -50,10 +50,21 @@ def get_or_create_operator(*, session: Session, name: str) -> Operator:
         return op
 
 
+ROLES = ("operator", "admin")  # admin: also the shared default model sets (app.services.model_versions)
+
+
 def create_api_key(
-    *, session: Session, secret: bytes, operator_name: str, key_name: str, key: str | None = None
+    *,
+    session: Session,
+    secret: bytes,
+    operator_name: str,
+    key_name: str,
+    key: str | None = None,
+    role: str = "operator",
 ) -> tuple[ApiKey, str]:
     """Create a key for an operator (created if new); return the row and the plain key (shown once)."""
+    if role not in ROLES:
+        raise ValueError(f"role {role!r}: one of {', '.join(ROLES)}")
     op = get_or_create_operator(session=session, name=operator_name)
     plain = key or new_api_key()
     row = ApiKey(
@@ -62,6 +73,7 @@ def create_api_key(
         prefix=key_prefix(plain),
         key_hash=key_digest(plain, secret),
         hash_scheme=HMAC_SCHEME,
+        role=role,
     )
     session.add(row)
     session.commit()
@@ -70,6 +82,12 @@ def create_api_key(
 
 def operator_for_key(*, session: Session, secret: bytes, key: str) -> Operator | None:
     """Return the operator of an active key: rows found by prefix, digests compared in constant time."""
+    found = key_for(session=session, secret=secret, key=key)
+    return None if found is None else session.get(Operator, found.operator_id)
+
+
+def key_for(*, session: Session, secret: bytes, key: str) -> ApiKey | None:
+    """Return the active stored key ``key`` is: rows found by prefix, digests compared in constant time."""
     rows = session.scalars(select(ApiKey).where(ApiKey.prefix == key_prefix(key), ApiKey.revoked_at.is_(None))).all()
     found = None
     for row in rows:  # every candidate is compared, so the time does not say which one matched
@@ -80,12 +98,23 @@ def operator_for_key(*, session: Session, secret: bytes, key: str) -> Operator |
     if found.hash_scheme == LEGACY_SCHEME:  # rows from before migration 0003: rewrite as HMAC on first use
         found.key_hash, found.hash_scheme = key_digest(key, secret), HMAC_SCHEME
         session.commit()
-    return session.get(Operator, found.operator_id)
+    return found
 
 
 def list_api_keys(*, session: Session) -> list[tuple[ApiKey, Operator]]:
     rows = session.execute(select(ApiKey, Operator).join(Operator).order_by(ApiKey.created_at)).all()
     return [(k, o) for k, o in rows]
+
+
+def set_key_role(*, session: Session, key_id: str, role: str) -> ApiKey | None:
+    """Give key ``key_id`` the role ``role`` (operator or admin); None when there is no such key."""
+    if role not in ROLES:
+        raise ValueError(f"role {role!r}: one of {', '.join(ROLES)}")
+    row = session.get(ApiKey, key_id)
+    if row is not None:
+        row.role = role
+        session.commit()
+    return row
 
 
 def revoke_api_key(*, session: Session, key_id: str) -> ApiKey | None:

@@ -138,6 +138,15 @@ DATABASE_DOWN: tuple[type[Exception], ...] = (
 )
 
 
+class Forbidden(Exception):
+    """A request the caller's key has no role for (HTTP 403): the message says which role and how to get it."""
+
+
+class VersionUnusable(Exception):
+    """A promoted model version's files cannot be loaded here (damaged, removed, or computing otherwise): HTTP 503,
+    the server's fault, not the request's; promoting another version (or 0) mends it."""
+
+
 class TooLarge(Exception):
     """A request over one of the service's size limits, found while reading it (HTTP 413): send less."""
 
@@ -182,6 +191,15 @@ def install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(TooLarge)
     async def _too_large(_request: Request, exc: TooLarge) -> JSONResponse:
         return SafeJSONResponse(status_code=413, content={"detail": str(exc), "request_id": current_request_id()})
+
+    @app.exception_handler(Forbidden)
+    async def _forbidden(_request: Request, exc: Forbidden) -> JSONResponse:
+        return SafeJSONResponse(status_code=403, content={"detail": str(exc), "request_id": current_request_id()})
+
+    @app.exception_handler(VersionUnusable)
+    async def _version_unusable(_request: Request, exc: VersionUnusable) -> JSONResponse:
+        errors_log.error("%s", exc)
+        return SafeJSONResponse(status_code=503, content={"detail": str(exc), "request_id": current_request_id()})
 
     @app.exception_handler(PlanningStopped)
     async def _planning_stopped(_request: Request, exc: PlanningStopped) -> JSONResponse:

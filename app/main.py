@@ -125,7 +125,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         )
     from app.services.model_versions import Served
 
-    app.state.served = Served(settings.data_dir, threads=settings.ort_threads or None, fit_threads=settings.fit_threads)
+    app.state.served = Served(
+        settings.data_dir,
+        threads=settings.ort_threads or None,
+        fit_threads=settings.fit_threads,
+        max_loaded=settings.max_loaded_versions,
+    )
     from app.services import jobs
 
     app.state.jobs = jobs.Dispatcher(settings, make_session_factory(engine))
@@ -171,7 +176,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             "status": "ready" if db["ok"] else "not ready",
             "database": db,
             "models": app.state.model_sets.default.identity,
-            "model_sets": app.state.model_sets.describe(),
+            # no server path: /readyz answers without a key
+            "model_sets": [{k: v for k, v in d.items() if k != "dir"} for d in app.state.model_sets.describe()],
             "targets": app.state.checkers.names,
         }
         return body if db["ok"] else JSONResponse(status_code=503, content=body)

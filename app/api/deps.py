@@ -90,20 +90,30 @@ def get_current_operator(
             detail=f"too many wrong API keys from this address (GSA_AUTH_FAILURES_PER_MINUTE); retry in {wait:.0f} s",
             headers={"Retry-After": str(max(1, math.ceil(wait)))},
         )
-    op = crud.operator_for_key(session=session, secret=request.app.state.key_secret, key=key)
+    stored = crud.key_for(session=session, secret=request.app.state.key_secret, key=key)
+    op = None if stored is None else session.get(Operator, stored.operator_id)
+    role = "operator" if stored is None else stored.role
     matches = [digests_equal(key, k) for k in settings.env_api_keys]  # every one compared: constant time
     if op is None and any(matches):
-        # Keys from GSA_API_KEYS: each is its own operator, created on first use.
+        # Keys from GSA_API_KEYS and GSA_ADMIN_API_KEYS: each is its own operator, created on first use.
         op = crud.get_or_create_operator(session=session, name=f"env-{key_fingerprint(key)}")
         session.commit()
+        admins = [digests_equal(key, k) for k in settings.env_admin_keys]
+        role = "admin" if any(admins) else "operator"
     if op is None:
         if throttle is not None:
             throttle.failed(client)
         raise HTTPException(status_code=401, detail="invalid or revoked API key")
+    request.state.role = role  # the key's role, for the routes that need an admin (is_admin)
     return op
 
 
 CurrentOperator = Annotated[Operator, Depends(get_current_operator)]
+
+
+def is_admin(request: Request) -> bool:
+    """Whether the request's key has the admin role (after ``get_current_operator`` has run)."""
+    return getattr(request.state, "role", "operator") == "admin"
 
 
 def get_model_sets(request: Request) -> ModelSets:
@@ -119,11 +129,13 @@ def models_for(model_sets: ModelSets, checker: Checker) -> Estimator:
     return model_sets.for_target(checker.model.name)
 
 
-def answering(request: Request, session: Session, model_sets: ModelSets, checkers: Any, target: str | None) -> Any:
-    """(Estimator, Checker) that answer ``target`` now: its promoted version's networks and calibration, where a
-    version is promoted (``app.services.model_versions``), else the configured set's."""
+def answering(
+    request: Request, session: Session, model_sets: ModelSets, checkers: Any, target: str | None, operator: Operator
+) -> Any:
+    """(Estimator, Checker) that answer ``target`` for ``operator`` now: the networks and calibration of the version
+    promoted for it, or of the shared default (``app.services.model_versions``), else the configured set's."""
     checker = checker_for(checkers, target)
-    return request.app.state.served.resolve(session, model_sets, checker)
+    return request.app.state.served.resolve(session, model_sets, checker, operator.id)
 
 
 def get_checkers(request: Request) -> Checkers:

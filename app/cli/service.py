@@ -106,13 +106,18 @@ def cmd_keys(args: argparse.Namespace) -> int:
                 secret=_secret(load_settings()),
                 operator_name=args.operator or args.name,
                 key_name=args.name,
+                role="admin" if args.admin else "operator",
             )
             print(f"{row.id}  {key}")
             print("store this key now: only its hash is kept", file=sys.stderr)
         elif args.keys_cmd == "list":
             for row, op in crud.list_api_keys(session=session):
                 state = "revoked" if row.revoked_at else "active"
-                print(f"{row.id}  {row.prefix}...  {row.name}  operator={op.name}  {state}")
+                print(f"{row.id}  {row.prefix}...  {row.name}  operator={op.name}  role={row.role}  {state}")
+        elif args.keys_cmd == "role":
+            if crud.set_key_role(session=session, key_id=args.id, role=args.role) is None:
+                raise CliError(f"no key with id {args.id}")
+            print(f"{args.id}: role {args.role}")
         else:
             if crud.revoke_api_key(session=session, key_id=args.id) is None:
                 raise CliError(f"no key with id {args.id}")

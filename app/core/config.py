@@ -16,7 +16,8 @@ class Settings(BaseSettings):
     """Service settings, read from ``GSA_*`` environment variables (and a ``.env`` file if present).
 
     ``GSA_DATABASE_URL`` defaults to a SQLite file under ``GSA_DATA_DIR``;
-    ``GSA_API_KEYS`` is a comma-separated list of keys accepted besides the stored ones.
+    ``GSA_API_KEYS`` is a comma-separated list of keys accepted besides the stored ones;
+    ``GSA_ADMIN_API_KEYS`` likewise, keys with the admin role (they may change the shared default model sets).
     ``GSA_KEY_SECRET`` is the HMAC secret API keys are stored under; when unset it is
     made once and kept in ``GSA_DATA_DIR/key-secret`` (several hosts must share one).
     ``GSA_ORPHAN_GRACE_S``: image files no row refers to are removed at start-up once
@@ -33,6 +34,7 @@ class Settings(BaseSettings):
     data_dir: Path = Path("data")
     database_url: str = ""
     api_keys: str = ""
+    admin_api_keys: str = ""
     host: str = "127.0.0.1"
     port: int = 8000
     max_page_size: int = Field(default=100, ge=1, le=10_000)
@@ -62,6 +64,9 @@ class Settings(BaseSettings):
     ort_threads: int = Field(default=0, ge=0, le=256, description="0: all cores")
     fit_threads: int = Field(
         default=0, ge=0, le=256, description="frames of one batch or pass fitted at once; 0: one a core"
+    )
+    max_loaded_versions: int = Field(
+        default=4, ge=1, le=256, description="adapted model versions kept loaded per process (LRU; ~220 MB each)"
     )
     ort_run_batch: int = Field(default=DEFAULT_RUN_BATCH, ge=1, le=256, description="frames per ONNX Runtime run")
     target_model: Path | None = None
@@ -98,7 +103,7 @@ class Settings(BaseSettings):
         short = [k for k in self.env_api_keys if len(k) < MIN_KEY_LENGTH]
         if short:
             raise ValueError(
-                f"GSA_API_KEYS holds a key of {len(short[0])} characters; each key needs at least {MIN_KEY_LENGTH} "
+                f"GSA_API_KEYS or GSA_ADMIN_API_KEYS holds a key of {len(short[0])} characters; each key needs at least {MIN_KEY_LENGTH} "
                 "(a short key is guessed): make one with `gsa keys create` or `openssl rand -hex 16`"
             )
         return self
@@ -109,7 +114,12 @@ class Settings(BaseSettings):
 
     @property
     def env_api_keys(self) -> list[str]:
-        return [k.strip() for k in self.api_keys.split(",") if k.strip()]
+        """Every key from the environment, admin keys included."""
+        return [k.strip() for k in f"{self.api_keys},{self.admin_api_keys}".split(",") if k.strip()]
+
+    @property
+    def env_admin_keys(self) -> list[str]:
+        return [k.strip() for k in self.admin_api_keys.split(",") if k.strip()]
 
 
 def get_settings() -> Settings:

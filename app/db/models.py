@@ -52,6 +52,8 @@ class ApiKey(Base):
     prefix: Mapped[str] = mapped_column(String(16), index=True)
     key_hash: Mapped[str] = mapped_column(String(64), unique=True)
     hash_scheme: Mapped[str] = mapped_column(String(16), default="hmac-sha256")
+    # "operator": the operator's own objects; "admin": also the shared default model sets (``gsa keys role``).
+    role: Mapped[str] = mapped_column(String(16), default="operator", server_default="operator")
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     revoked_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
 
@@ -188,8 +190,8 @@ class LabelledFrame(Base):
 
 
 class ModelVersion(Base):
-    """An adapted version of a target's model set (``gsa adapt`` run by the service); version 0, the configured
-    set (GSA_MODEL_DIR), has no row. At most one version of a target is promoted: it answers that target."""
+    """An adapted version of a target's model set (``gsa adapt`` run by the service), its operator's own; version 0,
+    the configured set (GSA_MODEL_DIR), has no row. Which version answers whom is a ``ModelPromotion``."""
 
     __tablename__ = "model_versions"
     __table_args__ = (UniqueConstraint("target", "version", name="uq_model_versions_target_version"),)
@@ -202,7 +204,22 @@ class ModelVersion(Base):
     base_version: Mapped[int] = mapped_column(Integer)
     dir: Mapped[str] = mapped_column(String(500))
     summary: Mapped[dict[str, Any]] = mapped_column(JSON)
-    promoted: Mapped[bool] = mapped_column(Boolean, default=False)
+
+
+SHARED_SCOPE = "shared"  # a ModelPromotion's scope for every operator without one of its own
+
+
+class ModelPromotion(Base):
+    """The version that answers a target for one operator (``scope`` its id), or for every operator without a
+    promotion of its own (``scope`` "shared", set by an admin key). No row: version 0, the configured set."""
+
+    __tablename__ = "model_promotions"
+
+    scope: Mapped[str] = mapped_column(String(36), primary_key=True)
+    target: Mapped[str] = mapped_column(String(200), primary_key=True)
+    version: Mapped[int] = mapped_column(Integer)
+    promoted_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    promoted_by: Mapped[str | None] = mapped_column(String(36), nullable=True)
 
 
 JOB_ACTIVE = ("queued", "running")

@@ -102,23 +102,33 @@ class ModelVersionPublic(Described):
     version: int
     """the version (0: the set the service was started with)"""
     promoted: bool
-    """whether it answers the target now"""
+    """whether it answers you for this target now"""
+    mine: bool = False
+    """whether you made it (your adaptation); version 0 and the shared default are not"""
+    shared_default: bool = False
+    """whether it answers every operator without a promotion of its own (an admin key chooses it)"""
     created_at: datetime | None = None
     """when it was made (UTC; none for version 0)"""
     base_version: int | None = None
     """the version it was adapted from"""
     summary: dict[str, Any] = Field(default_factory=dict)
     """how it was made: labelled frames and scenes (with a sha256 of their list), held-out figures before and after,
-    the trust calibration, CPU minutes; version 0: its networks' identity"""
+    the trust calibration, CPU minutes (only of your own versions, or to an admin key); version 0: its networks'
+    identity"""
 
     @classmethod
-    def from_row(cls, row: ModelVersion) -> ModelVersionPublic:
+    def from_row(
+        cls, row: ModelVersion, *, answering: int, shared: int, operator_id: str, admin: bool
+    ) -> ModelVersionPublic:
+        mine = row.operator_id == operator_id
         return cls(
             version=row.version,
-            promoted=row.promoted,
+            promoted=row.version == answering,
+            mine=mine,
+            shared_default=row.version == shared,
             created_at=utc_or_none(row.created_at),
             base_version=row.base_version,
-            summary=dict(row.summary),
+            summary=dict(row.summary) if mine or admin else {},
         )
 
 
@@ -126,9 +136,11 @@ class ModelSetPublic(Described):
     target: str
     """the target the set was trained on"""
     answering_version: int
-    """the version that answers this target now (0 when none is promoted)"""
+    """the version that answers you for this target now: yours where you promoted one, else the shared default"""
+    shared_version: int
+    """the shared default: what answers every operator without a promotion of its own (0: the configured set)"""
     versions: list[ModelVersionPublic]
-    """every version, 0 first"""
+    """the versions you may see, 0 first: yours and the shared default (an admin key: every operator's)"""
 
 
 class ModelSetsPublic(Described):

@@ -1,10 +1,18 @@
-"""Model-set versions and adaptations: what answers a target now, and the jobs that make new versions.
+"""Model-set versions and adaptations: what answers each operator's target now, and the jobs that make versions.
 
-Version 0 of a target's set is the folder the service was started with (GSA_MODEL_DIR, GSA_EXTRA_MODEL_DIRS);
-each adaptation (``gsa adapt`` on the operator's labelled frames, run as a child process so the service stays
-responsive) makes the next version under ``GSA_DATA_DIR/model-sets/TARGET/vN``, not promoted. One version per
-target is promoted (a row's flag; none promoted: version 0); every request reads it from the database, so every
-worker and host answers with the same version as soon as it is promoted, and rolls back as soon as 0 is.
+Version 0 of a target's set is the folder the service was started with (GSA_MODEL_DIR, GSA_EXTRA_MODEL_DIRS),
+shared and read-only. Each adaptation (``gsa adapt`` on the operator's labelled frames, run as a child process so
+the service stays responsive) makes the next version under ``GSA_DATA_DIR/model-sets/TARGET/vN``, the operator's
+own, not promoted. The tenancy:
+
+- an operator promotes its own versions, for itself alone (a ``ModelPromotion`` row with its id as scope);
+- an admin key may also promote any version as the shared default (scope "shared"): it answers every operator
+  without a promotion of its own;
+- no promotion at all: version 0.
+
+Every request reads the promotions from the database, so every worker and host answers with the same version as
+soon as it is promoted. A promotion passes a quality gate first (``Served.gate``): the files verified and a smoke
+estimate run, or the promotion is refused.
 """
 
 from __future__ import annotations
@@ -17,60 +25,155 @@ import subprocess
 import sys
 import tempfile
 import threading
+from collections import OrderedDict
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import func, select, update
+from sqlalchemy import delete, func, select
 from sqlalchemy.orm import Session
 
 from app.core.config import Settings
-from app.db.models import Job, ModelVersion, utcnow
-from app.errors import InputError
+from app.db.models import SHARED_SCOPE, Job, ModelPromotion, ModelVersion, utcnow
+from app.errors import Conflict, Forbidden, InputError, VersionUnusable
 
 EPOCH = re.compile(r"epoch (\d+)/(\d+)")
 
 
-def promoted(session: Session, target: str) -> ModelVersion | None:
-    return session.scalar(select(ModelVersion).where(ModelVersion.target == target, ModelVersion.promoted.is_(True)))
+def version_row(session: Session, target: str, version: int) -> ModelVersion | None:
+    """The row of ``version`` of ``target`` (None for 0, the configured set); LookupError when there is none."""
+    if version == 0:
+        return None
+    row = session.scalar(select(ModelVersion).where(ModelVersion.target == target, ModelVersion.version == version))
+    if row is None:
+        raise LookupError(version)
+    return row
 
 
-def versions(session: Session) -> list[ModelVersion]:
-    return list(session.scalars(select(ModelVersion).order_by(ModelVersion.target, ModelVersion.version)))
+def _promoted_version(session: Session, scope: str, target: str) -> int | None:
+    row = session.get(ModelPromotion, (scope, target))
+    return None if row is None else int(row.version)
 
 
-def promote(session: Session, target: str, version: int) -> None:
-    """Promote ``version`` of ``target`` (0: the configured set, a rollback); the others are demoted with it."""
-    if version != 0:
-        row = session.scalar(select(ModelVersion).where(ModelVersion.target == target, ModelVersion.version == version))
-        if row is None:
-            raise LookupError(version)
-    session.execute(update(ModelVersion).where(ModelVersion.target == target).values(promoted=False))
-    if version != 0:
-        session.execute(
-            update(ModelVersion)
-            .where(ModelVersion.target == target, ModelVersion.version == version)
-            .values(promoted=True)
+def shared_version(session: Session, target: str) -> int:
+    """The version that answers ``target`` for every operator without a promotion of its own (0: none promoted)."""
+    return _promoted_version(session, SHARED_SCOPE, target) or 0
+
+
+def answering_version(session: Session, operator_id: str, target: str) -> int:
+    """The version that answers ``target`` for ``operator_id``: its own promotion, else the shared default."""
+    own = _promoted_version(session, operator_id, target)
+    return own if own is not None else shared_version(session, target)
+
+
+def answering_row(session: Session, operator_id: str, target: str) -> ModelVersion | None:
+    """The row of the version that answers ``target`` for ``operator_id`` (None: the configured set)."""
+    return version_row(session, target, answering_version(session, operator_id, target))
+
+
+def visible(session: Session, operator_id: str, target: str, admin: bool = False) -> list[ModelVersion]:
+    """The versions of ``target`` the operator may see, use and promote: its own and the shared default (an admin
+    key: every operator's, since it chooses the shared default among them)."""
+    q = select(ModelVersion).where(ModelVersion.target == target).order_by(ModelVersion.version)
+    if admin:
+        return list(session.scalars(q))
+    shared = shared_version(session, target)
+    return [r for r in session.scalars(q) if r.operator_id == operator_id or r.version == shared]
+
+
+def usable_row(
+    session: Session, operator_id: str, target: str, version: int, admin: bool = False
+) -> ModelVersion | None:
+    """The row of a version the operator may use (None for 0); LookupError for one it may not see or none at all."""
+    if version == 0:
+        return None
+    for row in visible(session, operator_id, target, admin):
+        if row.version == version:
+            return row
+    raise LookupError(version)
+
+
+def promote(session: Session, *, operator_id: str, target: str, version: int, shared: bool = False) -> None:
+    """Promote ``version`` of ``target`` for the operator alone, or (``shared``: an admin's) for every operator
+    without a promotion of its own. Version 0 withdraws the promotion: the operator is answered by the shared
+    default again, and the shared default is the configured set again. One statement, so concurrent promotions
+    neither deadlock nor leave two answering."""
+    scope = SHARED_SCOPE if shared else operator_id
+    if version == 0:
+        session.execute(delete(ModelPromotion).where(ModelPromotion.scope == scope, ModelPromotion.target == target))
+        session.commit()
+        return
+    values = {"scope": scope, "target": target, "version": version, "promoted_at": utcnow(), "promoted_by": operator_id}
+    dialect = session.get_bind().dialect.name
+    if dialect == "postgresql":
+        from sqlalchemy.dialects.postgresql import insert as pg_insert
+
+        pg = pg_insert(ModelPromotion).values(**values)
+        stmt: Any = pg.on_conflict_do_update(
+            index_elements=["scope", "target"],
+            set_={k: pg.excluded[k] for k in ("version", "promoted_at", "promoted_by")},
         )
+    else:
+        from sqlalchemy.dialects.sqlite import insert as sqlite_insert
+
+        lite = sqlite_insert(ModelPromotion).values(**values)
+        stmt = lite.on_conflict_do_update(
+            index_elements=["scope", "target"],
+            set_={k: lite.excluded[k] for k in ("version", "promoted_at", "promoted_by")},
+        )
+    session.execute(stmt)
     session.commit()
 
 
+DEFAULT_LOADED = 4  # adapted versions kept loaded per process (about 220 MB each), the least recently used evicted
+
+
+def promote_checked(
+    session: Session,
+    served: Served,
+    checker: Any,
+    *,
+    operator_id: str,
+    target: str,
+    version: int,
+    shared: bool,
+    admin: bool,
+) -> None:
+    """Promote after the checks: ``Forbidden`` when ``shared`` without an admin key, LookupError for a version
+    the caller may not see, ``Conflict`` naming why when the version fails the quality gate (``Served.gate``)."""
+    if shared and not admin:
+        raise Forbidden(
+            "changing the shared default needs an admin key (gsa keys role ID admin, or GSA_ADMIN_API_KEYS); "
+            "promote without shared=true to change what answers you alone"
+        )
+    row = usable_row(session, operator_id, target, version, admin=shared)
+    if row is not None:
+        problem = served.gate(row, checker)
+        if problem:
+            raise Conflict(f"version {version} of {target} was not promoted: {problem}")
+    promote(session, operator_id=operator_id, target=target, version=version, shared=shared)
+
+
 class Served:
-    """The networks and checks that answer each target: its promoted version's, or the configured set's.
+    """The networks and checks that answer each operator and target: its promoted version's, or the configured
+    set's.
 
     A version's networks and its calibration (its ``trust.json``: the radar it was adapted to) load on first
-    use and stay loaded.
+    use and stay loaded, at most ``max_loaded`` versions at once (the least recently used is dropped).
     """
 
-    def __init__(self, data_dir: Path, threads: int | None = None, fit_threads: int = 0) -> None:
+    def __init__(
+        self, data_dir: Path, threads: int | None = None, fit_threads: int = 0, max_loaded: int = DEFAULT_LOADED
+    ) -> None:
         self.data_dir = Path(data_dir)
         self.threads = threads
         self.fit_threads = fit_threads
-        self._loaded: dict[tuple[str, int], tuple[Any, Any]] = {}
+        self.max_loaded = max(1, max_loaded)
+        self._loaded: OrderedDict[tuple[str, int], tuple[Any, Any]] = OrderedDict()
         self._lock = threading.Lock()
 
-    def resolve(self, session: Session, model_sets: Any, checker: Any) -> tuple[Any, Any]:
-        """(Estimator, Checker) for the checker's target: its promoted version's where one is promoted."""
-        return self.version(promoted(session, checker.model.name), model_sets, checker)
+    def resolve(self, session: Session, model_sets: Any, checker: Any, operator_id: str) -> tuple[Any, Any]:
+        """(Estimator, Checker) that answer the checker's target for ``operator_id`` (``answering_row``)."""
+        return self.version(answering_row(session, operator_id, checker.model.name), model_sets, checker)
 
     def version(self, row: ModelVersion | None, model_sets: Any, checker: Any) -> tuple[Any, Any]:
         """(Estimator, Checker) of one version of the checker's target (None: version 0, the configured set)."""
@@ -78,9 +181,21 @@ class Served:
             return model_sets.for_target(checker.model.name), checker
         key = (row.target, row.version)
         with self._lock:
-            if key not in self._loaded:
-                self._loaded[key] = self._load(self.data_dir / row.dir, checker)
-            return self._loaded[key]
+            if key in self._loaded:
+                self._loaded.move_to_end(key)
+                return self._loaded[key]
+            try:
+                loaded = self._load(self.data_dir / row.dir, checker)
+            except Exception as exc:  # onnxruntime's, numpy's, json's: every way a folder on disk can fail
+                raise VersionUnusable(
+                    f"version {row.version} of {row.target}, which answers this request, cannot be loaded here "
+                    f"({_without_paths(exc)}); promote another version, or 0 "
+                    f"(POST /v1/model-sets/{row.target}/versions/0/promote)"
+                ) from None
+            self._loaded[key] = loaded
+            while len(self._loaded) > self.max_loaded:
+                self._loaded.popitem(last=False)
+            return loaded
 
     def _load(self, folder: Path, base_checker: Any) -> tuple[Any, Any]:
         from inference.runtime import Estimator
@@ -92,10 +207,35 @@ class Served:
         cal = Calibration.load(path) if path.is_file() else base_checker.calibration
         return est, Checker(base_checker.model, radar, cal, networks=True, threads=self.fit_threads)
 
+    def gate(self, row: ModelVersion, base_checker: Any) -> str | None:
+        """The promotion's quality gate: why ``row`` may not answer anyone, or None when it may. Its files are
+        loaded afresh (each checked against the sha256 its card records, UNet++ against its export self-check) and
+        one smoke estimate runs: a seeded frame through both networks, whose angles must be finite and in range."""
+        import numpy as np
 
-def load_answering(settings: Settings, session: Session, target: str, version: int | None = None) -> tuple[Any, Any]:
-    """(Estimator, Checker) of ``target`` as the service answers it (its promoted version), or of ``version``
-    (0: the configured set), loaded from the settings alone: what a job's worker process uses."""
+        try:
+            est, _checker = self._load(self.data_dir / row.dir, base_checker)
+            frame = np.random.default_rng(0).random((1, est.img_size, est.img_size), dtype=np.float32)
+            out = est.estimate(frame)
+        except Exception as exc:
+            return f"version {row.version}'s files do not load: {_without_paths(exc)}"
+        angles = np.asarray(out.angles_deg, np.float64)
+        if angles.shape != (1, 3) or not np.isfinite(angles).all() or float(np.abs(angles).max()) > 360.0:
+            return f"version {row.version}'s smoke estimate answered {angles.tolist()}, not three finite angles"
+        return None
+
+
+def _without_paths(exc: BaseException) -> str:
+    """An error's first line with the server's absolute paths cut to their last part (no server path leaves)."""
+    text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    return re.sub(r"(?:/[^/\s'\"]+)+/([^/\s'\"]+)", r"\1", text)[:300]
+
+
+def load_answering(
+    settings: Settings, session: Session, target: str, operator_id: str, version: int | None = None
+) -> tuple[Any, Any]:
+    """(Estimator, Checker) of ``target`` as the service answers ``operator_id`` (its promoted version), or of
+    ``version`` (0: the configured set), loaded from the settings alone: what a job's worker process uses."""
     from inference.runtime import ModelSets
     from inference.trust import load_checkers
 
@@ -108,14 +248,7 @@ def load_answering(settings: Settings, session: Session, target: str, version: i
         settings.default_target,
         threads=settings.fit_threads,
     )
-    if version is None:
-        row = promoted(session, target)
-    elif version == 0:
-        row = None
-    else:
-        row = session.scalar(select(ModelVersion).where(ModelVersion.target == target, ModelVersion.version == version))
-        if row is None:
-            raise LookupError(version)
+    row = answering_row(session, operator_id, target) if version is None else version_row(session, target, version)
     served = Served(settings.data_dir, threads=settings.ort_threads or None, fit_threads=settings.fit_threads)
     return served.version(row, sets, checkers.get(target))
 
@@ -129,7 +262,8 @@ def start(
     base_dir: Path,
     options: dict[str, Any],
 ) -> Job:
-    """Check the request and queue the adaptation as a job (``app.services.jobs``; one per target at a time)."""
+    """Check the request and queue the adaptation as a job (``app.services.jobs``; one per operator and target at a
+    time)."""
     from app.services import jobs
     from app.services.labelled import summarise
 
@@ -144,8 +278,8 @@ def start(
         session,
         operator_id=operator_id,
         kind="adaptation",
-        key=f"adaptation:{target}",
-        busy_message=f"an adaptation of {target} is already queued or running; wait for it (one at a time)",
+        key=f"adaptation:{operator_id}:{target}",
+        busy_message=f"an adaptation of {target} of yours is already queued or running; wait for it (one at a time)",
         params={"target": target, "options": options, "frames": summary.count, "base_dir": str(base_dir)},
         engine="ray" if settings.ray_address else "local",
     )
@@ -166,7 +300,7 @@ def run_adaptation(ctx: Any) -> dict[str, Any]:
     try:
         with ctx.session_factory() as s:
             frames = frames_of(session=s, operator_id=operator_id, target=target, data_dir=settings.data_dir)
-            row = promoted(s, target)
+            row = answering_row(s, operator_id, target)  # the version that answers this operator now
             base_dir = Path(ctx.params["base_dir"])
             base, base_version = (settings.data_dir / row.dir, row.version) if row else (base_dir, 0)
             number = int(s.scalar(select(func.max(ModelVersion.version)).where(ModelVersion.target == target)) or 0) + 1
@@ -260,7 +394,6 @@ def run_adaptation(ctx: Any) -> dict[str, Any]:
                     base_version=base_version,
                     dir=str(rel),
                     summary=summary,
-                    promoted=False,
                 )
             )
             s.commit()

@@ -195,7 +195,7 @@ def run_pass_job(ctx: Any) -> dict[str, Any]:
         ]
         ctx.report(stage=f"loading the models of {p['target']}")
         with ctx.session_factory() as session:
-            est, checker = load_answering(ctx.settings, session, p["target"])
+            est, checker = load_answering(ctx.settings, session, p["target"], ctx.operator_id)
             ctx.report(stage=f"fitting and fusing {len(uploads)} frames", done=0, total=len(uploads))
             row = create_pass(
                 session=session,

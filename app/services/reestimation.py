@@ -18,19 +18,20 @@ from app.core.config import Settings
 from app.db.models import Estimate, Job, ModelVersion
 from app.errors import InputError
 from app.services import jobs
+from app.services.model_versions import load_answering, usable_row
 
 MAX_LISTED = 1000  # pairs kept in the job's result; the counts and the median cover them all
 
 
-def _version_row(session: Session, target: str, version: int) -> ModelVersion | None:
-    if version == 0:
-        return None
-    row = session.scalar(select(ModelVersion).where(ModelVersion.target == target, ModelVersion.version == version))
-    if row is None:
+def _version_row(session: Session, operator_id: str, target: str, version: int) -> ModelVersion | None:
+    """The version's row (None: 0), when it is one the operator may use: its own, or the shared default."""
+    try:
+        return usable_row(session, operator_id, target, version)
+    except LookupError:
         raise InputError(
-            ["version"], f"{target} has no version {version} (GET /v1/model-sets lists them; 0: the configured set)"
-        )
-    return row
+            ["version"],
+            f"{target} has no version {version} of yours (GET /v1/model-sets lists them; 0: the configured set)",
+        ) from None
 
 
 def _estimates(session: Session, operator_id: str, target: str, plan_id: str | None, limit: int) -> list[Estimate]:
@@ -58,7 +59,7 @@ def submit_reestimation(
     limit: int,
 ) -> Job:
     """Check the request (the version exists; there are estimates to read again) and queue it."""
-    _version_row(session, target, version)
+    _version_row(session, operator_id, target, version)
     rows = _estimates(session, operator_id, target, plan_id, limit)
     if not rows:
         where = f" of plan {plan_id}" if plan_id else ""
@@ -86,15 +87,14 @@ def run_reestimation(ctx: Any) -> dict[str, Any]:
 
     from app.services import images
     from app.services.estimation import EstimateRequest, estimate_and_store
-    from app.services.model_versions import load_answering
     from app.services.uploads import Upload
 
     settings: Settings = ctx.settings
     target, version = ctx.params["target"], int(ctx.params["version"])
     ctx.report(stage=f"loading version {version} of {target}")
     with ctx.session_factory() as session:
-        _version_row(session, target, version)
-        est, checker = load_answering(settings, session, target, version)
+        _version_row(session, ctx.operator_id, target, version)
+        est, checker = load_answering(settings, session, target, ctx.operator_id, version)
         olds = _estimates(session, ctx.operator_id, target, ctx.params.get("plan_id"), int(ctx.params["limit"]))
         pairs: list[dict[str, Any]] = []
         before = after = 0

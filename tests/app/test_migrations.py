@@ -48,6 +48,7 @@ def test_upgrade_downgrade_upgrade(url):
         "model_versions",
         "jobs",
         "plan_exports",
+        "model_promotions",
     }
     command.downgrade(cfg, "base")
     assert _tables(url) == set()
@@ -64,6 +65,7 @@ def test_upgrade_downgrade_upgrade(url):
         "model_versions",
         "jobs",
         "plan_exports",
+        "model_promotions",
     }
     engine = create_engine(url)
     with engine.connect() as conn:

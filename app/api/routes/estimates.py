@@ -110,7 +110,7 @@ async def create_estimate(
     snr_db: Annotated[float | None, Form(ge=-100, le=200, description=SNR_DB)] = None,
 ) -> EstimatePublic:
     """Estimate the attitude of one ISAR frame: Swin's answer, fitted to the target's projection and checked; stored."""
-    est, checker = answering(request, session, model_sets, checkers, asked.target)
+    est, checker = answering(request, session, model_sets, checkers, asked.target, operator)
     started = time.perf_counter()
     data = await read_upload(file, settings.max_upload_bytes)
     # Decoding, the models and the database run in a worker thread, so the event loop keeps serving meanwhile.
@@ -146,7 +146,7 @@ async def create_estimates_batch(
     files: Annotated[list[UploadFile], File(description="several frames, or one .npz stack [N, H, W]; " + FILE)],
 ) -> EstimatesPublic:
     """Estimate several frames as one batch through the models, each fitted and checked; one stored row each."""
-    est, checker = answering(request, session, model_sets, checkers, asked.target)
+    est, checker = answering(request, session, model_sets, checkers, asked.target, operator)
     started = time.perf_counter()
     uploads = await read_uploads(files, settings)
     async with client_watch(request) as gone:  # the client gone: the fit stops between frames, nothing stored

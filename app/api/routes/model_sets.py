@@ -4,11 +4,20 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body, HTTPException, Request
+from fastapi import APIRouter, Body, HTTPException, Query, Request
 from fastapi import Path as PathParam
 from fastapi.responses import JSONResponse
 
-from app.api.deps import CheckersDep, CurrentOperator, ModelSetsDep, SessionDep, SettingsDep, checker_for, queued
+from app.api.deps import (
+    CheckersDep,
+    CurrentOperator,
+    ModelSetsDep,
+    SessionDep,
+    SettingsDep,
+    checker_for,
+    is_admin,
+    queued,
+)
 from app.schemas import (
     AdaptationCreate,
     AdaptationPublic,
@@ -26,20 +35,30 @@ from app.services.reestimation import submit_reestimation
 router = APIRouter(prefix="/model-sets", tags=["model sets"])
 
 
-def _set_of(session: Any, model_sets: Any, target: str) -> ModelSetPublic:
-    rows = [r for r in mv.versions(session) if r.target == target]
-    est = model_sets.for_target(target)
-    answering = next((r.version for r in rows if r.promoted), 0)
-    base = ModelVersionPublic(version=0, promoted=answering == 0, summary={"dir": str(est.model_dir), **est.identity})
-    return ModelSetPublic(
-        target=target, answering_version=answering, versions=[base, *(ModelVersionPublic.from_row(r) for r in rows)]
+def _set_of(session: Any, model_sets: Any, target: str, operator_id: str, admin: bool) -> ModelSetPublic:
+    """The target's set as ``operator_id`` sees it: version 0, its own versions and the shared default (an admin
+    key: every version); never another operator's details or a server path."""
+    answering = mv.answering_version(session, operator_id, target)
+    shared = mv.shared_version(session, target)
+    base = ModelVersionPublic(
+        version=0, promoted=answering == 0, shared_default=shared == 0, summary=model_sets.for_target(target).identity
     )
+    rows = mv.visible(session, operator_id, target, admin)
+    listed = [
+        ModelVersionPublic.from_row(r, answering=answering, shared=shared, operator_id=operator_id, admin=admin)
+        for r in rows
+    ]
+    return ModelSetPublic(target=target, answering_version=answering, shared_version=shared, versions=[base, *listed])
 
 
 @router.get("", response_model=ModelSetsPublic)
-def list_model_sets(session: SessionDep, operator: CurrentOperator, model_sets: ModelSetsDep) -> ModelSetsPublic:
-    """Every target's model set: its versions (0, the configured set, and each adaptation) and which one answers."""
-    return ModelSetsPublic(data=[_set_of(session, model_sets, t) for t in model_sets.sets])
+def list_model_sets(
+    request: Request, session: SessionDep, operator: CurrentOperator, model_sets: ModelSetsDep
+) -> ModelSetsPublic:
+    """Every target's model set as it answers you: the versions you may see (0, the configured set; your own
+    adaptations; the shared default), which one answers you and which one answers everyone else."""
+    admin = is_admin(request)
+    return ModelSetsPublic(data=[_set_of(session, model_sets, t, operator.id, admin) for t in model_sets.sets])
 
 
 def _trained_target(checkers: Any, model_sets: Any, target: str) -> str:
@@ -140,20 +159,41 @@ def create_reestimation(
 @router.post(
     "/{target}/versions/{version}/promote",
     response_model=ModelSetPublic,
-    responses={404: {"description": "the target's set has no such version"}},
+    responses={
+        403: {"description": "shared=true without an admin key"},
+        404: {"description": "the target's set has no such version of yours"},
+        409: {"description": "the version failed the quality gate (its files, a smoke estimate); the reason is given"},
+    },
 )
 def promote_version(
+    request: Request,
     session: SessionDep,
     operator: CurrentOperator,
     model_sets: ModelSetsDep,
     checkers: CheckersDep,
     target: Annotated[Text, PathParam(max_length=200)],
-    version: Annotated[int, PathParam(ge=0, le=100_000, description="the version; 0 rolls back to the configured set")],
+    version: Annotated[int, PathParam(ge=0, le=100_000, description="the version; 0 withdraws the promotion")],
+    shared: Annotated[
+        bool, Query(description="promote it as the shared default, for every operator without its own (admin keys)")
+    ] = False,
 ) -> ModelSetPublic:
-    """Make ``version`` answer the target from the next request on (every worker reads it from the database)."""
+    """Make ``version`` answer the target for you from the next request on (every worker reads it from the
+    database): one of your own versions, or the shared default; 0 withdraws your promotion, so the shared default
+    answers you again. With ``shared=true`` an admin key sets the shared default instead (0: the configured set).
+    The version must first pass the quality gate: its files load and verify, and a smoke estimate runs."""
     name = _trained_target(checkers, model_sets, target)
+    admin = is_admin(request)
     try:
-        mv.promote(session, name, version)
+        mv.promote_checked(
+            session,
+            request.app.state.served,
+            checker_for(checkers, name),
+            operator_id=operator.id,
+            target=name,
+            version=version,
+            shared=shared,
+            admin=admin,
+        )
     except LookupError:
-        raise HTTPException(status_code=404, detail=f"{name} has no version {version}") from None
-    return _set_of(session, model_sets, name)
+        raise HTTPException(status_code=404, detail=f"{name} has no version {version} of yours") from None
+    return _set_of(session, model_sets, name, operator.id, admin)

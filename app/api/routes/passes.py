@@ -82,7 +82,7 @@ async def create_pass(
     ``GSA_MAX_PASS_JOB_FRAMES`` frames rather than ``GSA_MAX_BATCH_FRAMES``): a worker process fits and fuses it,
     and the job's ``result_url`` is the pass once stored."""
     cells_m = cells_from_form(range_cell_m, cross_range_cell_m)
-    est, checker = answering(request, session, model_sets, checkers, target)
+    est, checker = answering(request, session, model_sets, checkers, target, operator)
     started = time.perf_counter()
     if wants_job(request):
         limits = job_limits(settings)
