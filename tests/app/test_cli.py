@@ -73,6 +73,16 @@ def test_keys_create_list_revoke(tmp_path):
     assert key.startswith("gsa_")
     listed = _gsa("keys", "list", cwd=tmp_path).stdout
     assert key_id in listed and "active" in listed and key not in listed
+    assert "role=operator" in listed  # a key's role is the operator's own objects unless made admin
+    assert _gsa("keys", "role", key_id, "admin", cwd=tmp_path).returncode == 0
+    assert f"{key_id}  " in _gsa("keys", "list", cwd=tmp_path).stdout and "role=admin" in _gsa(
+        "keys", "list", cwd=tmp_path
+    ).stdout
+    admin_id = _gsa("keys", "create", "root", "--admin", cwd=tmp_path).stdout.split()[0]
+    assert any(admin_id in ln and "role=admin" in ln for ln in _gsa("keys", "list", cwd=tmp_path).stdout.splitlines())
+    bad_role = _gsa("keys", "role", key_id, "owner", cwd=tmp_path)
+    assert bad_role.returncode == 2 and "owner" in bad_role.stderr
+    assert _gsa("keys", "role", "no-such-id", "admin", cwd=tmp_path).returncode == 2
     assert _gsa("keys", "revoke", key_id, cwd=tmp_path).returncode == 0
     assert "revoked" in _gsa("keys", "list", cwd=tmp_path).stdout
     assert _gsa("keys", "revoke", "no-such-id", cwd=tmp_path).returncode == 2

@@ -180,6 +180,40 @@ def test_adaptations_from_before_0011_become_jobs_and_come_back_on_downgrade(url
     engine.dispose()
 
 
+def test_the_version_promoted_before_0013_becomes_the_shared_default_and_comes_back_on_downgrade(url):
+    """Before 0013 one promoted version answered every operator: after it, that version is the shared default (so
+    every operator is answered as before), keys gain the operator role, and a downgrade puts the flag back."""
+    cfg = _cfg(url)
+    command.upgrade(cfg, "0012")
+    engine = create_engine(url)
+    insert = text(
+        "INSERT INTO model_versions (id, target, version, created_at, operator_id, base_version, dir, summary, "
+        "promoted) VALUES (:i, 'tiangong-like', :v, CURRENT_TIMESTAMP, NULL, 0, :d, '{}', :p)"
+    )
+    with engine.begin() as conn:
+        conn.execute(text("INSERT INTO operators (id, name, created_at) VALUES ('op1', 'old', CURRENT_TIMESTAMP)"))
+        conn.execute(
+            text(
+                "INSERT INTO api_keys (id, operator_id, name, prefix, key_hash, hash_scheme, created_at) VALUES "
+                "('k1', 'op1', 'k', 'gsa_abcd', :h, 'hmac-sha256', CURRENT_TIMESTAMP)"
+            ),
+            {"h": "0" * 64},
+        )
+        conn.execute(insert, {"i": "m1", "v": 1, "d": "model-sets/tiangong-like/v1", "p": False})
+        conn.execute(insert, {"i": "m2", "v": 2, "d": "model-sets/tiangong-like/v2", "p": True})
+    command.upgrade(cfg, "head")
+    with engine.begin() as conn:
+        rows = conn.execute(text("SELECT scope, target, version FROM model_promotions")).all()
+        role = conn.execute(text("SELECT role FROM api_keys WHERE id = 'k1'")).scalar()
+    assert [tuple(r) for r in rows] == [("shared", "tiangong-like", 2)] and role == "operator"
+    command.downgrade(cfg, "0012")
+    with engine.begin() as conn:
+        flags = conn.execute(text("SELECT version, promoted FROM model_versions ORDER BY version")).all()
+    assert [(v, bool(p)) for v, p in flags] == [(1, False), (2, True)]
+    command.upgrade(cfg, "head")
+    engine.dispose()
+
+
 def test_an_unmigrated_database_answers_503_naming_the_fix(url, tmp_path, smoke_models):
     """Every /v1 route answers 503 "run gsa db upgrade" (not 500) until the schema is there, key or no key."""
     from fastapi.testclient import TestClient
