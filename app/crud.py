@@ -481,6 +481,18 @@ def list_labelled(
     return list(rows), total
 
 
+def delete_labelled(*, session: Session, operator_id: str, target: str, scene: str | None) -> list[str]:
+    """Delete the operator's labelled frames of ``target`` (of ``scene`` only, where given); return their images'
+    digests (the caller removes those no other row refers to)."""
+    where = [LabelledFrame.operator_id == operator_id, LabelledFrame.target == target]
+    if scene is not None:
+        where.append(LabelledFrame.scene == scene)
+    digests = list(session.scalars(select(LabelledFrame.frame_sha256).where(*where)))
+    session.execute(sa_delete(LabelledFrame).where(*where))
+    session.commit()
+    return digests
+
+
 def labelled_summary(*, session: Session, operator_id: str, target: str) -> tuple[dict[str, int], list[list[float]]]:
     """Counts per scene and every label's angles, for the operator's labelled frames of ``target``."""
     per_scene: dict[str, int] = {}

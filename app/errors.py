@@ -138,6 +138,10 @@ DATABASE_DOWN: tuple[type[Exception], ...] = (
 )
 
 
+class TooMany(Exception):
+    """Over a per-operator count (HTTP 429), such as queued jobs: the message says what is used and allowed."""
+
+
 class Forbidden(Exception):
     """A request the caller's key has no role for (HTTP 403): the message says which role and how to get it."""
 
@@ -191,6 +195,14 @@ def install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(TooLarge)
     async def _too_large(_request: Request, exc: TooLarge) -> JSONResponse:
         return SafeJSONResponse(status_code=413, content={"detail": str(exc), "request_id": current_request_id()})
+
+    @app.exception_handler(TooMany)
+    async def _too_many(_request: Request, exc: TooMany) -> JSONResponse:
+        return SafeJSONResponse(
+            status_code=429,
+            content={"detail": str(exc), "request_id": current_request_id()},
+            headers={"Retry-After": "30"},
+        )
 
     @app.exception_handler(Forbidden)
     async def _forbidden(_request: Request, exc: Forbidden) -> JSONResponse:

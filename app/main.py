@@ -137,6 +137,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     try:  # jobs a stopped process of this host left "running" are queued again (or fail, saying why)
         with make_session_factory(engine)() as s:
             jobs.recover(s)
+            jobs.sweep_leftovers(s, settings)
             waiting = jobs.any_active(s)
         if waiting:
             app.state.jobs.nudge()

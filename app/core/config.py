@@ -79,6 +79,15 @@ class Settings(BaseSettings):
     job_workers: int = Field(
         default=1, ge=0, le=256, description="jobs running at once on this host (0: none; another host runs them)"
     )
+    quota_storage_mb: float = Field(
+        default=10_240.0,
+        gt=0,
+        le=1e9,
+        description="what one operator may store (labelled frames, estimates' images, data sets, model versions)",
+    )
+    quota_queued_jobs: int = Field(
+        default=16, ge=1, le=100_000, description="jobs one operator may have queued or running"
+    )
     max_dataset_gb: float = Field(default=20.0, gt=0, le=100_000, description="the largest data set a job may write")
     max_pass_job_frames: int = Field(
         default=512, ge=2, le=100_000, description="frames of a pass sent with Prefer: respond-async (a job)"

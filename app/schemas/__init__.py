@@ -40,7 +40,13 @@ from app.schemas.estimates import (
     ScenesPublic,
 )
 from app.schemas.jobs import DatasetCreate, DatasetRadar, JobPublic, JobsPublic, ReestimationCreate
-from app.schemas.labelled import LabelledFramePublic, LabelledFramesPublic, LabelledSummary, LabelledUpload
+from app.schemas.labelled import (
+    LabelledDeleted,
+    LabelledFramePublic,
+    LabelledFramesPublic,
+    LabelledSummary,
+    LabelledUpload,
+)
 from app.schemas.model_sets import (
     AdaptationCreate,
     AdaptationPublic,
@@ -96,6 +102,7 @@ __all__ = [
     "ModelSetPublic",
     "ModelSetsPublic",
     "ModelVersionPublic",
+    "LabelledDeleted",
     "LabelledFramePublic",
     "LabelledFramesPublic",
     "LabelledSummary",

@@ -75,6 +75,13 @@ class LabelledSummary(Described):
     """the share of the networks' attitude cube (+-45 deg, in 15 deg cells) holding at least one labelled frame"""
 
 
+class LabelledDeleted(LabelledSummary):
+    """What is left after a deletion (the counts are of the frames that remain)."""
+
+    deleted: int
+    """the labelled frames deleted"""
+
+
 class LabelledFramesPublic(LabelledSummary):
     data: list[LabelledFramePublic]
     """this page, newest first"""

@@ -266,6 +266,7 @@ def submit_campaign(*, session: Session, settings: Settings, operator_id: str, c
         params=campaign_in.model_dump(mode="json"),
         stage=f"queued: a campaign over {campaign_in.duration_days:g} days",
         engine="local",
+        cap=settings.quota_queued_jobs,
     )
 
 

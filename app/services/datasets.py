@@ -17,7 +17,7 @@ from app.core.config import Settings
 from app.db.models import Job
 from app.errors import InputError
 from app.schemas import DatasetCreate
-from app.services import jobs
+from app.services import jobs, storage
 
 
 def spec_and_radar(params: dict[str, Any]) -> tuple[Any, Any]:
@@ -69,6 +69,7 @@ def submit_dataset(*, session: Session, settings: Settings, operator_id: str, da
             f"{spec.n} frames of {radar.n_range} x {radar.n_azimuth} make {size_gb:.1f} GB, over GSA_MAX_DATASET_GB "
             f"({settings.max_dataset_gb:g}): ask for fewer frames, or smaller ones",
         )
+    storage.check_room(session, settings, operator_id, int(size_gb * 1e9), f"a data set of {spec.n} frames")
     shards = -(-spec.n // spec.shard_size)
     return jobs.submit(
         session,
@@ -78,6 +79,7 @@ def submit_dataset(*, session: Session, settings: Settings, operator_id: str, da
         total=spec.n,
         stage=f"queued: {spec.n} frames in {shards} shards",
         engine="ray" if settings.ray_address else "local",
+        cap=settings.quota_queued_jobs,
     )
 
 

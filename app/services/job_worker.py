@@ -128,6 +128,9 @@ def run(job_id: str) -> int:
         ctx = JobContext(job, settings, factory)
 
     def stop(_signum: int, _frame: Any) -> None:
+        # Deaf to SIGTERM from here on: a second one (two DELETEs, the dispatcher stopping) must not interrupt the
+        # clean-up half-way, leaving a .partial version or a tenant's frames in a temporary folder.
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
         ctx.stopping = True
         raise Cancelled("cancelled")
 

@@ -25,20 +25,21 @@ import subprocess
 import sys
 import threading
 import time
+from collections import Counter
 from collections.abc import Iterator
 from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import func, select, update
+from sqlalchemy import delete, func, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from app.core.config import Settings
 from app.core.security import private_dir
 from app.db.models import JOB_ACTIVE, JOB_FINAL, Job, new_id, utcnow
-from app.errors import Conflict
+from app.errors import Conflict, TooMany
 
 MAX_ATTEMPTS = 3  # a job is started at most this often (the first run and two resumptions after restarts)
 POLL_S = 0.5
@@ -80,10 +81,21 @@ def submit(
     stage: str = "queued",
     engine: str = "local",
     job_id: str | None = None,
+    cap: int | None = None,
 ) -> Job:
-    """Store a queued job (its ``key`` must not be active already: else a 409 with ``busy_message``)."""
+    """Store a queued job (its ``key`` must not be active already: else a 409 with ``busy_message``; the operator
+    may have at most ``cap`` jobs queued or running, GSA_QUOTA_QUEUED_JOBS: else a 429 saying so)."""
     if kind not in KINDS:
         raise ValueError(kind)
+    if cap is not None:
+        active = session.scalar(
+            select(func.count()).select_from(Job).where(Job.operator_id == operator_id, Job.state.in_(JOB_ACTIVE))
+        )
+        if int(active or 0) >= cap:
+            raise TooMany(
+                f"you have {active} jobs queued or running, the most one operator may (GSA_QUOTA_QUEUED_JOBS = {cap}); "
+                "wait for one to end or cancel one (DELETE /v1/jobs/{id})"
+            )
     job = Job(
         id=job_id or new_id(),
         operator_id=operator_id,
@@ -138,8 +150,9 @@ def listing(
     return list(rows), total
 
 
-def cancel(session: Session, job: Job) -> Job:
-    """Cancel ``job``: queued, at once; running, ask its worker to stop (it says ``cancelled`` when it has)."""
+def cancel(session: Session, job: Job, settings: Settings | None = None) -> Job:
+    """Cancel ``job``: queued, at once, with what it keeps on disk (given ``settings``); running, stop its worker
+    and what the worker started (it cleans up and says ``cancelled`` when it has). Idempotent while it runs."""
     if job.state in JOB_FINAL:
         raise Conflict(f"job {job.id} is already {job.state}; only a queued or running job can be cancelled")
     now = utcnow()
@@ -154,13 +167,54 @@ def cancel(session: Session, job: Job) -> Job:
         session.execute(update(Job).where(Job.id == job.id, Job.state == "running").values(cancel_requested=True))
     session.commit()
     session.refresh(job)
+    if gone and settings is not None:
+        import shutil
+
+        shutil.rmtree(job_dir(settings, job.id), ignore_errors=True)
     pid = runner_pid(job)
     if job.state == "running" and pid is not None and pid != os.getpid():
-        try:
-            os.kill(pid, signal.SIGTERM)
-        except OSError:
-            pass
+        stop_group(pid, signal.SIGTERM)
     return job
+
+
+def fair_order(queued: list[Job], running: Counter[str]) -> list[Job]:
+    """The queued jobs in the order they start: turn about between operators, so one operator's 300 jobs do not
+    hold back another's one. A job's place is its operator's running jobs plus the jobs of that operator queued
+    before it; ties by age. ``queued`` comes oldest first."""
+    ahead: Counter[str] = Counter()
+    places = []
+    for k, job in enumerate(queued):
+        places.append((running[job.operator_id] + ahead[job.operator_id], k, job))
+        ahead[job.operator_id] += 1
+    return [job for *_, job in sorted(places, key=lambda p: (p[0], p[1]))]
+
+
+def remove(session: Session, job: Job, settings: Settings) -> None:
+    """Remove an ended job: its row, its folder and log, and a data set's files (the data set is the job's)."""
+    import shutil
+
+    if job.state not in JOB_FINAL:
+        raise Conflict(f"job {job.id} is {job.state}; cancel it first (DELETE /v1/jobs/{job.id})")
+    data = Path(settings.data_dir)
+    session.execute(delete(Job).where(Job.id == job.id, Job.state.in_(JOB_FINAL)))
+    session.commit()
+    shutil.rmtree(job_dir(settings, job.id), ignore_errors=True)
+    (data / "jobs" / f"{job.id}.log").unlink(missing_ok=True)
+    if job.kind == "dataset":
+        shutil.rmtree(data / "datasets" / job.id, ignore_errors=True)
+
+
+def stop_group(pid: int, sig: int) -> None:
+    """Signal a job's worker and every process it started (``gsa adapt``, simulation pools): the worker leads its
+    own process group (the dispatcher starts it in a new session). A worker of another host, or one already gone,
+    is left alone."""
+    try:
+        if os.getpgid(pid) == pid:
+            os.killpg(pid, sig)
+        else:
+            os.kill(pid, sig)
+    except OSError:
+        pass
 
 
 def append_log(log: str, lines: list[str], keep: int = 80) -> str:
@@ -206,6 +260,28 @@ def recover(session: Session, resume: bool = True) -> int:
         touched += _count(session.execute(update(Job).where(*seen).values(**values)))
         session.commit()
     return touched
+
+
+def sweep_leftovers(session: Session, settings: Settings) -> list[str]:
+    """Remove what ended jobs left on disk: each ``jobs/ID/`` folder (a queued pass's frames) whose job is not
+    queued or running, and, while no adaptation is queued or running anywhere, half-written versions
+    (``model-sets/*/*.partial``) and this host's adaptation work folders (a tenant's frames). Return what went."""
+    import shutil
+    import tempfile
+
+    data = Path(settings.data_dir)
+    active = {j.id: j.kind for j in session.scalars(select(Job).where(Job.state.in_(JOB_ACTIVE)))}
+    session.commit()
+    gone = []
+    root = data / "jobs"
+    stale = [p for p in root.iterdir() if p.is_dir() and p.name not in active] if root.is_dir() else []
+    if "adaptation" not in active.values():
+        stale += list((data / "model-sets").glob("*/*.partial"))
+        stale += list(Path(tempfile.gettempdir()).glob("gsa-adaptation-*"))
+    for path in stale:
+        shutil.rmtree(path, ignore_errors=True)
+        gone.append(path.name)
+    return gone
 
 
 def any_active(session: Session) -> bool:
@@ -295,6 +371,10 @@ class Dispatcher:
             if code is None:
                 continue
             del self.children[job_id]
+            try:  # what the worker started and left behind (killed, crashed) goes too: its group outlives it
+                os.killpg(proc.pid, signal.SIGKILL)
+            except OSError:
+                pass
             with self.session_factory() as s:  # a worker that died without a word: say so (writes first, no read)
                 now = utcnow()
                 reason = f"the worker process ended with status {code} before finishing"
@@ -318,9 +398,11 @@ class Dispatcher:
                 j for j in s.scalars(select(Job).where(Job.state == "running")) if j.runner.rpartition(":")[0] == host()
             ]
             room = self.settings.job_workers - len(running)
-            queued = list(
-                s.scalars(select(Job).where(Job.state == "queued").order_by(Job.created_at).limit(max(room, 0)))
-            )
+            busy = Counter(
+                j.operator_id for j in s.scalars(select(Job).where(Job.state == "running"))
+            )  # every host's: the share is the service's, not this host's
+            waiting = list(s.scalars(select(Job).where(Job.state == "queued").order_by(Job.created_at, Job.id)))
+            queued = fair_order(waiting, busy)[: max(room, 0)]
             s.commit()  # the reads end here: each claim below writes first
             for job in queued:
                 now = utcnow()

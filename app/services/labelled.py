@@ -18,8 +18,8 @@ from app import crud
 from app.core.config import Settings
 from app.db.models import LabelledFrame, utcnow
 from app.errors import InputError
-from app.schemas import LabelledFramePublic, LabelledSummary, LabelledUpload
-from app.services import images
+from app.schemas import LabelledDeleted, LabelledFramePublic, LabelledSummary, LabelledUpload
+from app.services import images, storage
 from app.services.scenes import scene_for, windows_of
 from app.services.uploads import DecodeBudget, decode
 from inference.errors import InferenceError
@@ -232,6 +232,8 @@ def create_labelled(
                 frame_sha256=images.store_blob(settings.data_dir, blob),
             )
         )
+    if blobs:
+        storage.check_room(session, settings, operator_id, sum(map(len, blobs)), f"these {len(blobs)} frames")
     stored = crud.create_labelled(session=session, rows=rows) if rows else []
     for blob in blobs:  # a concurrent sweep may have removed a blob before its row existed
         images.store_blob(settings.data_dir, blob)
@@ -241,6 +243,25 @@ def create_labelled(
         stored=[LabelledFramePublic.from_row(r) for r in stored],
         already_stored=[name for (name, _), d in zip(files, digests, strict=True) if d in known],
     )
+
+
+def delete_labelled(
+    *, session: Session, settings: Settings, operator_id: str, target: str, scene: str | None, every: bool
+) -> LabelledDeleted:
+    """Delete the operator's labelled frames of ``target``: one scene's (``scene``), or all of them (``every``,
+    asked for by name so that a forgotten parameter deletes nothing); their images go where no row needs them."""
+    if scene is None and not every:
+        raise InputError(
+            ["scene"],
+            f"name the scene whose labelled frames of {target} to delete (scene=S), or all=true to delete all of them",
+            where="query",
+        )
+    digests = crud.delete_labelled(session=session, operator_id=operator_id, target=target, scene=scene)
+    for d in set(digests):
+        if not crud.blob_in_use(session=session, digest=d):
+            images.blob_path(Path(settings.data_dir), d).unlink(missing_ok=True)
+    summary = summarise(session=session, operator_id=operator_id, target=target)
+    return LabelledDeleted(**summary.model_dump(), deleted=len(digests))
 
 
 def summarise(*, session: Session, operator_id: str, target: str) -> LabelledSummary:

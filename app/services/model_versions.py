@@ -153,6 +153,26 @@ def promote_checked(
     promote(session, operator_id=operator_id, target=target, version=version, shared=shared)
 
 
+def delete_version(session: Session, settings: Settings, *, operator_id: str, target: str, version: int) -> None:
+    """Delete one of the operator's own versions, with its folder: LookupError for one not its own (or none), a
+    ``Conflict`` while any promotion names it (its own, another operator's pin, or the shared default)."""
+    if version == 0:
+        raise Conflict(f"version 0 of {target} is the configured set, shared and read-only; it cannot be deleted")
+    row = version_row(session, target, version)
+    assert row is not None
+    if row.operator_id != operator_id:
+        raise LookupError(version)
+    named = session.scalars(
+        select(ModelPromotion.scope).where(ModelPromotion.target == target, ModelPromotion.version == version)
+    ).all()
+    if named:
+        who = "the shared default" if SHARED_SCOPE in named else "promoted"
+        raise Conflict(f"version {version} of {target} is {who}: promote another (or 0) first, then delete it")
+    session.execute(delete(ModelVersion).where(ModelVersion.id == row.id))
+    session.commit()
+    shutil.rmtree(Path(settings.data_dir) / row.dir, ignore_errors=True)
+
+
 class Served:
     """The networks and checks that answer each operator and target: its promoted version's, or the configured
     set's.
@@ -264,7 +284,7 @@ def start(
 ) -> Job:
     """Check the request and queue the adaptation as a job (``app.services.jobs``; one per operator and target at a
     time)."""
-    from app.services import jobs
+    from app.services import jobs, storage
     from app.services.labelled import summarise
 
     summary = summarise(session=session, operator_id=operator_id, target=target)
@@ -274,6 +294,7 @@ def start(
             f"you have {summary.count} labelled frames of {target} from {len(summary.per_scene)} scene(s); an "
             "adaptation needs at least 4, from 2 scenes or more (POST /v1/targets/{target}/labelled-frames)",
         )
+    storage.check_room(session, settings, operator_id, storage.folder_bytes(base_dir), "the adapted version")
     return jobs.submit(
         session,
         operator_id=operator_id,
@@ -282,6 +303,7 @@ def start(
         busy_message=f"an adaptation of {target} of yours is already queued or running; wait for it (one at a time)",
         params={"target": target, "options": options, "frames": summary.count, "base_dir": str(base_dir)},
         engine="ray" if settings.ray_address else "local",
+        cap=settings.quota_queued_jobs,
     )
 
 

@@ -134,7 +134,7 @@ def submit_pass(
     """Queue a pass as a job (``Prefer: respond-async``; up to GSA_MAX_PASS_JOB_FRAMES frames): checked now as the
     synchronous route checks it, its frames kept under ``GSA_DATA_DIR/jobs/ID`` until the worker has fused it."""
     from app.db.models import new_id
-    from app.services import jobs
+    from app.services import jobs, storage
 
     model_aperture = checker.radar.aperture_deg if cells_m is None else None
     _check_pass(
@@ -148,12 +148,16 @@ def submit_pass(
         aperture_deg,
         model_aperture,
     )
+    waiting = sum(4 * int(np.prod(u.magnitude.shape)) for u in uploads)  # float32 on disk until it runs
+    storage.check_room(session, settings, operator_id, waiting, f"this pass's {len(uploads)} frames")
     job_id = new_id()
     folder = jobs.job_dir(settings, job_id)
     private_dir(folder)
     fd = os.open(folder / "frames.npz", os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
     with os.fdopen(fd, "wb") as fh:
-        np.savez(fh, **{f"f{k:05d}": u.magnitude for k, u in enumerate(uploads)})  # type: ignore[arg-type]  # numpy's stub reserves allow_pickle
+        # float32, as the networks read them: float64 doubled what waits on disk (issue 74)
+        frames = {f"f{k:05d}": np.asarray(u.magnitude, np.float32) for k, u in enumerate(uploads)}
+        np.savez(fh, **frames)  # type: ignore[arg-type]  # numpy's stub reserves allow_pickle
     params = {
         "plan_id": plan_id,
         "observed_at": [t.isoformat() for t in observed_at],
@@ -174,6 +178,7 @@ def submit_pass(
         total=len(uploads),
         stage=f"queued: a pass of {len(uploads)} frames",
         job_id=job_id,
+        cap=settings.quota_queued_jobs,
     )
 
 

@@ -72,6 +72,7 @@ def submit_reestimation(
         total=len(rows),
         stage=f"queued: {len(rows)} estimates of {target} with version {version}",
         engine="local",
+        cap=settings.quota_queued_jobs,
     )
 
 

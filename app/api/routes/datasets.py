@@ -7,7 +7,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, HTTPException, Request
 from fastapi import Path as PathParam
-from fastapi.responses import FileResponse, JSONResponse
+from fastapi.responses import FileResponse, JSONResponse, Response
 
 from app.api.deps import CurrentOperator, SessionDep, SettingsDep, queued
 from app.schemas import DatasetCreate, JobPublic, Text
@@ -64,3 +64,27 @@ def dataset_file(
         raise HTTPException(status_code=404, detail="Data set file not found")
     media = "application/json" if file_name.endswith(".json") else "application/octet-stream"
     return FileResponse(path, media_type=media, filename=file_name)
+
+
+@router.delete(
+    "/{job_id}",
+    status_code=204,
+    responses={
+        404: {"description": "no data set of yours has this id"},
+        409: {"description": "the data set is still being made: cancel it first (DELETE /v1/jobs/{id})"},
+    },
+)
+def delete_dataset(
+    session: SessionDep,
+    operator: CurrentOperator,
+    settings: SettingsDep,
+    job_id: Annotated[Text, PathParam(max_length=36)],
+) -> Response:
+    """Remove one of the caller's data sets, its files and its job; what it took from the storage quota is free."""
+    from app.services import jobs as jobs_svc
+
+    job = jobs_svc.own(session, operator.id, job_id)
+    if job is None or job.kind != "dataset":
+        raise HTTPException(status_code=404, detail="Data set not found")
+    jobs_svc.remove(session, job, settings)
+    return Response(status_code=204)

@@ -6,9 +6,10 @@ from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, HTTPException, Query
 from fastapi import Path as PathParam
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, Response
 
-from app.api.deps import CurrentOperator, PageDep, SessionDep
+from app.api.deps import CurrentOperator, PageDep, SessionDep, SettingsDep
+from app.db.models import JOB_FINAL
 from app.schemas import JobPublic, JobsPublic, Text
 from app.services import jobs as jobs_svc
 
@@ -52,19 +53,28 @@ def read_job(
     responses={
         **NOT_FOUND,
         202: {"model": JobPublic, "description": "the running job is asked to stop; it says cancelled once it has"},
-        409: {"description": "the job has already ended (done, failed or cancelled)"},
+        204: {"description": "the ended job is removed, with what it kept on disk (a data set's files, its log)"},
     },
 )
 def cancel_job(
-    session: SessionDep, operator: CurrentOperator, job_id: Annotated[Text, PathParam(max_length=36)]
-) -> JobPublic | JSONResponse:
-    """Cancel one of the caller's jobs: a queued one at once (200), a running one at its next step (202).
+    session: SessionDep,
+    operator: CurrentOperator,
+    settings: SettingsDep,
+    job_id: Annotated[Text, PathParam(max_length=36)],
+) -> JobPublic | Response:
+    """Cancel one of the caller's jobs: a queued one at once (200), a running one at its next step (202; asking
+    again is harmless). Its worker and every process the worker started are stopped, and what the job made so far
+    is removed (a data set's shards, an adaptation's partial version, a queued pass's frames).
 
-    What a cancelled job made so far is removed (a data set's shards, an adaptation's partial version)."""
+    An ended job (done, failed or cancelled) is removed instead (204), with its files: a data set goes with its
+    job. What a job stored elsewhere stays (a campaign, a pass, an adapted version: DELETE those themselves)."""
     job = jobs_svc.own(session, operator.id, job_id)
     if job is None:
         raise HTTPException(status_code=404, detail="Job not found")
-    job = jobs_svc.cancel(session, job)
+    if job.state in JOB_FINAL:
+        jobs_svc.remove(session, job, settings)
+        return Response(status_code=204)
+    job = jobs_svc.cancel(session, job, settings)
     body = JobPublic.from_row(job)
     if job.state == "running":
         return JSONResponse(status_code=202, content=body.model_dump(mode="json"))

@@ -6,7 +6,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, HTTPException, Query, Request
 from fastapi import Path as PathParam
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, Response
 
 from app.api.deps import (
     CheckersDep,
@@ -197,3 +197,29 @@ def promote_version(
     except LookupError:
         raise HTTPException(status_code=404, detail=f"{name} has no version {version} of yours") from None
     return _set_of(session, model_sets, name, operator.id, admin)
+
+
+@router.delete(
+    "/{target}/versions/{version}",
+    status_code=204,
+    responses={
+        404: {"description": "the target's set has no such version of yours"},
+        409: {"description": "the version is promoted (or the shared default, or version 0): it answers someone"},
+    },
+)
+def delete_version(
+    session: SessionDep,
+    operator: CurrentOperator,
+    settings: SettingsDep,
+    model_sets: ModelSetsDep,
+    checkers: CheckersDep,
+    target: Annotated[Text, PathParam(max_length=200)],
+    version: Annotated[int, PathParam(ge=0, le=100_000, description="one of your versions, not promoted")],
+) -> Response:
+    """Delete one of your adapted versions and its files, once nothing answers with it (promote another first)."""
+    name = _trained_target(checkers, model_sets, target)
+    try:
+        mv.delete_version(session, settings, operator_id=operator.id, target=name, version=version)
+    except LookupError:
+        raise HTTPException(status_code=404, detail=f"{name} has no version {version} of yours") from None
+    return Response(status_code=204)

@@ -21,7 +21,7 @@ from app.api.deps import (
     models_for,
     read_upload,
 )
-from app.schemas import LabelledFramePublic, LabelledFramesPublic, LabelledUpload, Text
+from app.schemas import LabelledDeleted, LabelledFramePublic, LabelledFramesPublic, LabelledUpload, Text
 from app.services import labelled as labelled_svc
 
 router = APIRouter(prefix="/targets", tags=["labelled frames"])
@@ -135,3 +135,21 @@ def list_labelled_frames(
     )
     summary = labelled_svc.summarise(session=session, operator_id=operator.id, target=name)
     return LabelledFramesPublic(**summary.model_dump(), data=[LabelledFramePublic.from_row(r) for r in rows])
+
+
+@router.delete("/{target}/labelled-frames", response_model=LabelledDeleted)
+def delete_labelled_frames(
+    session: SessionDep,
+    operator: CurrentOperator,
+    settings: SettingsDep,
+    checkers: CheckersDep,
+    target: Annotated[Text, PathParam(max_length=200, description="the target model")],
+    scene: Annotated[Text | None, Query(max_length=200, description="delete this scene's frames")] = None,
+    every: Annotated[bool, Query(alias="all", description="delete all your labelled frames of the target")] = False,
+) -> LabelledDeleted:
+    """Delete the caller's labelled frames of a target: one scene's (``scene=S``), or all of them (``all=true``).
+    Versions already adapted from them stay; what the frames took from the storage quota is free again."""
+    name = checker_for(checkers, target).model.name
+    return labelled_svc.delete_labelled(
+        session=session, settings=settings, operator_id=operator.id, target=name, scene=scene, every=every
+    )

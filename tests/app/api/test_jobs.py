@@ -70,13 +70,17 @@ def test_a_data_set_job_writes_the_bytes_this_process_would(client, settings, tm
     assert client.delete(f"/v1/jobs/{job['id']}", headers=B).status_code == 404
     assert client.get(f"/v1/datasets/{job['id']}/files/manifest.json", headers=B).status_code == 404
     assert job["id"] not in [j["id"] for j in client.get("/v1/jobs", headers=B).json()["data"]]
-    # Listed with filters; a finished job cannot be cancelled.
+    # Listed with filters; a finished job is removed by DELETE, its data set with it.
     listing = client.get("/v1/jobs", params={"kind": "dataset", "state": "done"}, headers=A).json()
     assert job["id"] in [j["id"] for j in listing["data"]] and listing["count"] >= 1
     assert client.get("/v1/jobs", params={"state": "done", "kind": "campaign"}, headers=A).json()["data"] == []
-    again = client.delete(f"/v1/jobs/{job['id']}", headers=A)
-    assert again.status_code == 409 and "already done" in again.json()["detail"]
     assert client.get(f"/v1/datasets/{job['id']}/files/..%2Fgsa.db", headers=A).status_code == 404
+    assert client.delete(f"/v1/datasets/{job['id']}", headers=B).status_code == 404  # not B's to delete
+    assert client.delete(f"/v1/jobs/{job['id']}", headers=A).status_code == 204
+    assert not (settings.data_dir / "datasets" / job["id"]).exists()
+    assert not (settings.data_dir / "jobs" / f"{job['id']}.log").exists()
+    assert client.get(f"/v1/jobs/{job['id']}", headers=A).status_code == 404
+    assert client.delete(f"/v1/jobs/{job['id']}", headers=A).status_code == 404
 
 
 @pytest.mark.parametrize(

@@ -130,8 +130,9 @@ def test_a_pass_sent_asynchronously_is_a_job_whose_pass_is_the_synchronous_one(c
     assert job["state"] == "done", job
     assert job["result_url"] == f"/v1/passes/{job['result']['pass_id']}"
     fused = client.get(job["result_url"], headers=A).json()
+    # The job's frames wait on disk in float32 (half of float64's bytes, issue 74): the fused matrix moves ~1e-8.
     np.testing.assert_allclose(
-        fused["attitude_lvlh"]["rotation_matrix"], sync["attitude_lvlh"]["rotation_matrix"], atol=1e-9
+        fused["attitude_lvlh"]["rotation_matrix"], sync["attitude_lvlh"]["rotation_matrix"], atol=1e-6
     )
     assert [f["used"] for f in fused["frames"]] == [f["used"] for f in sync["frames"]]
     assert fused["id"] in client.get(f"/v1/plans/{plan['id']}", headers=A).json()["pass_ids"]

@@ -214,3 +214,19 @@ def test_adaptations_lock_per_operator_and_target(client, versions):
     assert "base_dir" not in json.dumps(client.get(f"/v1/jobs/{first.json()['id']}", headers=A).json())
     for job, h in ((first, A), (other, B)):
         assert client.delete(f"/v1/jobs/{job.json()['id']}", headers=h).status_code in (200, 202)
+
+
+def test_an_operator_deletes_its_own_versions_that_answer_no_one(client, settings, smoke_models, versions):
+    folder = _make_version(client, settings, smoke_models, KEY_A, 5)
+    assert client.post(f"/v1/model-sets/{T}/versions/5/promote", headers=A).status_code == 200
+    promoted = client.delete(f"/v1/model-sets/{T}/versions/5", headers=A)
+    assert promoted.status_code == 409 and "promote another" in promoted.json()["detail"]
+    assert client.post(f"/v1/model-sets/{T}/versions/0/promote", headers=A).status_code == 200
+    assert client.delete(f"/v1/model-sets/{T}/versions/5", headers=B).status_code == 404  # not B's
+    assert client.post(f"/v1/model-sets/{T}/versions/5/promote", params={"shared": "true"}, headers=ADMIN).is_success
+    shared = client.delete(f"/v1/model-sets/{T}/versions/5", headers=A)
+    assert shared.status_code == 409 and "shared default" in shared.json()["detail"]
+    assert client.post(f"/v1/model-sets/{T}/versions/0/promote", params={"shared": "true"}, headers=ADMIN).is_success
+    assert client.delete(f"/v1/model-sets/{T}/versions/5", headers=A).status_code == 204
+    assert not folder.exists() and 5 not in [v["version"] for v in _listed(client, A)["versions"]]
+    assert client.delete(f"/v1/model-sets/{T}/versions/0", headers=A).status_code == 409  # the configured set
