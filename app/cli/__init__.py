@@ -163,6 +163,8 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
     jbw.add_argument("--json", action="store_true")
     jbc = jbs.add_parser("cancel", help="cancel a queued or running job")
     jbc.add_argument("id")
+    jbd = jbs.add_parser("delete", help="remove an ended job with its files (a data set goes with its job)")
+    jbd.add_argument("id")
     jbt = jbs.add_parser(
         "wait", help="follow a job to its end with a progress bar (exit 0: done; 1: failed or cancelled)"
     )
@@ -173,7 +175,7 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
     for q in jbs.choices.values():
         add_client_options(q, "the service")
     jb.set_defaults(func=_lazy("jobs", "cmd_jobs"))
-    lb = sub.add_parser("labelled", help="your labelled frames on the service (add a folder, list)")
+    lb = sub.add_parser("labelled", help="your labelled frames on the service (add a folder, list, delete)")
     lbs = lb.add_subparsers(dest="labelled_cmd", required=True)
     lba = lbs.add_parser("add", help="store a folder of labelled frames (one .npz each, inference.labelled's format)")
     lba.add_argument("folder")
@@ -185,7 +187,11 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
     lbl.add_argument("--target", required=True)
     lbl.add_argument("--scene", help="only this scene's frames")
     lbl.add_argument("--limit", type=int, default=20)
-    for q in (lba, lbl):
+    lbd = lbs.add_parser("delete", help="delete your labelled frames of a target: one scene's, or --all")
+    lbd.add_argument("--target", required=True)
+    lbd.add_argument("--scene", help="delete this scene's frames")
+    lbd.add_argument("--all", action="store_true", help="delete every labelled frame of yours of the target")
+    for q in (lba, lbl, lbd):
         q.add_argument("--json", action="store_true")
         add_client_options(q, "the service")
     lb.set_defaults(func=_lazy("labelled", "cmd_labelled"))

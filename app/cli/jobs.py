@@ -1,4 +1,4 @@
-"""``gsa jobs list|show|cancel|wait``: your long work on the service (``/v1/jobs``)."""
+"""``gsa jobs list|show|cancel|delete|wait``: your long work on the service (``/v1/jobs``)."""
 
 from __future__ import annotations
 
@@ -60,7 +60,16 @@ def cmd_jobs(args: argparse.Namespace) -> int:
         job = call_server(args, "GET", path).json()
         print(json.dumps(job, indent=2)) if args.json else _show(job)
         return 0
-    if sub == "cancel":
+    if sub in ("cancel", "delete"):
+        state = call_server(args, "GET", path).json()["state"]
+        if sub == "cancel" and state in FINAL:
+            raise CliError(f"job {args.id} is already {state}: nothing to cancel (gsa jobs delete removes it)")
+        if sub == "delete":
+            if state not in FINAL:
+                raise CliError(f"job {args.id} is {state}: cancel it first (gsa jobs cancel {args.id})")
+            call_server(args, "DELETE", path)
+            print(f"job {args.id}: deleted, with its files")
+            return 0
         job = call_server(args, "DELETE", path).json()
         said = "cancelled" if job["state"] == "cancelled" else "asked to stop (it says cancelled once it has)"
         print(f"job {job['id']}: {said}")

@@ -69,7 +69,8 @@ def adapt_with_plan(command: Any) -> Any:
 
 
 def cmd_labelled(args: argparse.Namespace) -> int:
-    """``gsa labelled add FOLDER --target T`` and ``gsa labelled list --target T`` on the service."""
+    """``gsa labelled add FOLDER --target T``, ``list --target T`` and ``delete --target T --scene S`` (or
+    ``--all``) on the service."""
     import json
 
     from app.cli.common import call_server
@@ -88,6 +89,17 @@ def cmd_labelled(args: argparse.Namespace) -> int:
         for f in body["data"]:
             z, y, x = f["angles_deg"]
             print(f"  {f['id'][:8]}  {f['scene'][:24]:<24} {z:8.2f} {y:8.2f} {x:8.2f}  {f['name']}")
+        return 0
+    if args.labelled_cmd == "delete":
+        if bool(args.scene) == bool(args.all):
+            raise CliError("give --scene S (one scene's frames) or --all (every labelled frame of the target)")
+        params = {"scene": args.scene} if args.scene else {"all": "true"}
+        body = call_server(args, "DELETE", path, params=params).json()
+        if args.json:
+            print(json.dumps(body, indent=1))
+            return 0
+        print(f"deleted {body['deleted']} labelled frames of {body['target']}")
+        _summary(body)
         return 0
     if not 1 <= args.batch <= 64:
         raise CliError(f"--batch {args.batch}: between 1 and 64 files a request")

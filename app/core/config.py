@@ -109,12 +109,13 @@ class Settings(BaseSettings):
 
     @model_validator(mode="after")
     def _keys_long_enough(self) -> Settings:
-        short = [k for k in self.env_api_keys if len(k) < MIN_KEY_LENGTH]
-        if short:
-            raise ValueError(
-                f"GSA_API_KEYS or GSA_ADMIN_API_KEYS holds a key of {len(short[0])} characters; each key needs at least {MIN_KEY_LENGTH} "
-                "(a short key is guessed): make one with `gsa keys create` or `openssl rand -hex 16`"
-            )
+        for name, keys in (("GSA_API_KEYS", self.api_keys), ("GSA_ADMIN_API_KEYS", self.admin_api_keys)):
+            short = [k for k in (k.strip() for k in keys.split(",")) if k and len(k) < MIN_KEY_LENGTH]
+            if short:
+                raise ValueError(
+                    f"{name} holds a key of {len(short[0])} characters; each key needs at least {MIN_KEY_LENGTH} "
+                    "(a short key is guessed): make one with `gsa keys create` or `openssl rand -hex 16`"
+                )
         return self
 
     @property

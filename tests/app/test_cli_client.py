@@ -129,6 +129,10 @@ def test_labelled_frames_through_the_command_line(served, capsys, tmp_path):
     assert rc == 2 and "unknown target" in err and err.count("\n") == 1
     rc, _, err = _run(capsys, "labelled", "add", str(tmp_path / "none"), "--target", "tiangong-like")
     assert rc == 2 and "not a folder" in err
+    rc, _, err = _run(capsys, "labelled", "delete", "--target", "tiangong-like")
+    assert rc == 2 and "--scene S" in err and err.count("\n") == 1
+    rc, out, _ = _run(capsys, "labelled", "delete", "--target", "tiangong-like", "--scene", "s1")
+    assert rc == 0 and "deleted 2 labelled frames" in out and "s0 (3)" in out and "s1" not in out.split("deleted")[1]
 
 
 def test_jobs_through_the_command_line(served, capsys):
@@ -146,6 +150,10 @@ def test_jobs_through_the_command_line(served, capsys):
     rc, out, _ = _run(capsys, "jobs", "show", job_id)
     assert rc == 0 and "state     done" in out and f"see       /v1/jobs/{job_id}" in out and "jobs: done" in out
     rc, _, err = _run(capsys, "jobs", "cancel", job_id)
-    assert rc == 2 and err.count("\n") == 1 and "409" in err and "already done" in err
+    assert rc == 2 and err.count("\n") == 1 and "already done" in err and "gsa jobs delete" in err
+    rc, out, _ = _run(capsys, "jobs", "delete", job_id)
+    assert rc == 0 and "deleted" in out
+    rc, _, err = _run(capsys, "jobs", "show", job_id)
+    assert rc == 2 and "404" in err
     rc, _, err = _run(capsys, "jobs", "show", "no-such-job")
     assert rc == 2 and "404" in err
