@@ -616,18 +616,30 @@ async function modelsPage() {
   const sets = await api("/v1/model-sets");
   const blocks = await Promise.all(sets.data.map(async (s) => {
     const lab = await api(`/v1/targets/${encodeURIComponent(s.target)}/labelled-frames?limit=100`);
+    const own = s.answering_version !== s.shared_version;  // the caller promoted a version of its own
+    const action = (v) => {
+      if (v.version === s.answering_version) return "";
+      const promote = v.version === 0
+        ? (own ? `<button class="promote" data-target="${esc(s.target)}" data-version="0">Back to the shared default</button>` : "")
+        : `<button class="promote" data-target="${esc(s.target)}" data-version="${v.version}">Promote for me</button>`;
+      const remove = v.mine && !v.shared_default
+        ? ` <button class="remove" data-target="${esc(s.target)}" data-version="${v.version}">Delete</button>` : "";
+      return promote + remove;
+    };
     const versions = s.versions.map((v) => `<tr class="${v.version === s.answering_version ? "answering" : ""}">
-        <td class="num">${v.version}</td><td>${v.version === s.answering_version ? "<b>answers</b>" : ""}</td>
+        <td class="num">${v.version}</td><td>${[v.version === s.answering_version ? "<b>answers you</b>" : "",
+          v.shared_default ? "shared default" : "", v.mine ? "yours" : ""].filter(Boolean).join(", ")}</td>
         <td>${v.created_at ? utc(v.created_at) : "configured set"}</td><td class="num">${v.base_version ?? "-"}</td>
         <td class="num">${v.summary.labelled_frames ?? "-"}</td>
         <td>${v.summary.train_scenes ? esc(v.summary.train_scenes.length ?? v.summary.train_scenes) : "-"} / ${v.summary.validation_scenes ? esc(v.summary.validation_scenes.length ?? v.summary.validation_scenes) : "-"}</td>
         <td>${figures(v.summary.before)}</td><td>${figures(v.summary.after)}</td><td class="num">${num(v.summary.cpu_minutes, 1)}</td>
-        <td>${v.version === s.answering_version ? "" : `<button class="promote" data-target="${esc(s.target)}" data-version="${v.version}">${v.version === 0 ? "Roll back to 0" : "Promote"}</button>`}</td></tr>`).join("");
+        <td>${action(v)}</td></tr>`).join("");
     const scenes = Object.entries(lab.per_scene).map(([k, n]) => `<tr><td>${esc(k)}</td><td class="num">${n}</td></tr>`).join("");
     const frames = lab.data.slice(0, 50).map((f) => `<tr><td>${esc(f.name)}</td><td>${esc(f.scene)}</td>
         <td>${f.angles_deg.map((v) => num(v, 2)).join(", ")}</td><td>${utc(f.observed_at)}</td><td>${esc(f.station_name || "-")}</td>
         <td class="num">${num(f.attitude_sigma_deg, 2)}</td><td class="num">${num(f.snr_db, 1)}</td><td>${utc(f.created_at)}</td></tr>`).join("");
-    return `<section class="modelset"><h2>${esc(s.target)} <span class="muted">version ${s.answering_version} answers</span></h2>
+    return `<section class="modelset"><h2>${esc(s.target)} <span class="muted">version ${s.answering_version} answers you;
+      the shared default is ${s.shared_version}</span></h2>
       <table class="versions"><thead><tr><th class="num">version</th><th></th><th>made (UTC)</th><th class="num">from</th>
       <th class="num">labelled frames</th><th>scenes train / held out</th><th>held out, before</th><th>held out, after</th>
       <th class="num">CPU min</th><th></th></tr></thead><tbody>${versions}</tbody></table>
@@ -641,12 +653,21 @@ async function modelsPage() {
   }));
   view.innerHTML = `<h1>Model sets <span class="muted">(${sets.data.length})</span></h1>
     <p class="muted">Each adaptation (<code>POST /v1/model-sets/{target}/adaptations</code>, <code>gsa adapt</code>) is a new version
-    of its target's set, learnt from the labelled frames below; one version answers each target, and every estimate names it.</p>
+    of its target's set, learnt from your labelled frames below, and yours: promoting it changes what answers you alone. Everyone
+    without a promotion of their own is answered by the shared default, which an admin key sets. Every estimate names its version.</p>
     ${blocks.join("") || '<p class="muted">No model sets: the service serves none.</p>'}`;
   view.querySelectorAll("button.promote").forEach((b) => b.addEventListener("click", async () => {
     b.disabled = true;
     try {
       await api(`/v1/model-sets/${encodeURIComponent(b.dataset.target)}/versions/${b.dataset.version}/promote`, "json", "POST");
+    } catch (err) { fail(err.message); }
+    route();
+  }));
+  view.querySelectorAll("button.remove").forEach((b) => b.addEventListener("click", async () => {
+    if (!confirm(`Delete version ${b.dataset.version} of ${b.dataset.target} and its files?`)) return;
+    b.disabled = true;
+    try {
+      await api(`/v1/model-sets/${encodeURIComponent(b.dataset.target)}/versions/${b.dataset.version}`, "text", "DELETE");
     } catch (err) { fail(err.message); }
     route();
   }));
