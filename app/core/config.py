@@ -88,6 +88,12 @@ class Settings(BaseSettings):
     quota_queued_jobs: int = Field(
         default=16, ge=1, le=100_000, description="jobs one operator may have queued or running"
     )
+    max_adaptation_minutes: float = Field(
+        default=120.0, gt=0, le=10_000, description="the longest max_minutes an adaptation may ask for"
+    )
+    max_adaptation_epochs: int = Field(
+        default=200, ge=1, le=100_000, description="the most epochs an adaptation may ask for"
+    )
     max_dataset_gb: float = Field(default=20.0, gt=0, le=100_000, description="the largest data set a job may write")
     max_pass_job_frames: int = Field(
         default=512, ge=2, le=100_000, description="frames of a pass sent with Prefer: respond-async (a job)"

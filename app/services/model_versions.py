@@ -287,6 +287,15 @@ def start(
     from app.services import jobs, storage
     from app.services.labelled import summarise
 
+    for field, asked, most, name in (
+        ("max_minutes", options.get("max_minutes"), settings.max_adaptation_minutes, "GSA_MAX_ADAPTATION_MINUTES"),
+        ("epochs", options.get("epochs"), settings.max_adaptation_epochs, "GSA_MAX_ADAPTATION_EPOCHS"),
+    ):
+        if asked is not None and asked > most:
+            raise InputError(
+                [field],
+                f"{asked:g} is over this service's limit of {most:g} ({name}): one job worker is held that long",
+            )
     summary = summarise(session=session, operator_id=operator_id, target=target)
     if summary.count < 4 or len(summary.per_scene) < 2:
         raise InputError(

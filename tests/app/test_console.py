@@ -157,7 +157,15 @@ def test_console_pages_in_chromium(served, tmp_path):
         "jobs": (f"{console}/jobs", [job["id"][:8], 'id="jobs"', "<progress", ">done<", ">manifest</a>"]),
         "models": (
             f"{console}/models",
-            ["Model sets", "version 0 answers you", "the shared default is 0", 'class="labelpoint"', "6 in 2 scene(s)", "pass-1", "lab5.npz"],
+            [
+                "Model sets",
+                "version 0 answers you",
+                "the shared default is 0",
+                'class="labelpoint"',
+                "6 in 2 scene(s)",
+                "pass-1",
+                "lab5.npz",
+            ],
         ),
         "no-key": (f"{srv.url}/console/", ["Use this key"]),
     }

@@ -209,6 +209,10 @@ def test_adaptations_lock_per_operator_and_target(client, versions):
     assert first.status_code == 202, first.text
     other = client.post(f"/v1/model-sets/{T}/adaptations", json={"epochs": 1}, headers=B)
     assert other.status_code == 202, other.text  # another operator's adaptation of the same target is not a 409
+    long = client.post(f"/v1/model-sets/{T}/adaptations", json={"max_minutes": 1000}, headers=B)
+    assert long.status_code == 422 and "GSA_MAX_ADAPTATION_MINUTES" in long.json()["detail"][0]["msg"]
+    many = client.post(f"/v1/model-sets/{T}/adaptations", json={"epochs": 900}, headers=B)
+    assert many.status_code == 422 and many.json()["detail"][0]["loc"][-1] == "epochs"
     again = client.post(f"/v1/model-sets/{T}/adaptations", json={"epochs": 1}, headers=A)
     assert again.status_code == 409 and "of yours" in again.json()["detail"]
     assert "base_dir" not in json.dumps(client.get(f"/v1/jobs/{first.json()['id']}", headers=A).json())
