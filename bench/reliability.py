@@ -1,5 +1,6 @@
-"""Hostile clients (issue 46): what a decompression bomb, a flood of bodies that never come, and abandoned work
-cost a real `gsa serve` (one worker, shipped models, SQLite, default limits).
+"""Hostile clients (issues 46 and 74): what a decompression bomb, a flood of bodies that never come, abandoned work,
+a key that stores without end and a key that queues hundreds of jobs cost a real `gsa serve` (one worker, shipped
+models, SQLite, default limits but a storage quota of QUOTA_MB).
 
 Run with ``python -m bench.reliability`` (``make bench`` runs it); replaces the "Hostile clients" section of
 BENCHMARKS.md. Memory is the worker's peak resident set (VmHWM), CPU its user + system time (/proc), both read
@@ -35,6 +36,9 @@ KEY = "bench-reliability-key-0123"
 AUTH = {"X-API-Key": KEY}
 SIDE = 4096
 FLOOD = 1000
+OTHER = {"X-API-Key": "bench-reliability-key-4567"}
+QUOTA_MB = 100  # small enough to reach in a minute
+SMALL_RADAR = {"n_range": 64, "n_azimuth": 64, "bandwidth_hz": 0.4e9, "aperture_deg": 1.275}
 
 
 def _log(msg: str) -> None:
@@ -199,6 +203,74 @@ def abandoned(srv: Server, pid: int, log: Path) -> list[str]:
     ]
 
 
+def _labelled_npz(n: int, seed: int) -> list[tuple[str, str, bytes]]:
+    from inference.labelled import write_frame
+
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in range(n):
+        buf = io.BytesIO()
+        write_frame(buf, rng.random((256, 256)).astype(np.float32) + 0.01, angles_deg=(k % 40, 0.0, 0.0), scene="s")
+        out.append(("files", f"f{seed}-{k}.npz", buf.getvalue()))
+    return out
+
+
+def storage(srv: Server) -> list[str]:
+    """One key uploads 64 labelled frames a request until the quota answers; the other key still stores."""
+    t0, stored, last = time.monotonic(), 0, None
+    with httpx.Client(timeout=120.0, headers=AUTH) as client:
+        for k in range(1000):
+            body, ctype = multipart([], _labelled_npz(64, k))
+            last = client.post(
+                srv.url + "/v1/targets/tiangong-like/labelled-frames", content=body, headers={"Content-Type": ctype}
+            )
+            if last.status_code != 201:
+                break
+            stored = last.json()["count"]
+        seconds = time.monotonic() - t0
+        body, ctype = multipart([], _labelled_npz(1, 99_999))
+        other = httpx.post(
+            srv.url + "/v1/targets/tiangong-like/labelled-frames",
+            content=body,
+            headers={**OTHER, "Content-Type": ctype},
+            timeout=60,
+        )
+        gone = client.delete(srv.url + "/v1/targets/tiangong-like/labelled-frames", params={"all": "true"})
+    assert last is not None
+    detail = str(last.json().get("detail", ""))[:160]
+    _log(f"storage: {stored} frames in {seconds:.1f} s, then {last.status_code}")
+    return [
+        f"- **A key that stores without end** (GSA_QUOTA_STORAGE_MB {QUOTA_MB}): 64 labelled 256 x 256 frames a "
+        f"request, as fast as answered: {stored} frames stored in {seconds:.1f} s, then {last.status_code} "
+        f'("{detail}..."). Another key\'s upload meanwhile: {other.status_code}. `DELETE '
+        f"/v1/targets/tiangong-like/labelled-frames?all=true` removed {gone.json()['deleted']} frames and their "
+        "images. Before: no quota (11,724 frames, 779 MB, in 120 s) and nothing could be deleted.",
+    ]
+
+
+def queue(srv: Server) -> list[str]:
+    """One key asks for 300 one-frame data sets; then another key asks for one: how long until it is done."""
+    with httpx.Client(timeout=60.0, headers=AUTH) as client:
+        codes = [
+            client.post(srv.url + "/v1/datasets", json={"n": 1, "radar": SMALL_RADAR}).status_code for _ in range(300)
+        ]
+        t0 = time.monotonic()
+        mine = httpx.post(srv.url + "/v1/datasets", json={"n": 1, "radar": SMALL_RADAR}, headers=OTHER).json()
+        while httpx.get(srv.url + f"/v1/jobs/{mine['id']}", headers=OTHER).json()["state"] in ("queued", "running"):
+            time.sleep(0.2)
+        waited = time.monotonic() - t0
+        for job in client.get(srv.url + "/v1/jobs", params={"limit": 100}).json()["data"]:
+            client.delete(srv.url + f"/v1/jobs/{job['id']}")
+    accepted, refused = codes.count(202), codes.count(429)
+    _log(f"queue: {accepted} accepted, {refused} refused; the other key's job done in {waited:.1f} s")
+    return [
+        f"- **A key that queues 300 jobs** (one-frame data sets; GSA_QUOTA_QUEUED_JOBS 16, GSA_JOB_WORKERS 1): "
+        f"{accepted} accepted, {refused} answered 429. Another key's one-frame data set asked for next was done "
+        f"{waited:.1f} s later: jobs start in turn between keys. Before: all 300 queued, first come first served, and "
+        "another key's job waited about 20 minutes.",
+    ]
+
+
 def _plan_30_days() -> dict[str, Any]:
     from app.schemas import PAPER_EXAMPLE
 
@@ -213,7 +285,8 @@ def main() -> None:
         env = {
             "GSA_DATA_DIR": str(root / "data"),
             "GSA_MODEL_DIR": str(DEFAULT_MODEL_DIR),
-            "GSA_API_KEYS": KEY,
+            "GSA_API_KEYS": f"{KEY},{OTHER['X-API-Key']}",
+            "GSA_QUOTA_STORAGE_MB": str(QUOTA_MB),
             "GSA_LOG_LEVEL": "info",
             "GSA_LOG_JSON": "true",
         }
@@ -227,13 +300,17 @@ def main() -> None:
             lines += flood(srv)
             _log("abandoned work")
             lines += abandoned(srv, pid, log)
+            _log("storage quota")
+            lines += storage(srv)
+            _log("queued jobs")
+            lines += queue(srv)
         finally:
             srv.stop()
     section = [
         f"## {TITLE}",
         "",
         f"Machine: {machine()}. Date: {today}. Command: `python -m bench.reliability` (bench/reliability.py). "
-        "One `gsa serve` worker, shipped models, SQLite, default limits.",
+        f"One `gsa serve` worker, shipped models, SQLite, default limits but GSA_QUOTA_STORAGE_MB {QUOTA_MB}.",
         "",
         *lines,
         "",

@@ -177,16 +177,19 @@ def cancel(session: Session, job: Job, settings: Settings | None = None) -> Job:
     return job
 
 
-def fair_order(queued: list[Job], running: Counter[str]) -> list[Job]:
+def fair_order(queued: list[Job], running: Counter[str], last_start: dict[str, datetime] | None = None) -> list[Job]:
     """The queued jobs in the order they start: turn about between operators, so one operator's 300 jobs do not
     hold back another's one. A job's place is its operator's running jobs plus the jobs of that operator queued
-    before it; ties by age. ``queued`` comes oldest first."""
+    before it; at equal places the operator served longest ago (``last_start``: when its latest job started; never
+    comes first) goes first, then the older job. ``queued`` comes oldest first."""
+    never = datetime.min.replace(tzinfo=UTC)
+    last = {op: (t if t.tzinfo else t.replace(tzinfo=UTC)) for op, t in (last_start or {}).items()}
     ahead: Counter[str] = Counter()
     places = []
     for k, job in enumerate(queued):
-        places.append((running[job.operator_id] + ahead[job.operator_id], k, job))
+        places.append((running[job.operator_id] + ahead[job.operator_id], last.get(job.operator_id, never), k, job))
         ahead[job.operator_id] += 1
-    return [job for *_, job in sorted(places, key=lambda p: (p[0], p[1]))]
+    return [job for *_, job in sorted(places, key=lambda p: (p[0], p[1], p[2]))]
 
 
 def remove(session: Session, job: Job, settings: Settings) -> None:
@@ -402,7 +405,12 @@ class Dispatcher:
                 j.operator_id for j in s.scalars(select(Job).where(Job.state == "running"))
             )  # every host's: the share is the service's, not this host's
             waiting = list(s.scalars(select(Job).where(Job.state == "queued").order_by(Job.created_at, Job.id)))
-            queued = fair_order(waiting, busy)[: max(room, 0)]
+            served = s.execute(
+                select(Job.operator_id, func.max(Job.started_at))
+                .where(Job.operator_id.in_({j.operator_id for j in waiting}), Job.started_at.is_not(None))
+                .group_by(Job.operator_id)
+            )
+            queued = fair_order(waiting, busy, {op: t for op, t in served if t is not None})[: max(room, 0)]
             s.commit()  # the reads end here: each claim below writes first
             for job in queued:
                 now = utcnow()

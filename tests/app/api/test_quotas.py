@@ -127,13 +127,17 @@ def _job(op: str, minute: int) -> SimpleNamespace:
 
 
 def test_jobs_start_in_turn_between_operators():
-    """Operator a queued five jobs, then b one and c one: b's and c's start second and third, not after a's five;
-    an operator with a job running already waits behind one without."""
+    """Operator a queued five jobs, then b one and c one: b's and c's start within the first three, not after a's
+    five; an operator with a job running, or served more lately, waits behind one without."""
     queued = [_job("a", k) for k in range(5)] + [_job("b", 10), _job("c", 11)]
     order = [j.operator_id for j in jobs.fair_order(queued, jobs.Counter())]  # type: ignore[arg-type]
     assert order == ["a", "b", "c", "a", "a", "a", "a"]
     busy = [j.operator_id for j in jobs.fair_order(queued, jobs.Counter({"a": 1}))]  # type: ignore[arg-type]
     assert busy[:3] == ["b", "c", "a"]
+    # One worker: a's job has just ended, so nobody runs; a, served last, goes after b and c, who never were.
+    served = {"a": datetime(2026, 1, 1, 0, 30, tzinfo=UTC), "c": datetime(2026, 1, 1, 0, 10, tzinfo=UTC)}
+    turn = [j.operator_id for j in jobs.fair_order(queued, jobs.Counter(), served)]  # type: ignore[arg-type]
+    assert turn == ["b", "c", "a", "a", "a", "a", "a"]
 
 
 def test_a_cancel_stops_the_worker_and_every_process_it_started(tmp_path):
