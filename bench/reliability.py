@@ -240,6 +240,7 @@ def storage(srv: Server) -> list[str]:
     detail = str(last.json().get("detail", ""))[:160]
     _log(f"storage: {stored} frames in {seconds:.1f} s, then {last.status_code}")
     return [
+        "",
         f"- **A key that stores without end** (GSA_QUOTA_STORAGE_MB {QUOTA_MB}): 64 labelled 256 x 256 frames a "
         f"request, as fast as answered: {stored} frames stored in {seconds:.1f} s, then {last.status_code} "
         f'("{detail}..."). Another key\'s upload meanwhile: {other.status_code}. `DELETE '
