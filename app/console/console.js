@@ -91,7 +91,7 @@ async function plansPage(params) {
       <td>${esc(p.target_name)}</td><td>${esc(p.observer_name)}</td><td>${esc(p.station_name)}</td>
       <td>${utc(p.t_access)}</td><td class="num">${num(p.dv_total_m_s, 1)}</td>
       <td>${p.feasible === null || p.feasible === undefined ? "-" : p.feasible ? "yes" : "no"}</td></tr>`).join("");
-  view.innerHTML = `<h1>Plans <span class="muted">(${body.count})</span></h1>
+  view.innerHTML = `<h1>Plans <span class="muted">(${body.count})</span> <a class="action" href="#/new-plan">New plan</a></h1>
     <form class="filter" id="filter"><input type="text" id="target" placeholder="target name" value="${esc(target)}">
     <button>Filter</button></form>
     <table id="plans"><thead><tr><th>plan</th><th>created (UTC)</th><th>target</th><th>observer</th><th>station</th>
@@ -367,10 +367,13 @@ async function estimatesPage() {
       <td>${utc(e.created_at)}</td><td>${esc(e.input_name)}</td><td>${euler(e.attitude)}</td>
       <td>${e.quality ? (e.quality.trusted ? "yes" : "no") : "-"}</td>
       <td>${e.plan_id ? `<a href="#/plans/${esc(e.plan_id)}">${esc(e.plan_id.slice(0, 8))}</a>` : "-"}</td></tr>`).join("");
+  const upload = await estimateForm();
   view.innerHTML = `<h1>Estimates <span class="muted">(${body.count})</span></h1>
+    ${upload}
     <table id="estimates"><thead><tr><th>estimate</th><th>created (UTC)</th><th>input</th><th>z, y, x (deg)</th>
     <th>trusted</th><th>plan</th></tr></thead><tbody>${rows ||
-      '<tr><td colspan="6" class="muted">No estimates yet: POST /v1/estimates, or gsa estimate --server.</td></tr>'}</tbody></table>`;
+      '<tr><td colspan="6" class="muted">No estimates yet: upload a frame above, POST /v1/estimates, or gsa estimate --server.</td></tr>'}</tbody></table>`;
+  wireEstimateForm();
 }
 
 async function estimatePage(id) {
@@ -683,7 +686,8 @@ async function route() {
   const parts = where.split("/").filter(Boolean);
   view.innerHTML = "<p>Loading...</p>";
   try {
-    if (parts[0] === "plans" && parts[1]) await planPage(decodeURIComponent(parts[1]));
+    if (parts[0] === "new-plan") await newPlanPage();
+    else if (parts[0] === "plans" && parts[1]) await planPage(decodeURIComponent(parts[1]));
     else if (parts[0] === "campaigns" && parts[1]) await campaignPage(decodeURIComponent(parts[1]));
     else if (parts[0] === "campaigns") await campaignsPage();
     else if (parts[0] === "estimates" && parts[1]) await estimatePage(decodeURIComponent(parts[1]));

@@ -189,3 +189,82 @@ def test_the_landing_page_links_the_console(client):
     assert 'href="/console/"' in client.get("/").text
     r = client.get("/console", follow_redirects=False)
     assert r.status_code in (307, 308) and r.headers["location"].endswith("/console/")
+
+
+ISS = json.loads((ROOT / "examples" / "iss-plan.json").read_text())
+
+
+def test_the_console_plans_from_a_pasted_tle_and_estimates_an_uploaded_frame(served, tmp_path):
+    """An operator's first hour in the console, in a real Chromium: a mistyped TLE is refused with the server's
+    message at the target's field and nothing is stored; the ISS's TLE pasted as it comes, an observer's elements
+    and a new radar site give a plan whose page opens; a frame picked from disk gives an estimate whose page opens."""
+    from tests.utils.browser import Browser
+
+    srv, *_ = served
+    headers = {"X-API-Key": KEY_A}
+    plans_before = httpx.get(srv.url + "/v1/plans", headers=headers).json()["count"]
+    browser = Browser(CHROMIUM, [f for f in FLAGS if not f.startswith("--virtual-time")], tmp_path / "profile")
+    try:
+        browser.goto(f"{srv.url}/console/#key={KEY_A}&/new-plan")
+        browser.wait_for("document.getElementById('planform') !== null")
+
+        def fill(name: str, value: str) -> None:
+            browser.evaluate(
+                f"document.getElementById('planform').elements.namedItem({json.dumps(name)}).value = "
+                f"{json.dumps(value)}"
+            )
+
+        fill("target_name", "ISS (ZARYA)")
+        fill("target_text", "1 25544U 98067A   08264.51782528 -.00002182  00000-0 -11606-4 0  2927\nnot a TLE line")
+        fill("observer_name", "Observer")
+        fill("observer_text", json.dumps(ISS["observer"]["elements"]))
+        station = ISS["ground_station"]
+        fill("gs_name", station["name"])
+        fill("gs_lat", str(station["latitude_deg"]))
+        fill("gs_lon", str(station["longitude_deg"]))
+        fill("duration_days", "5")
+        browser.evaluate("document.getElementById('plansubmit').click()")
+        said = browser.wait_for(
+            "[...document.querySelectorAll('fieldset[data-loc=\"target\"] .fielderror')].map(e => e.textContent)"
+            ".join(' ')"
+        )
+        assert "line" in said.lower() or "tle" in said.lower(), said
+        assert httpx.get(srv.url + "/v1/plans", headers=headers).json()["count"] == plans_before  # nothing stored
+        fill("target_text", "\n".join(ISS["target"]["tle"]))  # as pasted from CelesTrak: a 3LE
+        browser.evaluate("document.getElementById('plansubmit').click()")
+        plan_id = browser.wait_for(
+            "location.hash.startsWith('#/plans/') && document.getElementById('status').dataset.ready === '1' && "
+            "document.body.innerText.includes('Radar at T_access') && location.hash.slice(8)",
+            timeout_s=120,
+        )
+        stored = httpx.get(f"{srv.url}/v1/plans/{plan_id}", headers=headers).json()
+        assert stored["target_name"] == "ISS (ZARYA)" and stored["station_name"] == station["name"]
+        browser.screenshot(SHOTS / "new-plan-made.png")
+        browser.goto(f"{srv.url}/console/#/new-plan")
+        browser.wait_for("document.getElementById('planform') !== null")
+        browser.evaluate("document.getElementById('paper').click()")
+        browser.screenshot(SHOTS / "new-plan-form.png")
+
+        browser.goto(f"{srv.url}/console/#/estimates")
+        browser.wait_for("document.getElementById('estimateform') !== null")
+        browser.set_files("#framefile", [ROOT / "examples" / "sample-frame.npy"])
+        browser.evaluate("document.getElementById('estimatesubmit').click()")
+        said = browser.wait_for("[...document.querySelectorAll('.fielderror')].map(e => e.textContent).join(' ')")
+        assert "the models take 64x64" in said, said  # 256 x 256 for these small models: the server's words
+        browser.evaluate("document.getElementById('estimateform').elements.namedItem('resample').checked = true")
+        browser.evaluate("document.getElementById('estimatesubmit').click()")
+        try:
+            estimate_id = browser.wait_for(
+                "location.hash.startsWith('#/estimates/') && document.getElementById('status').dataset.ready === '1' "
+                "&& document.body.innerText.includes('observation frame') && location.hash.slice(12)",
+                timeout_s=120,
+            )
+        except TimeoutError:
+            raise AssertionError(
+                browser.evaluate("location.hash + ' ' + document.body.innerText.slice(0, 800)")
+            ) from None
+        made = httpx.get(f"{srv.url}/v1/estimates/{estimate_id}", headers=headers).json()
+        assert made["input_name"] == "sample-frame.npy"
+        assert browser.evaluate("document.getElementById('status').dataset.failed") == "0"
+    finally:
+        browser.close()
