@@ -300,7 +300,7 @@ async function campaignsPage() {
       <td><a href="#/campaigns/${esc(c.id)}">${esc(c.id.slice(0, 8))}</a></td><td>${utc(c.created_at)}</td>
       <td>${esc(c.target_name)}</td><td>${esc(c.observer_name)}</td><td>${esc(c.station_name)}</td>
       <td class="num">${c.scenes}</td><td class="num">${num(c.dv_total_m_s, 1)}</td><td>${utc(c.first_access)}</td></tr>`).join("");
-  view.innerHTML = `<h1>Campaigns <span class="muted">(${body.count})</span></h1>
+  view.innerHTML = `<h1>Campaigns <span class="muted">(${body.count})</span> <a class="action" href="#/new-campaign">New campaign</a></h1>
     <table id="campaigns"><thead><tr><th>campaign</th><th>created (UTC)</th><th>target</th><th>observer</th><th>station</th>
     <th class="num">scenes</th><th class="num">dv (m/s)</th><th>first T_access (UTC)</th></tr></thead><tbody>${rows ||
       '<tr><td colspan="8" class="muted">No campaigns yet: POST /v1/campaigns, or gsa campaign --server.</td></tr>'}</tbody></table>`;
@@ -651,7 +651,8 @@ async function modelsPage() {
         <table class="scenes"><thead><tr><th>scene</th><th class="num">frames</th></tr></thead><tbody>${scenes}</tbody></table></div>
         <div class="scroll"><table class="labelled"><thead><tr><th>frame</th><th>scene</th><th>z, y, x (deg)</th><th>observed (UTC)</th>
         <th>station</th><th class="num">optical 1-sigma (deg)</th><th class="num">SNR (dB)</th><th>stored (UTC)</th></tr></thead><tbody>${frames}</tbody></table></div>`
-        : `<p class="muted">None yet: POST /v1/targets/${esc(s.target)}/labelled-frames, or gsa labelled add DIR --target ${esc(s.target)} --server.</p>`}
+        : `<p class="muted">None yet: add them below, POST /v1/targets/${esc(s.target)}/labelled-frames, or gsa labelled add DIR --target ${esc(s.target)} --server.</p>`}
+      ${modelForms(s.target)}
       </section>`;
   }));
   view.innerHTML = `<h1>Model sets <span class="muted">(${sets.data.length})</span></h1>
@@ -659,6 +660,7 @@ async function modelsPage() {
     of its target's set, learnt from your labelled frames below, and yours: promoting it changes what answers you alone. Everyone
     without a promotion of their own is answered by the shared default, which an admin key sets. Every estimate names its version.</p>
     ${blocks.join("") || '<p class="muted">No model sets: the service serves none.</p>'}`;
+  wireModelForms();
   view.querySelectorAll("button.promote").forEach((b) => b.addEventListener("click", async () => {
     b.disabled = true;
     try {
@@ -686,7 +688,8 @@ async function route() {
   const parts = where.split("/").filter(Boolean);
   view.innerHTML = "<p>Loading...</p>";
   try {
-    if (parts[0] === "new-plan") await newPlanPage();
+    if (parts[0] === "new-plan") await newScenePage("plan");
+    else if (parts[0] === "new-campaign") await newScenePage("campaign");
     else if (parts[0] === "plans" && parts[1]) await planPage(decodeURIComponent(parts[1]));
     else if (parts[0] === "campaigns" && parts[1]) await campaignPage(decodeURIComponent(parts[1]));
     else if (parts[0] === "campaigns") await campaignsPage();

@@ -70,7 +70,9 @@ function showErrors(form, detail) {
     });
     const where = best || form;
     const shown = path && !best ? `${path}: ${e.msg}` : e.msg;
-    where.insertAdjacentHTML("beforeend", `<p class="error fielderror" data-for="${esc(path)}">${esc(shown)}</p>`);
+    // inside a fieldset or the form; right after a label (a paragraph inside one would break its line)
+    const place = where.tagName === "LABEL" ? "afterend" : "beforeend";
+    where.insertAdjacentHTML(place, `<p class="error fielderror" data-for="${esc(path)}">${esc(shown)}</p>`);
   }
 }
 
@@ -84,12 +86,27 @@ function orbitFieldset(role, legend) {
   </fieldset>`;
 }
 
-async function newPlanPage() {
+// A plan (POST /v1/plans) or a campaign (POST /v1/campaigns): both orbits, the radar, the span.
+async function newScenePage(kind) {
+  const campaign = kind === "campaign";
   const stations = await api("/v1/stations?limit=100");
   const stored = stations.data.map((s) => `<option value="${esc(s.name)}">${esc(s.name)} (stored)</option>`).join("");
-  view.innerHTML = `<h1>New plan</h1>
-    <p class="muted">Paste both orbits, choose the radar, and plan: the scene, its phasing burn and the radar's view
-    (<code>POST /v1/plans</code>). <button type="button" id="paper">Fill in the paper's Table 1 scene</button></p>
+  const span = campaign
+    ? `<fieldset data-loc="campaign"><legend>Campaign</legend>
+        <label data-loc="start">start (UTC, ISO 8601; empty: the target's epoch) <input type="text" name="start"></label>
+        <label data-loc="duration_days">days <input type="text" name="duration_days" class="short" value="60"></label>
+        <label data-loc="dv_budget_m_s">dv budget (m/s) <input type="text" name="dv_budget_m_s" class="short" value="1000"></label>
+        <label data-loc="max_scenes">at most scenes <input type="text" name="max_scenes" class="short" value="20"></label>
+      </fieldset>`
+    : `<fieldset data-loc="search"><legend>Search</legend>
+        <label data-loc="search.start">start (UTC, ISO 8601; empty: the target's epoch) <input type="text" name="start"></label>
+        <label data-loc="search.duration_days">days <input type="text" name="duration_days" class="short" value="10"></label>
+      </fieldset>`;
+  view.innerHTML = `<h1>New ${kind}</h1>
+    <p class="muted">${campaign
+      ? "Paste both orbits, choose the radar, and plan a campaign: one GSA scene after another within the dv budget (<code>POST /v1/campaigns</code>; tens of seconds)."
+      : "Paste both orbits, choose the radar, and plan: the scene, its phasing burn and the radar's view (<code>POST /v1/plans</code>)."}
+    <button type="button" id="paper">Fill in the paper's Table 1 scene</button></p>
     <form id="planform" class="entry">
       <div class="grid">${orbitFieldset("target", "Target (imaged by the radar)")}${orbitFieldset("observer", "Observer (the optical satellite)")}</div>
       <fieldset data-loc="ground_station"><legend>Radar site</legend>
@@ -101,14 +118,12 @@ async function newPlanPage() {
           <label>altitude (m) <input type="text" name="gs_alt" class="short" value="0"></label>
         </span>
       </fieldset>
-      <fieldset data-loc="search"><legend>Search</legend>
-        <label data-loc="search.start">start (UTC, ISO 8601; empty: the target's epoch) <input type="text" name="start"></label>
-        <label data-loc="search.duration_days">days <input type="text" name="duration_days" class="short" value="10"></label>
-      </fieldset>
+      ${span}
       <p><button id="plansubmit">Plan</button> <span id="planstate" class="muted"></span></p>
     </form>`;
   const form = document.getElementById("planform");
   const field = (name) => form.elements.namedItem(name);
+  const number = (name) => (field(name).value.trim() === "" ? null : Number(field(name).value));
   document.getElementById("paper").addEventListener("click", () => {
     for (const role of ["target", "observer"]) {
       field(`${role}_name`).value = PAPER[role].name;
@@ -119,11 +134,11 @@ async function newPlanPage() {
     field("gs_lat").value = PAPER.station.latitude_deg;
     field("gs_lon").value = PAPER.station.longitude_deg;
     field("gs_alt").value = PAPER.station.altitude_m;
-    field("duration_days").value = "30";
+    field("duration_days").value = campaign ? "60" : "30";
   });
   form.addEventListener("submit", async (ev) => {
     ev.preventDefault();
-    const body = { search: {} };
+    const body = {};
     const local = [];
     for (const role of ["target", "observer"]) {
       try {
@@ -133,23 +148,65 @@ async function newPlanPage() {
         local.push({ loc: [role], msg: err.message });
       }
     }
-    if (field("station").value) body.ground_station = field("station").value;
-    else {
-      const n = (name) => (field(name).value.trim() === "" ? null : Number(field(name).value));
-      body.ground_station = { name: field("gs_name").value.trim(), latitude_deg: n("gs_lat"), longitude_deg: n("gs_lon"), altitude_m: n("gs_alt") ?? 0 };
+    body.ground_station = field("station").value || {
+      name: field("gs_name").value.trim(), latitude_deg: number("gs_lat"), longitude_deg: number("gs_lon"), altitude_m: number("gs_alt") ?? 0,
+    };
+    const span = campaign ? body : (body.search = {});
+    if (field("start").value.trim()) span.start = field("start").value.trim();
+    for (const name of campaign ? ["duration_days", "dv_budget_m_s", "max_scenes"] : ["duration_days"]) {
+      if (field(name).value.trim()) span[name] = number(name);
     }
-    if (field("start").value.trim()) body.search.start = field("start").value.trim();
-    if (field("duration_days").value.trim()) body.search.duration_days = Number(field("duration_days").value);
     if (local.length) return showErrors(form, local);
     const button = document.getElementById("plansubmit");
     button.disabled = true;
-    document.getElementById("planstate").textContent = "planning (a few seconds; up to GSA_PLAN_TIMEOUT_S)...";
-    const r = await send("/v1/plans", body);
+    document.getElementById("planstate").textContent = campaign
+      ? "planning the campaign (up to GSA_CAMPAIGN_TIMEOUT_S)..." : "planning (a few seconds; up to GSA_PLAN_TIMEOUT_S)...";
+    const r = await send(campaign ? "/v1/campaigns" : "/v1/plans", body);
     button.disabled = false;
     document.getElementById("planstate").textContent = "";
-    if (r.status === 201) location.hash = `#/plans/${encodeURIComponent(r.body.id)}`;
+    if (r.status === 201) location.hash = `#/${campaign ? "campaigns" : "plans"}/${encodeURIComponent(r.body.id)}`;
     else showErrors(form, r.body.detail ?? `${r.status}`);
   });
+}
+
+// The model sets page: labelled frames in, an adaptation started (a job: the Jobs page follows it).
+function modelForms(target) {
+  const t = esc(target);
+  return `<form class="entry labelledform" data-target="${t}"><fieldset data-loc="files"><legend>Add labelled frames of ${t}</legend>
+      <input type="file" name="files" multiple accept=".npz">
+      <label data-loc="scene">scene of files that name none <input type="text" name="scene" class="short"></label>
+      <button>Upload</button> <span class="state muted"></span></fieldset></form>
+    <form class="entry adaptform" data-target="${t}"><fieldset data-loc="adapt"><legend>Adapt ${t}'s set to your frames</legend>
+      <label data-loc="max_minutes">at most minutes <input type="text" name="max_minutes" class="short" value="10"></label>
+      <label><input type="checkbox" name="map_only"> only the reflectivity map (a few CPU minutes)</label>
+      <button>Adapt</button> <span class="state muted"></span></fieldset></form>`;
+}
+
+function wireModelForms() {
+  document.querySelectorAll("form.labelledform").forEach((form) => form.addEventListener("submit", async (ev) => {
+    ev.preventDefault();
+    const files = form.elements.namedItem("files").files;
+    if (!files.length) return showErrors(form, [{ loc: ["files"], msg: "choose labelled frames: .npz files (inference.labelled's format)" }]);
+    const data = new FormData();
+    for (const f of files) data.append("files", f, f.name);
+    const scene = form.elements.namedItem("scene").value.trim();
+    if (scene) data.append("scene", scene);
+    form.querySelector(".state").textContent = "uploading...";
+    const r = await send(`/v1/targets/${encodeURIComponent(form.dataset.target)}/labelled-frames`, data);
+    form.querySelector(".state").textContent = "";
+    if (r.status === 201) route();
+    else showErrors(form, r.body.detail ?? `${r.status}`);
+  }));
+  document.querySelectorAll("form.adaptform").forEach((form) => form.addEventListener("submit", async (ev) => {
+    ev.preventDefault();
+    const body = {};
+    const minutes = form.elements.namedItem("max_minutes").value.trim();
+    if (minutes) body.max_minutes = Number(minutes);
+    if (form.elements.namedItem("map_only").checked) body.map_only = true;
+    const r = await send(`/v1/model-sets/${encodeURIComponent(form.dataset.target)}/adaptations`, body);
+    if (r.status === 202) location.hash = "#/jobs";
+    else showErrors(form, r.body.detail ?? `${r.status}`);
+  }));
 }
 
 // The estimates page's upload: one frame in, its estimate's page out.

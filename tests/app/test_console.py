@@ -265,6 +265,40 @@ def test_the_console_plans_from_a_pasted_tle_and_estimates_an_uploaded_frame(ser
             ) from None
         made = httpx.get(f"{srv.url}/v1/estimates/{estimate_id}", headers=headers).json()
         assert made["input_name"] == "sample-frame.npy"
+
+        # A campaign from the paper's scene, 20 days.
+        browser.goto(f"{srv.url}/console/#/new-campaign")
+        browser.wait_for("document.getElementById('planform') !== null")
+        browser.evaluate("document.getElementById('paper').click()")
+        browser.evaluate("document.getElementById('planform').elements.namedItem('duration_days').value = '20'")
+        browser.evaluate("document.getElementById('plansubmit').click()")
+        campaign_id = browser.wait_for(
+            "location.hash.startsWith('#/campaigns/') && document.getElementById('status').dataset.ready === '1' && "
+            "document.getElementById('scenes') !== null && location.hash.slice(12)",
+            timeout_s=180,
+        )
+        assert httpx.get(f"{srv.url}/v1/campaigns/{campaign_id}", headers=headers).status_code == 200
+
+        # Labelled frames added on the model sets page; an adaptation the server refuses says why at its field.
+        before = httpx.get(srv.url + "/v1/targets/tiangong-like/labelled-frames", headers=headers).json()["count"]
+        frame = tmp_path / "lab-new.npz"
+        write_frame(
+            frame, np.random.default_rng(99).random((64, 64)) + 0.01, angles_deg=(1.0, 2.0, 3.0), scene="pass-9"
+        )
+        browser.goto(f"{srv.url}/console/#/models")
+        browser.wait_for("document.querySelector('form.labelledform') !== null")
+        browser.set_files("form.labelledform input[type=file]", [frame])
+        browser.evaluate("document.querySelector('form.labelledform button').click()")
+        browser.wait_for("document.body.innerText.includes('pass-9')")
+        after = httpx.get(srv.url + "/v1/targets/tiangong-like/labelled-frames", headers=headers).json()["count"]
+        assert after == before + 1
+        browser.evaluate("document.querySelector('form.adaptform').elements.namedItem('max_minutes').value = '0'")
+        browser.evaluate("document.querySelector('form.adaptform button').click()")
+        said = browser.wait_for(
+            "[...document.querySelectorAll('form.adaptform .fielderror')].map(e => e.textContent).join(' ')"
+        )
+        assert "0.1" in said, said  # max_minutes' lower bound, in the server's words
+        browser.screenshot(SHOTS / "models-forms.png")
         assert browser.evaluate("document.getElementById('status').dataset.failed") == "0"
     finally:
         browser.close()
