@@ -306,6 +306,41 @@ class Encounter:
     closest_approach_km: float
     closest_approach_s: float
     arc: Trajectory | None = None  # the observer after the burn (the exports' ephemeris)
+    relative: RelativeMotion | None = None  # the fly-by about T_access in the target's RTN frame
+
+
+RELATIVE_HALF_S = 60.0  # the fly-by drawn from a minute before T_access to a minute after (about 800 km at 13 km/s)
+RELATIVE_STEP_S = 1.0
+
+
+@dataclass(frozen=True, slots=True)
+class RelativeMotion:
+    """Where the observer is relative to the target about T_access, in the target's own radial / along-track /
+    orbit-normal frame at each moment (the Hill frame): ``t_s`` from T_access and ``rtn_km`` [3, N]."""
+
+    t_s: Vec
+    rtn_km: Vec
+
+
+def relative_motion(
+    observer: Trajectory,
+    target: Trajectory,
+    t_access_s: float,
+    t_from_s: float,
+    t_to_s: float,
+    half_s: float = RELATIVE_HALF_S,
+    step_s: float = RELATIVE_STEP_S,
+) -> RelativeMotion:
+    """The observer's position relative to the target, ``half_s`` either side of ``t_access_s`` (kept within
+    ``t_from_s``..``t_to_s``, where the observer's arc is defined), each sample in the target's RTN frame then."""
+    lo, hi = max(t_access_s - half_s, t_from_s), min(t_access_s + half_s, t_to_s)
+    n = max(int(round((hi - lo) / step_s)), 1) + 1
+    t = np.linspace(lo, hi, n)
+    r_o, _ = observer.state(t)
+    r_t, v_t = target.state(t)
+    rel = r_o - r_t
+    rtn = np.stack([rtn_matrix(r_t[:, k], v_t[:, k]) @ rel[:, k] for k in range(n)], axis=1)
+    return RelativeMotion(t_s=t - t_access_s, rtn_km=rtn)
 
 
 def encounter(
@@ -342,4 +377,5 @@ def encounter(
         closest_approach_km=float(cand_d[j]),
         closest_approach_s=float(cand_t[j]),
         arc=arc,
+        relative=relative_motion(arc, target, phasing.t_access_s, t0, t_end_s),
     )

@@ -375,6 +375,27 @@ class CandidatePublic(Described):
         )
 
 
+class RelativeMotionPublic(Described):
+    """The fly-by about T_access: where the observer is relative to the target, in the target's own orbital frame
+    at each moment (radial, along-track, orbit normal; the Hill frame), one sample a second."""
+
+    t_s: list[float]
+    """seconds from T_access"""
+    radial_km: list[float]
+    """the observer's offset from the target along the target's radius (up), km"""
+    along_track_km: list[float]
+    """along the target's direction of motion, km"""
+    cross_track_km: list[float]
+    """along the target's orbit normal, km"""
+
+    @classmethod
+    def from_motion(cls, motion: Any) -> RelativeMotionPublic:
+        r, t, n = (np.round(np.asarray(motion.rtn_km[k], float), 3).tolist() for k in range(3))
+        return cls(
+            t_s=np.round(np.asarray(motion.t_s, float), 3).tolist(), radial_km=r, along_track_km=t, cross_track_km=n
+        )
+
+
 class VerificationPublic(Described):
     miss_km: float = Field(
         description="numerically propagated (J2) distance of the observer from its aim point at T_access"
@@ -395,6 +416,8 @@ class VerificationPublic(Described):
     target_angular_rate_deg_s: float = Field(
         description="the target's angular rate seen from the observer at T_access (what an optical tracker must follow)"
     )
+    relative_motion: RelativeMotionPublic | None = None
+    """the fly-by a minute either side of T_access in the target's orbital frame (the console draws it)"""
 
     @classmethod
     def from_plan(cls, plan: Plan) -> VerificationPublic:
@@ -410,6 +433,7 @@ class VerificationPublic(Described):
             closest_approach_km=meet.closest_approach_km,
             closest_approach_time=utc(plan.epoch, meet.closest_approach_s),
             target_angular_rate_deg_s=meet.target_angular_rate_deg_s,
+            relative_motion=RelativeMotionPublic.from_motion(meet.relative) if meet.relative is not None else None,
         )
 
 

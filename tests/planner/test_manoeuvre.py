@@ -59,3 +59,43 @@ def test_the_burn_is_the_cheapest_option_after_j2():
     assert (ours.revolutions_before, ours.lambert_revolutions, ours.low_path) == cheapest
     assert ours.dv_total_km_s == pytest.approx(costs[cheapest][1], abs=1e-4)  # 0.1 m/s
     assert costs[cheapest_two_body][1] - ours.dv_total_km_s > 0.04  # 48 m/s saved here
+
+
+class _Circle:
+    """A circular two-body orbit of radius A, inclined ``incl`` about the x axis (the node at t = 0): exact."""
+
+    A, N = 7000.0, 0.0011  # km, rad/s
+
+    def __init__(self, incl_rad: float, lag_rad: float = 0.0) -> None:
+        self.incl, self.lag = incl_rad, lag_rad
+
+    def state(self, t):
+        t = np.atleast_1d(np.asarray(t, float))
+        th = self.N * t - self.lag
+        c, s, ci, si = np.cos(th), np.sin(th), np.cos(self.incl), np.sin(self.incl)
+        r = self.A * np.stack([c, s * ci, s * si])
+        v = self.A * self.N * np.stack([-s, c * ci, c * si])
+        return r, v
+
+
+def test_the_fly_by_in_the_target_s_frame_matches_the_closed_forms():
+    """Two circular orbits of one radius, in closed form: an observer lagging by a fixed phase sits still behind
+    and below the target (radial a(cos d - 1), along-track -a sin d); one in a plane tilted by delta through the
+    target's position at T_access is at (a sin^2 th (cos delta - 1), a sin th cos th (cos delta - 1),
+    a sin th sin delta) at angle th = n t from there."""
+    from planner.manoeuvre import relative_motion
+
+    target, a = _Circle(0.0), _Circle.A
+    lag = 0.01
+    behind = relative_motion(_Circle(0.0, lag), target, 500.0, 0.0, 2000.0)
+    assert behind.t_s[0] == -60.0 and behind.t_s[-1] == 60.0 and len(behind.t_s) == 121
+    np.testing.assert_allclose(behind.rtn_km[0], a * (np.cos(lag) - 1.0), atol=1e-9)
+    np.testing.assert_allclose(behind.rtn_km[1], -a * np.sin(lag), atol=1e-9)
+    np.testing.assert_allclose(behind.rtn_km[2], 0.0, atol=1e-9)
+    delta = np.radians(1.0)
+    tilted = relative_motion(_Circle(delta), target, 0.0, -30.0, 1000.0)  # the arc starts at -30 s: cut there
+    assert tilted.t_s[0] == -30.0 and tilted.t_s[-1] == 60.0
+    th = _Circle.N * tilted.t_s
+    np.testing.assert_allclose(tilted.rtn_km[0], a * np.sin(th) ** 2 * (np.cos(delta) - 1.0), atol=1e-9)
+    np.testing.assert_allclose(tilted.rtn_km[1], a * np.sin(th) * np.cos(th) * (np.cos(delta) - 1.0), atol=1e-9)
+    np.testing.assert_allclose(tilted.rtn_km[2], a * np.sin(th) * np.sin(delta), atol=1e-9)
