@@ -43,7 +43,7 @@ from planner.elements import elements_of_state, state_to_elements
 from planner.errors import PlannerError, PlanningStopped, SearchRangeError
 from planner.illumination import phase_angle_deg, sun_position_km, sunlit
 from planner.lambert import lambert
-from planner.manoeuvre import best_lambert, period_s, retarget, rtn_matrix
+from planner.manoeuvre import RelativeMotion, best_lambert, period_s, relative_motion, retarget, rtn_matrix
 from planner.orbits import Orbit, earth_frames, trajectory
 from planner.plan import (
     CandidateOrder,
@@ -152,6 +152,7 @@ class SceneCheck:
     phase_angle_deg: float
     closest_approach_km: float
     closest_approach_s: float
+    relative: RelativeMotion | None = None  # the fly-by about T_access in the target's RTN frame, as flown
 
 
 @dataclass(frozen=True, slots=True)
@@ -680,7 +681,8 @@ def check_scene(scene: CampaignScene, flown: Trajectory, epoch: datetime) -> Sce
     cand = np.concatenate([t_min, grid[[0, -1]]])
     d = distance(cand)
     j = int(np.argmin(d))
-    return SceneCheck(float(np.linalg.norm(rho)), rate, lit, phase_deg, float(d[j]), float(cand[j]))
+    fly_by = relative_motion(flown.state, target, t, t0, t + 0.9 * p)
+    return SceneCheck(float(np.linalg.norm(rho)), rate, lit, phase_deg, float(d[j]), float(cand[j]), fly_by)
 
 
 def _why_none(plan: Plan, left_km_s: float) -> str:

@@ -10,6 +10,7 @@ is solved again, until the numerically propagated arrival is within ``tol_km``.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -323,8 +324,8 @@ class RelativeMotion:
 
 
 def relative_motion(
-    observer: Trajectory,
-    target: Trajectory,
+    observer: Callable[[Vec], tuple[Vec, Vec]],
+    target: Callable[[Vec], tuple[Vec, Vec]],
     t_access_s: float,
     t_from_s: float,
     t_to_s: float,
@@ -332,12 +333,13 @@ def relative_motion(
     step_s: float = RELATIVE_STEP_S,
 ) -> RelativeMotion:
     """The observer's position relative to the target, ``half_s`` either side of ``t_access_s`` (kept within
-    ``t_from_s``..``t_to_s``, where the observer's arc is defined), each sample in the target's RTN frame then."""
+    ``t_from_s``..``t_to_s``, where the observer's arc is defined), each sample in the target's RTN frame then.
+    ``observer`` and ``target`` give the states (km, km/s; [3, N]) at times [N] (a trajectory's ``state``)."""
     lo, hi = max(t_access_s - half_s, t_from_s), min(t_access_s + half_s, t_to_s)
     n = max(int(round((hi - lo) / step_s)), 1) + 1
     t = np.linspace(lo, hi, n)
-    r_o, _ = observer.state(t)
-    r_t, v_t = target.state(t)
+    r_o, _ = observer(t)
+    r_t, v_t = target(t)
     rel = r_o - r_t
     rtn = np.stack([rtn_matrix(r_t[:, k], v_t[:, k]) @ rel[:, k] for k in range(n)], axis=1)
     return RelativeMotion(t_s=t - t_access_s, rtn_km=rtn)
@@ -377,5 +379,5 @@ def encounter(
         closest_approach_km=float(cand_d[j]),
         closest_approach_s=float(cand_t[j]),
         arc=arc,
-        relative=relative_motion(arc, target, phasing.t_access_s, t0, t_end_s),
+        relative=relative_motion(arc.state, target.state, phasing.t_access_s, t0, t_end_s),
     )

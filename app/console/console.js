@@ -258,7 +258,7 @@ async function planPage(id) {
     .map((k) => `<a href="#" data-export="${k}">${k.replace("?format=xml", " (XML)")}</a>`).join(" · ");
   view.innerHTML = `<h1>Plan ${esc(p.target_name)} / ${esc(p.observer_name)} / ${esc(p.station_name)}</h1>
     <p class="muted">${esc(p.id)} · created ${utc(p.created_at)} · ${p.duration_days} days from ${utc(p.epoch)} · elements ${esc(p.reading)}</p>
-    ${verdict}${(p.notes || []).map((n) => `<p class="muted">note: ${esc(n)}</p>`).join("")}${mapSvg(geo, coastLines)}${skySvg(geo, (geo.features.find((x) => x.properties.kind === "station") || {}).properties)}${scene}${encounterCard(ph, p.request)}
+    ${verdict}${(p.notes || []).map((n) => `<p class="muted">note: ${esc(n)}</p>`).join("")}${mapSvg(geo, coastLines)}${skySvg(geo, (geo.features.find((x) => x.properties.kind === "station") || {}).properties)}${scene}${encounterCard(ph && ph.verification)}
     <h2>Access windows (${p.access_windows.length}, every one; the chosen pass highlighted)</h2>
     <div class="scroll"><table id="windows"><thead><tr><th class="num">#</th><th>rise (UTC)</th><th>culmination (UTC)</th><th>set (UTC)</th>
     <th class="num">az rise (deg)</th><th class="num">az culm. (deg)</th><th class="num">az set (deg)</th>
@@ -342,10 +342,17 @@ async function campaignPage(id) {
     <th class="num">phase (deg)</th><th>line of sight (R, T, N)</th><th class="num">aim within (km)</th><th>radar</th>
     <th>with errors</th><th>burns</th></tr>
     </thead><tbody>${scenes || '<tr><td colspan="12" class="muted">None.</td></tr>'}</tbody></table></div>
+    ${c.scenes.length ? `<h2>The fly-by of scene <select id="flyscene">${c.scenes.map((sc) => `<option value="${sc.index}">${sc.index}
+      (${utc(sc.t_access)})</option>`).join("")}</select></h2><div id="flyby">${encounterCard(c.scenes[0].check, "as flown, in the target's orbital frame")}</div>` : ""}
     <h2>Stretches searched</h2>
     <table id="stretches"><thead><tr><th>from (UTC)</th><th>to (UTC)</th><th class="num">candidates</th>
     <th class="num">feasible</th><th>what came of it</th></tr></thead><tbody>${stretches}</tbody></table>
     <h2>Exports</h2><p>${exportsList}</p>`;
+  const pick = document.getElementById("flyscene");
+  if (pick) pick.addEventListener("change", () => {
+    const sc = c.scenes.find((x) => String(x.index) === pick.value);
+    document.getElementById("flyby").innerHTML = encounterCard(sc.check, "as flown, in the target's orbital frame");
+  });
   view.querySelectorAll("[data-export]").forEach((a) => a.addEventListener("click", async (ev) => {
     ev.preventDefault();
     const kind = a.dataset.export;

@@ -43,19 +43,19 @@ function encounterPanel(rm, yKey, yName) {
   return `<svg class="panel encounter" viewBox="0 0 ${W} ${H}" role="img" aria-label="fly-by, along-track against ${esc(yName)}">${g}</svg>`;
 }
 
-function encounterCard(ph, request) {
-  const v = ph && ph.verification;
+// v: a plan's phasing.verification, or a campaign scene's check (which has no relative speed).
+function encounterCard(v, title = "The fly-by in the target's orbital frame") {
   const rm = v && v.relative_motion;
   if (!rm || !rm.t_s.length) return "";
-  const limit = request && request.search && request.search.max_tracking_rate_deg_s;
   const k0 = rm.t_s.findIndex((t) => Math.abs(t) < 1e-6);
   const at = k0 >= 0 ? `radial ${num(rm.radial_km[k0], 1)}, along-track ${num(rm.along_track_km[k0], 1)}, cross-track ${num(rm.cross_track_km[k0], 1)} km` : "";
-  return `<div class="card"><b>The fly-by in the target's orbital frame</b>
+  const speed = v.relative_speed_km_s == null ? "" : `, passing at ${num(v.relative_speed_km_s, 2)} km/s`;
+  return `<div class="card encountercard"><b>${esc(title)}</b>
     <span class="muted">(the observer ${rm.t_s[0]} s to +${rm.t_s[rm.t_s.length - 1]} s about T_access, a dot every 10 s; axes to
     different scales)</span><br>
-    at T_access the observer is ${num(v.separation_km, 2)} km from the target (${at}), passing at ${num(v.relative_speed_km_s, 2)} km/s;
+    at T_access the observer is ${num(v.separation_km, 2)} km from the target (${at})${speed};
     closest ${num(v.closest_approach_km, 2)} km at ${utc(v.closest_approach_time)}; the optical tracker must follow
-    ${num(v.target_angular_rate_deg_s, 2)} deg/s${limit ? ` (limit ${num(limit, 2)})` : ""}
+    ${num(v.target_angular_rate_deg_s, 2)} deg/s
     <div class="grid">${encounterPanel(rm, "radial_km", "radial, up")}${encounterPanel(rm, "cross_track_km", "cross-track, orbit normal")}</div>
     <div class="legend"><span><i class="sw-flyby"></i>the observer's path</span><span><i class="sw-flylos"></i>line of sight at T_access</span>
     <span>● the target, at the origin; ○ the observer at T_access</span></div></div>`;

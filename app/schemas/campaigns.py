@@ -13,6 +13,7 @@ from app.schemas.plans import (
     PAPER_EXAMPLE,
     CandidatePublic,
     ObserverOpticsIn,
+    RelativeMotionPublic,
     SceneSearchIn,
     WindowPublic,
     network_names,
@@ -206,6 +207,8 @@ class SceneCheckPublic(Described):
     """the least distance from the phasing burn to 0.9 of an orbit after t_access, km"""
     closest_approach_time: datetime
     """when it is (UTC)"""
+    relative_motion: RelativeMotionPublic | None = None
+    """the fly-by a minute either side of t_access in the target's orbital frame, as flown (the console draws it)"""
 
 
 class AimPublic(Described):
@@ -277,6 +280,7 @@ class CampaignScenePublic(Described):
                 phase_angle_deg=check.phase_angle_deg,
                 closest_approach_km=check.closest_approach_km,
                 closest_approach_time=utc(epoch, check.closest_approach_s),
+                relative_motion=None if check.relative is None else RelativeMotionPublic.from_motion(check.relative),
             ),
             slot_shift_s=s.slot_shift_s,
             aim=_aim_public(epoch, s, opts),

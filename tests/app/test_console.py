@@ -145,7 +145,16 @@ def test_console_pages_in_chromium(served, tmp_path):
         "campaigns": (f"{console}/campaigns", [campaign["id"][:8], "first T_access"]),
         "campaign": (
             f"{console}/campaigns/{campaign['id']}",
-            ['id="scenes"', 'id="stretches"', "feasible scene(s)", "scene flown", "phasing", "aim within (km)"],
+            [
+                'id="scenes"',
+                'id="stretches"',
+                "feasible scene(s)",
+                "scene flown",
+                "phasing",
+                "aim within (km)",
+                'id="flyscene"',
+                '<svg class="panel encounter"',
+            ],
         ),
         "estimates": (f"{console}/estimates", [est["id"][:8]]),
         "estimate": (

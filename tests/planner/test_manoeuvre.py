@@ -87,13 +87,15 @@ def test_the_fly_by_in_the_target_s_frame_matches_the_closed_forms():
 
     target, a = _Circle(0.0), _Circle.A
     lag = 0.01
-    behind = relative_motion(_Circle(0.0, lag), target, 500.0, 0.0, 2000.0)
+    behind = relative_motion(_Circle(0.0, lag).state, target.state, 500.0, 0.0, 2000.0)
     assert behind.t_s[0] == -60.0 and behind.t_s[-1] == 60.0 and len(behind.t_s) == 121
     np.testing.assert_allclose(behind.rtn_km[0], a * (np.cos(lag) - 1.0), atol=1e-9)
     np.testing.assert_allclose(behind.rtn_km[1], -a * np.sin(lag), atol=1e-9)
     np.testing.assert_allclose(behind.rtn_km[2], 0.0, atol=1e-9)
     delta = np.radians(1.0)
-    tilted = relative_motion(_Circle(delta), target, 0.0, -30.0, 1000.0)  # the arc starts at -30 s: cut there
+    tilted = relative_motion(
+        _Circle(delta).state, target.state, 0.0, -30.0, 1000.0
+    )  # the arc starts at -30 s: cut there
     assert tilted.t_s[0] == -30.0 and tilted.t_s[-1] == 60.0
     th = _Circle.N * tilted.t_s
     np.testing.assert_allclose(tilted.rtn_km[0], a * np.sin(th) ** 2 * (np.cos(delta) - 1.0), atol=1e-9)
