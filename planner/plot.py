@@ -33,15 +33,19 @@ def feasibility_words(plan) -> str:  # type: ignore[no-untyped-def]
 
 
 def plot_plan(plan, path: str, title: str = "") -> None:  # type: ignore[no-untyped-def]
-    """Write a four-panel PNG of ``plan`` (a planner.plan.Plan) to ``path``."""
+    """Write a PNG of ``plan`` (a planner.plan.Plan) to ``path``: the map, the pass, the alignment and, where a burn
+    was planned, the fly-by in the target's orbital frame."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.dates as mdates
     import matplotlib.pyplot as plt
 
-    fig = plt.figure(figsize=(16, 10))
-    grid = fig.add_gridspec(2, 3, height_ratios=[1.25, 1])
+    meet = plan.encounter
+    fly_by = meet.relative if meet is not None else None
+    rows = 3 if fly_by is not None else 2
+    fig = plt.figure(figsize=(16, 10 if rows == 2 else 14))
+    grid = fig.add_gridspec(rows, 3, height_ratios=[1.25, 1, 1][:rows])
     tgt, frames, station = plan.target_trajectory, plan.frames, plan.station
     chosen = plan.chosen
     t_c = (
@@ -147,10 +151,46 @@ def plot_plan(plan, path: str, title: str = "") -> None:  # type: ignore[no-unty
             title=f"alignment, dHa {chosen.delta_ha_km:.1f} km, dHp {chosen.delta_hp_km:.1f} km",
         )
         ax.grid(alpha=0.3)
+    if fly_by is not None:
+        _fly_by_panels(fig, grid, fly_by, meet)
     fig.suptitle(f"{title}\n{feasibility_words(plan)}" if title else feasibility_words(plan), fontsize=12)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def _fly_by_panels(fig, grid, fly_by, meet) -> None:  # type: ignore[no-untyped-def]
+    """The observer a minute either side of T_access in the target's RTN frame (planner.manoeuvre.relative_motion):
+    along-track against radial and against cross-track, and the distance against time."""
+    t, (r, a, n) = fly_by.t_s, fly_by.rtn_km
+    k0 = int(np.argmin(np.abs(t)))
+    ticks = np.isclose(np.mod(t, 10.0), 0.0) & (np.abs(t) > 0)
+    for col, (y, name) in enumerate(((r, "radial, up (km)"), (n, "cross-track, orbit normal (km)"))):
+        ax = fig.add_subplot(grid[2, col])
+        ax.plot(a, y, color="tab:purple", lw=2, label="the observer")
+        ax.plot(a[ticks], y[ticks], "o", color="tab:purple", ms=3)
+        for k in np.flatnonzero(ticks & np.isclose(np.mod(t, 30.0), 0.0)):
+            ax.annotate(
+                f"{t[k]:+.0f} s", (a[k], y[k]), textcoords="offset points", xytext=(0, 6), ha="center", fontsize=8
+            )
+        ax.plot([a[k0], 0.0], [y[k0], 0.0], color="tab:orange", ls="--", label="line of sight at T_access")
+        ax.plot(0.0, 0.0, "ko", ms=7, label="the target")
+        ax.plot(a[k0], y[k0], "o", mfc="white", mec="tab:purple", ms=8, label="the observer at T_access")
+        ax.set(xlabel="along-track (km; the target moves to the right)", ylabel=name)
+        ax.set_title("the fly-by in the target's orbital frame (axes to different scales)", fontsize=10)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    ax = fig.add_subplot(grid[2, 2])
+    ax.plot(t, np.sqrt(r**2 + a**2 + n**2), color="tab:purple")
+    ax.axvline(0.0, color="k", ls="--", label="T_access")
+    ax.axhline(meet.closest_approach_km, color="tab:green", ls=":", label=f"closest {meet.closest_approach_km:.1f} km")
+    ax.set(
+        xlabel="seconds from T_access",
+        ylabel="observer to target (km)",
+        title=f"{meet.relative_speed_km_s:.2f} km/s; the tracker follows {meet.target_angular_rate_deg_s:.2f} deg/s",
+    )
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
 
 
 def plot_campaign(campaign, path: str, title: str = "", dispersions=None) -> None:  # type: ignore[no-untyped-def]
