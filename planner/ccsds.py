@@ -354,3 +354,78 @@ def convert(text: str, kind: Literal["OEM", "OPM"], fmt: Format) -> str:
     if type(message).__name__.upper() != kind:
         raise ValueError(f"this is a {type(message).__name__.upper()}, not an {kind}")
     return _serialise(message, fmt)
+
+
+def apm_message(
+    *,
+    created: datetime,
+    originator: str,
+    object_name: str,
+    object_id: str,
+    epoch: datetime,
+    quaternion_wxyz: Sequence[float],
+    comments: Sequence[str] = (),
+    fmt: Format = "kvn",
+) -> str:
+    """A CCSDS APM 2.0 (ADM, 504.0-B-2; UTC): one attitude at ``epoch`` as a quaternion from GCRF to the body
+    (REF_FRAME_A GCRF, REF_FRAME_B SC_BODY_1). ``quaternion_wxyz`` (scalar first) is the rotation that takes GCRF's
+    axes onto the body's: the quaternion of the body-to-GCRF matrix, whose columns are the body axes in GCRF. It is
+    written scalar last (Q1..Q3, QC) with QC >= 0.
+
+    The XML is ccsds-ndm's. The KVN is written here: ADM 2.0 puts the quaternion between QUAT_START and QUAT_STOP,
+    which ccsds-ndm's KVN writer leaves out (its XML and the standard's sample messages agree with this layout)."""
+    from ccsds_ndm.models.ndmxml4 import ndmxml_4_0_0_apm_2_0 as apm
+    from ccsds_ndm.models.ndmxml4 import ndmxml_4_0_0_common_4_0 as common
+    from ccsds_ndm.models.ndmxml4.ndmxml_4_0_0_master_4_0 import Apm
+
+    if fmt not in FORMATS:
+        raise ValueError(f"format {fmt!r}: kvn or xml")
+    w, x, y, z = (float(q) for q in quaternion_wxyz)
+    norm = (w * w + x * x + y * y + z * z) ** 0.5
+    sign = -1.0 if w < 0 else 1.0
+    q1, q2, q3, qc = (sign * v / norm for v in (x, y, z, w))
+    if fmt == "kvn":
+        lines = [
+            "CCSDS_APM_VERS = 2.0",
+            f"CREATION_DATE  = {ccsds_time_text(created)}",
+            f"ORIGINATOR     = {originator}",
+            "",
+            *(f"COMMENT {c}" for c in comments),
+            f"OBJECT_NAME    = {object_name}",
+            f"OBJECT_ID      = {object_id}",
+            "CENTER_NAME    = EARTH",
+            "TIME_SYSTEM    = UTC",
+            "",
+            f"EPOCH          = {ccsds_time_text(epoch)}",
+            "",
+            "QUAT_START",
+            "REF_FRAME_A    = GCRF",
+            "REF_FRAME_B    = SC_BODY_1",
+            f"Q1             = {q1:.12f}",
+            f"Q2             = {q2:.12f}",
+            f"Q3             = {q3:.12f}",
+            f"QC             = {qc:.12f}",
+            "QUAT_STOP",
+        ]
+        return "\n".join(lines) + "\n"
+    state = common.QuaternionStateType(
+        ref_frame_a="GCRF",
+        ref_frame_b="SC_BODY_1",
+        quaternion=common.QuaternionType(q1=q1, q2=q2, q3=q3, qc=qc),
+    )
+    message = Apm(
+        header=common.AdmHeader(creation_date=ccsds_time_text(created), originator=originator),
+        body=apm.ApmBody(
+            segment=apm.ApmSegment(
+                metadata=apm.ApmMetadata(
+                    comment=list(comments),
+                    object_name=object_name,
+                    object_id=object_id,
+                    center_name="EARTH",
+                    time_system="UTC",
+                ),
+                data=apm.ApmData(epoch=ccsds_time_text(epoch), quaternion_state=[state]),
+            )
+        ),
+    )
+    return _serialise(message, fmt)

@@ -15,6 +15,7 @@ from fastapi.responses import FileResponse, Response
 from app import crud
 from app.api import examples
 from app.api.deps import (
+    CcsdsFormat,
     CheckersDep,
     CurrentOperator,
     ModelSetsDep,
@@ -31,8 +32,8 @@ from app.api.deps import (
 )
 from app.db.models import Estimate
 from app.schemas import EstimatePublic, EstimatesPublic, IsoDateTime, Text
+from app.services import attitude_exports, images
 from app.services import estimation as svc
-from app.services import images
 
 router = APIRouter(prefix="/estimates", tags=["estimates"])
 
@@ -206,6 +207,32 @@ def read_estimate(
     row = _owned(session, operator.id, estimate_id)
     passes = crud.passes_over(session=session, operator_id=operator.id, plan_id=row.plan_id, moment=row.observed_at)
     return EstimatePublic.from_row(row, passes)
+
+
+@router.get(
+    "/{estimate_id}/export/apm",
+    response_class=Response,
+    responses={
+        **NOT_FOUND,
+        200: {"content": {"text/plain": {}, "application/xml": {}}},
+        409: {
+            "description": "the estimate has no attitude in an inertial frame (made without plan_id and observed_at)"
+        },
+    },
+)
+def export_apm(
+    session: SessionDep,
+    operator: CurrentOperator,
+    estimate_id: Annotated[Text, PathParam()],
+    format: CcsdsFormat = "kvn",  # noqa: A002 (the query parameter's name)
+) -> Response:
+    """The estimate's attitude as a CCSDS APM 2.0 (ADM 504.0-B-2; KVN, or XML with ``format=xml``): the quaternion
+    from GCRF to the body at its observation time, with the estimate, its models and its trust in comments."""
+    row = _owned(session, operator.id, estimate_id)
+    text = attitude_exports.estimate_apm(row, format)
+    media = "application/xml" if format == "xml" else "text/plain"
+    name = f"estimate-{row.id}.apm" + (".xml" if format == "xml" else "")
+    return Response(text, media_type=media, headers={"Content-Disposition": f'attachment; filename="{name}"'})
 
 
 def _png(settings: SettingsDep, digest: str) -> Response:

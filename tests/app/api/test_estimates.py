@@ -408,3 +408,40 @@ def test_the_fitted_outline_is_the_edge_of_the_projection(client, frame):
     from app.services.images import png_frame
 
     assert np.array_equal(png_frame(original), np.asarray(Image.open(io.BytesIO(original)), float) / 255.0)
+
+
+def test_an_estimate_s_attitude_leaves_as_a_ccsds_apm(client, frame):
+    """GET /v1/estimates/{id}/export/apm: ADM 2.0's APM, KVN (QUAT_START..QUAT_STOP, as the standard lays it out)
+    and XML (read back by ccsds-ndm); scipy's rotation of (Q1, Q2, Q3, QC) is the estimate's body-to-GCRF matrix,
+    and EPOCH its observation time. Without an inertial attitude it is a 409 saying how to get one."""
+    from ccsds_ndm.ndm_io import NdmIo
+    from scipy.spatial.transform import Rotation
+
+    plan = client.post("/v1/plans", json=PAPER_EXAMPLE, headers=A).json()
+    when = plan["chosen"]["t_access"]
+    body = _post(client, _npy(frame), plan_id=plan["id"], observed_at=when).json()
+    kvn = client.get(f"/v1/estimates/{body['id']}/export/apm", headers=A)
+    assert kvn.status_code == 200 and kvn.headers["content-type"].startswith("text/plain")
+    text = kvn.text
+    assert text.startswith("CCSDS_APM_VERS = 2.0") and "REF_FRAME_A    = GCRF" in text
+    block = text[text.index("QUAT_START") : text.index("QUAT_STOP")]
+    q = {k.strip(): float(v) for k, v in (ln.split("=") for ln in block.splitlines()[1:] if "=" in ln and ln[0] == "Q")}
+    expected = np.array(body["attitude_j2000"]["rotation_matrix"])
+    np.testing.assert_allclose(
+        Rotation.from_quat([q["Q1"], q["Q2"], q["Q3"], q["QC"]]).as_matrix(), expected, atol=1e-9
+    )
+    epoch = next(ln.split("=", 1)[1].strip() for ln in text.splitlines() if ln.startswith("EPOCH"))
+    assert datetime.fromisoformat(epoch + "+00:00") == datetime.fromisoformat(when.replace("Z", "+00:00"))
+    xml = client.get(f"/v1/estimates/{body['id']}/export/apm", params={"format": "xml"}, headers=A)
+    assert xml.status_code == 200 and xml.headers["content-type"].startswith("application/xml")
+    read = NdmIo().from_string(xml.text)
+    state = read.body.segment.data.quaternion_state[0]
+    back = [state.quaternion.q1, state.quaternion.q2, state.quaternion.q3, state.quaternion.qc]
+    np.testing.assert_allclose(Rotation.from_quat(back).as_matrix(), expected, atol=1e-9)
+    assert (state.ref_frame_a, state.ref_frame_b) == ("GCRF", "SC_BODY_1")
+    plain = _post(client, _npy(frame)).json()  # no plan, no time: no inertial attitude
+    refused = client.get(f"/v1/estimates/{plain['id']}/export/apm", headers=A)
+    assert refused.status_code == 409 and "plan_id and observed_at" in refused.json()["detail"]
+    assert client.get(f"/v1/estimates/{body['id']}/export/apm", headers=B).status_code == 404
+    bad = client.get(f"/v1/estimates/{body['id']}/export/apm", params={"format": "json"}, headers=A)
+    assert bad.status_code == 422
