@@ -66,7 +66,7 @@ def validation_line(exc: ValidationError) -> str:
 EXAMPLES_DIR = Path(__file__).resolve().parents[2] / "examples"
 
 
-EXAMPLE_PLANS = {"paper": "paper-plan.json", "iss": "iss-plan.json"}
+EXAMPLE_PLANS = {"paper": "paper-plan-30-days.json", "iss": "iss-plan.json"}
 
 
 def add_client_options(p: argparse.ArgumentParser, what: str = "send it to a running service instead") -> None:
