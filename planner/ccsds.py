@@ -429,3 +429,90 @@ def apm_message(
         ),
     )
     return _serialise(message, fmt)
+
+
+def aem_message(
+    *,
+    created: datetime,
+    originator: str,
+    object_name: str,
+    object_id: str,
+    times: Sequence[datetime],
+    quaternions_wxyz: Sequence[Sequence[float]],
+    comments: Sequence[str] = (),
+    fmt: Format = "kvn",
+) -> str:
+    """A CCSDS AEM 2.0 (ADM, 504.0-B-2; UTC): one segment of quaternions from GCRF to the body (REF_FRAME_A GCRF,
+    REF_FRAME_B SC_BODY_1; each as ``apm_message`` states it, scalar last with QC >= 0), at ``times``.
+
+    The XML is ccsds-ndm's. The KVN is written here: its data lines are ``EPOCH Q1 Q2 Q3 QC``, where ccsds-ndm's KVN
+    writer puts QC first."""
+    from ccsds_ndm.models.ndmxml4 import ndmxml_4_0_0_aem_2_0 as aem
+    from ccsds_ndm.models.ndmxml4 import ndmxml_4_0_0_common_4_0 as common
+    from ccsds_ndm.models.ndmxml4.ndmxml_4_0_0_master_4_0 import Aem
+
+    if len(times) != len(quaternions_wxyz) or len(times) < 2:
+        raise ValueError("an AEM needs two or more times, each with its quaternion")
+    states = []
+    for t, (w, x, y, z) in zip(times, quaternions_wxyz, strict=True):
+        norm = (w * w + x * x + y * y + z * z) ** 0.5
+        sign = -1.0 if w < 0 else 1.0
+        q1, q2, q3, qc = (sign * float(v) / norm for v in (x, y, z, w))
+        states.append(
+            common.AttitudeStateType(
+                quaternion_ephemeris=common.QuaternionEphemerisType(
+                    epoch=ccsds_time_text(t), quaternion=common.QuaternionType(q1=q1, q2=q2, q3=q3, qc=qc)
+                )
+            )
+        )
+    if fmt == "kvn":
+        rows = []
+        for st in states:
+            q = st.quaternion_ephemeris.quaternion
+            rows.append(f"{st.quaternion_ephemeris.epoch}  {q.q1:.12f}  {q.q2:.12f}  {q.q3:.12f}  {q.qc:.12f}")
+        lines = [
+            "CCSDS_AEM_VERS = 2.0",
+            f"CREATION_DATE  = {ccsds_time_text(created)}",
+            f"ORIGINATOR     = {originator}",
+            "",
+            "META_START",
+            *(f"COMMENT {c}" for c in comments),
+            f"OBJECT_NAME    = {object_name}",
+            f"OBJECT_ID      = {object_id}",
+            "CENTER_NAME    = EARTH",
+            "REF_FRAME_A    = GCRF",
+            "REF_FRAME_B    = SC_BODY_1",
+            "TIME_SYSTEM    = UTC",
+            f"START_TIME     = {ccsds_time_text(times[0])}",
+            f"STOP_TIME      = {ccsds_time_text(times[-1])}",
+            "ATTITUDE_TYPE  = QUATERNION",
+            "META_STOP",
+            "",
+            "DATA_START",
+            *rows,
+            "DATA_STOP",
+        ]
+        return "\n".join(lines) + "\n"
+    message = Aem(
+        header=common.AdmHeader(creation_date=ccsds_time_text(created), originator=originator),
+        body=aem.AemBody(
+            segment=[
+                aem.AemSegment(
+                    metadata=aem.AemMetadata(
+                        comment=list(comments),
+                        object_name=object_name,
+                        object_id=object_id,
+                        center_name="EARTH",
+                        ref_frame_a="GCRF",
+                        ref_frame_b="SC_BODY_1",
+                        time_system="UTC",
+                        start_time=ccsds_time_text(times[0]),
+                        stop_time=ccsds_time_text(times[-1]),
+                        attitude_type="QUATERNION",
+                    ),
+                    data=aem.AemData(attitude_state=states),
+                )
+            ]
+        ),
+    )
+    return _serialise(message, fmt)

@@ -8,10 +8,11 @@ from typing import Annotated
 from fastapi import APIRouter, File, Form, HTTPException, Query, Request, UploadFile
 from fastapi import Path as PathParam
 from fastapi.concurrency import run_in_threadpool
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, Response
 
 from app import crud
 from app.api.deps import (
+    CcsdsFormat,
     CheckersDep,
     CurrentOperator,
     ModelSetsDep,
@@ -28,6 +29,7 @@ from app.api.deps import (
     wants_job,
 )
 from app.schemas import IsoDateTime, JobPublic, PassesPublic, PassPublic, PassSummary, Text
+from app.services import attitude_exports
 from app.services import passes as pass_svc
 
 router = APIRouter(prefix="/passes", tags=["passes"])
@@ -145,3 +147,30 @@ def read_pass(session: SessionDep, operator: CurrentOperator, pass_id: Annotated
     if row is None:
         raise HTTPException(status_code=404, detail="Pass not found")
     return PassPublic.from_row(row)
+
+
+@router.get(
+    "/{pass_id}/export/aem",
+    response_class=Response,
+    responses={
+        404: {"description": "no pass with this id is yours"},
+        200: {"content": {"text/plain": {}, "application/xml": {}}},
+        409: {"description": "the pass has no plan: its attitude is in LVLH only"},
+    },
+)
+def export_aem(
+    session: SessionDep,
+    operator: CurrentOperator,
+    pass_id: Annotated[Text, PathParam()],
+    format: CcsdsFormat = "kvn",  # noqa: A002 (the query parameter's name)
+) -> Response:
+    """The pass's fused attitude as a CCSDS AEM 2.0 (ADM 504.0-B-2; KVN, or XML with ``format=xml``): the quaternion
+    from GCRF to the body every second from its first frame to its last (the turning model's, for a turning
+    target), with the pass's verdict and bounds in comments."""
+    row = crud.get_pass(session=session, operator_id=operator.id, pass_id=pass_id)
+    if row is None:
+        raise HTTPException(status_code=404, detail="Pass not found")
+    text = attitude_exports.pass_aem(session, operator.id, row, format)
+    media = "application/xml" if format == "xml" else "text/plain"
+    name = f"pass-{row.id}.aem" + (".xml" if format == "xml" else "")
+    return Response(text, media_type=media, headers={"Content-Disposition": f'attachment; filename="{name}"'})

@@ -366,3 +366,40 @@ def test_rows_stored_in_the_first_format_read_as_they_did(client, settings, plan
     assert {k: v for k, v in old_est.items() if k != "refined"} == {k: v for k, v in est.items() if k != "refined"}
     got = client.get(f"/v1/plans/{plan['id']}", headers=A).json()
     assert got["access_windows"] == plan["access_windows"] and got["chosen"] == plan["chosen"]
+
+
+def _rotation_angle_deg(a, b):
+    return float(np.degrees(np.arccos(np.clip((np.trace(np.asarray(a).T @ np.asarray(b)) - 1.0) / 2.0, -1.0, 1.0))))
+
+
+def test_a_pass_s_attitude_leaves_as_a_ccsds_aem(client, plan):
+    """GET /v1/passes/{id}/export/aem: ADM 2.0's AEM, a quaternion a second from the first frame to the last.
+    Read with scipy (scalar last): at the fusion's own moment it is the pass's attitude_j2000 (another code path:
+    the fusion's LVLH at mid-pass), and a target still in LVLH turns in GCRF at the orbit's rate, |r x v| / r^2 of
+    the paper's 700 x 600 km orbit (0.0615-0.0633 deg/s). XML is read back by ccsds-ndm; no plan is a 409."""
+    from ccsds_ndm.ndm_io import NdmIo
+    from scipy.spatial.transform import Rotation
+
+    times = _times(plan, 5)
+    body = _post(client, plan["id"], times, data=_stack(5)).json()
+    r = client.get(f"/v1/passes/{body['id']}/export/aem", headers=A)
+    assert r.status_code == 200 and r.text.startswith("CCSDS_AEM_VERS = 2.0"), r.text[:300]
+    rows = r.text[r.text.index("DATA_START") + 10 : r.text.index("DATA_STOP")].split("\n")
+    rows = [ln.split() for ln in rows if ln.strip()]
+    when = [datetime.fromisoformat(x[0] + "+00:00") for x in rows]
+    mats = [Rotation.from_quat([float(v) for v in x[1:5]]).as_matrix() for x in rows]
+    first, last = (datetime.fromisoformat(t.replace("Z", "+00:00")) for t in (times[0], times[-1]))
+    assert when[0] == first and when[-1] == last and len(rows) >= (last - first).total_seconds()
+    at = datetime.fromisoformat(body["attitude_j2000"]["at"].replace("Z", "+00:00"))
+    k = int(np.argmin([abs((t - at).total_seconds()) for t in when]))
+    off = abs((when[k] - at).total_seconds())
+    assert _rotation_angle_deg(mats[k], body["attitude_j2000"]["rotation_matrix"]) < 0.07 * off + 1e-3
+    if body["stable"] is not False:
+        rates = [_rotation_angle_deg(mats[j], mats[j + 1]) for j in range(len(mats) - 2)]  # 1 s apart
+        assert 0.0612 < min(rates) and max(rates) < 0.0636, (min(rates), max(rates))
+    xml = client.get(f"/v1/passes/{body['id']}/export/aem", params={"format": "xml"}, headers=A)
+    segment = NdmIo().from_string(xml.text).body.segment[0]
+    q0 = segment.data.attitude_state[0].quaternion_ephemeris.quaternion
+    np.testing.assert_allclose(Rotation.from_quat([q0.q1, q0.q2, q0.q3, q0.qc]).as_matrix(), mats[0], atol=1e-9)
+    assert (segment.metadata.ref_frame_a, segment.metadata.ref_frame_b) == ("GCRF", "SC_BODY_1")
+    assert client.get(f"/v1/passes/{body['id']}/export/aem", headers={"X-API-Key": KEY_B}).status_code == 404
