@@ -81,8 +81,12 @@ def target_mesh(target_name: str) -> Mesh:
 
 
 def mesh_fingerprint(mesh: Mesh) -> str:
-    """The sha256 of a mesh (vertices and faces): a table made from another mesh is refused."""
-    h = hashlib.sha256(np.ascontiguousarray(mesh.vertices, np.float64).tobytes())
+    """The sha256 of a mesh (vertices to the micrometre, and faces): a table made from another mesh is refused.
+
+    The built-in meshes are built with trigonometry whose last bits differ between CPUs (AVX2 against AVX-512):
+    their vertices are hashed as whole micrometres, the same on every machine."""
+    microns = np.rint(np.asarray(mesh.vertices, np.float64) * 1e6).astype(np.int64)
+    h = hashlib.sha256(np.ascontiguousarray(microns).tobytes())
     h.update(np.ascontiguousarray(mesh.faces, np.int64).tobytes())
     return h.hexdigest()
 

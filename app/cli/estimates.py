@@ -111,6 +111,28 @@ def _one_frame(args: argparse.Namespace, data: bytes) -> tuple[str, bytes, bool]
     return f"{name}[{args.frame}]", buf.getvalue(), frames[args.frame].normalised
 
 
+def _normalised_hint(name: str, data: bytes, sent_normalised: bool, trusted: bool) -> None:
+    """Say when an untrusted answer's frame may have been normalised twice: a real .npy frame whose values all lie
+    in [0, 1], as the models' input does, sent without --normalised (one more normalisation squeezes it)."""
+    import io
+
+    import numpy as np
+
+    if sent_normalised or trusted or not name.lower().endswith(".npy"):
+        return
+    try:
+        arr = np.load(io.BytesIO(data), allow_pickle=False)
+    except (ValueError, OSError):
+        return
+    if np.iscomplexobj(arr) or arr.size == 0 or not np.isfinite(arr).all():
+        return
+    if float(arr.min()) >= 0.0 and float(arr.max()) <= 1.0:
+        print(
+            "hint: every value of this frame lies in [0, 1], as the models' input does: if it already is that input "
+            "(gsa simulate writes such frames), add --normalised, or it is normalised a second time"
+        )
+
+
 def cmd_estimate(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -150,6 +172,8 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         r = call_server(args, "POST", "/v1/estimates", files={"file": (name, data)}, data=form, timeout=60)
         answer = EstimatePublic.model_validate(r.json())
         _print_checked(answer, prefix=f"estimate {answer.id}: ")
+        trusted = bool(answer.quality and answer.quality.trusted)
+        _normalised_hint(name, data, bool(args.normalised or file_normalised), trusted)
         return 0
     from app.services import uploads as upload_svc
 
@@ -182,6 +206,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         cells_m=cells,
     )
     _print_checked(body)
+    _normalised_hint(name, data, bool(args.normalised or file_normalised), bool(body.quality and body.quality.trusted))
     print(
         f"UNet++ {res.timings_s['unetpp'] * 1000:.0f} ms, Swin {res.timings_s['swin'] * 1000:.0f} ms, "
         f"fit and checks {t_fit * 1000:.0f} ms"

@@ -89,6 +89,9 @@ def cmd_labelled(args: argparse.Namespace) -> int:
         for f in body["data"]:
             z, y, x = f["angles_deg"]
             print(f"  {f['id'][:8]}  {f['scene'][:24]:<24} {z:8.2f} {y:8.2f} {x:8.2f}  {f['name']}")
+        total = body["per_scene"].get(args.scene, 0) if args.scene else body["count"]
+        if total > len(body["data"]):
+            print(f"  ... the newest {len(body['data'])} of {total} shown; --limit N shows more")
         return 0
     if args.labelled_cmd == "delete":
         if bool(args.scene) == bool(args.all):

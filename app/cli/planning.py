@@ -150,7 +150,7 @@ FILE_NAMES = {  # an export's stored name -> its file in --export's folder
 def _export_plan(plan: Any, result: dict[str, Any], req: Any, folder: Path) -> None:
     """Write the plan in every export format into ``folder`` (as GET /v1/plans/{id}/export/... serves them)."""
     from app.services import exports
-    from app.services.planning import access_csv
+    from app.services.planning import access_csv, scenes_by_pass
 
     folder.mkdir(parents=True, exist_ok=True)
     names = {"target": req.target.name, "observer": req.observer.name, "station": req.ground_station.name}
@@ -159,7 +159,9 @@ def _export_plan(plan: Any, result: dict[str, Any], req: Any, folder: Path) -> N
     )
     if not result.get("phasing"):
         print("note: no OPM, OEM or CZML: the plan has no phasing burn (no candidate was planned)", file=sys.stderr)
-    files = {"access.csv": access_csv(result["access_windows"])} | {FILE_NAMES[k]: v for k, v in texts.items()}
+    files = {"access.csv": access_csv(result["access_windows"], scenes_by_pass(result))} | {
+        FILE_NAMES[k]: v for k, v in texts.items()
+    }
     for fname, body in files.items():
         (folder / fname).write_text(body)
     print(f"wrote {', '.join(sorted(files))} to {folder}", file=sys.stderr)

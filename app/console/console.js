@@ -64,9 +64,9 @@ async function api(path, as = "json", method = "GET") {
   }
 }
 
-function askForKey() {
+function askForKey(refused = "") {
   document.getElementById("who").textContent = "";
-  view.innerHTML = `<h1>API key</h1>
+  view.innerHTML = `<h1>API key</h1>${refused ? `<p class="error" id="refused">${esc(refused)}</p>` : ""}
     <div class="card"><p>Every request carries your API key (<code>X-API-Key</code>). It is kept in this browser tab
     only (sessionStorage) and goes to no other site. <code>gsa keys create NAME</code> makes one; <code>make run</code>
     prints a development key.</p>
@@ -164,7 +164,7 @@ function mapSvg(geo, coastLines) {
 
 // The radar's sky over the pass nearest the chosen moment: zenith at the centre, the horizon at the rim, north up
 // and east to the right (as GNSS sky plots draw it); the station's mask shaded.
-function skySvg(geo, station) {
+function skySvg(geo, station, tAccess) {
   const inview = geo.features.find((f) => f.properties.kind === "target_in_view");
   const sky = inview && inview.properties.sky_time_az_el_deg;
   if (!sky || !sky.length) return "";
@@ -191,8 +191,21 @@ function skySvg(geo, station) {
   const track = sky.map(([, az, el]) => at(az, el).map((v) => v.toFixed(1)).join(",")).join("L");
   const [x0, y0] = at(sky[0][1], sky[0][2]);
   g += `<path class="skytrack" d="M${track}"/><circle cx="${x0}" cy="${y0}" r="4" class="skystart"><title>rise ${utc(sky[0][0])}</title></circle>`;
+  // the time every 2 minutes along the arc (HH:MM UTC), and T_access as a star
+  const times = sky.map(([t]) => Date.parse(t));
+  for (let m = Math.ceil(times[0] / 120000) * 120000; m <= times[times.length - 1]; m += 120000) {
+    const k = times.findIndex((t) => t >= m);
+    const [x, y] = at(sky[k][1], sky[k][2]);
+    g += `<circle cx="${x.toFixed(1)}" cy="${y.toFixed(1)}" r="2" class="skystart"/><text x="${(x + 5).toFixed(1)}" y="${(y - 4).toFixed(1)}" class="tick">${new Date(m).toISOString().slice(11, 16)}</text>`;
+  }
+  if (tAccess) {
+    const ta = Date.parse(tAccess);
+    const k = times.reduce((best, t, i) => (Math.abs(t - ta) < Math.abs(times[best] - ta) ? i : best), 0);
+    const [x, y] = at(sky[k][1], sky[k][2]);
+    g += `<text x="${x.toFixed(1)}" y="${(y + 6).toFixed(1)}" class="skyaccess" text-anchor="middle">★<title>T_access ${utc(tAccess)}</title></text>`;
+  }
   const top = sky.reduce((a, b) => (b[2] > a[2] ? b : a));
-  return `<div class="card sky"><b>The pass in the radar's sky</b> <span class="muted">(from ${utc(sky[0][0])}; highest ${num(top[2], 1)}° at azimuth ${num(top[1], 1)}°; the dot is where it rises)</span>
+  return `<div class="card sky"><b>The pass in the radar's sky</b> <span class="muted">(from ${utc(sky[0][0])}; highest ${num(top[2], 1)}° at azimuth ${num(top[1], 1)}°; the dot is where it rises, ★ T_access, times UTC)</span>
     <svg id="sky" viewBox="0 0 ${S} ${S}" role="img" aria-label="sky plot">${g}</svg></div>`;
 }
 function maskAt(mask, az) {
@@ -258,7 +271,7 @@ async function planPage(id) {
     .map((k) => `<a href="#" data-export="${k}">${k.replace("?format=xml", " (XML)")}</a>`).join(" · ");
   view.innerHTML = `<h1>Plan ${esc(p.target_name)} / ${esc(p.observer_name)} / ${esc(p.station_name)}</h1>
     <p class="muted">${esc(p.id)} · created ${utc(p.created_at)} · ${p.duration_days} days from ${utc(p.epoch)} · elements ${esc(p.reading)}</p>
-    ${verdict}${(p.notes || []).map((n) => `<p class="muted">note: ${esc(n)}</p>`).join("")}${mapSvg(geo, coastLines)}${skySvg(geo, (geo.features.find((x) => x.properties.kind === "station") || {}).properties)}${scene}${encounterCard(ph && ph.verification)}
+    ${verdict}${(p.notes || []).map((n) => `<p class="muted">note: ${esc(n)}</p>`).join("")}${mapSvg(geo, coastLines)}${skySvg(geo, (geo.features.find((x) => x.properties.kind === "station") || {}).properties, ch && ch.t_access)}${scene}${encounterCard(ph && ph.verification)}
     <h2>Access windows (${p.access_windows.length}, every one; the chosen pass highlighted)</h2>
     <div class="scroll"><table id="windows"><thead><tr><th class="num">#</th><th>rise (UTC)</th><th>culmination (UTC)</th><th>set (UTC)</th>
     <th class="num">az rise (deg)</th><th class="num">az culm. (deg)</th><th class="num">az set (deg)</th>
@@ -538,11 +551,13 @@ function passPanel(p, axis, name) {
   const X = (t) => L + (t / tmax) * (W - L - R);
   const Y = (v) => T + (1 - (Math.min(hi, Math.max(lo, v)) - lo) / (hi - lo)) * (H - T - B);
   let g = `<rect x="${L}" y="${T}" width="${W - L - R}" height="${H - T - B}" class="plotbg"/>`;
-  for (let k = 0; k <= 4; k++) {
-    const v = lo + (k / 4) * (hi - lo);
-    g += `<line x1="${L}" x2="${W - R}" y1="${Y(v)}" y2="${Y(v)}" class="gridline"/><text x="${L - 6}" y="${Y(v) + 4}" class="tick" text-anchor="end">${num(v, 1)}</text>`;
-    const t = (k / 4) * tmax;
-    g += `<text x="${X(t)}" y="${H - 8}" class="tick" text-anchor="middle">${num(t, 0)} s</text>`;
+  const ystep = niceStep(hi - lo);  // round ticks (encounter.js), and the times as UTC clock times
+  for (let v = Math.ceil(lo / ystep) * ystep; v <= hi + 1e-9; v += ystep) {
+    g += `<line x1="${L}" x2="${W - R}" y1="${Y(v)}" y2="${Y(v)}" class="gridline"/><text x="${L - 6}" y="${Y(v) + 4}" class="tick" text-anchor="end">${Number(v.toPrecision(6))}</text>`;
+  }
+  const tstep = niceStep(tmax);
+  for (let t = 0; t <= tmax + 1e-9; t += tstep) {
+    g += `<text x="${X(t)}" y="${H - 8}" class="tick" text-anchor="middle">${new Date(t0 + 1000 * t).toISOString().slice(11, 19)}Z</text>`;
   }
   if (p.stable) {
     const b = p.uncertainty_deg[axis];
@@ -708,8 +723,8 @@ async function route() {
     else if (parts[0] === "models") await modelsPage();
     else await plansPage(params);
   } catch (err) {
+    if (!key()) return askForKey(err.message);  // a refused key: say so above the key form, not behind it
     fail(err.message);
-    if (!key()) askForKey();
   }
   settle();
 }

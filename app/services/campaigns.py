@@ -255,8 +255,14 @@ def submit_campaign(*, session: Session, settings: Settings, operator_id: str, c
     from app.services import jobs
 
     checked = with_stored_station(campaign_in, stored_station_lookup(session, operator_id))
-    to_orbit(checked.target, "target")
-    to_orbit(checked.observer, "observer")
+    target, observer = to_orbit(checked.target, "target"), to_orbit(checked.observer, "observer")
+    if (target.elements, target.tle) == (observer.elements, observer.tle):
+        # what the planner's plane check refuses at once on the synchronous route; here before the job is queued
+        raise InputError(
+            ["observer"],
+            "the observer's orbit is the target's: the two planes have no line of nodes, so there is no GSA scene; "
+            "use an observer in another plane",
+        )
     to_stations(checked)
     campaign_options(checked, settings.max_grid_points)
     return jobs.submit(
@@ -370,10 +376,10 @@ def _aim_words(scene: CampaignScenePublic) -> str:
 def export(kind: str, row: Any, fmt: ccsds.Format = "kvn") -> str:
     """One export of a stored campaign (a row, or anything with its fields): ``opm``, ``oem`` (KVN, or XML with
     ``fmt``), ``czml``, ``access.csv``."""
-    from app.services.planning import access_csv
+    from app.services.planning import access_csv, scenes_by_pass
 
     if kind == "access.csv":
-        return access_csv(row.result.get("access_windows", []))
+        return access_csv(row.result.get("access_windows", []), scenes_by_pass(row.result))
     fl = flight(row.request, row.result)
     names = {"target": row.target_name, "observer": row.observer_name, "station": row.station_name}
     if kind == "opm":

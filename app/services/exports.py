@@ -497,14 +497,21 @@ TRACK_HALF_SPAN_S = 3000.0  # about half a low orbit either side of the chosen m
 
 def _lines(lat: Vec, lon: Vec, keep: NDArray[np.bool_] | None = None) -> list[list[list[float]]]:
     """A track as GeoJSON line parts, cut where it crosses the antimeridian (RFC 7946 section 3.1.9) and,
-    with ``keep``, where it leaves the kept points."""
+    with ``keep``, where it leaves the kept points. A part that meets the antimeridian runs on to it: it ends at
+    +-180 deg, and the next starts at -+180, at the latitude where the track crosses (linear between the samples),
+    so a map shows no gap there."""
     parts: list[list[list[float]]] = [[]]
     for k in range(lat.size):
         if keep is not None and not keep[k]:
             parts.append([])
             continue
-        if k and abs(lon[k] - lon[k - 1]) > 180.0:
-            parts.append([])
+        if k and abs(lon[k] - lon[k - 1]) > 180.0 and (keep is None or keep[k - 1]):
+            edge = 180.0 if lon[k - 1] > 0 else -180.0  # leaving eastward over +180, or westward over -180
+            after = float(lon[k]) + 2.0 * edge  # the next sample's longitude unwrapped past the edge
+            share = (edge - float(lon[k - 1])) / (after - float(lon[k - 1]))
+            lat_x = round(float(lat[k - 1] + share * (lat[k] - lat[k - 1])), 5)
+            parts[-1].append([edge, lat_x])
+            parts.append([[-edge, lat_x]])
         parts[-1].append([round(float(lon[k]), 5), round(float(lat[k]), 5)])
     return [p for p in parts if len(p) > 1]
 

@@ -407,6 +407,7 @@ ACCESS_CSV_COLUMNS = (
     "min_range_km",
     "rise_clipped",
     "set_clipped",
+    "scene",
 )
 
 
@@ -417,11 +418,32 @@ def _z(iso: str) -> str:
     return z_time(datetime.fromisoformat(iso))
 
 
-def access_csv(windows: list[dict[str, Any]]) -> str:
+def scenes_by_pass(result: dict[str, Any]) -> dict[int, str]:
+    """Which stored access window (by its index) each scene of a plan or campaign result images in: a plan's chosen
+    candidate is "chosen", a campaign's scenes their numbers ("2", or "2;3" where two share a pass)."""
+    windows = result.get("access_windows", [])
+    moments = []
+    if result.get("chosen"):
+        moments.append(("chosen", result["chosen"]["t_access"], result["chosen"].get("station")))
+    for sc in result.get("scenes", []):
+        moments.append((str(sc["index"]), sc["t_access"], (sc.get("candidate") or {}).get("station")))
+    marks: dict[int, list[str]] = {}
+    for label, when, station in moments:
+        t = datetime.fromisoformat(when)
+        for k, w in enumerate(windows):
+            same = station is None or w.get("station") in (None, station)
+            if same and datetime.fromisoformat(w["rise"]) <= t <= datetime.fromisoformat(w["set"]):
+                marks.setdefault(k, []).append(label)
+                break
+    return {k: ";".join(v) for k, v in marks.items()}
+
+
+def access_csv(windows: list[dict[str, Any]], scenes: dict[int, str] | None = None) -> str:
     """The plan's access windows as an STK-style access report: one row a pass, times in UTC (Z), angles in degrees.
 
     Azimuths are from north through east, elevations above the station's horizon (WGS84
-    normal), ranges in km; a window cut by the span's start or end says so in its clipped flags.
+    normal), ranges in km; a window cut by the span's start or end says so in its clipped flags. ``scene`` marks
+    the pass a scene images in (``scenes_by_pass``): "chosen" for a plan's, the scene numbers for a campaign's.
     """
     import csv
     import io
@@ -444,6 +466,7 @@ def access_csv(windows: list[dict[str, Any]]) -> str:
                 f"{win['min_range_km']:.3f}",
                 str(win["rise_clipped"]).lower(),
                 str(win["set_clipped"]).lower(),
+                (scenes or {}).get(k, ""),
             ]
         )
     return out.getvalue()

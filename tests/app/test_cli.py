@@ -120,6 +120,11 @@ def test_estimate_locally_with_plot(tmp_path, smoke_models):
     np.save(tmp_path / "n.npy", normalise_frame(np.abs(frame)))
     ok = _gsa("estimate", str(tmp_path / "n.npy"), "--normalised", "--models", str(smoke_models), cwd=tmp_path)
     assert ok.returncode == 0 and "quaternion" in ok.stdout, ok.stderr
+    assert "hint" not in ok.stdout
+    twice = _gsa("estimate", str(tmp_path / "n.npy"), "--models", str(smoke_models), cwd=tmp_path)
+    assert twice.returncode == 0
+    if "NOT TRUSTED" in twice.stdout:  # an untrusted answer to a frame already normalised says what to add
+        assert "add --normalised" in twice.stdout
     np.save(tmp_path / "raw.npy", np.abs(frame))
     raw = _gsa("estimate", str(tmp_path / "raw.npy"), "--normalised", "--models", str(smoke_models), cwd=tmp_path)
     assert raw.returncode == 2 and "values in [0, 1]" in raw.stderr and raw.stderr.count("\n") == 1

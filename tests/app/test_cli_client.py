@@ -124,6 +124,8 @@ def test_labelled_frames_through_the_command_line(served, capsys, tmp_path):
     assert "in 2 scene(s): s0 (3), s1 (2)" in out
     rc, out, _ = _run(capsys, "labelled", "add", str(folder), "--target", "tiangong-like")
     assert rc == 0 and "0 labelled frames stored, 5 already there" in out
+    rc, out, _ = _run(capsys, "labelled", "list", "--target", "tiangong-like", "--limit", "2")
+    assert rc == 0 and "the newest 2 of 5 shown; --limit N shows more" in out  # a cut list says so
     rc, out, _ = _run(capsys, "labelled", "list", "--target", "tiangong-like", "--scene", "s1", "--json")
     assert rc == 0 and {f["name"] for f in json.loads(out)["data"]} == {"f1.npz", "f3.npz"}
     rc, _, err = _run(capsys, "labelled", "list", "--target", "no-such")

@@ -180,6 +180,10 @@ def test_console_pages_in_chromium(served, tmp_path):
             ],
         ),
         "no-key": (f"{srv.url}/console/", ["Use this key"]),
+        "wrong-key": (
+            f"{srv.url}/console/#key=not-a-key-of-this-service&/plans",
+            ["Use this key", 'id="refused"', "refused"],
+        ),
     }
     for name, (url, expected) in pages.items():
         dom = _browse(url, name, tmp_path / name)
@@ -194,7 +198,8 @@ def test_console_pages_in_chromium(served, tmp_path):
     assert any(x["path"].startswith("/console/") for x in served_paths)
     assert any(x["path"].endswith("/export/geojson") for x in served_paths)
     bad = [(x["path"], x["status"]) for x in served_paths if x["status"] >= 400]
-    assert not bad, bad
+    # the wrong-key page's own refusal (its DOM dump and its screenshot: two loads), and nothing else
+    assert bad == [("/v1/plans", 401)] * 2, bad
 
 
 def test_the_landing_page_links_the_console(client):

@@ -21,7 +21,7 @@ from app.api.deps import (
     planning_budget,
 )
 from app.schemas import PAPER_EXAMPLE, IsoDateTime, PlanCreate, PlanPublic, PlansPublic, PlanSummary, Text
-from app.services.planning import access_csv, plan_and_store
+from app.services.planning import access_csv, plan_and_store, scenes_by_pass
 
 router = APIRouter(prefix="/plans", tags=["plans"])
 
@@ -104,7 +104,7 @@ def export_access_csv(session: SessionDep, operator: CurrentOperator, plan_id: A
     plan = crud.get_plan(session=session, operator_id=operator.id, plan_id=plan_id)
     if plan is None:
         raise HTTPException(status_code=404, detail="Plan not found")
-    body = access_csv(plan.result.get("access_windows", []))
+    body = access_csv(plan.result.get("access_windows", []), scenes_by_pass(plan.result))
     name = f"access-{plan.id}.csv"
     return Response(body, media_type="text/csv", headers={"Content-Disposition": f'attachment; filename="{name}"'})
 

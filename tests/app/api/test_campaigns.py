@@ -95,6 +95,11 @@ def test_the_czml_marks_every_scene_and_the_csv_every_pass(client, campaign):
     assert r.status_code == 200
     rows = list(csv.DictReader(io.StringIO(r.text)))
     assert len(rows) == len(campaign["access_windows"]) > n
+    marked = {row["scene"]: row for row in rows if row["scene"]}  # each scene's pass, by the scene's number
+    assert sorted(int(x) for label in marked for x in label.split(";")) == list(range(n))
+    for sc in campaign["scenes"]:
+        row = next(row for label, row in marked.items() if str(sc["index"]) in label.split(";"))
+        assert row["rise_utc"][:19] <= sc["t_access"][:19] <= row["set_utc"][:19]
 
 
 def test_a_campaign_over_its_time_budget_is_503_and_stores_nothing(settings):
@@ -139,6 +144,11 @@ def test_a_campaign_asked_for_asynchronously_is_a_job_whose_result_is_the_same_c
         "/v1/campaigns", json={**CAMPAIGN_EXAMPLE, "dv_budget_m_s": -1}, headers={**A, "Prefer": "respond-async"}
     )
     assert bad.status_code == 422  # checked before it is queued: no job
+    # The observer given the target's own orbit: refused now, as the synchronous route refuses it, not a failed job.
+    twin = {**CAMPAIGN_EXAMPLE, "observer": {**CAMPAIGN_EXAMPLE["target"], "name": "Twin"}}
+    same = client.post("/v1/campaigns", json=twin, headers={**A, "Prefer": "respond-async"})
+    assert same.status_code == 422 and same.json()["detail"][0]["loc"][-1] == "observer", same.text
+    assert client.post("/v1/campaigns", json=twin, headers=A).status_code == 422
 
 
 def _replan_state(campaign, when, moved_km=0.0):

@@ -437,3 +437,20 @@ def test_a_footprint_across_the_antimeridian_and_about_a_pole_stays_fillable():
         assert foot.buffer(1e-6).contains(Point(lon, lat))
         lons = np.concatenate([np.array(g.exterior.coords)[:, 0] for g in getattr(foot, "geoms", [foot])])
         assert np.all(np.abs(lons) <= 180.0)
+
+
+def test_a_track_cut_at_the_antimeridian_runs_on_to_it():
+    """A track crossing 180 deg between two samples: the first part ends on the antimeridian and the next begins
+    there, at the latitude where the track crosses (a line in lon/lat here, so the crossing is exact), both ways."""
+    from app.services.exports import _lines
+
+    east = _lines(np.array([0.0, 8.0, 14.0, 20.0]), np.array([170.0, 178.0, -176.0, -170.0]))
+    assert east == [[[170.0, 0.0], [178.0, 8.0], [180.0, 10.0]], [[-180.0, 10.0], [-176.0, 14.0], [-170.0, 20.0]]]
+    west = _lines(np.array([20.0, 14.0, 8.0]), np.array([-170.0, -176.0, 178.0]))
+    assert west == [[[-170.0, 20.0], [-176.0, 14.0], [-180.0, 10.0]], [[180.0, 10.0], [178.0, 8.0]]]
+    hidden = _lines(
+        np.array([0.0, 8.0, 14.0, 20.0]),
+        np.array([170.0, 178.0, -176.0, -170.0]),
+        keep=np.array([True, False, True, True]),
+    )
+    assert hidden == [[[-176.0, 14.0], [-170.0, 20.0]]]  # a crossing out of view draws nothing

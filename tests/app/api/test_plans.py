@@ -375,6 +375,9 @@ def test_access_report_csv_matches_the_plan(client, paper_plan):
     chosen = paper_plan["chosen"]
     w_chosen = windows[chosen["pass_index"]]
     assert w_chosen["rise"] <= chosen["t_access"] <= w_chosen["set"]
+    # The pass the scene images in is marked, and only it.
+    assert [k for k, row in enumerate(rows) if row["scene"]] == [chosen["pass_index"]]
+    assert rows[chosen["pass_index"]]["scene"] == "chosen"
     for row, w in zip(rows, windows, strict=True):
         for col, key in (("rise_utc", "rise"), ("culmination_utc", "culmination"), ("set_utc", "set")):
             assert row[col].endswith("Z")
