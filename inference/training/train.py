@@ -285,9 +285,9 @@ def train(data_dir: str | Path, out_dir: str | Path, options: TrainOptions | Non
             break
     if run.world == 1:
         return _finish(run)
-    import torch.distributed as dist
-
     import gc
+
+    import torch.distributed as dist
 
     record = _finish(run) if run.rank == 0 else {}
     # The DDP wrappers hold the process group: freed now, not at interpreter exit, where tearing down gloo's worker
