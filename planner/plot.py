@@ -194,11 +194,11 @@ def _fly_by_panels(fig, grid, fly_by, meet) -> None:  # type: ignore[no-untyped-
 
 
 def plot_campaign(campaign, path: str, title: str = "", dispersions=None) -> None:  # type: ignore[no-untyped-def]
-    """Write a two-panel PNG of ``campaign`` (a planner.campaign.Campaign) to ``path``: the Delta-v spent over
+    """Write a three-panel PNG of ``campaign`` (a planner.campaign.Campaign) to ``path``: the Delta-v spent over
     the span against the budget, each stretch shaded by what came of it (with ``dispersions``, a list of
     planner.dispersion.SceneDispersion, the trims' 95th-percentile margin on top, and each scene's feasible share);
-    and each scene's line of sight in the target's orbital frame (the imaging geometry the labelled frames will
-    cover)."""
+    each scene's line of sight in the target's orbital frame (the imaging geometry the labelled frames will
+    cover); and each scene's fly-by as flown."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -206,7 +206,7 @@ def plot_campaign(campaign, path: str, title: str = "", dispersions=None) -> Non
     import matplotlib.pyplot as plt
 
     ep = campaign.epoch
-    fig, (ax, sky) = plt.subplots(1, 2, figsize=(13, 4.8), gridspec_kw={"width_ratios": [1.7, 1.0]})
+    fig, (ax, sky, fly) = plt.subplots(1, 3, figsize=(18, 4.8), gridspec_kw={"width_ratios": [1.7, 1.0, 1.2]})
     for s in campaign.stretches:
         colour = "#2ca02c" if s.scene is not None else "#d62728"
         ax.axvspan(utc(ep, s.t0_s), utc(ep, s.t1_s), color=colour, alpha=0.08, lw=0)
@@ -263,6 +263,23 @@ def plot_campaign(campaign, path: str, title: str = "", dispersions=None) -> Non
     sky.set_xlabel("azimuth from along-track toward radial (deg)")
     sky.set_ylabel("elevation toward the orbit normal (deg)")
     sky.set_title("where the observer sees the target from")
+    # Each scene's fly-by as flown, a minute either side of T_access, in the target's orbital frame.
+    for s in campaign.scenes:
+        rel = s.check.relative if s.check is not None else None
+        if rel is None:
+            continue
+        k0 = int(np.argmin(np.abs(rel.t_s)))
+        (line,) = fly.plot(rel.rtn_km[1], rel.rtn_km[0], lw=1.5, label=f"scene {s.index}")
+        fly.plot(rel.rtn_km[1][k0], rel.rtn_km[0][k0], "o", mfc="white", mec=line.get_color(), ms=6)
+    fly.plot(0.0, 0.0, "ko", ms=6)
+    fly.set(
+        xlabel="along-track (km; the target moves to the right)",
+        ylabel="radial, up (km)",
+        title="each scene's fly-by, +-60 s (o: T_access; the target at 0, 0)",
+    )
+    fly.grid(alpha=0.3)
+    if campaign.scenes:
+        fly.legend(fontsize=8)
     if title:
         fig.suptitle(title)
     fig.tight_layout()
