@@ -356,6 +356,14 @@ def convert(text: str, kind: Literal["OEM", "OPM"], fmt: Format) -> str:
     return _serialise(message, fmt)
 
 
+def _scalar_last(quaternion_wxyz: Sequence[float]) -> tuple[float, float, float, float]:
+    """A quaternion given scalar first, as ADM writes it: unit, scalar last (Q1, Q2, Q3, QC), with QC >= 0."""
+    w, x, y, z = (float(q) for q in quaternion_wxyz)
+    norm = (w * w + x * x + y * y + z * z) ** 0.5
+    sign = -1.0 if w < 0 else 1.0
+    return sign * x / norm, sign * y / norm, sign * z / norm, sign * w / norm
+
+
 def apm_message(
     *,
     created: datetime,
@@ -380,10 +388,7 @@ def apm_message(
 
     if fmt not in FORMATS:
         raise ValueError(f"format {fmt!r}: kvn or xml")
-    w, x, y, z = (float(q) for q in quaternion_wxyz)
-    norm = (w * w + x * x + y * y + z * z) ** 0.5
-    sign = -1.0 if w < 0 else 1.0
-    q1, q2, q3, qc = (sign * v / norm for v in (x, y, z, w))
+    q1, q2, q3, qc = _scalar_last(quaternion_wxyz)
     if fmt == "kvn":
         lines = [
             "CCSDS_APM_VERS = 2.0",
@@ -454,10 +459,8 @@ def aem_message(
     if len(times) != len(quaternions_wxyz) or len(times) < 2:
         raise ValueError("an AEM needs two or more times, each with its quaternion")
     states = []
-    for t, (w, x, y, z) in zip(times, quaternions_wxyz, strict=True):
-        norm = (w * w + x * x + y * y + z * z) ** 0.5
-        sign = -1.0 if w < 0 else 1.0
-        q1, q2, q3, qc = (sign * float(v) / norm for v in (x, y, z, w))
+    for t, q_wxyz in zip(times, quaternions_wxyz, strict=True):
+        q1, q2, q3, qc = _scalar_last(q_wxyz)
         states.append(
             common.AttitudeStateType(
                 quaternion_ephemeris=common.QuaternionEphemerisType(

@@ -14,7 +14,7 @@ from app.db.models import Estimate, Pass
 from app.errors import Conflict
 from app.schemas import EstimatePublic, PassPublic
 from app.services.scenes import scene_for
-from inference.rotations import so3_exp
+from inference.rotations import euler_from_matrix, euler_to_quaternion, so3_exp
 from planner.ccsds import Format, aem_message, apm_message
 
 AEM_STEP_S = 1.0  # the AEM's attitude every second over the pass
@@ -53,14 +53,6 @@ def estimate_apm(row: Estimate, fmt: Format) -> str:
     )
 
 
-def _quaternion_wxyz(m: np.ndarray) -> list[float]:
-    """A rotation matrix's unit quaternion, scalar first (Shepperd's method: the largest of the four first)."""
-    from scipy.spatial.transform import Rotation
-
-    x, y, z, w = Rotation.from_matrix(m).as_quat()
-    return [float(w), float(x), float(y), float(z)]
-
-
 def pass_aem(session: Session, operator_id: str, row: Pass, fmt: Format) -> str:
     """The fused pass's attitude (body to GCRF) every second from its first frame to its last, as an AEM: a target
     still in LVLH keeps ``attitude_lvlh`` while LVLH turns with the orbit; a turning one follows the fitted body
@@ -87,7 +79,7 @@ def pass_aem(session: Session, operator_id: str, row: Pass, fmt: Format) -> str:
     quaternions = []
     for k, t in enumerate(steps):
         body_to_lvlh = a_ref @ so3_exp((t - at).total_seconds() * w_body) if turning and at else a_ref
-        quaternions.append(_quaternion_wxyz(np.asarray(lvlh[k]) @ body_to_lvlh))
+        quaternions.append(list(euler_to_quaternion(*euler_from_matrix(np.asarray(lvlh[k]) @ body_to_lvlh))))
     model = (
         f"turning at {', '.join(f'{v:.3f}' for v in p.rate_deg_s)} deg/s (body axes) from {at.isoformat() if at else '-'}"
         if turning
