@@ -19,15 +19,15 @@ def replace_section(title: str, lines: list[str], path: Path = Path("BENCHMARKS.
     path.write_text("\n".join([*old[:start], *lines, *gap, *old[end:]]).rstrip("\n") + "\n")
 
 
-def kept_sections(titles: tuple[str, ...], path: Path = Path("BENCHMARKS.md")) -> list[str]:
-    """Return the lines of the named sections as they stand (so a full rewrite can keep them)."""
+def other_sections(own: tuple[str, ...], path: Path = Path("BENCHMARKS.md")) -> list[str]:
+    """Return the lines of every section not titled in ``own``, in the file's order, as they stand (so a
+    benchmark that rewrites its own sections keeps every other benchmark's)."""
     if not path.exists():
         return []
     old = path.read_text().splitlines()
+    heads = [k for k, line in enumerate(old) if line.startswith("## ")] + [len(old)]
     out: list[str] = []
-    for title in titles:
-        if f"## {title}" in old:
-            start = old.index(f"## {title}")
-            end = next((k for k in range(start + 1, len(old)) if old[k].startswith("## ")), len(old))
+    for start, end in zip(heads[:-1], heads[1:], strict=True):
+        if old[start][3:] not in own:
             out += old[start:end]
     return out

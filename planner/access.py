@@ -12,16 +12,18 @@ elevation pass (tests/planner/test_access.py checks both against a 1-s skyfield 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from planner.constants import OMEGA_EARTH_RAD_S
 from planner.errors import SearchRangeError, StationError
 from planner.propagation import EarthFrames, Station, Trajectory
 from planner.radar import validate_radar
-from planner.search import TimeFunction, bisect_roots, grid_maxima, time_grid
+from planner.search import bisect_maxima, bisect_roots, time_grid
 
 Vec = NDArray[np.float64]
 
@@ -173,101 +175,219 @@ def mask_deg(station: Station, azimuth_deg: Vec) -> Vec:
     return np.maximum(station.min_elevation_deg, np.interp(az, pts[:, 0], pts[:, 1], period=360.0))
 
 
-def _look(rho_itrs: Vec, station: Station) -> LookAngles:
-    enu = station.enu_itrs() @ rho_itrs
-    rng = np.linalg.norm(rho_itrs, axis=0)
-    el = np.degrees(np.arcsin(np.clip(enu[2] / rng, -1.0, 1.0)))
-    if station.refraction:
-        el = el + refraction_deg(el)
-    az = np.mod(np.degrees(np.arctan2(enu[0], enu[1])), 360.0)
-    return LookAngles(az, el, rng)
-
-
 def look_angles(r_sat_km: Vec, t_s: Vec, station: Station, frames: EarthFrames) -> LookAngles:
     """Return the look angles from ``station`` to GCRS positions ``r_sat_km`` (3, N) at ``t_s``.
 
     Elevations are as the station sees them: refracted when ``station.refraction`` is on.
     """
-    return _look(frames.to_itrs(t_s, r_sat_km) - station.itrs_km()[:, None], station)
+    t = np.atleast_1d(np.asarray(t_s, float))
+    return Sites.of([station]).look(frames.to_itrs(t, r_sat_km), np.zeros(t.size, np.int64))
 
 
-def look_function(traj: Trajectory, station: Station, frames: EarthFrames, above_mask: bool = True):  # type: ignore[no-untyped-def]
-    """Return ``f(t_s) -> (elevation in deg, slant range in km)``, both shape (N,).
+@dataclass(frozen=True, slots=True)
+class Sites:
+    """Stations as arrays, so one look serves many (moment, station) pairs: station ``k[m]`` at moment ``m``."""
 
-    The elevation is measured from the mask at the satellite's azimuth (``above_mask``), or from
-    the horizon; refracted when the station asks for it.
-    """
-    site = station.itrs_km()
+    stations: tuple[Station, ...]
+    itrs_km: Vec  # (S, 3)
+    enu: Vec  # (S, 3, 3): each site's east, north, up rows
+    min_elevation_deg: Vec  # (S,)
+    refraction: NDArray[np.bool_]  # (S,)
+    masked: NDArray[np.bool_]  # (S,): the station has an azimuth mask
 
-    def f(t_s: Vec) -> tuple[Vec, Vec]:
+    @classmethod
+    def of(cls, stations: list[Station] | tuple[Station, ...]) -> Sites:
+        st = tuple(stations)
+        return cls(
+            st,
+            np.array([s.itrs_km() for s in st]).reshape(len(st), 3),
+            np.array([s.enu_itrs() for s in st]).reshape(len(st), 3, 3),
+            np.array([s.min_elevation_deg for s in st], float),
+            np.array([s.refraction for s in st], bool),
+            np.array([bool(s.mask) for s in st], bool),
+        )
+
+    def look(self, r_itrs_km: Vec, k: NDArray[np.int64]) -> LookAngles:
+        """Look angles from station ``k[m]`` to the ITRS position ``r_itrs_km[:, m]``; refracted where asked."""
+        rho = r_itrs_km - self.itrs_km[k].T
+        enu = np.einsum("mij,jm->im", self.enu[k], rho)
+        rng = np.sqrt(np.einsum("im,im->m", rho, rho))
+        el = np.degrees(np.arcsin(np.clip(enu[2] / rng, -1.0, 1.0)))
+        bent = self.refraction[k]
+        if bent.any():
+            el = np.where(bent, el + refraction_deg(el), el)
+        az = np.mod(np.degrees(np.arctan2(enu[0], enu[1])), 360.0)
+        return LookAngles(az, el, rng)
+
+    def rates(self, r_itrs_km: Vec, v_itrs_km_s: Vec, k: NDArray[np.int64]) -> tuple[Vec, Vec]:
+        """The azimuth and elevation rates (deg/s) station ``k[m]`` turns at to follow a satellite at ITRS
+        position ``r_itrs_km[:, m]`` moving at ``v_itrs_km_s[:, m]`` (Earth-fixed): the look angles' time
+        derivatives in closed form, refraction's bending included where the station asks for it."""
+        rho = r_itrs_km - self.itrs_km[k].T
+        enu = np.einsum("mij,jm->im", self.enu[k], rho)
+        enu_dot = np.einsum("mij,jm->im", self.enu[k], v_itrs_km_s)
+        rng = np.sqrt(np.einsum("im,im->m", rho, rho))
+        rng_dot = np.einsum("im,im->m", rho, v_itrs_km_s) / rng
+        horizontal_sq = enu[0] ** 2 + enu[1] ** 2
+        el_dot = np.degrees((enu_dot[2] * rng - enu[2] * rng_dot) / (rng * np.sqrt(horizontal_sq)))
+        bent = self.refraction[k]
+        if bent.any():
+            el = np.degrees(np.arcsin(np.clip(enu[2] / rng, -1.0, 1.0)))
+            slope = (refraction_deg(el + 1e-3) - refraction_deg(el - 1e-3)) / 2e-3
+            el_dot = np.where(bent, el_dot * (1.0 + slope), el_dot)
+        az_dot = np.degrees((enu[1] * enu_dot[0] - enu[0] * enu_dot[1]) / horizontal_sq)
+        return az_dot, el_dot
+
+    def floor_deg(self, k: NDArray[np.int64], azimuth_deg: Vec) -> Vec:
+        """The lowest elevation in view (``mask_deg``) for station ``k[m]`` at ``azimuth_deg[m]``."""
+        out = self.min_elevation_deg[k]
+        masked = self.masked[k]
+        if masked.any():
+            out = out.copy()
+            for j in np.unique(k[masked]):
+                at = k == j
+                out[at] = mask_deg(self.stations[j], azimuth_deg[at])
+        return out
+
+
+# f(t, k): a function of the moment t[m] for station k[m], both shape (M,).
+KeyedFunction = Callable[[Vec, NDArray[np.int64]], Vec]
+Keys = NDArray[np.int64]
+
+
+def _keyed_look(traj: Trajectory, frames: EarthFrames, sites: Sites) -> Callable[[Vec, Keys], LookAngles]:
+    def look(t_s: Vec, k: Keys) -> LookAngles:
         r, _ = traj.state(t_s)
-        look = _look(frames.to_itrs(t_s, r) - site[:, None], station)
-        el = look.elevation_deg - mask_deg(station, look.azimuth_deg) if above_mask else look.elevation_deg
-        return el, look.range_km
+        return sites.look(frames.to_itrs(t_s, r), k)
 
-    return f
+    return look
+
+
+def _keyed_rates(traj: Trajectory, frames: EarthFrames, sites: Sites) -> Callable[[Vec, Keys], tuple[Vec, Vec]]:
+    """``rates(t, k)``: station ``k[m]``'s azimuth and elevation rates (deg/s) at ``t[m]``, from the state.
+
+    The Earth-fixed velocity is the rotated inertial one less the Earth's rotation, omega x r; the frame's own
+    precession, nutation and polar motion turn it by under 1e-11 rad/s, which is left out.
+    """
+
+    def rates(t_s: Vec, k: Keys) -> tuple[Vec, Vec]:
+        r, v = traj.state(t_s)
+        n = t_s.size
+        both = frames.to_itrs(np.concatenate([t_s, t_s]), np.hstack([r, v]))
+        r_itrs, v_itrs = both[:, :n], both[:, n:]
+        v_fixed = v_itrs - OMEGA_EARTH_RAD_S * np.array([-r_itrs[1], r_itrs[0], np.zeros(n)])
+        return sites.rates(r_itrs, v_fixed, k)
+
+    return rates
 
 
 @dataclass(frozen=True, slots=True)
 class Intervals:
-    """Where a function of time is positive: ``start``/``end`` (N,), and whether each lies on the span's edge."""
+    """Where a function of time is positive: ``start``/``end`` (N,), and whether each lies on the span's edge;
+    ``key`` names the station of each (sorted by station, then time)."""
 
     start: Vec
     end: Vec
     start_clipped: NDArray[np.bool_]
     end_clipped: NDArray[np.bool_]
+    key: Keys
 
 
-def positive_intervals(f: TimeFunction, t: Vec, g: Vec, extrema_t: Vec, extrema_g: Vec, tol_s: float) -> Intervals:
-    """Return the intervals of ``[t[0], t[-1]]`` where ``f > 0``.
+def _keyed_maxima(
+    f: KeyedFunction, t: Vec, g: Vec, keys: Keys, tol_s: float, select: NDArray[np.bool_] | None = None
+) -> tuple[Vec, Keys, Vec]:
+    """The local maxima of ``f`` sampled as ``g`` (rows: stations ``keys``) on the grid ``t``: ``(t, key, f)``.
 
-    ``g`` is ``f`` on the grid ``t``; ``extrema_t`` / ``extrema_g`` are the refined
-    extrema between grid points that could cross zero unseen (a grazing maximum, a
-    shallow minimum). Merged into the grid, they leave ``f`` monotonic between
-    neighbouring samples, so every crossing is one sign change, refined to ``tol_s``.
+    ``search.grid_maxima`` for every row at once: an interior maximum is bracketed by its grid neighbours (only
+    where ``select`` holds), and a maximum hiding in the first or last step while the grid falls away from it is
+    found from the one-sided slope there. Every bracket is refined in one vectorised search.
     """
-    tt = np.concatenate([t, extrema_t])
-    gg = np.concatenate([g, extrema_g])
-    order = np.argsort(tt, kind="stable")
-    tt, gg = tt[order], gg[order]
-    keep = np.concatenate([[True], np.diff(tt) > 0.0])
-    tt, gg = tt[keep], gg[keep]
+    select = np.ones(g.shape, bool) if select is None else select
+    rows, i = np.nonzero((g[:, 1:-1] >= g[:, :-2]) & (g[:, 1:-1] > g[:, 2:]) & select[:, 1:-1])
+    lo, hi, key = [t[i]], [t[i + 2]], [keys[rows]]
+    h = 1e-3
+    for end, inner, sign in ((0, 1, 1.0), (-1, -2, -1.0)):
+        edge = keys[(g[:, end] > g[:, inner]) & select[:, end]]
+        if edge.size:
+            at = np.concatenate([np.full(edge.size, t[end]), np.full(edge.size, t[end] + sign * 2.0 * h)])
+            s = f(at, np.concatenate([edge, edge]))
+            rising_inward = s[edge.size :] > s[: edge.size]
+            edge = edge[rising_inward]
+            near, far = np.full(edge.size, t[end] + sign * h), np.full(edge.size, t[inner])
+            lo.append(near if sign > 0 else far)
+            hi.append(far if sign > 0 else near)
+            key.append(edge)
+    lo_a, hi_a, key_a = np.concatenate(lo), np.concatenate(hi), np.concatenate(key).astype(np.int64)
+    if not lo_a.size:
+        return np.empty(0), np.zeros(0, np.int64), np.empty(0)
+    t_max = bisect_maxima(f, lo_a, hi_a, tol_s, h_s=h, key=key_a)
+    return t_max, key_a, f(t_max, key_a)
+
+
+def _keyed_intervals(
+    f: KeyedFunction, t: Vec, g: Vec, keys: Keys, ext_t: Vec, ext_k: Keys, ext_g: Vec, tol_s: float
+) -> Intervals:
+    """Where ``f > 0`` over ``[t[0], t[-1]]`` for each row (station ``keys``) of the grid values ``g``.
+
+    The refined extrema between grid points that could cross zero unseen (``ext_*``: a grazing maximum, a
+    shallow minimum) are merged into each row, so ``f`` is monotonic between neighbouring samples and every
+    crossing is one sign change; all are refined to ``tol_s`` at once.
+    """
+    n = t.size
+    tt = np.concatenate([np.tile(t, keys.size), ext_t])
+    kk = np.concatenate([np.repeat(keys, n), ext_k]).astype(np.int64)
+    gg = np.concatenate([g.ravel(), ext_g])
+    order = np.lexsort((tt, kk))
+    tt, kk, gg = tt[order], kk[order], gg[order]
+    keep = np.concatenate([[True], (np.diff(tt) > 0.0) | (np.diff(kk) != 0)])
+    tt, kk, gg = tt[keep], kk[keep], gg[keep]
     positive = gg > 0.0
-    idx = np.flatnonzero(positive[1:] != positive[:-1])
-    roots = bisect_roots(f, tt[idx], tt[idx + 1], tol_s)
+    same = kk[1:] == kk[:-1]
+    idx = np.flatnonzero((positive[1:] != positive[:-1]) & same)
+    key = kk[idx]
+    roots = bisect_roots(lambda x: f(x, key), tt[idx], tt[idx + 1], tol_s)
     rising = ~positive[idx]
-    start, end = roots[rising], roots[~rising]
-    start_clipped = np.zeros(start.size, bool)
-    end_clipped = np.zeros(end.size, bool)
-    if positive[0]:
-        start = np.concatenate([[tt[0]], start])
-        start_clipped = np.concatenate([[True], start_clipped])
-    if positive[-1]:
-        end = np.concatenate([end, [tt[-1]]])
-        end_clipped = np.concatenate([end_clipped, [True]])
-    return Intervals(start, end, start_clipped, end_clipped)
+    first = np.flatnonzero(np.concatenate([[True], ~same]))
+    last = np.flatnonzero(np.concatenate([~same, [True]]))
+    first, last = first[positive[first]], last[positive[last]]
+    start = np.concatenate([roots[rising], tt[first]])
+    start_k = np.concatenate([key[rising], kk[first]])
+    start_c = np.concatenate([np.zeros(int(rising.sum()), bool), np.ones(first.size, bool)])
+    end = np.concatenate([roots[~rising], tt[last]])
+    end_k = np.concatenate([key[~rising], kk[last]])
+    end_c = np.concatenate([np.zeros(int((~rising).sum()), bool), np.ones(last.size, bool)])
+    s_order, e_order = np.lexsort((start, start_k)), np.lexsort((end, end_k))
+    return Intervals(start[s_order], end[e_order], start_c[s_order], end_c[e_order], start_k[s_order])
+
+
+def _take(a: Intervals, sel: NDArray[Any]) -> Intervals:
+    return Intervals(a.start[sel], a.end[sel], a.start_clipped[sel], a.end_clipped[sel], a.key[sel])
 
 
 def intersect(a: Intervals, b: Intervals) -> Intervals:
-    """Return the intervals where both ``a`` and ``b`` hold (each sorted and disjoint)."""
+    """Return the intervals where both ``a`` and ``b`` hold, station by station (each sorted and disjoint)."""
     start: list[float] = []
     end: list[float] = []
     sc: list[bool] = []
     ec: list[bool] = []
-    i = j = 0
-    while i < a.start.size and j < b.start.size:
-        lo = max(a.start[i], b.start[j])
-        hi = min(a.end[i], b.end[j])
-        if lo < hi:
-            start.append(float(lo))
-            end.append(float(hi))
-            sc.append(bool((a.start_clipped[i] and lo == a.start[i]) or (b.start_clipped[j] and lo == b.start[j])))
-            ec.append(bool((a.end_clipped[i] and hi == a.end[i]) or (b.end_clipped[j] and hi == b.end[j])))
-        if a.end[i] < b.end[j]:
-            i += 1
-        else:
-            j += 1
-    return Intervals(np.array(start), np.array(end), np.array(sc, bool), np.array(ec, bool))
+    key: list[int] = []
+    for k in np.unique(np.concatenate([a.key, b.key])):
+        x, y = _take(a, a.key == k), _take(b, b.key == k)
+        i = j = 0
+        while i < x.start.size and j < y.start.size:
+            lo = max(x.start[i], y.start[j])
+            hi = min(x.end[i], y.end[j])
+            if lo < hi:
+                start.append(float(lo))
+                end.append(float(hi))
+                sc.append(bool((x.start_clipped[i] and lo == x.start[i]) or (y.start_clipped[j] and lo == y.start[j])))
+                ec.append(bool((x.end_clipped[i] and hi == x.end[i]) or (y.end_clipped[j] and hi == y.end[j])))
+                key.append(int(k))
+            if x.end[i] < y.end[j]:
+                i += 1
+            else:
+                j += 1
+    return Intervals(np.array(start), np.array(end), np.array(sc, bool), np.array(ec, bool), np.array(key, np.int64))
 
 
 def access_windows(
@@ -281,70 +401,150 @@ def access_windows(
 ) -> AccessWindows:
     """Find every pass of ``traj`` above the station's elevation mask in ``[t0_s, t1_s]``.
 
-    A window is where the elevation is above the mask and, with
-    ``station.max_range_km`` set, the slant range is within it: a highly eccentric
-    pass can enter and leave range inside one elevation pass. Elevation and range
-    are sampled every ``step_s``; their extrema between samples are refined and
-    merged into the samples, so each function is monotonic between neighbours and
-    every crossing (a grazing pass shorter than the step included) is one sign
-    change, refined to ``tol_s``. ``step_s`` must be shorter than half the time
-    between a culmination and the next elevation minimum (over ten minutes for any
-    Earth orbit), which 120 s is. The culmination is the highest point and
-    ``min_range_km`` the least range inside each window.
+    One station's ``network_access``: see there.
     """
-    validate_station(station)
+    return network_access(traj, [station], frames, t0_s, t1_s, step_s, tol_s)[0]
+
+
+def network_access(
+    traj: Trajectory,
+    stations: list[Station] | tuple[Station, ...],
+    frames: EarthFrames,
+    t0_s: float,
+    t1_s: float,
+    step_s: float = 120.0,
+    tol_s: float = 1e-4,
+) -> list[AccessWindows]:
+    """Every pass of ``traj`` over each of ``stations`` in ``[t0_s, t1_s]``: one ``AccessWindows`` a station.
+
+    A window is where the elevation is above the station's mask and, with ``max_range_km`` set, the slant range
+    is within it: a highly eccentric pass can enter and leave range inside one elevation pass. The target is
+    propagated once on a grid of ``step_s`` that every station shares; each station's elevation and range over
+    the grid are array operations, and their extrema between samples are refined and merged into the samples,
+    so each function is monotonic between neighbours and every crossing (a grazing pass shorter than the step
+    included) is one sign change. Every station's extrema and crossings are refined together, to ``tol_s``, in
+    one vectorised search. ``step_s`` must be shorter than half the time between a culmination and the next
+    elevation minimum (over ten minutes for any Earth orbit), which 120 s is. The culmination is the highest
+    point and ``min_range_km`` the least range inside each window.
+    """
+    for station in stations:
+        validate_station(station)
     if t1_s - t0_s > MAX_SPAN_S:
         raise SearchRangeError(f"span of {(t1_s - t0_s) / 86400.0:.2f} days is over the 30-day limit", field="end")
-    look = look_function(traj, station, frames)
+    sites = Sites.of(stations)
+    n_st = len(sites.stations)
+    keys = np.arange(n_st, dtype=np.int64)
+    look = _keyed_look(traj, frames, sites)
 
-    def f_el(t_s: Vec) -> Vec:
-        return look(t_s)[0]
+    def f_el(t_s: Vec, k: Keys) -> Vec:
+        a = look(t_s, k)
+        return a.elevation_deg - sites.floor_deg(k, a.azimuth_deg)
 
-    def f_near(t_s: Vec) -> Vec:
-        return -look(t_s)[1]
+    def f_sky(t_s: Vec, k: Keys) -> Vec:
+        return look(t_s, k).elevation_deg
+
+    def f_near(t_s: Vec, k: Keys) -> Vec:
+        return -look(t_s, k).range_km
 
     t = time_grid(t0_s, t1_s, step_s)
-    g, rng = look(t)
-    # Every sampled maximum is refined (one or two an orbit, so cheap): near a high
-    # culmination elevation curves by tens of degrees within one step, so no margin
-    # below the mask is safe. A sampled minimum only matters if it is above the mask.
+    r_grid, v_grid = traj.state(t)
+    r_itrs = frames.to_itrs(t, r_grid)
+    grid_k = np.repeat(keys, t.size)
+    grid = sites.look(np.tile(r_itrs, n_st), grid_k)
+    sky = grid.elevation_deg.reshape(n_st, t.size)
+    rng = grid.range_km.reshape(n_st, t.size)
+    g = (grid.elevation_deg - sites.floor_deg(grid_k, grid.azimuth_deg)).reshape(n_st, t.size)
+    # A sampled maximum is refined where the satellite could rise above the floor within a step of the sample:
+    # its height over the site's horizon plane changes by at most its Earth-fixed speed times the step (the speed
+    # bounded from the grid's, with a fifth to spare). Near a high culmination elevation curves by tens of degrees
+    # within one step, so no margin in degrees would be safe; this one is in kilometres. A floor below the
+    # horizon (a mask under 0 deg) refines every maximum. A sampled minimum only matters if it is above the mask.
     # Extrema to 1 ms: the function is flat there, so a finer time buys nothing.
+    speed = float(np.max(np.linalg.norm(v_grid, axis=0)) + OMEGA_EARTH_RAD_S * np.max(np.linalg.norm(r_grid, axis=0)))
+    height = rng * np.sin(np.radians(sky))
+    below_horizon = np.array([_lowest_floor_deg(s) < 0.0 for s in sites.stations])
+    could_see = (height + 1.2 * speed * float(np.max(np.diff(t))) >= 0.0) | below_horizon[:, None]
     ext_tol = max(tol_s, 1e-3)
-    t_max, g_max = grid_maxima(f_el, t, g, ext_tol, include_ends=True)
-    t_min, g_min = grid_maxima(lambda x: -f_el(x), t, -g, ext_tol, select=g > 0.0, include_ends=True)
-    windows = positive_intervals(f_el, t, g, np.concatenate([t_max, t_min]), np.concatenate([g_max, -g_min]), tol_s)
+    t_max, k_max, g_max = _keyed_maxima(f_el, t, g, keys, ext_tol, select=could_see)
+    t_min, k_min, g_min = _keyed_maxima(lambda x, k: -f_el(x, k), t, -g, keys, ext_tol, select=g > 0.0)
+    windows = _keyed_intervals(
+        f_el,
+        t,
+        g,
+        keys,
+        np.concatenate([t_max, t_min]),
+        np.concatenate([k_max, k_min]),
+        np.concatenate([g_max, -g_min]),
+        tol_s,
+    )
     # Range minima: for the least range in each window and for a range limit.
-    t_near, near = grid_maxima(f_near, t, -rng, ext_tol, include_ends=True)
-    if station.max_range_km is not None and windows.start.size:
-        limit = station.max_range_km
+    limited = keys[[s.max_range_km is not None for s in sites.stations]]
+    near_select = could_see | np.isin(keys, limited)[:, None]  # a range limit needs every least range
+    t_near, k_near, near = _keyed_maxima(f_near, t, -rng, keys, ext_tol, select=near_select)
+    if limited.size and windows.start.size:
+        limit = np.array([s.max_range_km or 0.0 for s in sites.stations])
 
-        def f_in(t_s: Vec) -> Vec:
-            return limit - look(t_s)[1]
+        def f_in(t_s: Vec, k: Keys) -> Vec:
+            return limit[k] - look(t_s, k).range_km
 
-        t_far, far = grid_maxima(
-            lambda x: -f_in(x), t, rng - limit, ext_tol, select=limit - rng > 0.0, include_ends=True
+        g_in = limit[limited, None] - rng[limited]
+        t_far, k_far, far = _keyed_maxima(lambda x, k: -f_in(x, k), t, -g_in, limited, ext_tol, select=g_in > 0.0)
+        ours = np.isin(k_near, limited)
+        in_range = _keyed_intervals(
+            f_in,
+            t,
+            g_in,
+            limited,
+            np.concatenate([t_near[ours], t_far]),
+            np.concatenate([k_near[ours], k_far]),
+            np.concatenate([limit[k_near[ours]] + near[ours], -far]),
+            tol_s,
         )
-        in_range = positive_intervals(
-            f_in, t, limit - rng, np.concatenate([t_near, t_far]), np.concatenate([limit + near, -far]), tol_s
-        )
-        windows = intersect(windows, in_range)
-    t_peaks = t_max[g_max > 0.0]
-    if station.mask:  # above a mask that varies in azimuth the highest point is not the furthest above it
-        sky = look_function(traj, station, frames, above_mask=False)
+        free = ~np.isin(windows.key, limited)
+        cut = intersect(_take(windows, ~free), in_range)
+        both = _join(_take(windows, free), cut)
+        windows = _take(both, np.lexsort((both.start, both.key)))
+    # Above a mask that varies in azimuth the highest point is not the furthest above it.
+    t_peaks, k_peaks = t_max[g_max > 0.0], k_max[g_max > 0.0]
+    if sites.masked.any():
+        masked = keys[sites.masked]
+        t_sky, k_sky, _ = _keyed_maxima(f_sky, t, sky[masked], masked, ext_tol, select=could_see[masked])
+        plain = ~sites.masked[k_peaks]
+        t_peaks = np.concatenate([t_peaks[plain], t_sky])
+        k_peaks = np.concatenate([k_peaks[plain], k_sky])
+    described = _describe(look, _keyed_rates(traj, frames, sites), sites, windows, t_peaks, k_peaks, t_near, k_near)
+    return [_station_windows(described, windows.key == k) for k in keys]
 
-        def f_sky(t_s: Vec) -> Vec:
-            return sky(t_s)[0]
 
-        t_peaks, _ = grid_maxima(f_sky, t, sky(t)[0], ext_tol, include_ends=True)
-    return _describe(traj, station, frames, windows, t_peaks, t_near)
+def _lowest_floor_deg(station: Station) -> float:
+    """The lowest elevation the station sees anywhere around its horizon (its minimum, and its mask's lowest)."""
+    return max(station.min_elevation_deg, min((el for _, el in station.mask), default=station.min_elevation_deg))
 
 
-def _inside(times: Vec, start: float, end: float) -> Vec:
-    return times[(times >= start) & (times <= end)]
+def _join(a: Intervals, b: Intervals) -> Intervals:
+    return Intervals(
+        np.concatenate([a.start, b.start]),
+        np.concatenate([a.end, b.end]),
+        np.concatenate([a.start_clipped, b.start_clipped]),
+        np.concatenate([a.end_clipped, b.end_clipped]),
+        np.concatenate([a.key, b.key]).astype(np.int64),
+    )
+
+
+def _station_windows(w: AccessWindows, sel: NDArray[np.bool_]) -> AccessWindows:
+    """One station's windows out of every station's (``sel``), as that station's own (no ``station`` index)."""
+    return AccessWindows(**{f.name: getattr(w, f.name)[sel] for f in fields(AccessWindows) if f.name != "station"})
 
 
 def _describe(
-    traj: Trajectory, station: Station, frames: EarthFrames, w: Intervals, t_peaks: Vec, t_near: Vec
+    look: Callable[[Vec, Keys], LookAngles],
+    rates: Callable[[Vec, Keys], tuple[Vec, Vec]],
+    sites: Sites,
+    w: Intervals,
+    t_peaks: Vec,
+    k_peaks: Keys,
+    t_near: Vec,
+    k_near: Keys,
 ) -> AccessWindows:
     n = w.start.size
     if n == 0:
@@ -352,21 +552,29 @@ def _describe(
         return AccessWindows(
             empty, empty, empty, empty, empty, empty, empty, empty, np.zeros(0, bool), np.zeros(0, bool)
         )
-    # Each window's highest point and least range lie at an interior extremum or at an end:
-    # one look at those moments gives both.
-    look = look_function(traj, station, frames, above_mask=False)
-    culm = np.empty(n)
-    nearest = np.empty(n)
-    for k in range(n):
-        s, e = float(w.start[k]), float(w.end[k])
-        cand = np.concatenate([[s, e], _inside(t_peaks, s, e), _inside(t_near, s, e)])
-        el, rg = look(cand)
-        culm[k] = cand[int(np.argmax(el))]
-        nearest[k] = float(rg.min())
+    # Each window's highest point and least range lie at an interior extremum or at an end: one look at those
+    # moments, every window's at once, gives both.
+    t_ext = np.concatenate([t_peaks, t_near])
+    k_ext = np.concatenate([k_peaks, k_near]).astype(np.int64)
+    inside = (
+        (k_ext[None, :] == w.key[:, None]) & (t_ext[None, :] >= w.start[:, None]) & (t_ext[None, :] <= w.end[:, None])
+    )
+    win, ext = np.nonzero(inside)
+    owner = np.concatenate([np.arange(n), np.arange(n), win])
+    cand_t = np.concatenate([w.start, w.end, t_ext[ext]])
+    order = np.argsort(owner, kind="stable")
+    owner, cand_t = owner[order], cand_t[order]
+    a = look(cand_t, w.key[owner])
+    bounds = np.flatnonzero(np.concatenate([[True], owner[1:] != owner[:-1]]))
+    nearest = np.minimum.reduceat(a.range_km, bounds)
+    best = np.array(
+        [b + int(np.argmax(a.elevation_deg[b:e])) for b, e in zip(bounds, [*bounds[1:], owner.size], strict=True)]
+    )
+    culm = cand_t[best]
     t_all = np.concatenate([w.start, culm, w.end])
-    r, _ = traj.state(t_all)
-    angles = look_angles(r, t_all, station, frames)
-    az_rate, el_rate = _peak_rates(traj, station, frames, w.start, culm, w.end)
+    angles = look(t_all, np.tile(w.key, 3))
+    az_rate, el_rate = _peak_rates(rates, w.key, w.start, culm, w.end)
+    limit = np.array([s.max_azimuth_rate_deg_s for s in sites.stations])[w.key]
     return AccessWindows(
         rise_s=w.start,
         culmination_s=culm,
@@ -380,32 +588,39 @@ def _describe(
         set_clipped=np.asarray(w.end_clipped, bool),
         max_azimuth_rate_deg_s=az_rate,
         max_elevation_rate_deg_s=el_rate,
-        keyhole=az_rate > station.max_azimuth_rate_deg_s,
+        keyhole=az_rate > limit,
     )
 
 
 RATE_HALF_SPAN_S = 180.0  # the elevation's rate is sought this far either side of the culmination, every second
-RATE_DT_S = 0.05  # the central difference's half step
+RATE_COARSE_S = 10.0  # the first look for the elevation's fastest moment
 
 
 def pointing_rates(traj: Trajectory, station: Station, frames: EarthFrames, t_s: Vec) -> tuple[Vec, Vec]:
-    """Return the azimuth and elevation rates (deg/s) the radar turns at, at ``t_s``: central differences over
-    0.1 s of the look angles (the azimuth's wrapped through north)."""
-    t = np.asarray(t_s, float)
-    ahead = look_angles(traj.state(t + RATE_DT_S)[0], t + RATE_DT_S, station, frames)
-    behind = look_angles(traj.state(t - RATE_DT_S)[0], t - RATE_DT_S, station, frames)
-    d_az = (ahead.azimuth_deg - behind.azimuth_deg + 180.0) % 360.0 - 180.0
-    return d_az / (2 * RATE_DT_S), (ahead.elevation_deg - behind.elevation_deg) / (2 * RATE_DT_S)
+    """Return the azimuth and elevation rates (deg/s) the radar turns at, at ``t_s``: the look angles' time
+    derivatives from the satellite's state (``Sites.rates``)."""
+    t = np.atleast_1d(np.asarray(t_s, float))
+    return _keyed_rates(traj, frames, Sites.of([station]))(t, np.zeros(t.size, np.int64))
 
 
 def _peak_rates(
-    traj: Trajectory, station: Station, frames: EarthFrames, start: Vec, culm: Vec, end: Vec
+    rates: Callable[[Vec, Keys], tuple[Vec, Vec]], key: Keys, start: Vec, culm: Vec, end: Vec
 ) -> tuple[Vec, Vec]:
-    """Each window's azimuth rate at its culmination and largest elevation rate near it (deg/s, magnitudes)."""
-    offsets = np.arange(-RATE_HALF_SPAN_S, RATE_HALF_SPAN_S + 0.5, 1.0)
-    lo = start + RATE_DT_S  # the differences stay inside the window (a window clipped at the span's end included)
-    hi = np.maximum(end - RATE_DT_S, lo)
-    grid = np.clip(culm[:, None] + offsets, lo[:, None], hi[:, None])
-    az, el = pointing_rates(traj, station, frames, np.concatenate([np.clip(culm, lo, hi), grid.ravel()]))
+    """Each window's azimuth rate at its culmination and largest elevation rate near it (deg/s, magnitudes).
+
+    The elevation's rate is read every ``RATE_COARSE_S`` within ``RATE_HALF_SPAN_S`` of the culmination, then
+    every second within a coarse step of the fastest sample: the seconds a full scan would read there, at a
+    sixth of the cost (the rate is smooth, one hump either side of the culmination).
+    """
     n = culm.size
-    return np.abs(az[:n]), np.abs(el[n:]).reshape(n, -1).max(axis=1)
+
+    def el_rates(offsets: Vec, centre: Vec) -> tuple[Vec, Vec]:
+        grid = np.clip(centre[:, None] + offsets, start[:, None], end[:, None])
+        return grid, np.abs(rates(grid.ravel(), np.repeat(key, offsets.size))[1]).reshape(n, -1)
+
+    coarse = np.arange(-RATE_HALF_SPAN_S, RATE_HALF_SPAN_S + 0.5, RATE_COARSE_S)
+    grid, rate = el_rates(coarse, culm)
+    best = grid[np.arange(n), np.argmax(rate, axis=1)]
+    _, fine = el_rates(np.arange(-RATE_COARSE_S, RATE_COARSE_S + 0.5, 1.0), best)
+    az = rates(culm, key)[0]
+    return np.abs(az), np.maximum(rate.max(axis=1), fine.max(axis=1))

@@ -16,7 +16,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.access import MAX_SPAN_S, AccessWindows, access_windows, merge_windows, validate_station
+from planner.access import MAX_SPAN_S, AccessWindows, merge_windows, network_access, validate_station
 from planner.alignment import Candidate, HeightBox, ObserverPlaneModel, align_nodes
 from planner.constants import MIN_PERIGEE_HEIGHT_KM, MU_EARTH_KM3_S2, R_EARTH_KM
 from planner.elements import Elements, height_change_dv_km_s, state_to_elements
@@ -336,7 +336,7 @@ def make_plan(
     check("propagation")
 
     clock = time.perf_counter()
-    windows = merge_windows([access_windows(tgt, st, frames, 0.0, t1, step_s=opts.access_step_s) for st in stations])
+    windows = merge_windows(network_access(tgt, stations, frames, 0.0, t1, step_s=opts.access_step_s))
     timings["access"] = time.perf_counter() - clock
     check("the access search")
 

@@ -47,34 +47,48 @@ def bisect_roots(f: TimeFunction, lo: Vec, hi: Vec, tol_s: float) -> Vec:
     f_lo, f_hi = f(lo), f(hi)
     x = np.full(lo.size, np.nan)  # no previous estimate: the first step never counts as converged
     side = np.zeros(lo.size, int)
+    done = np.zeros(lo.size, bool)
     for _ in range(100):
         denom = f_hi - f_lo
         safe = np.abs(denom) > 0
         x_new = np.where(safe, (lo * f_hi - hi * f_lo) / np.where(safe, denom, 1.0), 0.5 * (lo + hi))
         x_new = np.where((x_new > lo) & (x_new < hi), x_new, 0.5 * (lo + hi))
+        x_new = np.where(f_lo == 0, lo, np.where(f_hi == 0, hi, x_new))
         moved = np.abs(x_new - x)
-        x = x_new
-        x = np.where(f_lo == 0, lo, np.where(f_hi == 0, hi, x))
-        if np.all((hi - lo <= tol_s) | (moved < tol_s * 0.1) | (f_lo == 0) | (f_hi == 0)):
+        x = np.where(done, x, x_new)
+        # A bracket that has converged keeps its root: each root is what it would be refined alone, whatever
+        # else is refined beside it (a station's passes come out the same in a network).
+        done |= (hi - lo <= tol_s) | (moved < tol_s * 0.1) | (f_lo == 0) | (f_hi == 0)
+        if np.all(done):
             break
         f_x = f(x)
-        left = np.sign(f_x) == np.sign(f_lo)
+        left = (np.sign(f_x) == np.sign(f_lo)) & ~done
+        right = ~left & ~done
         # Illinois: halve the stale end's value when the same side moves twice running.
         f_hi = np.where(left & (side == 1), 0.5 * f_hi, f_hi)
-        f_lo = np.where(~left & (side == -1), 0.5 * f_lo, f_lo)
+        f_lo = np.where(right & (side == -1), 0.5 * f_lo, f_lo)
         lo = np.where(left, x, lo)
         f_lo = np.where(left, f_x, f_lo)
-        hi = np.where(left, hi, x)
-        f_hi = np.where(left, f_hi, f_x)
-        side = np.where(left, 1, -1)
+        hi = np.where(right, x, hi)
+        f_hi = np.where(right, f_x, f_hi)
+        side = np.where(left, 1, np.where(right, -1, side))
     return x
 
 
-def bisect_maxima(f: TimeFunction, lo: Vec, hi: Vec, tol_s: float, h_s: float = 1e-3) -> Vec:
+def bisect_maxima(
+    f: TimeFunction | Callable[[Vec, NDArray[np.int64]], Vec],
+    lo: Vec,
+    hi: Vec,
+    tol_s: float,
+    h_s: float = 1e-3,
+    key: NDArray[np.int64] | None = None,
+) -> Vec:
     """Refine maxima of ``f`` inside brackets where it rises then falls, to ``tol_s``.
 
     The slope is read from a central difference of half-width ``h_s`` seconds, and
-    its zero found by ``bisect_roots`` (so in a handful of calls of ``f``).
+    its zero found by ``bisect_roots`` (so in a handful of calls of ``f``). With
+    ``key``, ``f(t, key)`` is a family of functions, bracket ``m`` being of member
+    ``key[m]`` (a station of a network, say), all refined together.
     """
     lo = np.array(lo, float)
     hi = np.array(hi, float)
@@ -82,7 +96,8 @@ def bisect_maxima(f: TimeFunction, lo: Vec, hi: Vec, tol_s: float, h_s: float = 
         return lo
 
     def slope(t: Vec) -> Vec:
-        both = f(np.concatenate([t + h_s, t - h_s]))
+        at = np.concatenate([t + h_s, t - h_s])
+        both = f(at) if key is None else f(at, np.concatenate([key, key]))  # type: ignore[call-arg]
         return both[: t.size] - both[t.size :]
 
     return bisect_roots(slope, lo, hi, tol_s)

@@ -246,24 +246,27 @@ def test_grazing_passes_a_hair_above_the_mask(scans, orbit, station):
         assert grazing.sum() == 1 and (w.set_s - w.rise_s)[grazing][0] < 60.0
 
 
-@pytest.mark.parametrize("station,limit_km", [("cape_town", 2600.0), ("svalbard", 30000.0), ("cape_town", 30000.0)])
-def test_range_limit_cuts_windows_inside_a_pass(scans, station, limit_km):
-    """A Molniya pass enters and leaves range inside one elevation pass: a window is where both hold."""
-    ref = _scan(scans, "molniya", station)
-    el_r, el_s, el_o0, el_o1 = ref.crossings("el", 0.0)
-    rg_r, rg_s, rg_o0, rg_o1 = ref.crossings("range", limit_km)
+def _in_view_and_range(ref, mask, limit_km):
+    """The scan's windows above ``mask`` and within ``limit_km``: where both of its interval sets hold."""
 
     def intervals(r, s, o0, o1):
         r = np.concatenate([[0.0], r]) if o0 else r
         s = np.concatenate([s, [ref.span]]) if o1 else s
         return list(zip(r, s, strict=True))
 
-    both = [
+    return [
         (max(a0, b0), min(a1, b1))
-        for a0, a1 in intervals(el_r, el_s, el_o0, el_o1)
-        for b0, b1 in intervals(rg_r, rg_s, rg_o0, rg_o1)
+        for a0, a1 in intervals(*ref.crossings("el", mask))
+        for b0, b1 in intervals(*ref.crossings("range", limit_km))
         if max(a0, b0) < min(a1, b1)
     ]
+
+
+@pytest.mark.parametrize("station,limit_km", [("cape_town", 2600.0), ("svalbard", 30000.0), ("cape_town", 30000.0)])
+def test_range_limit_cuts_windows_inside_a_pass(scans, station, limit_km):
+    """A Molniya pass enters and leaves range inside one elevation pass: a window is where both hold."""
+    ref = _scan(scans, "molniya", station)
+    both = _in_view_and_range(ref, 0.0, limit_km)
     w = _ours("molniya", station, 0.0, max_range_km=limit_km)
     assert len(both) >= 1 and len(w) == len(both)
     np.testing.assert_allclose(w.rise_s, [b[0] for b in both], atol=ten_ms, rtol=0)
@@ -308,3 +311,31 @@ def test_pointing_rates_against_skyfields_altaz(iss):
     assert access_windows(sat_traj, slow, frames, 0.0, SPAN_S).keyhole[k]
     with pytest.raises(StationError, match="max_azimuth_rate_deg_s"):
         access_windows(sat_traj, replace(STATION, max_azimuth_rate_deg_s=0.0), frames, 0.0, SPAN_S)
+
+
+@pytest.mark.parametrize("orbit", ["iss", "molniya"])
+def test_a_network_searched_at_once_finds_each_stations_windows_of_the_scan(scans, orbit):
+    """Every station of a network in one search (one propagation shared, every crossing refined together): each
+    station's windows are those the independent scan finds for it alone, masks and a range limit differing."""
+    from planner.access import network_access
+
+    l1, l2, epoch, span = ORBITS[orbit]
+    frames = EarthFrames(epoch, -3600.0, span + 3600.0)
+    sat = SGP4Trajectory(parse_tle(l1, l2), epoch, frames)
+    names = ["shanghai", "tira"] if orbit == "iss" else ["svalbard", "cape_town"]
+    network = [(name, mask, None) for name in names for mask in (0.0, 10.0, 20.0)]
+    if orbit == "molniya":
+        network.append(("cape_town", 0.0, 2600.0))
+    stations = [Station(*STATIONS[name], mask, max_range_km=limit) for name, mask, limit in network]
+    found = network_access(sat, stations, frames, 0.0, span)
+    assert len(found) == len(network)
+    for (name, mask, limit), w in zip(network, found, strict=True):
+        ref = _scan(scans, orbit, name)
+        if limit is None:
+            _assert_same_windows(w, *ref.crossings("el", mask))
+        else:
+            both = _in_view_and_range(ref, mask, limit)
+            assert len(both) >= 1 and len(w) == len(both)
+            np.testing.assert_allclose(w.rise_s, [b[0] for b in both], atol=ten_ms, rtol=0)
+            np.testing.assert_allclose(w.set_s, [b[1] for b in both], atol=ten_ms, rtol=0)
+        assert w.station.size == 0  # each station's own windows
