@@ -29,6 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 from planner.constants import DAY_S, F_EARTH, J2, MU_EARTH_KM3_S2, OMEGA_EARTH_RAD_S, R_EARTH_KM
 from planner.elements import Elements, elements_to_state, secular_state, state_to_elements
 from planner.errors import PlannerError
+from planner.integrator import integrate_j2
 from planner.radar import Radar
 from planner.tle import TLE
 
@@ -363,56 +364,12 @@ def j2_acceleration(r_km: Vec, pole: Vec | None = None) -> Vec:
 _F = 1.5 * J2 * MU_EARTH_KM3_S2 * R_EARTH_KM**2
 
 
-def _j2_rhs(pole: Pole | None):  # type: ignore[no-untyped-def]
-    """Return the right-hand side ``f(t, y)`` of two-body + J2 about ``pole`` (GCRS z if None)."""
-    # Scalar maths on purpose: for a 6-vector, math beats numpy by ~5x per call, and the
-    # call count (~10^5 for 10 days) dominates the run time.
-    if pole is None:
-        (a0, b0, c0), (a1, b1, c1), (a2, b2, c2), tm = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (1.0, 0.0, 0.0), 0.0
-    else:
-        (a0, b0, c0), (a1, b1, c1), (a2, b2, c2) = (tuple(float(x) for x in row) for row in pole.c)
-        tm = pole.t_mid_s
-
-    def rhs(t: float, y: list[float]) -> tuple[float, ...]:
-        x, yy, z, vx, vy, vz = y
-        dt = t - tm
-        px, py, pz = a0 + dt * (b0 + dt * c0), a1 + dt * (b1 + dt * c1), a2 + dt * (b2 + dt * c2)
-        r2 = x * x + yy * yy + z * z
-        r = math.sqrt(r2)
-        k = -MU_EARTH_KM3_S2 / (r2 * r)
-        f = _F / (r2 * r2 * r)
-        inv = 1.0 / math.sqrt(px * px + py * py + pz * pz)
-        px, py, pz = px * inv, py * inv, pz * inv
-        zp = px * x + py * yy + pz * z
-        q = 5.0 * zp * zp / r2 - 1.0
-        n = 2.0 * zp
-        return (vx, vy, vz, k * x + f * (q * x - n * px), k * yy + f * (q * yy - n * py), k * z + f * (q * z - n * pz))
-
-    return rhs
-
-
-def _release(solver: Any) -> None:
-    """Drop what scipy's dop853 integrator holds once it has run.
-
-    Its Fortran wrapper keeps a reference to the integrator's bound ``_solout`` after the
-    solver is gone, and with it the work arrays and our callback: 0.8 MB a plan grew without
-    bound before (tests/planner/test_propagation.py::test_integrations_do_not_leak).
-    """
-    integrator = getattr(solver, "_integrator", None)
-    if integrator is not None:
-        integrator.solout = None
-        integrator.call_args = []
-        integrator.work = integrator.iwork = None
-
-
 class NumericalJ2Trajectory:
     """Two-body + J2 motion integrated once with DOP853, then interpolated anywhere in its span.
 
-    The integrator is scipy's Fortran DOP853 (``scipy.integrate.ode``), which steps
-    in compiled code, many times faster than ``solve_ivp(method="DOP853")``, whose Python
-    stepping costs more than the force model (design/measurements.md, "DOP853 in compiled
-    code"); the two agree (tests/planner/test_propagation.py). The integrator's own
-    steps are kept and read back by quintic Hermite interpolation of position,
+    The integration is one compiled call, force model and stepping alike (``planner.integrator``); it
+    agrees with scipy's Fortran DOP853 and with the tests' own integrators (tests/planner/test_propagation.py).
+    The integrator's own steps are kept and read back by quintic Hermite interpolation of position,
     velocity and acceleration, accurate to well under a metre.
     """
 
@@ -425,38 +382,25 @@ class NumericalJ2Trajectory:
         rtol: float = 1e-10,
         pole: Pole | None = None,
     ) -> None:
-        from scipy.integrate import ode
-
         if not (math.isfinite(t0_s) and math.isfinite(t1_s)):
             raise PlannerError("propagation span must be finite", field="t_s")
         y0 = np.concatenate([np.asarray(r0_km, float), np.asarray(v0_km_s, float)])
-        steps_t: list[float] = []
-        steps_y: list[Vec] = []
-
-        def solout(t: float, y: Vec) -> int:
-            steps_t.append(t)
-            steps_y.append(np.array(y))
-            return 0
-
         self.t0_s, self.t1_s = float(t0_s), float(t1_s)
         if t1_s == t0_s:
-            steps_t, steps_y = [t0_s, t0_s + 1e-9], [y0, y0]
+            t, y = np.array([t0_s, t0_s + 1e-9]), np.array([y0, y0]).T
         else:
-            solver = ode(_j2_rhs(pole)).set_integrator("dop853", rtol=rtol, atol=rtol * 1e-2, nsteps=10**7)
-            solver.set_solout(solout)
-            solver.set_initial_value(y0, t0_s)
-            with warnings.catch_warnings():  # a failure is raised below as a PlannerError, not printed
-                warnings.simplefilter("ignore", UserWarning)
-                solver.integrate(t1_s)
-            _release(solver)
-            if not solver.successful():
+            steps_t, steps_y, status = integrate_j2(
+                y0,
+                t0_s,
+                t1_s,
+                rtol,
+                rtol * 1e-2,
+                None if pole is None else pole.c,
+                0.0 if pole is None else pole.t_mid_s,
+            )
+            if status != 0 or not np.all(np.isfinite(steps_y)):
                 raise PlannerError("numerical propagation failed (orbit decayed or diverged)", field="elements")
-        t = np.array(steps_t)
-        y = np.array(steps_y).T
-        # scipy's Fortran dop853 keeps a reference to the solout callback (and so to these lists)
-        # after the solver is gone: emptied here (and _release), a plan no longer leaks every step.
-        steps_t.clear()
-        steps_y.clear()
+            t, y = steps_t, steps_y.T
         order = np.argsort(t)
         self._t = t[order]
         self._r = y[:3, order]
