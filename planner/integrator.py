@@ -16,8 +16,8 @@ time and state are returned, for dense output by quintic Hermite interpolation.
 from __future__ import annotations
 
 import math
+from typing import Any
 
-import numba
 import numpy as np
 from numpy.typing import NDArray
 from scipy.integrate._ivp import dop853_coefficients as _dop
@@ -38,7 +38,6 @@ SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
 ERROR_EXPONENT = -1.0 / 8.0  # the error estimator's order is 7
 
 
-@numba.njit(cache=True, nogil=True)
 def _rhs(t: float, y: Vec, pole: Vec, t_mid: float, out: Vec) -> None:  # pragma: no cover - compiled
     dt = t - t_mid
     px = pole[0, 0] + dt * (pole[0, 1] + dt * pole[0, 2])
@@ -60,7 +59,6 @@ def _rhs(t: float, y: Vec, pole: Vec, t_mid: float, out: Vec) -> None:  # pragma
     out[5] = k * z + f * (q * z - n * pz)
 
 
-@numba.njit(cache=True, nogil=True)
 def _norm(v: Vec, scale: Vec) -> float:  # pragma: no cover - compiled
     s = 0.0
     for i in range(v.size):
@@ -68,7 +66,6 @@ def _norm(v: Vec, scale: Vec) -> float:  # pragma: no cover - compiled
     return math.sqrt(s / v.size)
 
 
-@numba.njit(cache=True, nogil=True)
 def _dop853(
     y0: Vec,
     t0: float,
@@ -183,6 +180,28 @@ def _dop853(
     return ts[:count].copy(), ys[:count].copy(), 0
 
 
+_KERNEL: Any = None
+
+
+def _compiled() -> Any:
+    """The integrator compiled by numba (or loaded from numba's cache beside this module) on first use.
+
+    Importing numba costs about 0.4 s that the service's light entry points (``gsa --help``, ``import app.main``)
+    must not pay, so it is imported here; the helpers are compiled as module globals, which is how the
+    integrator's own compiled code finds them.
+    """
+    global _KERNEL
+    if _KERNEL is None:
+        import numba
+
+        jit = numba.njit(cache=True, nogil=True)
+        here = globals()
+        here["_rhs"] = jit(_rhs)
+        here["_norm"] = jit(_norm)
+        _KERNEL = jit(_dop853)
+    return _KERNEL
+
+
 NO_POLE = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
 
 
@@ -203,7 +222,7 @@ def integrate_j2(
     step fell under what the times can hold (the orbit decayed or diverged).
     """
     pole = NO_POLE if pole_c is None else np.ascontiguousarray(pole_c, float)
-    return _dop853(
+    result: tuple[Vec, Vec, int] = _compiled()(
         np.ascontiguousarray(y0, float),
         float(t0_s),
         float(t1_s),
@@ -218,3 +237,4 @@ def integrate_j2(
         _E3,
         _E5,
     )
+    return result
