@@ -1,6 +1,6 @@
 """Physical optics beside the scattering-centre simulator (issue 41): the look, the speed, the fast path's error.
 
-Writes the "Physical optics" section of BENCHMARKS.md and bench/physics.png (the README's figure).
+Writes the "Physical optics" section of BENCHMARKS.md and bench/physics.png (docs/networks.md's figure).
 Run with `python -m bench.physics` (about 3 minutes on 2 cores).
 
 1. The figure: four attitudes of the default target, noise-free, in both physics (PO with roughness 0 and

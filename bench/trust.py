@@ -153,7 +153,7 @@ def main() -> None:
             shown = geodesic_deg(np.array([reversed_reading(c.angles_deg) for c in bc]), bad_frames_truth(kind, N_BAD))
             trusted = np.array([c.quality.trusted for c in bc])
             top += (
-                f"; no single-frame check can flag it over SO(3) (README, 'Any attitude'): {int(trusted.sum())} "
+                f"; no single-frame check can flag it over SO(3) (docs/estimation.md, 'Any attitude'): {int(trusted.sum())} "
                 f"trusted, {int((trusted & (shown <= 5.0)).sum())} of them read as the attitude the frame shows "
                 "(within 5 deg)"
             )

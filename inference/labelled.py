@@ -3,7 +3,7 @@
 The folder format (``gsa labelled add``, ``gsa adapt --frames``, ``gsa simulate --scene`` writes it):
 one ``.npz`` per frame, any name, read in name order, holding
 
-* ``image``: 2-D, raw magnitudes or complex, ``[range, cross-range]`` (the README's image
+* ``image``: 2-D, raw magnitudes or complex, ``[range, cross-range]`` (docs/estimation.md's image
   convention); ``normalised`` (bool, optional) says it already is ``normalise_frame``'s output;
 * the label, one of: ``angles_deg`` (z, y, x: body to the frame's observation frame, as every
   answer of the service), or ``quaternion_j2000`` (body to J2000, scalar first) with ``observed_at``

@@ -1,4 +1,4 @@
-"""The README's commands, checked as written: every module it runs exists and runs as a script, every
+"""The commands of the README and docs/, checked as written: every module it runs exists and runs as a script, every
 gsa subcommand it names exists, every gsa command line in its shell blocks parses as written, every option a gsa
 mention names is one its command takes, every file such a command reads is in the repository or written by another
 README command (or a capitalised placeholder: REQUEST.json), the first one an operator runs, run as written, every make target it
@@ -19,7 +19,8 @@ import pytest
 from app.cli import build_parser, command_name
 
 ROOT = Path(__file__).resolve().parents[1]
-README = (ROOT / "README.md").read_text()
+# The README and the documentation it leads to (docs/), read as one text.
+README = "\n".join(p.read_text() for p in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))])
 # Commands in code spans and in fenced blocks.
 SNIPPETS = re.findall(r"`([^`\n]+)`", README) + re.findall(r"```(?:sh|bash)?\n(.*?)```", README, re.S)
 TEXT = "\n".join(SNIPPETS)

@@ -122,7 +122,7 @@ class CheckedPublic(Described):
         None,
         description="the attitude the same frame shows read with its cross-range axis reversed: the answer turned "
         "half about the line of sight (RX_180 R). A single frame cannot tell the two apart, whatever the scattering, "
-        "since that half turn keeps the line of sight's direction in the body; the answer assumes the README's image "
+        "since that half turn keeps the line of sight's direction in the body; the answer assumes docs/estimation.md's image "
         "convention. This one holds where the radar's cross-range sense is the opposite, or the target turns against "
         "the line of sight faster than it sweeps (a pass tells: its fusion reads such frames so). Null on answers "
         "stored before it",

@@ -44,7 +44,7 @@ class RadarIn(Strict):
     """The site's imaging radar: what decides whether a scene's frames can be formed (``planner.radar``).
 
     Defaults: the paper's Table 3 band and frame, the transmitter of a tracking-and-imaging radar in that band
-    (FHR's TIRA, Ku band), a 34 m dish; each default's source is in README.md ("The radar in the scene")."""
+    (FHR's TIRA, Ku band), a 34 m dish; each default's source is in docs/planner.md ("The radar in the scene")."""
 
     min_elevation_deg: Finite = _radar_field(
         "min_elevation_deg",

@@ -161,7 +161,7 @@ def main(argv: list[str] | None = None) -> int:
     import faulthandler
 
     faulthandler.enable()  # a crash of the interpreter itself leaves its stack in the job's log
-    os.umask(0o077)  # however it was started: what the job writes is 0700 / 0600 (the README's promise)
+    os.umask(0o077)  # however it was started: what the job writes is 0700 / 0600 (docs/operations.md's promise)
     argv = sys.argv[1:] if argv is None else argv
     logging.basicConfig(level=logging.WARNING)
     if len(argv) != 1:

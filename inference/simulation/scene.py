@@ -4,7 +4,7 @@ A scatterer's echo depends on its kind and on the angle between its outward norm
 the line of sight (``scatterer_amplitudes``); self-shadowing hides those the hull
 covers (``visible``). The label is the target's exact projection on the image plane
 (``label_mask``). ``Scattering`` holds the options that vary how the target turns into
-an image (DESIGN.md section 3 and the README's simulator section); ``simulate`` joins
+an image (DESIGN.md section 3 and docs/networks.md's simulator section); ``simulate`` joins
 them with ``inference.simulation.radar``'s echo and image formation into one frame.
 """
 

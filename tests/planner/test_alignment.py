@@ -97,7 +97,7 @@ def test_mean_reading_does_not_reproduce_the_paper():
     t_paper = seconds_between(PAPER_EPOCH, PAPER_T_ACCESS)
     q = float(model.rate_change(PAPER_DHA_KM, PAPER_DHP_KM))
     t_cross = _crossing_near(plane_crossing_function(tgt, model, q), t_paper, half_width_s=600.0)
-    assert abs(t_cross - t_paper) > 60.0  # minutes off: see README, "Reproducing the paper"
+    assert abs(t_cross - t_paper) > 60.0  # minutes off: see docs/planner.md, "Reproducing the paper"
 
 
 def test_align_nodes_against_brute_force(osculating):
