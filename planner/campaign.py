@@ -405,7 +405,7 @@ def plan_campaign(
     stations = stations_of(station)
     clock0 = time.perf_counter()
     timings: dict[str, float] = {"plans": 0.0, "returns": 0.0, "flight": 0.0}
-    notes: list[str] = []
+    notes: list[str] = [*target.notes, *observer.notes]
     epoch = as_utc(opts.start) if opts.start is not None else target.epoch
     end_s = opts.duration_s
     margin = CAMPAIGN_MARGIN_S

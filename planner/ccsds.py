@@ -187,6 +187,24 @@ def elements_from_opm(text: str, field: str = "opm") -> Elements:
     return elements_of_state(r, v, epoch)  # Elements validate themselves
 
 
+def opm_manoeuvre_note(text: str, name: str, field: str = "opm") -> str | None:
+    """What an OPM's manoeuvres mean for a plan read from it, or None where it lists none.
+
+    A plan starts from the OPM's state vector and applies none of its manoeuvres (the planner plans its own burns);
+    the note says so, so that a burn listed in the message is never dropped unseen.
+    """
+    segment = read_message(text, "OPM", field).body.segment
+    burns = list(getattr(segment.data, "maneuver_parameters", None) or [])
+    if not burns:
+        return None
+    first = str(getattr(burns[0], "man_epoch_ignition", "") or "").strip()
+    return (
+        f"{name}: the OPM lists {len(burns)} manoeuvre(s) (the first at {first or 'an unstated time'}); the plan "
+        "starts from its state vector at EPOCH and applies none of them: to plan from after a burn, send the "
+        "state orbit determination gives after it"
+    )
+
+
 # --------------------------------------------------------------------------------------------------- writing
 
 

@@ -33,11 +33,13 @@ FRAME_MARGIN_S = 3600.0  # Earth orientation is sampled an hour either side of a
 
 @dataclass(frozen=True, slots=True)
 class Orbit:
-    """A satellite: a name and either Table-1 elements or a TLE."""
+    """A satellite: a name and either Table-1 elements or a TLE; ``notes`` say what its input held that a plan
+    does not use (an OPM's manoeuvres), and every plan and campaign of it repeats them."""
 
     name: str
     elements: Elements | None = None
     tle: TLE | None = None
+    notes: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if (self.elements is None) == (self.tle is None):

@@ -314,6 +314,7 @@ def make_plan(
     if eop_note:
         notes.append(eop_note)
     notes += tle_age_notes((target, observer), epoch, t1, opts.max_tle_age_days)
+    notes += [*target.notes, *observer.notes]
     obs_el = osculating_elements(observer, epoch, frames)
     check_box_reachable(obs_el, opts.box)
     # One pole of date for the plan: J2 acts about it in every propagation and verification.

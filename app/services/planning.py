@@ -30,7 +30,7 @@ from app.services import exports
 from inference.runtime import UNNAMED_CARD_TARGET
 from planner.access import access_windows
 from planner.alignment import HeightBox
-from planner.ccsds import elements_from_opm, omm_fields
+from planner.ccsds import elements_from_opm, omm_fields, opm_manoeuvre_note
 from planner.elements import Elements
 from planner.errors import PlannerError, PlanningStopped
 from planner.optics import ObserverOptics
@@ -68,7 +68,8 @@ def to_orbit(orbit: OrbitIn, where: str) -> Orbit:
         if orbit.omm_kvn is not None:
             return Orbit(orbit.name, tle=tle_from_omm(omm_fields(orbit.omm_kvn, "omm_kvn"), field="omm_kvn"))
         if orbit.opm is not None:
-            return Orbit(orbit.name, elements=elements_from_opm(orbit.opm))
+            note = opm_manoeuvre_note(orbit.opm, f"{where} {orbit.name}")
+            return Orbit(orbit.name, elements=elements_from_opm(orbit.opm), notes=(note,) if note else ())
         if orbit.omm_xml is not None:
             return Orbit(orbit.name, tle=tle_from_omm(omm_fields(orbit.omm_xml, "omm_xml"), field="omm_xml"))
         if orbit.omm_csv is not None:

@@ -341,6 +341,11 @@ def test_the_opm_goes_back_in_as_an_observer(client, plan, fmt):
     body["search"] = {"start": plan["phasing"]["t_burn"], "duration_days": 2}
     r = client.post("/v1/plans", json=body, headers=A)
     assert r.status_code == 201, r.text
+    # Its burn is listed in the OPM and not applied: the plan says so, naming when it was.
+    burn_at = plan["phasing"]["t_burn"][:19]
+    said = [n for n in r.json()["notes"] if "manoeuvre" in n]
+    assert len(said) == 1 and "observer from its own OPM" in said[0] and burn_at in said[0], r.json()["notes"]
+    assert "applies none of them" in said[0]
     from app.schemas import OrbitIn
     from app.services.planning import to_orbit
 
