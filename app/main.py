@@ -150,10 +150,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.session_factory = make_session_factory(engine)
     install_error_handlers(app)
 
-    def body_limit(headers: dict[str, str]) -> int:
-        # Uploads are checked file by file against max_upload_bytes; this bounds a whole request.
-        multipart = headers.get("content-type", "").startswith("multipart/")
-        return settings.max_batch_bytes if multipart else settings.max_request_bytes
+    def body_limit(headers: dict[str, str], path: str) -> int:
+        # Uploads are checked file by file against max_upload_bytes; this bounds a whole request. A catalogue of
+        # satellites (CelesTrak's active file, ~10,000 OMMs) is bounded by its own limit and by the work budget.
+        if headers.get("content-type", "").startswith("multipart/"):
+            return settings.max_batch_bytes
+        return settings.max_catalogue_bytes if path.rstrip("/") == "/v1/access-windows" else settings.max_request_bytes
 
     from app.core.metrics import Metrics
 

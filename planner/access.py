@@ -255,30 +255,45 @@ KeyedFunction = Callable[[Vec, NDArray[np.int64]], Vec]
 Keys = NDArray[np.int64]
 
 
-def _keyed_look(traj: Trajectory, frames: EarthFrames, sites: Sites) -> Callable[[Vec, Keys], LookAngles]:
-    def look(t_s: Vec, k: Keys) -> LookAngles:
-        r, _ = traj.state(t_s)
-        return sites.look(frames.to_itrs(t_s, r), k)
-
-    return look
+# state(t, j): the GCRS position and velocity (3, M) of satellite ``j[m]`` at ``t[m]``.
+KeyedState = Callable[[Vec, NDArray[np.int64]], tuple[Vec, Vec]]
 
 
-def _keyed_rates(traj: Trajectory, frames: EarthFrames, sites: Sites) -> Callable[[Vec, Keys], tuple[Vec, Vec]]:
-    """``rates(t, k)``: station ``k[m]``'s azimuth and elevation rates (deg/s) at ``t[m]``, from the state.
+@dataclass(frozen=True, slots=True)
+class _Pairs:
+    """Every (satellite, station) pair of a search, pair ``k`` being satellite ``sat[k]`` over station ``site[k]``."""
 
-    The Earth-fixed velocity is the rotated inertial one less the Earth's rotation, omega x r; the frame's own
-    precession, nutation and polar motion turn it by under 1e-11 rad/s, which is left out.
-    """
+    state: KeyedState
+    sites: Sites
+    frames: EarthFrames
+    sat: Keys
+    site: Keys
 
-    def rates(t_s: Vec, k: Keys) -> tuple[Vec, Vec]:
-        r, v = traj.state(t_s)
+    def look(self, t_s: Vec, k: Keys) -> LookAngles:
+        r, _ = self.state(t_s, self.sat[k])
+        return self.sites.look(self.frames.to_itrs(t_s, r), self.site[k])
+
+    def rates(self, t_s: Vec, k: Keys) -> tuple[Vec, Vec]:
+        """Pair ``k[m]``'s azimuth and elevation rates (deg/s) at ``t[m]``, from the state.
+
+        The Earth-fixed velocity is the rotated inertial one less the Earth's rotation, omega x r; the frame's own
+        precession, nutation and polar motion turn it by under 1e-11 rad/s, which is left out.
+        """
+        r, v = self.state(t_s, self.sat[k])
         n = t_s.size
-        both = frames.to_itrs(np.concatenate([t_s, t_s]), np.hstack([r, v]))
+        both = self.frames.to_itrs(np.concatenate([t_s, t_s]), np.hstack([r, v]))
         r_itrs, v_itrs = both[:, :n], both[:, n:]
         v_fixed = v_itrs - OMEGA_EARTH_RAD_S * np.array([-r_itrs[1], r_itrs[0], np.zeros(n)])
-        return sites.rates(r_itrs, v_fixed, k)
+        return self.sites.rates(r_itrs, v_fixed, self.site[k])
 
-    return rates
+
+def one_state(traj: Trajectory) -> KeyedState:
+    """One trajectory as the keyed state of a search over one satellite."""
+
+    def state(t_s: Vec, _: Keys) -> tuple[Vec, Vec]:
+        return traj.state(t_s)
+
+    return state
 
 
 @dataclass(frozen=True, slots=True)
@@ -427,18 +442,51 @@ def network_access(
     elevation minimum (over ten minutes for any Earth orbit), which 120 s is. The culmination is the highest
     point and ``min_range_km`` the least range inside each window.
     """
+    return pair_access(one_state(traj), 1, stations, frames, t0_s, t1_s, step_s, tol_s)[0]
+
+
+def pair_access(
+    state: KeyedState,
+    n_sat: int,
+    stations: list[Station] | tuple[Station, ...],
+    frames: EarthFrames,
+    t0_s: float,
+    t1_s: float,
+    step_s: float = 120.0,
+    tol_s: float = 1e-4,
+) -> list[list[AccessWindows]]:
+    """``network_access`` for ``n_sat`` satellites at once (``state(t, j)``: satellite ``j``'s GCRS state): the
+    windows of satellite ``j`` over station ``s`` are ``[j][s]``. Every pair's extrema and crossings are refined
+    together, so the search's fixed costs are paid once for the whole batch."""
     for station in stations:
         validate_station(station)
     if t1_s - t0_s > MAX_SPAN_S:
         raise SearchRangeError(f"span of {(t1_s - t0_s) / 86400.0:.2f} days is over the 30-day limit", field="end")
     sites = Sites.of(stations)
     n_st = len(sites.stations)
-    keys = np.arange(n_st, dtype=np.int64)
-    look = _keyed_look(traj, frames, sites)
+    pairs = _Pairs(
+        state,
+        sites,
+        frames,
+        np.repeat(np.arange(n_sat, dtype=np.int64), n_st),
+        np.tile(np.arange(n_st, dtype=np.int64), n_sat),
+    )
+    described, key = _search(pairs, t0_s, t1_s, step_s, tol_s)
+    out = [_station_windows(described, key == k) for k in range(n_sat * n_st)]
+    return [out[j * n_st : (j + 1) * n_st] for j in range(n_sat)]
+
+
+def _search(pairs: _Pairs, t0_s: float, t1_s: float, step_s: float, tol_s: float) -> tuple[AccessWindows, Keys]:
+    """Every pair's windows as one set (sorted by pair, then time) and the pair of each."""
+    sites = pairs.sites
+    n_pair = pairs.sat.size
+    keys = np.arange(n_pair, dtype=np.int64)
+    look = pairs.look
+    station = [sites.stations[j] for j in pairs.site]
 
     def f_el(t_s: Vec, k: Keys) -> Vec:
         a = look(t_s, k)
-        return a.elevation_deg - sites.floor_deg(k, a.azimuth_deg)
+        return a.elevation_deg - sites.floor_deg(pairs.site[k], a.azimuth_deg)
 
     def f_sky(t_s: Vec, k: Keys) -> Vec:
         return look(t_s, k).elevation_deg
@@ -447,23 +495,29 @@ def network_access(
         return -look(t_s, k).range_km
 
     t = time_grid(t0_s, t1_s, step_s)
-    r_grid, v_grid = traj.state(t)
-    r_itrs = frames.to_itrs(t, r_grid)
-    grid_k = np.repeat(keys, t.size)
-    grid = sites.look(np.tile(r_itrs, n_st), grid_k)
-    sky = grid.elevation_deg.reshape(n_st, t.size)
-    rng = grid.range_km.reshape(n_st, t.size)
-    g = (grid.elevation_deg - sites.floor_deg(grid_k, grid.azimuth_deg)).reshape(n_st, t.size)
+    n_sat = int(pairs.sat.max()) + 1
+    sat_grid = np.repeat(np.arange(n_sat, dtype=np.int64), t.size)
+    r_all, v_all = pairs.state(np.tile(t, n_sat), sat_grid)
+    r_itrs = pairs.frames.to_itrs(np.tile(t, n_sat), r_all).reshape(3, n_sat, t.size)
+    # Each pair's satellite on the grid, as one (3, pairs x grid) array for the pair's station.
+    grid_k = np.repeat(pairs.site, t.size)
+    grid = sites.look(r_itrs[:, pairs.sat, :].reshape(3, -1), grid_k)
+    sky = grid.elevation_deg.reshape(n_pair, t.size)
+    rng = grid.range_km.reshape(n_pair, t.size)
+    g = (grid.elevation_deg - sites.floor_deg(grid_k, grid.azimuth_deg)).reshape(n_pair, t.size)
     # A sampled maximum is refined where the satellite could rise above the floor within a step of the sample:
     # its height over the site's horizon plane changes by at most its Earth-fixed speed times the step (the speed
     # bounded from the grid's, with a fifth to spare). Near a high culmination elevation curves by tens of degrees
     # within one step, so no margin in degrees would be safe; this one is in kilometres. A floor below the
     # horizon (a mask under 0 deg) refines every maximum. A sampled minimum only matters if it is above the mask.
     # Extrema to 1 ms: the function is flat there, so a finer time buys nothing.
-    speed = float(np.max(np.linalg.norm(v_grid, axis=0)) + OMEGA_EARTH_RAD_S * np.max(np.linalg.norm(r_grid, axis=0)))
+    speed_sat = np.linalg.norm(v_all, axis=0).reshape(n_sat, t.size).max(axis=1) + OMEGA_EARTH_RAD_S * np.linalg.norm(
+        r_all, axis=0
+    ).reshape(n_sat, t.size).max(axis=1)
     height = rng * np.sin(np.radians(sky))
-    below_horizon = np.array([_lowest_floor_deg(s) < 0.0 for s in sites.stations])
-    could_see = (height + 1.2 * speed * float(np.max(np.diff(t))) >= 0.0) | below_horizon[:, None]
+    below_horizon = np.array([_lowest_floor_deg(s) < 0.0 for s in station], bool)
+    reach = 1.2 * speed_sat[pairs.sat] * float(np.max(np.diff(t)))
+    could_see = (height + reach[:, None] >= 0.0) | below_horizon[:, None]
     ext_tol = max(tol_s, 1e-3)
     t_max, k_max, g_max = _keyed_maxima(f_el, t, g, keys, ext_tol, select=could_see)
     t_min, k_min, g_min = _keyed_maxima(lambda x, k: -f_el(x, k), t, -g, keys, ext_tol, select=g > 0.0)
@@ -478,11 +532,11 @@ def network_access(
         tol_s,
     )
     # Range minima: for the least range in each window and for a range limit.
-    limited = keys[[s.max_range_km is not None for s in sites.stations]]
+    limited = keys[[s.max_range_km is not None for s in station]]
     near_select = could_see | np.isin(keys, limited)[:, None]  # a range limit needs every least range
     t_near, k_near, near = _keyed_maxima(f_near, t, -rng, keys, ext_tol, select=near_select)
     if limited.size and windows.start.size:
-        limit = np.array([s.max_range_km or 0.0 for s in sites.stations])
+        limit = np.array([s.max_range_km or 0.0 for s in station])
 
         def f_in(t_s: Vec, k: Keys) -> Vec:
             return limit[k] - look(t_s, k).range_km
@@ -506,14 +560,15 @@ def network_access(
         windows = _take(both, np.lexsort((both.start, both.key)))
     # Above a mask that varies in azimuth the highest point is not the furthest above it.
     t_peaks, k_peaks = t_max[g_max > 0.0], k_max[g_max > 0.0]
-    if sites.masked.any():
-        masked = keys[sites.masked]
+    masked_pair = sites.masked[pairs.site]
+    if masked_pair.any():
+        masked = keys[masked_pair]
         t_sky, k_sky, _ = _keyed_maxima(f_sky, t, sky[masked], masked, ext_tol, select=could_see[masked])
-        plain = ~sites.masked[k_peaks]
+        plain = ~masked_pair[k_peaks]
         t_peaks = np.concatenate([t_peaks[plain], t_sky])
         k_peaks = np.concatenate([k_peaks[plain], k_sky])
-    described = _describe(look, _keyed_rates(traj, frames, sites), sites, windows, t_peaks, k_peaks, t_near, k_near)
-    return [_station_windows(described, windows.key == k) for k in keys]
+    turn_limit = np.array([s.max_azimuth_rate_deg_s for s in station])
+    return _describe(look, pairs.rates, turn_limit, windows, t_peaks, k_peaks, t_near, k_near), windows.key
 
 
 def _lowest_floor_deg(station: Station) -> float:
@@ -539,7 +594,7 @@ def _station_windows(w: AccessWindows, sel: NDArray[np.bool_]) -> AccessWindows:
 def _describe(
     look: Callable[[Vec, Keys], LookAngles],
     rates: Callable[[Vec, Keys], tuple[Vec, Vec]],
-    sites: Sites,
+    turn_limit: Vec,
     w: Intervals,
     t_peaks: Vec,
     k_peaks: Keys,
@@ -574,7 +629,6 @@ def _describe(
     t_all = np.concatenate([w.start, culm, w.end])
     angles = look(t_all, np.tile(w.key, 3))
     az_rate, el_rate = _peak_rates(rates, w.key, w.start, culm, w.end)
-    limit = np.array([s.max_azimuth_rate_deg_s for s in sites.stations])[w.key]
     return AccessWindows(
         rise_s=w.start,
         culmination_s=culm,
@@ -588,7 +642,7 @@ def _describe(
         set_clipped=np.asarray(w.end_clipped, bool),
         max_azimuth_rate_deg_s=az_rate,
         max_elevation_rate_deg_s=el_rate,
-        keyhole=az_rate > limit,
+        keyhole=az_rate > turn_limit[w.key],
     )
 
 
@@ -600,7 +654,8 @@ def pointing_rates(traj: Trajectory, station: Station, frames: EarthFrames, t_s:
     """Return the azimuth and elevation rates (deg/s) the radar turns at, at ``t_s``: the look angles' time
     derivatives from the satellite's state (``Sites.rates``)."""
     t = np.atleast_1d(np.asarray(t_s, float))
-    return _keyed_rates(traj, frames, Sites.of([station]))(t, np.zeros(t.size, np.int64))
+    zero = np.zeros(1, np.int64)
+    return _Pairs(one_state(traj), Sites.of([station]), frames, zero, zero).rates(t, np.zeros(t.size, np.int64))
 
 
 def _peak_rates(

@@ -513,3 +513,49 @@ class SGP4Trajectory:
             raise PlannerError(f"SGP4 failed for this TLE: {SGP4_ERRORS.get(code, code)}", field="tle")
         rot = self.frames.teme_to_gcrs(t)
         return mxv(rot, r_teme.T), mxv(rot, v_teme.T)
+
+
+class SGP4Catalogue:
+    """Many TLEs propagated by SGP4 together, rotated from TEME into GCRS at once: ``state(t, j)`` is satellite
+    ``j[m]``'s state at ``t[m]`` (the keyed state of ``planner.access.pair_access``)."""
+
+    def __init__(self, tles: list[TLE], plan_epoch: datetime, frames: EarthFrames) -> None:
+        from sgp4.api import Satrec, jday
+
+        self.tles = tles
+        self.satrecs = [Satrec.twoline2rv(t.line1, t.line2) for t in tles]
+        self.frames = frames
+        e = as_utc(plan_epoch)
+        self._jd_whole, self._jd_frac0 = jday(e.year, e.month, e.day, e.hour, e.minute, e.second + e.microsecond * 1e-6)
+
+    def failures(self, t_s: ArrayLike) -> dict[int, str]:
+        """The satellites SGP4 cannot propagate over the times ``t_s`` (index: SGP4's reason): a decayed orbit, say."""
+        from sgp4.api import SGP4_ERRORS
+
+        t = np.atleast_1d(np.asarray(t_s, float))
+        jd, fr = np.full(t.size, self._jd_whole), self._jd_frac0 + t / DAY_S
+        out = {}
+        for j, sat in enumerate(self.satrecs):
+            err = sat.sgp4_array(jd, fr)[0]
+            if np.any(err):
+                code = int(err[err != 0][0])
+                out[j] = f"SGP4 failed: {SGP4_ERRORS.get(code, code)}"
+        return out
+
+    def state(self, t_s: ArrayLike, j: NDArray[np.int64]) -> tuple[Vec, Vec]:
+        t = np.atleast_1d(np.asarray(t_s, float))
+        r = np.empty((t.size, 3))
+        v = np.empty((t.size, 3))
+        order = np.argsort(j, kind="stable")
+        bounds = np.flatnonzero(np.diff(j[order])) + 1
+        fr_all = self._jd_frac0 + t / DAY_S
+        for part in np.split(order, bounds):
+            if not part.size:
+                continue
+            err, r[part], v[part] = self.satrecs[int(j[part[0]])].sgp4_array(
+                np.full(part.size, self._jd_whole), fr_all[part]
+            )
+            if np.any(err):
+                raise PlannerError(f"SGP4 failed for element set {int(j[part[0]])}", field="tle")
+        rot = self.frames.teme_to_gcrs(t)
+        return mxv(rot, r.T), mxv(rot, v.T)

@@ -207,9 +207,14 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
     for q in sts.choices.values():
         add_client_options(q, "the service")
     st.set_defaults(func=_lazy("planning", "cmd_stations"))
-    ac = sub.add_parser("access", help="access windows from a JSON request (the body of POST /v1/access-windows)")
+    ac = sub.add_parser(
+        "access",
+        help="access windows from a JSON request (the body of POST /v1/access-windows); a catalogue (targets) is "
+        "written a window a line, as JSON lines or CSV (its format)",
+    )
     ac.add_argument("file")
     ac.add_argument("--json", action="store_true")
+    ac.add_argument("--workers", type=int, default=1, help="a catalogue's shards on this many processes (default 1)")
     ac.set_defaults(func=_lazy("planning", "cmd_access"))
     for name, module, help in INFERENCE_COMMANDS:
         if name == load:

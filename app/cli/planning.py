@@ -173,13 +173,45 @@ def cmd_access(args: argparse.Namespace) -> int:
     from app.services.planning import run_access
 
     try:
-        result = run_access(AccessCreate.model_validate(read_json(args.file)))
+        req = AccessCreate.model_validate(read_json(args.file))
+        if req.targets is not None:
+            return _catalogue(req, args.workers)
+        result = run_access(req)
     except ValidationError as exc:
         raise CliError(validation_line(exc)) from None
     except InputError as exc:
         raise CliError(input_line(exc)) from None
     body = result.model_dump(mode="json")
     print(json.dumps(body, indent=2) if args.json else format_windows(body["access_windows"]))
+    return 0
+
+
+def _catalogue(req: Any, workers: int) -> int:
+    """A catalogue's windows on standard output, shard by shard, in the service's bytes; shards on ``workers``
+    processes (the order kept). Over the budget (GSA_ACCESS_BUDGET) it is refused as the service refuses it."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from app.core.config import get_settings
+    from app.errors import TooLarge
+    from app.services.catalogue import prepare
+
+    if workers < 1:
+        raise CliError("--workers must be at least 1")
+    try:
+        cat = prepare(req, get_settings().access_budget)
+    except TooLarge as exc:
+        raise CliError(str(exc)) from None
+    sys.stdout.write(cat.header() + "".join(cat.errors()))
+    shards = cat.shards()
+    if workers == 1:
+        pieces: Any = map(cat.run_shard, shards)
+        for piece in pieces:
+            sys.stdout.write(piece)
+    else:
+        with ProcessPoolExecutor(workers) as pool:
+            for piece in pool.map(cat.run_shard, shards):
+                sys.stdout.write(piece)
+    sys.stdout.flush()
     return 0
 
 

@@ -52,6 +52,12 @@ class Settings(BaseSettings):
     max_epoch_gap_days: float = Field(default=60.0, gt=0, le=36_525.0)
     max_tle_age_days: float = Field(default=30.0, gt=0, le=36_525.0)
     max_request_bytes: int = Field(default=1_000_000, ge=1024)
+    max_catalogue_bytes: int = Field(
+        default=16 * 1024 * 1024, ge=1024, description="a POST /v1/access-windows body (a catalogue of satellites)"
+    )
+    access_budget: float = Field(
+        default=100_000.0, ge=1.0, description="a catalogue's work at most, in target-station-days"
+    )
     max_upload_bytes: int = Field(default=8 * 1024 * 1024, ge=1024)
     max_batch_bytes: int = Field(default=64 * 1024 * 1024, ge=1024)
     max_image_side: int = Field(default=4096, ge=8, le=65_536)

@@ -205,7 +205,7 @@ def route_template(scope: Scope) -> str:
 class RequestContextMiddleware:
     """Outermost middleware: request id, body-size limits, the access log line, and a JSON 500 for any bug.
 
-    ``body_limit(headers)`` gives the byte limit of a request's body; it is checked against
+    ``body_limit(headers, path)`` gives the byte limit of a request's body; it is checked against
     ``Content-Length`` up front and against the bytes actually received (chunked uploads).
     """
 
@@ -223,7 +223,7 @@ class RequestContextMiddleware:
         token = request_id_var.set(rid)
         t0 = time.perf_counter()
         state = {"status": 500, "started": False}
-        limit = int(self.body_limit(headers))
+        limit = int(self.body_limit(headers, str(scope.get("path", ""))))
 
         async def send_with_id(message: Message) -> None:
             if message["type"] == "http.response.start":

@@ -4,6 +4,7 @@ Each result has one shape from the domain to the wire and the database: built by
 constructor, stored as ``model_dump(mode="json")`` with a format version, read back by ``from_row``.
 """
 
+from app.schemas.access import AccessCreate, CatalogueIn
 from app.schemas.campaigns import (
     CAMPAIGN_EXAMPLE,
     BurnPublic,
@@ -66,7 +67,6 @@ from app.schemas.passes import (
 )
 from app.schemas.plans import (
     PAPER_EXAMPLE,
-    AccessCreate,
     AccessPublic,
     CandidatePublic,
     FeasibilityPublic,
@@ -126,6 +126,7 @@ __all__ = [
     "PAPER_EXAMPLE",
     "STATION_EXAMPLE",
     "AccessCreate",
+    "CatalogueIn",
     "AccessPublic",
     "AlternativePublic",
     "AttitudePublic",

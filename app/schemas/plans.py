@@ -183,28 +183,6 @@ class PlanCreate(Strict):
         return self
 
 
-class AccessCreate(Strict):
-    """Access windows of one satellite to one station."""
-
-    model_config = ConfigDict(
-        extra="forbid",
-        allow_inf_nan=False,
-        json_schema_extra={
-            "examples": [{"target": PAPER_EXAMPLE["target"], "ground_station": PAPER_EXAMPLE["ground_station"]}]
-        },
-    )
-
-    target: OrbitIn
-    """the satellite"""
-    ground_station: GroundStationIn = Field(description="the radar site, or the name of one stored under /v1/stations")
-    start: IsoDateTime | None = None
-    """the start of the span (ISO 8601, UTC; default: the target's epoch)"""
-    duration_days: Finite = Field(default=7.0, ge=0.001, le=30.0)
-    """the span, days (0.001-30)"""
-    reading: Literal["osculating", "mean"] = "osculating"
-    """osculating (numerical J2) or mean (J2 secular rates)"""
-
-
 # Responses
 class WindowPublic(Described):
     rise: datetime

@@ -376,7 +376,9 @@ def access_for(*, session: Session, operator_id: str, access_in: AccessCreate, s
 
 
 def run_access(req: AccessCreate, max_epoch_gap_days: float | None = None) -> AccessPublic:
-    """Compute access windows alone."""
+    """Compute access windows alone: one satellite over one station (a catalogue is ``app.services.catalogue``)."""
+    if req.target is None or req.ground_station is None:
+        raise InputError(["target"], "one satellite's windows need target and ground_station")
     _osculating_states(((req.target, "target"),), req.reading, ["reading"])
     target = to_orbit(req.target, "target")
     station = to_station(req.ground_station)
