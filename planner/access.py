@@ -454,10 +454,12 @@ def pair_access(
     t1_s: float,
     step_s: float = 120.0,
     tol_s: float = 1e-4,
+    rates: bool = True,
 ) -> list[list[AccessWindows]]:
     """``network_access`` for ``n_sat`` satellites at once (``state(t, j)``: satellite ``j``'s GCRS state): the
     windows of satellite ``j`` over station ``s`` are ``[j][s]``. Every pair's extrema and crossings are refined
-    together, so the search's fixed costs are paid once for the whole batch."""
+    together, so the search's fixed costs are paid once for the whole batch. Without ``rates`` the radar's turning
+    rates are not sought (NaN, and no keyhole): they cost more than the rest of the search together."""
     for station in stations:
         validate_station(station)
     if t1_s - t0_s > MAX_SPAN_S:
@@ -471,12 +473,14 @@ def pair_access(
         np.repeat(np.arange(n_sat, dtype=np.int64), n_st),
         np.tile(np.arange(n_st, dtype=np.int64), n_sat),
     )
-    described, key = _search(pairs, t0_s, t1_s, step_s, tol_s)
+    described, key = _search(pairs, t0_s, t1_s, step_s, tol_s, rates)
     out = [_station_windows(described, key == k) for k in range(n_sat * n_st)]
     return [out[j * n_st : (j + 1) * n_st] for j in range(n_sat)]
 
 
-def _search(pairs: _Pairs, t0_s: float, t1_s: float, step_s: float, tol_s: float) -> tuple[AccessWindows, Keys]:
+def _search(
+    pairs: _Pairs, t0_s: float, t1_s: float, step_s: float, tol_s: float, rates: bool = True
+) -> tuple[AccessWindows, Keys]:
     """Every pair's windows as one set (sorted by pair, then time) and the pair of each."""
     sites = pairs.sites
     n_pair = pairs.sat.size
@@ -568,7 +572,8 @@ def _search(pairs: _Pairs, t0_s: float, t1_s: float, step_s: float, tol_s: float
         t_peaks = np.concatenate([t_peaks[plain], t_sky])
         k_peaks = np.concatenate([k_peaks[plain], k_sky])
     turn_limit = np.array([s.max_azimuth_rate_deg_s for s in station])
-    return _describe(look, pairs.rates, turn_limit, windows, t_peaks, k_peaks, t_near, k_near), windows.key
+    turning = pairs.rates if rates else None
+    return _describe(look, turning, turn_limit, windows, t_peaks, k_peaks, t_near, k_near), windows.key
 
 
 def _lowest_floor_deg(station: Station) -> float:
@@ -593,7 +598,7 @@ def _station_windows(w: AccessWindows, sel: NDArray[np.bool_]) -> AccessWindows:
 
 def _describe(
     look: Callable[[Vec, Keys], LookAngles],
-    rates: Callable[[Vec, Keys], tuple[Vec, Vec]],
+    rates: Callable[[Vec, Keys], tuple[Vec, Vec]] | None,
     turn_limit: Vec,
     w: Intervals,
     t_peaks: Vec,
@@ -628,7 +633,10 @@ def _describe(
     culm = cand_t[best]
     t_all = np.concatenate([w.start, culm, w.end])
     angles = look(t_all, np.tile(w.key, 3))
-    az_rate, el_rate = _peak_rates(rates, w.key, w.start, culm, w.end)
+    if rates is None:
+        az_rate = el_rate = np.full(n, np.nan)
+    else:
+        az_rate, el_rate = _peak_rates(rates, w.key, w.start, culm, w.end)
     return AccessWindows(
         rise_s=w.start,
         culmination_s=culm,

@@ -152,6 +152,20 @@ def utc(epoch: datetime, t_s: float) -> datetime:
     return guess
 
 
+def utc_many(epoch: datetime, t_s: ArrayLike) -> list[datetime]:
+    """``utc`` of many elapsed times at once: where no leap second falls between the earliest and the latest (as
+    nearly always), each is the epoch plus its seconds, shifted by the one offset; else ``utc`` of each."""
+    t = np.atleast_1d(np.asarray(t_s, float))
+    if not t.size:
+        return []
+    start = as_utc(epoch)
+    first, last = utc(start, float(t.min())), utc(start, float(t.max()))
+    if _tai_minus_utc_s(first) != _tai_minus_utc_s(last):
+        return [utc(start, float(x)) for x in t]
+    shift = _tai_minus_utc_s(start) - _tai_minus_utc_s(first)
+    return [start + timedelta(seconds=float(x) + shift) for x in t]
+
+
 def _rot_z(angle: Vec) -> Vec:
     """Return rotation matrices of shape (3, 3, N) about z by ``angle`` (skyfield's rot_z)."""
     c, s = np.cos(angle), np.sin(angle)

@@ -6,13 +6,13 @@ The lines are a pure function of the request: the same bytes whichever way the s
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
+
+import numpy as np
 
 from app.core.config import Settings
 from app.errors import InputError, TooLarge
@@ -21,7 +21,7 @@ from app.services.planning import access_for, stored_station_lookup, to_station,
 from planner.access import AccessWindows, pair_access, validate_station
 from planner.errors import PlannerError
 from planner.orbits import earth_frames
-from planner.propagation import SGP4Catalogue, Station, as_utc, utc
+from planner.propagation import SGP4Catalogue, Station, as_utc, utc_many
 from planner.tle import TLE, parse_tle, split_tles, tle_from_omm
 
 SHARD = 64  # satellites searched together: the search's fixed costs shared, its arrays a few MB
@@ -43,6 +43,16 @@ COLUMNS = (
     "set_clipped",
     "error",
 )
+
+
+def _csv_cell(value: object) -> str:
+    """One CSV cell as Python's csv writer writes it (quoted where it holds a comma, quote or line break)."""
+    if value is None:
+        return ""
+    text = str(value)
+    if any(c in text for c in ',"\r\n'):
+        return '"' + text.replace('"', '""') + '"'
+    return text
 
 
 @dataclass(frozen=True, slots=True)
@@ -118,13 +128,24 @@ class Catalogue:
         """The error lines of the entries that could not be read, in their catalogue order."""
         return [self.line(e, None, None, 0, e.error) for e in self.entries if e.error]
 
-    def line(self, e: Entry, station: str | None, w: AccessWindows | None, k: int, error: str | None = None) -> str:
+    def line(
+        self,
+        e: Entry,
+        station: str | None,
+        w: AccessWindows | None,
+        k: int,
+        error: str | None = None,
+        times: tuple[datetime, datetime, datetime] | None = None,
+    ) -> str:
+        """One line of the answer: a window (``k`` of ``w``; ``times``, its rise, culmination and set in UTC, if
+        already converted) or an entry's error."""
         row: dict[str, object] = {"index": e.index, "target": e.name, "norad_id": e.norad_id, "station": station}
         if w is not None:
+            rise, culmination, end = times or utc_many(self.epoch, [w.rise_s[k], w.culmination_s[k], w.set_s[k]])
             row |= {
-                "rise": utc(self.epoch, float(w.rise_s[k])).isoformat(),
-                "culmination": utc(self.epoch, float(w.culmination_s[k])).isoformat(),
-                "set": utc(self.epoch, float(w.set_s[k])).isoformat(),
+                "rise": rise.isoformat(),
+                "culmination": culmination.isoformat(),
+                "set": end.isoformat(),
                 "duration_s": round(float(w.set_s[k] - w.rise_s[k]), 4),
                 "max_elevation_deg": round(float(w.max_elevation_deg[k]), 4),
                 "rise_azimuth_deg": round(float(w.rise_azimuth_deg[k]), 4),
@@ -138,9 +159,7 @@ class Catalogue:
             row["error"] = error
         if self.fmt == "jsonl":
             return json.dumps(row, separators=(",", ":")) + "\n"
-        buf = io.StringIO()
-        csv.writer(buf, lineterminator="\r\n").writerow(["" if row.get(c) is None else row.get(c) for c in COLUMNS])
-        return buf.getvalue()
+        return ",".join(_csv_cell(row.get(c)) for c in COLUMNS) + "\r\n"
 
     def run_shard(self, shard: list[Entry]) -> str:
         """A shard's lines: each satellite's windows, station by station in the request's order, in time order. A
@@ -148,9 +167,9 @@ class Catalogue:
         frames = earth_frames(self.epoch, 0.0, self.span_s)
         tles = [e.tle for e in shard if e.tle is not None]
         try:
-            found = pair_access(
-                SGP4Catalogue(tles, self.epoch, frames).state, len(tles), self.stations, frames, 0.0, self.span_s
-            )
+            state = SGP4Catalogue(tles, self.epoch, frames).state
+            # The lines carry no turning rates: they are not sought (the search's dearest part).
+            found = pair_access(state, len(tles), self.stations, frames, 0.0, self.span_s, rates=False)
         except PlannerError:
             if len(shard) == 1:
                 return self.line(
@@ -161,10 +180,15 @@ class Catalogue:
                     f"element set {shard[0].index} ({shard[0].name}): SGP4 cannot propagate it over the span",
                 )
             return "".join(self.run_shard([e]) for e in shard)  # find which one, satellite by satellite
+        # Every window's rise, culmination and set of the shard turned into UTC at once.
+        seconds = [np.stack([w.rise_s, w.culmination_s, w.set_s], axis=1).ravel() for ws in found for w in ws]
+        moments = iter(utc_many(self.epoch, np.concatenate(seconds) if seconds else np.empty(0)))
         out = []
         for e, per_station in zip(shard, found, strict=True):
             for name, w in zip(self.names, per_station, strict=True):
-                out += [self.line(e, name, w, k) for k in range(len(w))]
+                for k in range(len(w)):
+                    times = (next(moments), next(moments), next(moments))
+                    out.append(self.line(e, name, w, k, times=times))
         return "".join(out)
 
 

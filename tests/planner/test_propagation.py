@@ -203,6 +203,13 @@ def test_utc_is_seconds_between_inverse_across_a_leap_second():
         assert abs((got - ref).total_seconds()) < 1e-5, (t_s, got, ref)
         assert abs(seconds_between(epoch, got) - t_s) < 1e-5, t_s
     assert utc(epoch, 120.0) == datetime(2017, 1, 1, 0, 0, 59, tzinfo=UTC)  # not 00:01:00: the day had 86401 s
+    # Many at once, across the leap second and on either side of it: skyfield's UTC each time.
+    from planner.propagation import utc_many
+
+    for times in ([0.0, 30.5, 61.0, 120.0, 86400.0], [-3600.0, -1.0], [120.0, 5000.0, 86400.0]):
+        for t_s, got in zip(times, utc_many(epoch, times), strict=True):
+            ref = ts.tt_jd(t0.whole, t0.tt_fraction + t_s / 86400.0).utc_datetime()
+            assert abs((got - ref).total_seconds()) < 1e-5, (t_s, got, ref)
 
 
 def test_the_compiled_integrator_against_scipys_fortran_dop853_both_ways():
