@@ -49,10 +49,11 @@ def _csv_cell(value: object) -> str:
     """One CSV cell as Python's csv writer writes it (quoted where it holds a comma, quote or line break)."""
     if value is None:
         return ""
-    text = str(value)
-    if any(c in text for c in ',"\r\n'):
-        return '"' + text.replace('"', '""') + '"'
-    return text
+    if not isinstance(value, str):
+        return str(value)
+    if "," in value or '"' in value or "\n" in value or "\r" in value:
+        return '"' + value.replace('"', '""') + '"'
+    return value
 
 
 @dataclass(frozen=True, slots=True)
