@@ -5,6 +5,7 @@ COPY pyproject.toml README.md alembic.ini ./
 COPY app ./app
 COPY planner ./planner
 COPY inference ./inference
+COPY scene ./scene
 COPY migrations ./migrations
 # torch==2.13.0 from PyPI is a CUDA build on x86_64 (several GB); for a slim image, install the
 # CPU wheel of the same version from PyTorch's CPU index first, then the package.

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import re
 import json
 import subprocess
 import sys
@@ -253,3 +254,13 @@ def test_the_planner_surface_names_real_objects_and_costs_nothing_to_import():
         import planner
 
         planner.nothing  # noqa: B018
+
+
+def test_the_image_copies_every_package_the_project_installs():
+    """The Dockerfile copies each package `pip install -e .` finds (pyproject's packages.find), so the image imports
+    what the code imports (scene/ was missing from it)."""
+    import tomllib
+
+    include = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]["find"]["include"]
+    copied = set(re.findall(r"^COPY (\w+) \./\1$", (ROOT / "Dockerfile").read_text(), re.M))
+    assert {name.rstrip("*") for name in include} <= copied, copied
