@@ -214,7 +214,12 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
     )
     ac.add_argument("file")
     ac.add_argument("--json", action="store_true")
-    ac.add_argument("--workers", type=int, default=1, help="a catalogue's shards on this many processes (default 1)")
+    ac.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        help="a catalogue's shards on this many processes (default 1); with GSA_RAY_ADDRESS set, as Ray tasks there",
+    )
     ac.set_defaults(func=_lazy("planning", "cmd_access"))
     for name, module, help in INFERENCE_COMMANDS:
         if name == load:

@@ -187,13 +187,13 @@ def cmd_access(args: argparse.Namespace) -> int:
 
 
 def _catalogue(req: Any, workers: int) -> int:
-    """A catalogue's windows on standard output, shard by shard, in the service's bytes; shards on ``workers``
-    processes (the order kept). Over the budget (GSA_ACCESS_BUDGET) it is refused as the service refuses it."""
-    from concurrent.futures import ProcessPoolExecutor
-
+    """A catalogue's windows on standard output, shard by shard, in the service's bytes: the shards on ``workers``
+    processes here, or as Ray tasks on the cluster at GSA_RAY_ADDRESS (the order kept, so the same bytes either
+    way). Over the budget (GSA_ACCESS_BUDGET) it is refused as the service refuses it."""
     from app.core.config import get_settings
     from app.errors import TooLarge
-    from app.services.catalogue import prepare
+    from app.services.catalogue import prepare, shard_jobs, shard_lines
+    from inference.engine import EngineError, engine_for
 
     if workers < 1:
         raise CliError("--workers must be at least 1")
@@ -201,16 +201,13 @@ def _catalogue(req: Any, workers: int) -> int:
         cat = prepare(req, get_settings().access_budget)
     except TooLarge as exc:
         raise CliError(str(exc)) from None
+    try:
+        engine = engine_for(workers=workers)
+    except EngineError as exc:
+        raise CliError(str(exc)) from None
     sys.stdout.write(cat.header() + "".join(cat.errors()))
-    shards = cat.shards()
-    if workers == 1:
-        pieces: Any = map(cat.run_shard, shards)
-        for piece in pieces:
-            sys.stdout.write(piece)
-    else:
-        with ProcessPoolExecutor(workers) as pool:
-            for piece in pool.map(cat.run_shard, shards):
-                sys.stdout.write(piece)
+    for piece in engine.map(shard_lines, shard_jobs(cat)):
+        sys.stdout.write(piece)
     sys.stdout.flush()
     return 0
 

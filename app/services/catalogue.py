@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime
 from typing import Any
 
@@ -239,6 +239,19 @@ def prepare(req: AccessCreate, budget: float) -> Catalogue:
         raise InputError(["targets"], "no element set of the catalogue can be read")
     epoch = as_utc(req.start) if req.start else max(t.epoch for t in good)
     return Catalogue(entries, resolved, names, epoch, req.duration_days * 86400.0, req.format)
+
+
+def shard_lines(job: tuple[Catalogue, list[Entry]]) -> str:
+    """``Catalogue.run_shard`` as a plain function of one argument, for an engine's map (Ray's tasks take
+    functions): the catalogue comes without its entries, only the shard's travel."""
+    cat, shard = job
+    return cat.run_shard(shard)
+
+
+def shard_jobs(cat: Catalogue) -> list[tuple[Catalogue, list[Entry]]]:
+    """Each shard with the catalogue it belongs to (its entries left out: each job carries its own)."""
+    bare = replace(cat, entries=[])
+    return [(bare, shard) for shard in cat.shards()]
 
 
 def stream(cat: Catalogue) -> Iterator[str]:

@@ -90,6 +90,21 @@ def test_gsa_simulate_on_the_cluster_writes_the_bytes_of_a_local_run(cluster, tm
         assert (tmp_path / "ray" / shard["file"]).read_bytes() == (tmp_path / "local" / shard["file"]).read_bytes()
 
 
+def test_gsa_access_of_a_catalogue_on_the_cluster_writes_the_bytes_of_a_local_run(cluster, tmp_path):
+    """A catalogue's shards as Ray tasks (issue 76): the same lines, byte for byte, as on this machine's one process."""
+    from tests.app.api.test_catalogue import SETS, _body
+
+    body = _body(SETS * 30, format="csv")  # 150 objects: 3 shards
+    request = tmp_path / "catalogue.json"
+    request.write_text(__import__("json").dumps(body))
+    cmd = [sys.executable, "-m", "app.cli", "access", str(request)]
+    plain = {k: v for k, v in os.environ.items() if k != "GSA_RAY_ADDRESS"}
+    local = subprocess.run(cmd, env=plain, capture_output=True, text=True, timeout=300)
+    on_ray = subprocess.run(cmd, env={**plain, "GSA_RAY_ADDRESS": cluster}, capture_output=True, text=True, timeout=300)
+    assert local.returncode == 0 and on_ray.returncode == 0, local.stderr[-1000:] + on_ray.stderr[-1000:]
+    assert on_ray.stdout == local.stdout and local.stdout.count("\n") > 150
+
+
 def test_a_data_set_job_runs_on_the_cluster(cluster, settings, tmp_path):
     from app.main import create_app
     from tests.conftest import KEY_A
