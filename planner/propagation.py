@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 from planner.constants import DAY_S, F_EARTH, J2, MU_EARTH_KM3_S2, OMEGA_EARTH_RAD_S, R_EARTH_KM
 from planner.elements import Elements, elements_to_state, secular_state, state_to_elements
 from planner.errors import PlannerError
-from planner.integrator import integrate_j2
+from planner.integrator import hermite_state, integrate_j2
 from planner.radar import Radar
 from planner.tle import TLE
 
@@ -469,29 +469,7 @@ class NumericalJ2Trajectory:
                 f"{self._t[0]:.3f}..{self._t[-1]:.3f} s",
                 field="t_s",
             )
-        k = np.clip(np.searchsorted(self._t, t, side="right") - 1, 0, self._t.size - 2)
-        h = self._t[k + 1] - self._t[k]
-        s = (t - self._t[k]) / h
-        s2, s3, s4, s5 = s * s, s**3, s**4, s**5
-        p0, v0, a0 = self._r[:, k], self._v[:, k] * h, self._a[:, k] * h * h
-        p1, v1, a1 = self._r[:, k + 1], self._v[:, k + 1] * h, self._a[:, k + 1] * h * h
-        r = (
-            (1 - 10 * s3 + 15 * s4 - 6 * s5) * p0
-            + (s - 6 * s3 + 8 * s4 - 3 * s5) * v0
-            + (0.5 * s2 - 1.5 * s3 + 1.5 * s4 - 0.5 * s5) * a0
-            + (0.5 * s3 - s4 + 0.5 * s5) * a1
-            + (-4 * s3 + 7 * s4 - 3 * s5) * v1
-            + (10 * s3 - 15 * s4 + 6 * s5) * p1
-        )
-        v = (
-            (-30 * s2 + 60 * s3 - 30 * s4) * p0
-            + (1 - 18 * s2 + 32 * s3 - 15 * s4) * v0
-            + (s - 4.5 * s2 + 6 * s3 - 2.5 * s4) * a0
-            + (1.5 * s2 - 4 * s3 + 2.5 * s4) * a1
-            + (-12 * s2 + 28 * s3 - 15 * s4) * v1
-            + (30 * s2 - 60 * s3 + 30 * s4) * p1
-        ) / h
-        return r, v
+        return hermite_state(self._t, self._r, self._v, self._a, t)
 
 
 def propagate_j2(

@@ -244,3 +244,13 @@ def test_an_orbit_that_falls_in_fails_by_name():
 
     with pytest.raises(PlannerError, match="decayed or diverged"):
         NumericalJ2Trajectory(np.array([6500.0, 0.0, 0.0]), np.array([0.0, 0.05, 0.0]), 0.0, 86400.0)
+
+
+def test_a_span_shorter_than_a_microsecond_is_integrated():
+    """A trajectory from an element epoch to a moment a hair after it (the scene's spans meet the epoch so): one short
+    step, not a failure."""
+    r0, v0 = elements_to_state(*PAPER_TARGET.radians())
+    for span in (1e-9, 3e-7, 1e-3):
+        traj = NumericalJ2Trajectory(r0, v0, 5000.0, 5000.0 + span)
+        r, v = traj.state(5000.0 + span)
+        assert np.linalg.norm(r[:, 0] - (r0 + v0 * span)) < 1e-6
