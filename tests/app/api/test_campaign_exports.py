@@ -73,7 +73,11 @@ def test_the_opm_holds_every_burn_and_flies_to_each_scene(client, campaign, tmp_
     rt, vt = elements_to_state(*PAPER_TARGET.radians())
     tgt = propagate_tod_j2(epoch, rt, vt, (PAPER_TARGET.epoch - epoch).total_seconds(), t_access)
     separation = np.linalg.norm(obs - tgt, axis=0)
-    np.testing.assert_allclose(separation, [s["check"]["separation_km"] for s in campaign["scenes"]], atol=0.2)
+    # Chained open-loop from the start state, fly-bys amplify every metre (issue 73: 1 mm/s on a first burn moves a
+    # second scene by 12.6 km). Both integrators end 30 days ~21 m from a 1e-13 run at rtol 1e-10
+    # (design/measurements.md, "A compiled J2 integrator"); this campaign's fourth scene turns that into 0.29 km
+    # (measured 2026-12-08). 0.5 km is still a small part of what 1 mm/s on one burn moves a later scene.
+    np.testing.assert_allclose(separation, [s["check"]["separation_km"] for s in campaign["scenes"]], atol=0.5)
 
 
 def test_the_opm_in_xml_holds_the_kvn_burns_and_goes_back_in(client, campaign, tmp_path):
