@@ -268,9 +268,9 @@ def recover(session: Session, resume: bool = True) -> int:
 def sweep_leftovers(session: Session, settings: Settings) -> list[str]:
     """Remove what ended jobs left on disk: each ``jobs/ID/`` folder (a queued pass's frames) whose job is not
     queued or running, and, while no adaptation is queued or running anywhere, half-written versions
-    (``model-sets/*/*.partial``) and this host's adaptation work folders (a tenant's frames). Return what went."""
+    (``model-sets/*/*.partial``) and this service's adaptation work folders (``work/``, a tenant's frames; another
+    service's on the same host, with its own data folder, are its own). Return what went."""
     import shutil
-    import tempfile
 
     data = Path(settings.data_dir)
     active = {j.id: j.kind for j in session.scalars(select(Job).where(Job.state.in_(JOB_ACTIVE)))}
@@ -280,7 +280,7 @@ def sweep_leftovers(session: Session, settings: Settings) -> list[str]:
     stale = [p for p in root.iterdir() if p.is_dir() and p.name not in active] if root.is_dir() else []
     if "adaptation" not in active.values():
         stale += list((data / "model-sets").glob("*/*.partial"))
-        stale += list(Path(tempfile.gettempdir()).glob("gsa-adaptation-*"))
+        stale += list((data / "work").glob("gsa-adaptation-*"))
     for path in stale:
         shutil.rmtree(path, ignore_errors=True)
         gone.append(path.name)

@@ -316,6 +316,17 @@ def start(
     )
 
 
+ADAPTATION_WORK_PREFIX = "gsa-adaptation-"
+
+
+def work_root(data_dir: Path | str) -> Path:
+    """Where this service's adaptations work (a tenant's frames while ``gsa adapt`` runs): inside its own data
+    folder, so a start-up sweep of another service on the same host (another data folder) never touches them."""
+    root = Path(data_dir) / "work"
+    root.mkdir(mode=0o700, parents=True, exist_ok=True)
+    return root
+
+
 def run_adaptation(ctx: Any) -> dict[str, Any]:
     """The job (``app.services.job_worker``): the labelled frames into a folder, ``gsa adapt`` in a child process,
     the version stored. A failure or a cancel leaves the served set as it was."""
@@ -325,7 +336,7 @@ def run_adaptation(ctx: Any) -> dict[str, Any]:
     settings = ctx.settings
     target, operator_id = ctx.params["target"], ctx.operator_id
     opts = dict(ctx.params.get("options") or {})
-    work = Path(tempfile.mkdtemp(prefix="gsa-adaptation-"))
+    work = Path(tempfile.mkdtemp(prefix=ADAPTATION_WORK_PREFIX, dir=work_root(settings.data_dir)))
     partial: Path | None = None
     proc: subprocess.Popen[str] | None = None
     try:

@@ -173,3 +173,20 @@ def test_leftovers_of_ended_jobs_are_swept_at_start(client, settings):
     assert "00000000-dead-job" in gone and "v9.partial" in gone
     assert not stray.exists() and not partial.exists()
     assert os.path.isdir(settings.data_dir / "jobs")
+
+
+def test_a_sweep_leaves_another_services_adaptation_work_alone(client, settings, tmp_path):
+    """Two services on one host, each with its own data folder: one's start-up sweep must not remove the other's
+    running adaptation's frames (it did, when both worked in the system's temporary folder: a CI run failed so)."""
+    from app.services.model_versions import work_root
+
+    other = tmp_path / "other-data"
+    theirs = work_root(other) / "gsa-adaptation-running"
+    theirs.mkdir()
+    (theirs / "frames").mkdir()
+    ours = work_root(settings.data_dir) / "gsa-adaptation-left"
+    ours.mkdir()
+    with client.app.state.session_factory() as s:
+        gone = jobs.sweep_leftovers(s, settings)
+    assert "gsa-adaptation-left" in gone and not ours.exists()
+    assert (theirs / "frames").is_dir()
