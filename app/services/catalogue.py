@@ -45,6 +45,11 @@ COLUMNS = (
 )
 
 
+def _z(moment: datetime) -> str:
+    """A UTC moment as the API writes every time: ISO 8601 with a Z."""
+    return moment.isoformat().replace("+00:00", "Z")
+
+
 def _csv_cell(value: object) -> str:
     """One CSV cell as Python's csv writer writes it (quoted where it holds a comma, quote or line break)."""
     if value is None:
@@ -144,9 +149,9 @@ class Catalogue:
         if w is not None:
             rise, culmination, end = times or utc_many(self.epoch, [w.rise_s[k], w.culmination_s[k], w.set_s[k]])
             row |= {
-                "rise": rise.isoformat(),
-                "culmination": culmination.isoformat(),
-                "set": end.isoformat(),
+                "rise": _z(rise),
+                "culmination": _z(culmination),
+                "set": _z(end),
                 "duration_s": round(float(w.set_s[k] - w.rise_s[k]), 4),
                 "max_elevation_deg": round(float(w.max_elevation_deg[k]), 4),
                 "rise_azimuth_deg": round(float(w.rise_azimuth_deg[k]), 4),

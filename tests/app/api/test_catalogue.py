@@ -80,6 +80,7 @@ def test_a_catalogue_over_a_network_streams_every_pass_that_skyfield_finds(clien
             np.testing.assert_allclose(rises, sec[events == 0], atol=0.5)
             np.testing.assert_allclose(sets, sec[events == 2], atol=0.5)
             assert all(x["target"] == name and x["norad_id"] == str(44000 + k) for x in ours)
+            assert all(x["rise"].endswith("Z") and x["set"].endswith("Z") for x in ours)  # the API's one time style
             checked += len(rises)
     assert checked >= 10
     # Satellite by satellite, then station by station, then in time.
