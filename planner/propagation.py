@@ -520,20 +520,6 @@ class SGP4Catalogue:
         e = as_utc(plan_epoch)
         self._jd_whole, self._jd_frac0 = jday(e.year, e.month, e.day, e.hour, e.minute, e.second + e.microsecond * 1e-6)
 
-    def failures(self, t_s: ArrayLike) -> dict[int, str]:
-        """The satellites SGP4 cannot propagate over the times ``t_s`` (index: SGP4's reason): a decayed orbit, say."""
-        from sgp4.api import SGP4_ERRORS
-
-        t = np.atleast_1d(np.asarray(t_s, float))
-        jd, fr = np.full(t.size, self._jd_whole), self._jd_frac0 + t / DAY_S
-        out = {}
-        for j, sat in enumerate(self.satrecs):
-            err = sat.sgp4_array(jd, fr)[0]
-            if np.any(err):
-                code = int(err[err != 0][0])
-                out[j] = f"SGP4 failed: {SGP4_ERRORS.get(code, code)}"
-        return out
-
     def state(self, t_s: ArrayLike, j: NDArray[np.int64]) -> tuple[Vec, Vec]:
         t = np.atleast_1d(np.asarray(t_s, float))
         r = np.empty((t.size, 3))

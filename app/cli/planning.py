@@ -192,7 +192,7 @@ def _catalogue(req: Any, workers: int) -> int:
     way). Over the budget (GSA_ACCESS_BUDGET) it is refused as the service refuses it."""
     from app.core.config import get_settings
     from app.errors import TooLarge
-    from app.services.catalogue import prepare, shard_jobs, shard_lines
+    from app.services.catalogue import prepare, stream
     from inference.engine import EngineError, engine_for
 
     if workers < 1:
@@ -205,8 +205,7 @@ def _catalogue(req: Any, workers: int) -> int:
         engine = engine_for(workers=workers)
     except EngineError as exc:
         raise CliError(str(exc)) from None
-    sys.stdout.write(cat.header() + "".join(cat.errors()))
-    for piece in engine.map(shard_lines, shard_jobs(cat)):
+    for piece in stream(cat, engine.map):
         sys.stdout.write(piece)
     sys.stdout.flush()
     return 0

@@ -7,7 +7,7 @@ The lines are a pure function of the request: the same bytes whichever way the s
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, replace
 from datetime import datetime
 from typing import Any
@@ -17,6 +17,7 @@ import numpy as np
 from app.core.config import Settings
 from app.errors import InputError, TooLarge
 from app.schemas import AccessCreate, AccessPublic, CatalogueIn
+from app.services.exports import z_time
 from app.services.planning import access_for, stored_station_lookup, to_station, with_stored_station
 from planner.access import AccessWindows, pair_access, validate_station
 from planner.errors import PlannerError
@@ -43,11 +44,6 @@ COLUMNS = (
     "set_clipped",
     "error",
 )
-
-
-def _z(moment: datetime) -> str:
-    """A UTC moment as the API writes every time: ISO 8601 with a Z."""
-    return moment.isoformat().replace("+00:00", "Z")
 
 
 def _csv_cell(value: object) -> str:
@@ -143,15 +139,16 @@ class Catalogue:
         error: str | None = None,
         times: tuple[datetime, datetime, datetime] | None = None,
     ) -> str:
-        """One line of the answer: a window (``k`` of ``w``; ``times``, its rise, culmination and set in UTC, if
-        already converted) or an entry's error."""
+        """One line of the answer: a window (``k`` of ``w``, with ``times``, its rise, culmination and set in UTC) or an
+        entry's error."""
         row: dict[str, object] = {"index": e.index, "target": e.name, "norad_id": e.norad_id, "station": station}
         if w is not None:
-            rise, culmination, end = times or utc_many(self.epoch, [w.rise_s[k], w.culmination_s[k], w.set_s[k]])
+            assert times is not None  # converted a shard at a time (run_shard)
+            rise, culmination, end = times
             row |= {
-                "rise": _z(rise),
-                "culmination": _z(culmination),
-                "set": _z(end),
+                "rise": z_time(rise),
+                "culmination": z_time(culmination),
+                "set": z_time(end),
                 "duration_s": round(float(w.set_s[k] - w.rise_s[k]), 4),
                 "max_elevation_deg": round(float(w.max_elevation_deg[k]), 4),
                 "rise_azimuth_deg": round(float(w.rise_azimuth_deg[k]), 4),
@@ -259,8 +256,8 @@ def shard_jobs(cat: Catalogue) -> list[tuple[Catalogue, list[Entry]]]:
     return [(bare, shard) for shard in cat.shards()]
 
 
-def stream(cat: Catalogue) -> Iterator[str]:
-    """The answer a piece at a time: the header (CSV), the entries that could not be read, then shard by shard."""
+def stream(cat: Catalogue, map_shards: Callable[..., Iterable[str]] = map) -> Iterator[str]:
+    """The answer a piece at a time: the header (CSV), the entries that could not be read, then shard by shard, the
+    shards run by ``map_shards`` (here, in order; an engine's map on processes or Ray, in order too)."""
     yield cat.header() + "".join(cat.errors())
-    for shard in cat.shards():
-        yield cat.run_shard(shard)
+    yield from map_shards(shard_lines, shard_jobs(cat))
