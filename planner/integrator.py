@@ -16,6 +16,7 @@ time and state are returned, for dense output by quintic Hermite interpolation.
 from __future__ import annotations
 
 import math
+import threading
 from typing import Any
 
 import numpy as np
@@ -216,6 +217,7 @@ def _hermite(grid: Vec, r: Vec, v: Vec, a: Vec, t: Vec, r_out: Vec, v_out: Vec) 
 
 _KERNEL: Any = None
 _HERMITE: Any = None
+_COMPILE = threading.Lock()
 
 
 def _compiled() -> Any:
@@ -223,31 +225,39 @@ def _compiled() -> Any:
 
     Importing numba costs about 0.4 s that the service's light entry points (``gsa --help``, ``import app.main``)
     must not pay, so it is imported here; the helpers are compiled as module globals, which is how the
-    integrator's own compiled code finds them.
+    integrator's own compiled code finds them. A lock makes the first use safe from the service's threads: two
+    plans arriving together once both replaced ``_norm``, the second jitting the first's dispatcher (a 500).
     """
     global _KERNEL
-    if _KERNEL is None:
-        import numba
+    with _COMPILE:
+        if _KERNEL is None:
+            import numba
 
-        jit = numba.njit(cache=True, nogil=True)
-        here = globals()
-        here["_rhs"] = jit(_rhs)
-        here["_norm"] = jit(_norm)
-        _KERNEL = jit(_dop853)
-    return _KERNEL
+            jit = numba.njit(cache=True, nogil=True)
+            here = globals()
+            here["_rhs"] = jit(_rhs)
+            here["_norm"] = jit(_norm)
+            _KERNEL = jit(_dop853)
+        return _KERNEL
+
+
+def _hermite_kernel() -> Any:
+    """The quintic Hermite interpolant compiled on first use, under the same lock as the integrator."""
+    global _HERMITE
+    with _COMPILE:
+        if _HERMITE is None:
+            import numba
+
+            _HERMITE = numba.njit(cache=True, nogil=True)(_hermite)
+        return _HERMITE
 
 
 def hermite_state(grid: Vec, r: Vec, v: Vec, a: Vec, t: Vec) -> tuple[Vec, Vec]:
     """Position and velocity (3, N) at ``t`` (N,) between steps ``grid`` of states ``r``, ``v``, ``a`` (3, M): the
     quintic Hermite interpolant through position, velocity and acceleration at the step's two ends, compiled."""
-    global _HERMITE
-    if _HERMITE is None:
-        import numba
-
-        _HERMITE = numba.njit(cache=True, nogil=True)(_hermite)
     r_out = np.empty((3, t.size))
     v_out = np.empty((3, t.size))
-    _HERMITE(grid, r, v, a, np.ascontiguousarray(t, float), r_out, v_out)
+    _hermite_kernel()(grid, r, v, a, np.ascontiguousarray(t, float), r_out, v_out)
     return r_out, v_out
 
 

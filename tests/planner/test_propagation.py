@@ -254,3 +254,38 @@ def test_a_span_shorter_than_a_microsecond_is_integrated():
         traj = NumericalJ2Trajectory(r0, v0, 5000.0, 5000.0 + span)
         r, v = traj.state(5000.0 + span)
         assert np.linalg.norm(r[:, 0] - (r0 + v0 * span)) < 1e-6
+
+
+def test_first_use_from_many_threads_at_once():
+    """The service's first plans arrive together on its thread pool: each thread's first integration must not
+    trip over another's lazy compile (two threads both jitting the helpers once answered a plan with a 500). Run
+    in a fresh interpreter, so the compile really is first, with every thread released at one barrier."""
+    import subprocess
+    import sys
+
+    script = """
+import threading
+import numpy as np
+from planner.integrator import hermite_state, integrate_j2
+
+barrier, errors = threading.Barrier(8), []
+y0 = np.array([7000.0, 0.0, 0.0, 0.0, 7.546, 0.0])
+
+def one():
+    barrier.wait()
+    try:
+        t, y, status = integrate_j2(y0, 0.0, 600.0, 1e-10, 1e-12)
+        assert status == 0
+        g = np.ascontiguousarray(t)
+        r, v = np.ascontiguousarray(y[:, :3].T), np.ascontiguousarray(y[:, 3:].T)
+        hermite_state(g, r, v, np.zeros_like(r), np.array([300.0]))
+    except Exception as exc:
+        errors.append(repr(exc))
+
+threads = [threading.Thread(target=one) for _ in range(8)]
+[t.start() for t in threads]
+[t.join() for t in threads]
+print(len(errors), errors[:1])
+"""
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300, check=True)
+    assert out.stdout.split()[0] == "0", out.stdout + out.stderr
