@@ -42,3 +42,15 @@ class Checked:
     bound_cov_deg2: Vec | None = None  # the 90 % bounds' covariance (``bound_covariance``), where the fit has one
     refined_on: str = SILHOUETTE  # NETWORK, SILHOUETTE or IMAGE
     image_fit: dict[str, float] | None = None  # the answer's likelihood under the map, where IMAGE answered
+
+
+@dataclass(frozen=True)
+class StillRefinement:
+    """A still pass's frames refined together on the image (``inference.reflectivity.serve.ImageRefiner.refine_still``):
+    the body turn common to them (3 x 3: each frame's attitude times it), the mean objective per pixel after and at
+    the start, and how many frames took part."""
+
+    turn: Vec
+    nll_per_pixel: float
+    start_nll_per_pixel: float
+    frames: int

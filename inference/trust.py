@@ -40,7 +40,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from inference.checked import NETWORK, SILHOUETTE, Alternative, Checked, Quality
+from inference.checked import NETWORK, SILHOUETTE, Alternative, Checked, Quality, StillRefinement
 from inference.errors import Cancelled, ModelFileError
 from inference.files import read_json, write_json
 from inference.fit import (
@@ -138,6 +138,8 @@ class ImageRefinement(Protocol):
     """What refines a checked answer on the frame's image (``inference.reflectivity.serve.ImageRefiner``)."""
 
     def refine_checked(self, checked: Checked, frame: Vec, enhanced: Vec, renderer: Renderer) -> Checked: ...
+
+    def refine_still(self, frames: Vec, angles_deg: Vec) -> StillRefinement | None: ...
 
 
 def in_cube(angles_deg: Vec) -> bool:

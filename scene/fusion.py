@@ -21,7 +21,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from inference.fusion import PassFrame, fuse, sweep_rates, sweep_sigmas
+from inference.checked import IMAGE, SILHOUETTE
+from inference.fusion import Fused, PassFrame, fuse, sweep_rates, sweep_sigmas
 from inference.rotations import MIRROR, euler_from_matrix, reversed_reading, rotation_matrix
 from scene.errors import SceneError
 from scene.geometry import Placements, Scene
@@ -31,7 +32,7 @@ if TYPE_CHECKING:  # the fit and the checks load numba's compiled renderer: impo
     from inference.checked import Checked
     from inference.fit import CommonFit, Renderer
     from inference.runtime import Estimator
-    from inference.trust import Checker
+    from inference.trust import Checker, ImageRefinement
 
 Vec = NDArray[np.float64]
 
@@ -92,6 +93,10 @@ class PassAttitude:
     turning_chi2: float | None
     common_fit: CommonFit | None
     stability: str
+    # Which fit gave a still pass's attitude: its frames' silhouettes, or their images refined together under the
+    # set's map (``image_fit``: the frames, the objective per pixel at the start and after, how far it moved).
+    refined_on: str = SILHOUETTE
+    image_fit: dict[str, float] | None = None
 
     def trusted_used(self, checks: Sequence[Checked]) -> int:
         """How many of the frames used are usable by their own checks (``usable``)."""
@@ -311,6 +316,8 @@ def fuse_pass(
             if enhanced is None
             else [e if c is o else None for e, c, o in zip(enhanced, cs, checks, strict=True)],
             renderer=None if enhanced is None else checker.common_renderer,
+            images=frames,
+            image=checker.image,
         )
 
     first = fused(checks)
@@ -351,12 +358,16 @@ def fuse_frames(
     sweep_sigma: Vec | None = None,
     silhouettes: Sequence[Vec | NDArray[np.float32] | None] | None = None,
     renderer: Renderer | None = None,
+    images: Vec | NDArray[np.float32] | None = None,
+    image: ImageRefinement | None = None,
 ) -> PassAttitude:
     """Place each checked frame's answer and alternatives in LVLH (``scene.placements``, unless ``placed`` gives
     them already), fuse them, and describe the pass. ``sweeps``: each frame's measured sweep rate (rad/s)
     and integration time (``sweeps_from``), or None; ``sweep_sigma`` their errors (``sweep_errors``, computed
     here unless given). ``silhouettes`` (each frame's, or None) and ``renderer``: a still answer is then
-    fitted to the used frames' silhouettes all at once (``inference.fit.fit_common``)."""
+    fitted to the used frames' silhouettes all at once (``inference.fit.fit_common``). ``images`` (the frames
+    themselves) and ``image`` (the set's map): a still answer is then refined on the used frames' images together
+    (``still_on_image``)."""
     t0 = min(observed_at)
     placed = placed or scene.placements(observed_at)
     if sweeps is not None and sweep_sigma is None:
@@ -410,6 +421,9 @@ def fuse_frames(
                 euler_zyx_deg=euler_from_matrix(rot),
                 residual_deg={k: angle_deg(rot, fused.placed[k]) for k in range(len(pass_frames))},
             )
+    image_fit = None
+    if images is not None and image is not None and fused.reference_s is None and fused.stable and enough:
+        fused, image_fit = still_on_image(fused, image, images, placed)
     if fused.reference_s is None:  # a still attitude holds all pass: given in J2000 at the frame nearest mid-pass
         span = [(t - t0).total_seconds() for t in observed_at]
         mid = int(np.argmin(np.abs(np.array(span) - 0.5 * (min(span) + max(span)))))
@@ -456,6 +470,8 @@ def fuse_frames(
         rate_sigma_deg_s=np.asarray(fused.rate_sigma_deg_s, float),
         turning_chi2=fused.turning_chi2,
         common_fit=common,
+        refined_on=SILHOUETTE if image_fit is None else IMAGE,
+        image_fit=image_fit,
         stability=(
             f"too few frames to tell: {trusted_used} trusted frames agree, and a pass needs {MIN_TRUSTED_FRAMES} "
             "(frames outside the networks' range, another target, or a target that turns too fast)"
@@ -467,3 +483,34 @@ def fuse_frames(
             f"{'turning model' if fused.reference_s is not None else 'mean'}'s at attitude_at"
         ),
     )
+
+
+def still_on_image(
+    fused: Fused, image: ImageRefinement, images: Vec | NDArray[np.float32], placed: Placements
+) -> tuple[Fused, dict[str, float] | None]:
+    """A still pass's attitude refined on its used frames' images together under the set's map: each frame sees the
+    one LVLH attitude through its own observation frame, and one body turn common to them is searched
+    (``ImageRefiner.refine_still``). Returns the fusion with the turned attitude and the fit's record, or as it was
+    and None where the map does not refine passes or found nothing better."""
+    from inference.rotations import angle_deg
+
+    used = sorted(fused.used)
+    bases = np.array([euler_from_matrix(placed.observation_in_lvlh(k).T @ fused.rotation) for k in used])
+    done = image.refine_still(np.asarray(images)[used].astype(np.float64), bases)
+    if done is None or not done.nll_per_pixel < done.start_nll_per_pixel:
+        return fused, None
+    rot = fused.rotation @ done.turn
+    moved = angle_deg(rot, fused.rotation)
+    fit = {
+        "frames": done.frames,
+        "nll_per_pixel": round(done.nll_per_pixel, 6),
+        "start_nll_per_pixel": round(done.start_nll_per_pixel, 6),
+        "moved_deg": round(moved, 4),
+    }
+    out = replace(
+        fused,
+        rotation=rot,
+        euler_zyx_deg=euler_from_matrix(rot),
+        residual_deg={k: angle_deg(rot, fused.placed[k]) for k in range(len(fused.placed))},
+    )
+    return out, fit

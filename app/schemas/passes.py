@@ -150,6 +150,18 @@ class PassResult(StoredResult):
     )
     stability: str
     """the stability verdict in words: still in LVLH, or turning at a rate"""
+    refined_on: str = Field(
+        default="silhouette",
+        description="what a still pass's attitude_lvlh was last refined on: 'image' (the used frames' images "
+        "together, one attitude in LVLH, under the model set's reflectivity map) or 'silhouette' (no map, a map "
+        "whose build found held-out passes not sharpened, a turning or undecided pass, or nothing better found)",
+    )
+    likelihood: dict[str, float] | None = Field(
+        default=None,
+        description="where refined_on is 'image': the frames refined together, their mean negative log-likelihood "
+        "per pixel under the map at the silhouette fusion's attitude and after (start_nll_per_pixel, "
+        "nll_per_pixel), and how far (deg) the refinement moved the attitude (moved_deg)",
+    )
     frames: list[PassFramePublic]
     """every frame's own answer and its part in the fusion"""
 
@@ -176,6 +188,8 @@ class PassResult(StoredResult):
             turning_chi2=None if p.turning_chi2 is None else round(p.turning_chi2, 2),
             common_fit=None if p.common_fit is None else PassCommonFit.from_common(p.common_fit),
             stability=p.stability,
+            refined_on=p.refined_on,
+            likelihood=p.image_fit,
             frames=[PassFramePublic.from_frame(f) for f in p.frames],
             attitude_at=p.attitude_at,
             timings_s=timings_s,

@@ -35,7 +35,17 @@ from inference.labelled import LabelledFrames, scene_split
 from inference.reflectivity import fitting
 from inference.reflectivity.likelihood import deviance
 from inference.reflectivity.model import Look, ReflectivityMap
-from inference.reflectivity.refine import MAX_RENDERS, FrameCost, Objective, raw_bounds, refine, refine_on, window_about
+from inference.reflectivity.refine import (
+    MAX_RENDERS,
+    FrameCost,
+    Objective,
+    raw_bounds,
+    refine,
+    refine_on,
+    refine_pass,
+    turned_by,
+    window_about,
+)
 from inference.reflectivity.sites import sites_of
 from inference.rotations import euler_difference, euler_from_matrix, geodesic_deg, rotation_matrix, so3_exp
 from inference.simulation.radar import Radar
@@ -56,6 +66,8 @@ SHAPES: tuple[float | None, ...] = (2.0, None)
 INFORMATIVE = 0.75
 DEVIANCE_MARGIN = 1.25  # a frame whose deviance exceeds the held-out frames' largest by this factor is flagged
 MIN_SCENES = 2
+PASS_FRAMES = 20  # a pass's frames refined together, spread over it (the service's pass refinement takes as many)
+PASS_STARTS = 2  # start directions per held-out scene in the pass check
 
 
 @dataclass(frozen=True)
@@ -72,6 +84,13 @@ class MapCalibration:
     # Whether the map brought the held-out frames' answers closer than their starts (median under INFORMATIVE x
     # START_DEG): a map that does not (smooth physical optics: a few flashes a frame) never answers.
     informative: bool = True
+    # The same for whole held-out scenes refined together as still passes (``refine_pass``: one body turn common to
+    # the scene's frames, from their labels all turned by START_DEG): each scene's median error, their median, and
+    # whether that is under INFORMATIVE x START_DEG. A pass's frames add their flashes up, so a map can sharpen
+    # passes where it cannot sharpen single frames; None where no held-out scene had 2 frames.
+    pass_errors_deg: tuple[float, ...] = ()
+    pass_median_deg: float | None = None
+    pass_informative: bool | None = None
 
 
 def check_frames(labelled: LabelledFrames, radar: Radar) -> None:
@@ -122,7 +141,7 @@ def _refined(
     return np.array(out)
 
 
-def _spread(n: int, k: int) -> NDArray[np.intp]:
+def spread(n: int, k: int) -> NDArray[np.intp]:
     return np.unique(np.linspace(0, n - 1, min(n, k)).round().astype(np.intp))
 
 
@@ -142,7 +161,7 @@ def build_map(
     check_frames(labelled, radar)
     train_idx, held_idx = scene_split(labelled.scenes, 0.25, seed)
     train, held = labelled.subset(train_idx), labelled.subset(held_idx)
-    pick = held_idx[_spread(len(held_idx), SELECT_FRAMES)]
+    pick = held_idx[spread(len(held_idx), SELECT_FRAMES)]
     sel_frames, sel_truth = labelled.frames[pick], labelled.angles_deg[pick]
     sel_enh = None if enhanced is None else np.asarray(enhanced)[pick]
     starts = _starts(sel_truth, seed)
@@ -191,7 +210,7 @@ def build_map(
         err = trial(best_map, cand, f"texture shape {shape}")
         if err < best_err:
             objective, best_err = cand, err
-    cal_idx = held_idx[_spread(len(held_idx), CALIBRATION_FRAMES)]
+    cal_idx = held_idx[spread(len(held_idx), CALIBRATION_FRAMES)]
     calibration = _calibrate(
         best_map,
         labelled.frames[cal_idx],
@@ -201,8 +220,10 @@ def build_map(
         None if enhanced is None else np.asarray(enhanced)[cal_idx],
         renderer,
     )
+    calibration = _calibrate_passes(calibration, best_map, labelled, held_idx, objective, seed + 2)
     tell(
-        f"map: chose {best_look}, {objective}; held-out median {calibration.median_deg:.2f} deg; fitting on all "
+        f"map: chose {best_look}, {objective}; held-out median {calibration.median_deg:.2f} deg (frames), "
+        f"{calibration.pass_median_deg} deg (passes); fitting on all "
         f"{len(labelled)} frames"
     )
     final = ReflectivityMap(sites, radar, best_look)
@@ -263,4 +284,44 @@ def _calibrate(
         round(float(np.median(geo)), 3),
         round(float(np.percentile(geo, 90)), 3),
         bool(np.median(geo) < INFORMATIVE * START_DEG),
+    )
+
+
+def pass_rows(scenes: tuple[str, ...] | list[str], rows: NDArray[np.intp]) -> list[NDArray[np.intp]]:
+    """``rows`` grouped by scene (sorted by name), each spread to at most PASS_FRAMES; scenes of one frame left out."""
+    out = []
+    for name in sorted({scenes[i] for i in rows}):
+        mine = np.array([i for i in rows if scenes[i] == name], dtype=np.intp)
+        if len(mine) >= 2:
+            out.append(mine[spread(len(mine), PASS_FRAMES)])
+    return out
+
+
+def _calibrate_passes(
+    calibration: MapCalibration,
+    rmap: ReflectivityMap,
+    labelled: LabelledFrames,
+    held_idx: NDArray[np.intp],
+    objective: Objective,
+    seed: int,
+) -> MapCalibration:
+    """Refine each held-out scene as one still pass from its labels all turned by START_DEG (PASS_STARTS seeded body
+    directions), and record how close the passes end (see ``MapCalibration``)."""
+    rng = np.random.default_rng(seed)
+    errors = []
+    for rows in pass_rows(labelled.scenes, np.asarray(held_idx, np.intp)):
+        truth, frames = labelled.angles_deg[rows], labelled.frames[rows]
+        for _ in range(PASS_STARTS):
+            w = rng.normal(size=3)
+            starts = turned_by(truth, so3_exp(np.radians(START_DEG) * w / np.linalg.norm(w)))
+            turn, _, _ = refine_pass(rmap, frames, starts, objective)
+            errors.append(round(float(np.median(geodesic_deg(turned_by(starts, turn), truth))), 3))
+    if not errors:
+        return calibration
+    med = round(float(np.median(errors)), 3)
+    return replace(
+        calibration,
+        pass_errors_deg=tuple(errors),
+        pass_median_deg=med,
+        pass_informative=bool(med < INFORMATIVE * START_DEG),
     )

@@ -24,13 +24,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from inference.checked import IMAGE, Alternative, Checked, Quality
+from inference.checked import IMAGE, Alternative, Checked, Quality, StillRefinement
 from inference.errors import ModelFileError
 from inference.files import checked_file, sha256_file
 from inference.fit import Renderer, silhouette_iou
+from inference.reflectivity.build import PASS_FRAMES, spread
 from inference.reflectivity.likelihood import deviance
 from inference.reflectivity.model import LAW_BINS, Look, ReflectivityMap
-from inference.reflectivity.refine import FrameCost, Objective, raw_bounds, refine_on, window_about
+from inference.reflectivity.refine import FrameCost, Objective, raw_bounds, refine_on, refine_pass, window_about
 from inference.reflectivity.sites import sites_of
 from inference.rotations import geodesic_deg, rotation_matrix
 from inference.simulation.radar import Radar
@@ -42,6 +43,7 @@ MAP_FILE = "reflectivity.npz"
 MAP_ROLE = "map"
 MAX_ALTERNATIVES = 3  # listed alternatives scored on the image; the best-scoring one is refined beside the answer
 REFINE_RENDERS = 120
+PASS_RENDERS = 160  # a pass's objective evaluations (each renders every frame taking part)
 AMBIGUITY_GAP = 0.002  # objective per pixel within which another attitude is as likely
 MAX_BOUND_DEG = 5.0
 DISTINCT_DEG = 5.0
@@ -117,6 +119,9 @@ class ImageRefiner:
         self.deviance_max = float(cal.get("deviance_max", math.inf))
         self.calibrated = bool(cal)
         self.informative = bool(cal.get("informative", True))
+        # A map built before passes were checked: a map that sharpens single frames stands for one that sharpens passes
+        passes = cal.get("pass_informative")
+        self.pass_informative = self.informative if passes is None else bool(passes)
 
     def refine_checked(self, checked: Checked, frame: Vec, enhanced: Vec, renderer: Renderer) -> Checked:
         if not self.informative:  # the map did not sharpen held-out answers: the silhouette's stands
@@ -168,6 +173,20 @@ class ImageRefiner:
             refined_on=IMAGE,
             image_fit=fit,
         )
+
+    def refine_still(self, frames: Vec, angles_deg: Vec) -> StillRefinement | None:
+        """A still pass's frames refined together: ``frames`` [N, H, W], each with its attitude (Euler z, y, x deg) in its
+        own observation frame, all one attitude in LVLH. One body turn common to them all is found on up to
+        ``PASS_FRAMES`` frames spread over the pass (``refine_pass``); None where the map's build found that held-out
+        passes were not sharpened."""
+        if not self.pass_informative or len(frames) < 2:
+            return None
+        idx = spread(len(frames), PASS_FRAMES)
+        angles = np.asarray(angles_deg, float)
+        turn, best, start = refine_pass(
+            self.map, np.asarray(frames)[idx].astype(np.float64), angles[idx], self.objective, PASS_RENDERS
+        )
+        return StillRefinement(np.asarray(turn, float), float(best), float(start), len(idx))
 
     def views(self, frame: Vec, angles_deg: Vec) -> tuple[Vec, Vec]:
         """What the map predicts of the whole frame at an attitude, normalised as frames are (40 dB below the

@@ -101,20 +101,26 @@ def _frames(model, imager, angles, scattering, seed):
     return np.stack(out)
 
 
-def test_a_map_fitted_on_one_physics_recovers_attitudes_on_another():
-    """Fitted on 24 frames of speckle from dense scatterers, the map refines frames of the lattice of scattering
-    centres (another scattering, another law per kind) from starts 2 deg off to under 1 deg (median)."""
+@pytest.fixture(scope="module")
+def dense_map():
+    """A map fitted on 24 frames of speckle from dense scatterers (12 multiplicative steps), with its history."""
     model = tiangong_like()
     radar = Radar()
-    imager = Imager(radar)
-    rng = np.random.default_rng(4)
-    train = rng.uniform(-35, 35, (24, 3))
+    train = np.random.default_rng(4).uniform(-35, 35, (24, 3))
     rmap = ReflectivityMap(sites_of(model, 0.15), radar, Look())
-    frames = _frames(model, imager, train, Scattering(scatterers="dense"), 100)
+    frames = _frames(model, Imager(radar), train, Scattering(scatterers="dense"), 100)
     history = fitting.fit(rmap, fitting.prepare(rmap, frames, train), 12)
+    return rmap, history
+
+
+def test_a_map_fitted_on_one_physics_recovers_attitudes_on_another(dense_map):
+    """Fitted on 24 frames of speckle from dense scatterers, the map refines frames of the lattice of scattering
+    centres (another scattering, another law per kind) from starts 2 deg off to under 1 deg (median)."""
+    rmap, history = dense_map
     assert history[-1] < history[0]  # the likelihood rises as the multiplicative steps go
+    rng = np.random.default_rng(5)
     test = rng.uniform(-35, 35, (4, 3))
-    shown = _frames(model, imager, test, Scattering(), 500)
+    shown = _frames(tiangong_like(), Imager(rmap.radar), test, Scattering(), 500)
     errors = []
     for truth, frame in zip(test, shown, strict=True):
         w = rng.normal(size=3)
@@ -122,6 +128,30 @@ def test_a_map_fitted_on_one_physics_recovers_attitudes_on_another():
         best = refine(rmap, frame, {"start": np.array(start)}, Objective(), max_renders=100)[0]
         errors.append(float(geodesic_deg(best.angles_deg, truth)[0]))
     assert np.median(errors) < 1.0, errors
+
+
+def test_a_still_pass_is_refined_on_its_frames_together(dense_map):
+    """A still pass seen by another physics (the lattice of scattering centres): 6 frames along a sweep, their
+    attitudes all off by one body rotation of 3 deg, as a pass's silhouette fusion would leave them. The service's
+    pass refinement (``ImageRefiner.refine_still``) finds one turn that brings every frame within 1 deg (median)."""
+    from inference.reflectivity.serve import ImageRefiner
+
+    rmap, _ = dense_map
+    rng = np.random.default_rng(11)
+    centre, way = rng.uniform(-25, 25, 3), rng.normal(size=3)
+    truth = np.array([centre + t * way / np.linalg.norm(way) for t in np.linspace(-8.0, 8.0, 6)])
+    shown = _frames(tiangong_like(), Imager(rmap.radar), truth, Scattering(), 700)
+    w = rng.normal(size=3)
+    error = so3_exp(np.radians(3.0) * w / np.linalg.norm(w))
+    starts = np.array([euler_from_matrix(rotation_matrix(*a) @ error) for a in truth])
+    done = ImageRefiner(rmap).refine_still(shown, starts)
+    assert done is not None and done.frames == 6 and done.nll_per_pixel < done.start_nll_per_pixel
+    after = np.array([euler_from_matrix(rotation_matrix(*a) @ done.turn) for a in starts])
+    errors = geodesic_deg(after, truth)
+    assert np.median(errors) < 1.0, errors
+    # A map whose build found held-out passes not sharpened leaves a pass to its silhouettes.
+    quiet = dataclasses.replace(rmap, record={"calibration": {"informative": True, "pass_informative": False}})
+    assert ImageRefiner(quiet).refine_still(shown, starts) is None
 
 
 def _labelled(n, scenes, size=256):
@@ -269,9 +299,13 @@ def test_map_only_builds_a_new_set_with_its_map_and_record(tmp_path, monkeypatch
         and record["scenes"] == 2
         and set(record["divergence_per_scene"]) == {"scene-0", "scene-1"}
     )
+    cal = record["calibration"]  # the held-out scene was refined as a pass too, from each of PASS_STARTS starts
+    assert len(cal["pass_errors_deg"]) == build.PASS_STARTS and cal["pass_median_deg"] is not None
+    assert cal["pass_informative"] == (cal["pass_median_deg"] < build.INFORMATIVE * build.START_DEG)
     est = Estimator.load(out)
     checker = load_checkers(out, est.img_size).get("tiangong-like")
     assert checker.image is not None and checker.image.calibrated
+    assert checker.image.pass_informative == cal["pass_informative"]
 
 
 def test_a_map_that_did_not_sharpen_held_out_answers_never_answers():

@@ -148,6 +148,50 @@ def test_a_still_pass_is_stable_and_beats_its_frames(paper_windows):
         assert out.turning_chi2 is not None and out.turning_chi2 < 30
 
 
+class _TruthRefiner:
+    """Stands in for the set's map: it checks that every frame's start is the one LVLH attitude seen through that
+    frame's own observation frame (the simulator's, not the scene's), and answers the body turn to the truth."""
+
+    def __init__(self, meta):
+        self.meta, self.seen = meta, []
+
+    def refine_still(self, frames, angles_deg):
+        from inference.checked import StillRefinement
+
+        truth = {k: rotation_matrix(*f.attitude_deg) for k, f in enumerate(self.meta)}
+        used = [int(f[0, 0]) for f in frames]  # each stand-in frame carries its index
+        turns = [rotation_matrix(*a).T @ truth[k] for a, k in zip(angles_deg, used, strict=True)]
+        self.seen = used
+        assert max(angle_deg(t, turns[0]) for t in turns) < 1e-4  # one body turn explains every frame
+        return StillRefinement(turns[0], -2.0, -1.0, len(used))
+
+
+def test_a_still_pass_refined_on_its_images_answers_the_turned_attitude(paper_windows):
+    """A still pass whose frames' images are refined together (a map's ``refine_still``): the fused attitude turned in
+    the body by what the refinement found, every used frame taking part, and the answer says it came from the image."""
+    rng = np.random.default_rng(8)
+    windows = [w for w in paper_windows if w.max_elevation_deg > 10]
+    meta, checks = _noisy_pass(windows, rng, 0.0, noise_deg=1.0)
+    times = [f.observed_at for f in meta]
+    images = np.zeros((len(meta), 4, 4))
+    images[:, 0, 0] = np.arange(len(meta))
+    refiner = _TruthRefiner(meta)
+    out = fuse_frames(
+        scene=scene_for(PAPER_EXAMPLE, *pass_span(times, None)),
+        checks=checks,
+        observed_at=times,
+        names=[str(k) for k in range(len(meta))],
+        images=images,
+        image=refiner,
+    )
+    assert out.stable and out.refined_on == "image" and out.image_fit["frames"] == out.used == len(refiner.seen)
+    assert angle_deg(out.attitude_lvlh, meta[0].body_to_lvlh) < 1e-4
+    assert max(f.residual_deg for f in out.frames if f.used) > 0.1  # the frames' own answers stay as they were
+    plain = _fuse(meta, checks)
+    assert plain.refined_on == "silhouette" and plain.image_fit is None
+    assert math.isclose(out.image_fit["moved_deg"], angle_deg(plain.attitude_lvlh, out.attitude_lvlh), abs_tol=1e-3)
+
+
 @pytest.mark.parametrize("sense", [1.0, -1.0])
 def test_a_spinning_target_is_found_turning_with_its_rate(paper_windows, sense):
     rng = np.random.default_rng(11 if sense > 0 else 12)
