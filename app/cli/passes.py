@@ -528,6 +528,13 @@ def _print_pass(result: PassResult, rec: dict[str, Any]) -> None:
             f"fitted to {common.frames} frames' silhouettes at once (mean soft IoU {common.silhouette_iou:.3f}): "
             f"{common.moved_deg:.3f} deg from their robust mean"
         )
+    fit = result.likelihood
+    if result.refined_on == "image" and fit:
+        print(
+            f"refined on {fit['frames']:.0f} frames' images together under the set's map: {fit['moved_deg']:.3f} deg "
+            f"from the silhouettes' answer (negative log-likelihood per pixel {fit['start_nll_per_pixel']:.4f} -> "
+            f"{fit['nll_per_pixel']:.4f})"
+        )
     alt = result.alternative_lvlh
     if alt:
         az, ay, ax = alt.euler_zyx_deg

@@ -406,7 +406,7 @@ def _export_campaign(req: Any, result: Any, folder: Path) -> None:
     """Write the campaign in every export format into ``folder`` (as GET /v1/campaigns/{id}/export/... serves them)."""
     from types import SimpleNamespace
 
-    from app.services import campaigns
+    from app.services import campaign_exports
 
     folder.mkdir(parents=True, exist_ok=True)
     row = SimpleNamespace(
@@ -417,7 +417,7 @@ def _export_campaign(req: Any, result: Any, folder: Path) -> None:
         observer_name=req.observer.name,
         station_name=req.ground_station.name,
     )
-    files = {name: campaigns.export(kind, row) for kind, name in campaigns.EXPORT_FILES.items()}
+    files = {name: campaign_exports.export(kind, row) for kind, name in campaign_exports.EXPORT_FILES.items()}
     for fname, body in files.items():
         (folder / fname).write_text(body)
     print(f"wrote {', '.join(sorted(files))} to {folder}", file=sys.stderr)

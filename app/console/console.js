@@ -599,7 +599,8 @@ async function passPage(id) {
     ${verdict}
     <div class="card"><b>Fused attitude, body to LVLH</b> (Euler z, y, x with 90 % bounds, deg): ${fused}
     ${p.alternative_lvlh ? `<br><span class="muted">other branch as many frames agree with: ${euler(p.alternative_lvlh)} deg</span>` : ""}
-    ${p.stable === false ? `<br>turning at ${p.rate_deg_s.map((v) => num(v, 3)).join(", ")} deg/s (body axes)` : ""}</div>
+    ${p.stable === false ? `<br>turning at ${p.rate_deg_s.map((v) => num(v, 3)).join(", ")} deg/s (body axes)` : ""}
+    ${p.refined_on === "image" && p.likelihood ? `<br>refined on ${p.likelihood.frames} frames' images together under the model set's map: ${num(p.likelihood.moved_deg, 2)} deg from the silhouettes' answer (negative log-likelihood per pixel ${num(p.likelihood.start_nll_per_pixel, 4)} &rarr; ${num(p.likelihood.nll_per_pixel, 4)})` : ""}</div>
     <h2>Each frame's attitude over the pass</h2>
     <div class="legend"><span><i class="sw-frame"></i>frame, with its 90 % bound</span><span><i class="sw-rejected"></i>rejected (drawn at the edge when off scale)</span>
     <span><i class="sw-fused"></i>fused answer and its bound</span></div>

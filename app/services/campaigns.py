@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from datetime import datetime, timedelta
 from typing import Any
 
@@ -15,9 +15,8 @@ from app.core.config import Settings
 from app.db.models import Campaign as CampaignRow
 from app.errors import InputError
 from app.schemas import CampaignCreate, CampaignReplan, CampaignResult
-from app.schemas.campaigns import CampaignScenePublic, ReplanRecord
+from app.schemas.campaigns import ReplanRecord
 from app.schemas.orbits import OrbitIn
-from app.services import exports
 from app.services.planning import (
     check_epoch_gap,
     observer_optics,
@@ -28,16 +27,11 @@ from app.services.planning import (
     with_radar_of,
     with_stored_station,
 )
-from planner import ccsds
 from planner.alignment import HeightBox
 from planner.campaign import (
-    CAMPAIGN_MARGIN_S,
     Campaign,
     CampaignOptions,
-    FlownTrajectory,
     Progress,
-    campaign_pole,
-    fly,
     plan_campaign,
 )
 from planner.closed_loop import replan
@@ -45,11 +39,9 @@ from planner.dispersion import SceneDispersion, disperse, trim_margin_km_s
 from planner.errors import PlannerError, PlanningStopped
 from planner.orbits import earth_frames, trajectory
 from planner.plan import PlanOptions, StopCheck
-from planner.propagation import Trajectory, as_utc, seconds_between
+from planner.propagation import as_utc, seconds_between
 
 Vec = NDArray[np.float64]
-EXPORT_FILES = {"opm": "opm.txt", "oem": "oem.txt", "czml": "campaign.czml", "access.csv": "access.csv"}
-CAMPAIGN_OEM_STEP_S = 120.0  # a campaign's ephemerides span weeks: 2-min samples (LAGRANGE 7 reads them to metres)
 # Where a planner error's field belongs in the request.
 MARGIN_ROUNDS = 2  # re-plans that shrink a campaign's budget by its trims' margin (the margin moves with the scenes)
 _TOP = ("duration_days", "dv_budget_m_s", "scene_span_days", "max_scenes", "return_to_orbit", "start")
@@ -296,142 +288,3 @@ def run_campaign_job(ctx: Any) -> dict[str, Any]:
             progress=progress,
         )
         return {"campaign_id": row.id, "scenes": row.scenes, "dv_total_m_s": row.dv_total_m_s}
-
-
-@dataclass(frozen=True)
-class Flight:
-    """A stored campaign flown again: the observer from its stored start through its stored burns, the target
-    from the stored request (both deterministic: no planning is repeated). Times are s after ``epoch``."""
-
-    epoch: datetime
-    t1_s: float
-    observer_flight: FlownTrajectory
-    target_trajectory: Trajectory
-    burns: list[dict[str, Any]]
-    accesses_s: tuple[float, ...]
-
-    def target(self, t_s: Vec) -> tuple[Vec, Vec]:
-        return self.target_trajectory.state(t_s)
-
-    def observer(self, t_s: Vec) -> tuple[Vec, Vec]:
-        return self.observer_flight.state(t_s)
-
-
-def flight(request: dict[str, Any], result: dict[str, Any]) -> Flight:
-    """Fly a stored campaign again from its stored start state and burns."""
-    req = CampaignCreate.model_validate(request)
-    stored = CampaignResult.model_validate(CampaignResult.upgraded(result))
-    epoch = stored.epoch
-    observer = to_orbit(req.observer, "observer")
-    target = to_orbit(req.target, "target")
-    end = stored.duration_days * 86400.0
-    pole = campaign_pole(epoch, observer, end)
-    burns = [b for s in stored.scenes for b in s.burns]
-    aims = [_aim_words(s) if b.kind == "phasing" else "" for s in stored.scenes for b in s.burns]
-    times = [(b.time - epoch).total_seconds() for b in burns]
-    r0, v0 = np.asarray(stored.observer_state.r_km), np.asarray(stored.observer_state.v_km_s)
-    flown = fly(
-        r0,
-        v0,
-        0.0,
-        end + CAMPAIGN_MARGIN_S,
-        [(t, np.asarray(b.dv_m_s) / 1000.0) for t, b in zip(times, burns, strict=True)],
-        pole,
-    )
-    frames = earth_frames(epoch, 0.0, end + CAMPAIGN_MARGIN_S)
-    tgt = trajectory(target, epoch, frames, 0.0, end + CAMPAIGN_MARGIN_S, "osculating", pole)
-    return Flight(
-        epoch,
-        end,
-        flown,
-        tgt,
-        [
-            {
-                "t_s": t,
-                "kind": b.kind,
-                "dv_km_s": tuple(x / 1000.0 for x in b.dv_m_s),
-                "dv_rtn_m_s": tuple(b.dv_rtn_m_s),
-                "aim": aim,
-            }
-            for t, b, aim in zip(times, burns, aims, strict=True)
-        ],
-        tuple((s.t_access - epoch).total_seconds() for s in stored.scenes),
-    )
-
-
-def _aim_words(scene: CampaignScenePublic) -> str:
-    """A scene's aim for its phasing burn's comment: what an operator re-aims to after orbit determination."""
-    aim = scene.aim
-    if aim is None:
-        return ""
-    rel = ", ".join(f"{x:.3f}" for x in aim.relative_rtn_km)
-    return (
-        f". Aim: at {aim.t_access:%Y-%m-%dT%H:%M:%S.%fZ} the observer {sum(x * x for x in aim.relative_km) ** 0.5:.3f} km "
-        f"from the target, RTN of the target [{rel}] km, within {aim.tolerance_km:.2f} km; Lambert arc of "
-        f"{aim.lambert_revolutions} revolution(s), {'low' if aim.low_path else 'high'} branch"
-        + (f"; imaged by radar {scene.candidate.station}" if scene.candidate.station else "")
-    )
-
-
-def export(kind: str, row: Any, fmt: ccsds.Format = "kvn") -> str:
-    """One export of a stored campaign (a row, or anything with its fields): ``opm``, ``oem`` (KVN, or XML with
-    ``fmt``), ``czml``, ``access.csv``."""
-    from app.services.planning import access_csv, scenes_by_pass
-
-    if kind == "access.csv":
-        return access_csv(row.result.get("access_windows", []), scenes_by_pass(row.result))
-    fl = flight(row.request, row.result)
-    names = {"target": row.target_name, "observer": row.observer_name, "station": row.station_name}
-    if kind == "opm":
-        r, v = fl.observer(np.array([0.0]))
-        burns = [
-            exports.Manoeuvre(b["t_s"], b["dv_km_s"], b["dv_rtn_m_s"], f"Impulsive {b['kind']} burn{b['aim']}")
-            for b in fl.burns
-        ]
-        comment = (
-            f"The observer at the start of campaign {row.id}, before any burn; {len(fl.accesses_s)} scene(s), "
-            f"{len(burns)} burn(s)"
-        )
-        return exports.opm_text(
-            fl.epoch, 0.0, r[:, 0], v[:, 0], burns, f"GSA-{row.id}", row.observer_name, comment, fmt=fmt
-        )
-    if kind == "oem":
-        # One observer segment between burns: each burn's instant ends one (before it) and starts the next.
-        edges = [0.0, *(b["t_s"] for b in fl.burns), fl.t1_s]
-        segments = [exports.OemSegment(row.target_name, f"GSA-{row.id}-TARGET", 0.0, fl.t1_s, fl.target, "the target")]
-        for k, piece in enumerate(fl.observer_flight.pieces):
-            what = (
-                "the observer before any burn" if k == 0 else f"the observer after its {fl.burns[k - 1]['kind']} burn"
-            )
-            segments.append(
-                exports.OemSegment(
-                    row.observer_name, f"GSA-{row.id}-OBSERVER", edges[k], edges[k + 1], piece.state, what
-                )
-            )
-        return exports.oem_text(fl.epoch, segments, fl.accesses_s, f"campaign {row.id}", CAMPAIGN_OEM_STEP_S, fmt=fmt)
-    if kind == "czml":
-        must = (*fl.accesses_s, *(b["t_s"] for b in fl.burns))
-        return exports.czml_text(
-            fl.epoch,
-            0.0,
-            fl.t1_s,
-            must,
-            fl.target,
-            [
-                (lo, hi, piece.state)
-                for lo, hi, piece in zip(
-                    [0.0, *(b["t_s"] for b in fl.burns)],
-                    [*(b["t_s"] for b in fl.burns), fl.t1_s],
-                    fl.observer_flight.pieces,
-                    strict=True,
-                )
-            ],
-            fl.accesses_s,
-            f"GSA-ISAR campaign {row.id}",
-            names,
-            row.request["ground_station"],
-            row.result.get("access_windows", []),
-            step_s=CAMPAIGN_OEM_STEP_S,
-            network=row.request.get("ground_stations"),
-        )
-    raise InputError(["kind"], f"unknown export {kind!r}: opm, oem, czml or access.csv", where="path")

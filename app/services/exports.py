@@ -448,21 +448,33 @@ POINTING_CHUNK = 12  # passes computed together: one vectorised call each, and t
 
 
 def pointing_csv(plan: Plan, windows: list[dict[str, Any]], stop: StopCheck | None = None) -> str:
-    """The radar's pointing over each pass, 1-s steps: azimuth (from north, through east), elevation, range and its
-    rate, and the azimuth's and elevation's rates the antenna turns at. ``stop()`` is asked before each chunk of
-    ``POINTING_CHUNK`` passes (a reason stops the work: ``PlanningStopped``)."""
+    """The radar's pointing over each pass of a plan (``pointing_lines``)."""
+    assert plan.target_trajectory is not None and plan.frames is not None and plan.station is not None
+    return pointing_lines(plan.target_trajectory, plan.station, plan.frames, plan.epoch, list(enumerate(windows)), stop)
+
+
+def pointing_lines(
+    traj: Any,
+    station: Any,
+    frames: Any,
+    epoch: datetime,
+    windows: list[tuple[int, dict[str, Any]]],
+    stop: StopCheck | None = None,
+) -> str:
+    """The radar's pointing over each pass (its access.csv row number, its window), 1-s steps: azimuth (from north,
+    through east), elevation, range and its rate, and the azimuth's and elevation's rates the antenna turns at.
+    ``stop()`` is asked before each chunk of ``POINTING_CHUNK`` passes (a reason stops the work:
+    ``PlanningStopped``)."""
     from planner.access import look_angles, pointing_rates
 
-    assert plan.target_trajectory is not None and plan.frames is not None and plan.station is not None
-    traj, station, frames, epoch = plan.target_trajectory, plan.station, plan.frames, plan.epoch
     lines = [",".join(POINTING_COLUMNS)]
     for first in range(0, len(windows), POINTING_CHUNK):
         if stop is not None and (why := stop()) is not None:
             raise PlanningStopped(f"writing pass {first} of {len(windows)} of pointing.csv: {why}")
         passes, times = [], []
-        for k in range(first, min(first + POINTING_CHUNK, len(windows))):
-            rise = (datetime.fromisoformat(windows[k]["rise"]) - epoch).total_seconds()
-            end = (datetime.fromisoformat(windows[k]["set"]) - epoch).total_seconds()
+        for k, window in windows[first : first + POINTING_CHUNK]:
+            rise = (datetime.fromisoformat(window["rise"]) - epoch).total_seconds()
+            end = (datetime.fromisoformat(window["set"]) - epoch).total_seconds()
             t_k = np.arange(math.ceil(rise), math.floor(end) + 1e-9, POINTING_STEP_S)
             if t_k.size:
                 passes.append((k, t_k))
@@ -495,7 +507,7 @@ TRACK_STEP_S = 20.0
 TRACK_HALF_SPAN_S = 3000.0  # about half a low orbit either side of the chosen moment
 
 
-def _lines(lat: Vec, lon: Vec, keep: NDArray[np.bool_] | None = None) -> list[list[list[float]]]:
+def line_parts(lat: Vec, lon: Vec, keep: NDArray[np.bool_] | None = None) -> list[list[list[float]]]:
     """A track as GeoJSON line parts, cut where it crosses the antimeridian (RFC 7946 section 3.1.9) and,
     with ``keep``, where it leaves the kept points. A part that meets the antimeridian runs on to it: it ends at
     +-180 deg, and the next starts at -+180, at the latitude where the track crosses (linear between the samples),
@@ -516,7 +528,7 @@ def _lines(lat: Vec, lon: Vec, keep: NDArray[np.bool_] | None = None) -> list[li
     return [p for p in parts if len(p) > 1]
 
 
-def _feature(kind: str, geometry: dict[str, Any], **properties: Any) -> dict[str, Any]:
+def feature(kind: str, geometry: dict[str, Any], **properties: Any) -> dict[str, Any]:
     return {"type": "Feature", "geometry": geometry, "properties": {"kind": kind, **properties}}
 
 
@@ -572,7 +584,7 @@ def geojson(plan: Plan, names: dict[str, str], windows: list[dict[str, Any]]) ->
             for k in run
         ]
     features = [
-        _feature(
+        feature(
             "station",
             {"type": "Point", "coordinates": [st.longitude_deg, st.latitude_deg]},
             name=names["station"],
@@ -580,12 +592,15 @@ def geojson(plan: Plan, names: dict[str, str], windows: list[dict[str, Any]]) ->
             min_elevation_deg=st.min_elevation_deg,
             mask=[list(p) for p in st.mask],
         ),
-        _feature(
-            "target_track", {"type": "MultiLineString", "coordinates": _lines(lat, lon)}, name=names["target"], **span
+        feature(
+            "target_track",
+            {"type": "MultiLineString", "coordinates": line_parts(lat, lon)},
+            name=names["target"],
+            **span,
         ),
-        _feature(
+        feature(
             "target_in_view",
-            {"type": "MultiLineString", "coordinates": _lines(lat, lon, keep=seen)},
+            {"type": "MultiLineString", "coordinates": line_parts(lat, lon, keep=seen)},
             name=names["target"],
             sky_time_az_el_deg=sky,
             sky_note="the pass nearest the chosen moment as the radar sees it: azimuth from north through east, "
@@ -595,15 +610,15 @@ def geojson(plan: Plan, names: dict[str, str], windows: list[dict[str, Any]]) ->
     height = float(np.interp(t_c, t, h))
     c_lat, c_lon = visibility_circle(st, height)
     features.append(
-        _feature(
+        feature(
             "visibility_circle",
-            {"type": "MultiLineString", "coordinates": _lines(c_lat, c_lon)},
+            {"type": "MultiLineString", "coordinates": line_parts(c_lat, c_lon)},
             height_km=round(height, 3),
             elevation_limit="the station's mask by azimuth, never below min_elevation_deg (geometric)",
         )
     )
     features.append(
-        _feature(
+        feature(
             "visibility_footprint",
             footprint_polygon(c_lat, c_lon),
             height_km=round(height, 3),
@@ -613,9 +628,9 @@ def geojson(plan: Plan, names: dict[str, str], windows: list[dict[str, Any]]) ->
     if plan.observer_trajectory is not None:  # where the plan flies it: across its phasing burn
         o_lat, o_lon, _ = ground_track(PlannedObserver(plan), plan.frames, t)
         features.append(
-            _feature(
+            feature(
                 "observer_track",
-                {"type": "MultiLineString", "coordinates": _lines(o_lat, o_lon)},
+                {"type": "MultiLineString", "coordinates": line_parts(o_lat, o_lon)},
                 name=names["observer"],
                 **span,
             )
@@ -624,7 +639,7 @@ def geojson(plan: Plan, names: dict[str, str], windows: list[dict[str, Any]]) ->
     sun = plan.frames.to_itrs(np.array([t_c]), sun_position_km(epoch, [t_c]))
     n_lat, n_lon, anti_lat, anti_lon = terminator(sun[:, 0])
     features.append(
-        _feature(
+        feature(
             "night",
             footprint_polygon(n_lat, n_lon),
             time=z_time(utc(epoch, t_c)),
@@ -635,7 +650,7 @@ def geojson(plan: Plan, names: dict[str, str], windows: list[dict[str, Any]]) ->
     if chosen is not None:
         a_lat, a_lon, _ = ground_track(plan.target_trajectory, plan.frames, np.array([t_c]))
         features.append(
-            _feature(
+            feature(
                 "t_access",
                 {"type": "Point", "coordinates": [round(float(a_lon[0]), 5), round(float(a_lat[0]), 5)]},
                 time=z_time(utc(epoch, t_c)),
@@ -644,7 +659,7 @@ def geojson(plan: Plan, names: dict[str, str], windows: list[dict[str, Any]]) ->
         if plan.observer_trajectory is not None:
             b_lat, b_lon, _ = ground_track(PlannedObserver(plan), plan.frames, np.array([t_c]))
             features.append(
-                _feature(
+                feature(
                     "observer_at_t_access",
                     {"type": "Point", "coordinates": [round(float(b_lon[0]), 5), round(float(b_lat[0]), 5)]},
                     time=z_time(utc(epoch, t_c)),

@@ -234,7 +234,7 @@ def test_campaign_prints_its_scenes_plots_and_exports(tmp_path):
     assert "1 scene(s)" in out.stdout and "phasing" in out.stdout and "stretches searched" in out.stdout
     assert (tmp_path / "c.png").stat().st_size > 10_000
     names = sorted(p.name for p in (tmp_path / "x").iterdir())
-    assert names == ["access.csv", "campaign.czml", "oem.txt", "opm.txt"]
+    assert names == ["access.csv", "campaign.czml", "campaign.geojson", "oem.txt", "opm.txt", "pointing.csv"]
     assert (tmp_path / "x" / "opm.txt").read_text().count("MAN_EPOCH_IGNITION") == 1
 
 

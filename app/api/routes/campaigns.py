@@ -178,21 +178,42 @@ EXPORT_TYPES = {
         "CZML for Cesium: both satellites, the station, access intervals, each T_access",
         "czml",
     ),
-    "access.csv": ("text/csv", "every pass of the target over the station in the span searched, one row a pass", "csv"),
+    "access.csv": (
+        "text/csv",
+        "every pass of the target over the station in the span searched, one row a pass; scene marks the pass each "
+        "scene images in",
+        "csv",
+    ),
+    "geojson": (
+        "application/geo+json",
+        "GeoJSON of the whole campaign: each station, the target's track over each scene's pass, the target and the "
+        "observer under each T_access, and each burn where the observer makes it",
+        "geojson",
+    ),
+    "pointing.csv": (
+        "text/csv",
+        "the radar's tasking file: its pointing over the pass each scene images in (or scene K's, with scene=K), "
+        "1-s steps, from the station that images it; access is the pass's row in access.csv",
+        "pointing.csv",
+    ),
 }
 
 
 def _export_route(kind: str) -> None:
-    from app.services import campaigns
+    from app.services import campaign_exports
 
     media, what, suffix = EXPORT_TYPES[kind]
 
-    def answer(session: Any, operator: Any, campaign_id: str, fmt: Literal["kvn", "xml"]) -> Response:
+    def answer(
+        session: Any, operator: Any, campaign_id: str, fmt: Literal["kvn", "xml"], scene: int | None = None
+    ) -> Response:
         row = crud.get_campaign(session=session, operator_id=operator.id, campaign_id=campaign_id)
         if row is None:
             raise HTTPException(status_code=404, detail="Campaign not found")
-        body = campaigns.export(kind, row, fmt)
+        body = campaign_exports.export(kind, row, fmt, scene)
         media_type, name = media, f"campaign-{row.id}.{suffix}"
+        if scene is not None:
+            name = f"campaign-{row.id}-scene-{scene}.{suffix}"
         if fmt == "xml":
             media_type, name = "application/xml", name.replace(".txt", ".xml")
         return Response(body, media_type=media_type, headers={"Content-Disposition": f'attachment; filename="{name}"'})
@@ -208,6 +229,19 @@ def _export_route(kind: str) -> None:
             format: CcsdsFormat = "kvn",  # noqa: A002 (the query parameter's name)
         ) -> Response:
             return answer(session, operator, campaign_id, format)
+
+    elif kind == "pointing.csv":
+
+        def export(  # type: ignore[misc]
+            session: SessionDep,
+            operator: CurrentOperator,
+            campaign_id: Annotated[Text, Path()],
+            scene: Annotated[
+                int | None,
+                Query(ge=0, description="one scene's pass (its index, as the campaign lists its scenes); all without"),
+            ] = None,
+        ) -> Response:
+            return answer(session, operator, campaign_id, "kvn", scene)
 
     else:
 

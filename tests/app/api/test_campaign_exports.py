@@ -125,3 +125,105 @@ def test_the_oem_has_one_observer_segment_between_burns(client, campaign, tmp_pa
         ]
         assert np.linalg.norm(dr) < 1e-5
         np.testing.assert_allclose(np.array(dv) * 1000.0, b["dv_m_s"], atol=1e-4)
+
+
+def _target_gcrs(epoch, t_s):
+    """The target by the independent J2 integrator from its elements (GCRS, km, (3, N))."""
+    rt, vt = elements_to_state(*PAPER_TARGET.radians())
+    return propagate_tod_j2(epoch, rt, vt, (PAPER_TARGET.epoch - epoch).total_seconds(), np.asarray(t_s, float))
+
+
+def test_each_scenes_pointing_file_against_skyfield(client, campaign):
+    """pointing.csv?scene=K: one row a second over the pass scene K images in (its access.csv row), the look angles
+    of the target flown by the independent integrator as skyfield's station sees it (skyfield's altaz)."""
+    import csv
+    import io
+
+    from skyfield.api import wgs84
+    from skyfield.constants import AU_KM
+    from skyfield.positionlib import ICRF
+
+    from planner.propagation import skyfield_times
+
+    epoch = datetime.fromisoformat(campaign["epoch"])
+    gs = CAMPAIGN_EXAMPLE["ground_station"]
+    site = wgs84.latlon(gs["latitude_deg"], gs["longitude_deg"], gs["altitude_m"])
+    access = list(
+        csv.DictReader(io.StringIO(client.get(f"/v1/campaigns/{campaign['id']}/export/access.csv", headers=A).text))
+    )
+    everything = client.get(f"/v1/campaigns/{campaign['id']}/export/pointing.csv", headers=A)
+    assert everything.status_code == 200 and everything.headers["content-type"].startswith("text/csv")
+    all_rows = list(csv.DictReader(io.StringIO(everything.text)))
+    for sc in campaign["scenes"][:2]:
+        r = client.get(f"/v1/campaigns/{campaign['id']}/export/pointing.csv?scene={sc['index']}", headers=A)
+        assert r.status_code == 200, r.text
+        assert f"scene-{sc['index']}" in r.headers["content-disposition"]
+        rows = list(csv.DictReader(io.StringIO(r.text)))
+        k = {int(x["access"]) for x in rows}
+        assert len(k) == 1
+        (k,) = k
+        assert str(sc["index"]) in access[k]["scene"].split(";")  # the pass access.csv marks for this scene
+        w = sc["access_window"]
+        span = (datetime.fromisoformat(w["set"]) - datetime.fromisoformat(w["rise"])).total_seconds()
+        assert abs(len(rows) - span) <= 2
+        assert abs(max(float(x["elevation_deg"]) for x in rows) - w["max_elevation_deg"]) < 0.01
+        assert all(x in all_rows for x in rows[:: max(1, len(rows) // 10)])  # every scene's file is part of the whole
+        sample = rows[:: max(1, len(rows) // 12)]
+        t_s = np.array(
+            [(datetime.fromisoformat(x["time_utc"].replace("Z", "+00:00")) - epoch).total_seconds() for x in sample]
+        )
+        t = skyfield_times(epoch, t_s)
+        d = _target_gcrs(epoch, t_s) - site.at(t).position.km
+        alt, az, dist = ICRF(d / AU_KM, t=t, center=site).altaz()
+        np.testing.assert_allclose([float(x["elevation_deg"]) for x in sample], alt.degrees, atol=0.01)
+        d_az = (np.array([float(x["azimuth_deg"]) for x in sample]) - az.degrees + 180) % 360 - 180
+        assert np.max(np.abs(d_az * np.cos(alt.radians))) < 0.01
+        np.testing.assert_allclose([float(x["range_km"]) for x in sample], dist.km, atol=0.1)
+    bad = client.get(f"/v1/campaigns/{campaign['id']}/export/pointing.csv?scene=99", headers=A)
+    assert bad.status_code == 422 and bad.json()["detail"][0]["loc"] == ["query", "scene"], bad.text
+    assert "its scenes are" in bad.json()["detail"][0]["msg"]
+    assert client.get(f"/v1/campaigns/{campaign['id']}/export/pointing.csv", headers=B).status_code == 404
+
+
+def test_the_campaign_geojson_puts_each_scene_and_burn_where_the_independent_flight_does(client, campaign):
+    """GeoJSON of the whole campaign: the station, each scene's pass track, the target under each T_access (within
+    0.01 deg of the independent integrator's target, skyfield's WGS-84 sub-point) and each burn with its size."""
+    from skyfield.api import wgs84
+    from skyfield.constants import AU_KM
+    from skyfield.positionlib import Geocentric
+
+    from planner.propagation import skyfield_times
+
+    r = client.get(f"/v1/campaigns/{campaign['id']}/export/geojson", headers=A)
+    assert r.status_code == 200 and r.headers["content-type"].startswith("application/geo+json")
+    geo = r.json()
+    assert geo["type"] == "FeatureCollection"
+    kinds = [f["properties"]["kind"] for f in geo["features"]]
+    scenes = campaign["scenes"]
+    burns = [b for s in scenes for b in s["burns"]]
+    assert kinds.count("station") == 1 and kinds.count("t_access") == len(scenes) == kinds.count("scene_pass")
+    assert kinds.count("burn") == len(burns) == kinds.count("burn")
+    epoch = datetime.fromisoformat(campaign["epoch"])
+    points = [f for f in geo["features"] if f["properties"]["kind"] == "t_access"]
+    t_s = np.array([(datetime.fromisoformat(s["t_access"]) - epoch).total_seconds() for s in scenes])
+    t = skyfield_times(epoch, t_s)
+    sub = wgs84.subpoint_of(Geocentric(_target_gcrs(epoch, t_s) / AU_KM, t=t, center=399))
+    for k, f in enumerate(points):
+        lon, lat = f["geometry"]["coordinates"]
+        assert f["properties"]["scene"] == scenes[k]["index"]
+        assert abs(lat - sub.latitude.degrees[k]) < 0.01
+        assert abs((lon - sub.longitude.degrees[k] + 180) % 360 - 180) < 0.01
+    got = [f["properties"] for f in geo["features"] if f["properties"]["kind"] == "burn"]
+    for p, b in zip(got, burns, strict=True):
+        assert abs(p["dv_m_s"] - float(np.linalg.norm(b["dv_m_s"]))) < 1e-3
+        assert (
+            abs(
+                (
+                    datetime.fromisoformat(p["time"].replace("Z", "+00:00")) - datetime.fromisoformat(b["time"])
+                ).total_seconds()
+            )
+            < 1e-3
+        )
+    for f in geo["features"]:
+        if f["geometry"]["type"] == "MultiLineString":
+            assert all(-180 <= x <= 180 and -90 <= y <= 90 for part in f["geometry"]["coordinates"] for x, y in part)
