@@ -24,6 +24,9 @@ from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from typing import Any, Literal
 
+import numpy as np
+from numpy.typing import NDArray
+
 from planner.constants import MU_EARTH_KM3_S2
 from planner.elements import Elements, elements_of_state
 from planner.errors import ElementsError, TLEError
@@ -34,6 +37,8 @@ VERSIONS = ("2.0", "3.0")
 # Inertial frames whose axes are the planner's GCRS ones to within EME2000's 23-mas frame bias.
 INERTIAL_FRAMES = ("EME2000", "GCRF", "ICRF")
 _KVN_LINE = re.compile(r"^[A-Z][A-Z0-9_]*\s*=")
+# An OEM's KVN also holds block markers and data lines (an epoch, then numbers), which are not KEYWORD = value.
+_OEM_FREE_LINE = re.compile(r"^((META|COVARIANCE)_(START|STOP)|\d{4}-\d{2,3}[\dT:.\-]*Z?(\s+\S+)+)$")
 _XML_VERSION = re.compile(r"<(opm|omm|oem)\b[^>]*\bversion\s*=\s*[\"']([^\"']*)[\"']", re.I)
 
 
@@ -75,6 +80,8 @@ def _check_kvn(text: str, kind: str, error: type[ElementsError] | type[TLEError]
         line = raw.strip()
         if not line or line.startswith("COMMENT"):
             continue
+        if kind == "OEM" and _OEM_FREE_LINE.match(line):
+            continue
         if not _KVN_LINE.match(line):
             raise error(f"line {n} is not KEYWORD = value: {line[:60]!r}", field=field)
         key, value = (part.strip() for part in line.split("=", 1))
@@ -104,12 +111,12 @@ def _check_xml(text: str, kind: str, error: type[ElementsError] | type[TLEError]
         raise error(f"CCSDS_{kind}_VERS {found[0][1]!r}: this reads versions 2.0 and 3.0", field=f"CCSDS_{kind}_VERS")
 
 
-def read_message(text: str, kind: Literal["OPM", "OMM"], field: str) -> Any:
+def read_message(text: str, kind: Literal["OPM", "OMM", "OEM"], field: str) -> Any:
     """The one ``kind`` message of a KVN or XML text as ccsds-ndm's data classes (its ``header``, ``body.segment``).
-    Raises ElementsError (OPM) or TLEError (OMM) naming ``field`` or the keyword at fault."""
+    Raises ElementsError (OPM, OEM) or TLEError (OMM) naming ``field`` or the keyword at fault."""
     from ccsds_ndm.ndm_io import NdmIo
 
-    error = ElementsError if kind == "OPM" else TLEError
+    error = TLEError if kind == "OMM" else ElementsError
     xml = text.lstrip().startswith("<")
     (_check_xml if xml else _check_kvn)(text, kind, error, field)
     try:
@@ -162,15 +169,24 @@ def _number(fields: dict[str, object], key: str) -> float:
     return value
 
 
-def elements_from_opm(text: str, field: str = "opm") -> Elements:
-    """The osculating elements of an OPM's state vector (KVN or XML; km, km/s; Earth-centred, inertial, UTC)."""
-    segment = read_message(text, "OPM", field).body.segment
-    meta = fields_of(segment.metadata)
+def _check_metadata(metadata: Any) -> None:
+    """An Earth-centred inertial frame in UTC, or ElementsError naming the keyword."""
+    meta = fields_of(metadata)
     for key, allowed in (("CENTER_NAME", ("EARTH",)), ("REF_FRAME", INERTIAL_FRAMES), ("TIME_SYSTEM", ("UTC",))):
         got = str(meta.get(key) or "").upper()
         if got not in allowed:
             raise ElementsError(f"{key} {got or 'missing'}: give {' or '.join(allowed)}", field=key)
-    state = segment.data.state_vector
+
+
+def elements_from_opm(text: str, field: str = "opm") -> Elements:
+    """The osculating elements of an OPM's state vector (KVN or XML; km, km/s; Earth-centred, inertial, UTC)."""
+    segment = read_message(text, "OPM", field).body.segment
+    _check_metadata(segment.metadata)
+    return _state_elements(segment.data.state_vector)
+
+
+def _state_elements(state: Any) -> Elements:
+    """The osculating elements of one state vector of an OPM or OEM (EPOCH, X..Z_DOT)."""
     values = fields_of(state) if state is not None else {}
     try:
         epoch = ccsds_time(str(values.get("EPOCH", "")))
@@ -185,6 +201,42 @@ def elements_from_opm(text: str, field: str = "opm") -> Elements:
     if not energy < 0.0:
         raise ElementsError("the state vector is not a bound (elliptic) Earth orbit: check X_DOT..Z_DOT", field="X_DOT")
     return elements_of_state(r, v, epoch)  # Elements validate themselves
+
+
+@dataclass(frozen=True)
+class Ephemeris:
+    """An OEM read as an orbit input: the osculating elements of its first state, every state of its segments
+    (epochs, and positions (3, N) in km) to compare a flight with, and how many segments it holds."""
+
+    elements: Elements
+    epochs: tuple[datetime, ...]
+    r_km: NDArray[np.float64]
+    segments: int
+
+
+def ephemeris_from_oem(text: str, field: str = "oem") -> Ephemeris:
+    """An OEM (KVN or XML; Earth-centred, inertial, UTC): its first segment's first state as osculating elements, and
+    that segment's states. Later segments (what follows a manoeuvre, or another object) are counted, not flown."""
+    segments = list(read_message(text, "OEM", field).body.segment or [])
+    if not segments:
+        raise ElementsError("the OEM holds no segment", field=field)
+    first = segments[0]
+    _check_metadata(first.metadata)
+    states = list(getattr(first.data, "state_vector", None) or [])
+    if not states:
+        raise ElementsError("the OEM's first segment holds no state", field=field)
+    elements = _state_elements(states[0])
+    epochs, r = [], []
+    for sv in states:
+        values = fields_of(sv)
+        try:
+            epochs.append(ccsds_time(str(values.get("EPOCH", ""))))
+        except ValueError:
+            raise ElementsError(f"EPOCH {values.get('EPOCH')!r} is not a CCSDS time", field="EPOCH") from None
+        r.append([_number(values, k) for k in ("X", "Y", "Z")])
+    if any(b <= a for a, b in zip(epochs, epochs[1:], strict=False)):
+        raise ElementsError("the OEM's first segment's epochs do not increase", field="EPOCH")
+    return Ephemeris(elements, tuple(epochs), np.array(r, float).T, len(segments))
 
 
 def opm_manoeuvre_note(text: str, name: str, field: str = "opm") -> str | None:

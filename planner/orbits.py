@@ -12,6 +12,9 @@ from dataclasses import dataclass
 from datetime import datetime
 from typing import Literal
 
+import numpy as np
+
+from planner.ccsds import Ephemeris
 from planner.elements import Elements, elements_of_state
 from planner.errors import PlannerError
 from planner.propagation import (
@@ -99,3 +102,27 @@ def osculating_elements(orbit: Orbit, epoch: datetime, frames: EarthFrames) -> E
     assert orbit.tle is not None
     r, v = SGP4Trajectory(orbit.tle, epoch, frames).state(0.0)
     return elements_of_state(r[:, 0], v[:, 0], epoch)
+
+
+def ephemeris_note(eph: Ephemeris, name: str) -> str:
+    """What an OEM read as an orbit input means for a plan: the plan flies two-body + J2 from its first state; how
+    far that flight departs from the OEM's own states over its first segment (the force models' difference, which a
+    plan beyond a few days inherits), and the segments not flown."""
+    t0 = eph.epochs[0]
+    t = np.array([seconds_between(t0, e) for e in eph.epochs])
+    text = f"{name}: read from the OEM's first state ({t0:%Y-%m-%dT%H:%M:%S}Z) and flown with two-body + J2"
+    if t.size > 1:
+        flown = NumericalJ2Trajectory.from_elements(eph.elements, t0, 0.0, float(t[-1]))
+        r, _ = flown.state(t)
+        off = np.linalg.norm(r - eph.r_km, axis=0)
+        worst = int(np.argmax(off))
+        text += (
+            f"; over the OEM's first segment ({t.size} states, {t[-1] / 86400.0:.2f} days) that flight departs from "
+            f"its states by up to {off[worst]:.3f} km ({t[worst] / 3600.0:.1f} h in)"
+        )
+    if eph.segments > 1:
+        text += (
+            f"; its {eph.segments - 1} later segment(s) (after a manoeuvre, or another object) are not flown: to plan "
+            "from after a burn, send the state orbit determination gives after it"
+        )
+    return text

@@ -102,13 +102,14 @@ class OmmIn(Described):
     """second derivative of the mean motion / 6, rev/day^3"""
 
 
-ORBIT_SOURCES = ("elements", "tle", "omm", "omm_xml", "omm_csv", "omm_kvn", "opm")
+ORBIT_SOURCES = ("elements", "tle", "omm", "omm_xml", "omm_csv", "omm_kvn", "opm", "oem")
 
 
 class OrbitIn(Strict):
     """A satellite: a name and exactly one of ``elements``, ``tle`` (2 lines, a 3LE, or a text block), ``omm`` (a
     CelesTrak OMM JSON object), ``omm_xml``, ``omm_csv`` or ``omm_kvn`` (CelesTrak's OMM XML, CSV or KVN text, one
-    element set), or ``opm`` (a CCSDS OPM in KVN or XML: its state vector, taken as osculating elements)."""
+    element set), ``opm`` (a CCSDS OPM in KVN or XML: its state vector, taken as osculating elements), or ``oem`` (a
+    CCSDS OEM in KVN or XML: its first state, taken as osculating elements)."""
 
     model_config = ConfigDict(
         extra="forbid",
@@ -144,6 +145,14 @@ class OrbitIn(Strict):
         default=None,
         description="a CCSDS OPM 2.0/3.0 in KVN or XML (NDM/XML, no DTD): EPOCH (UTC) and X..Z_DOT (km, km/s) in "
         "EME2000, GCRF or ICRF about the Earth, read as osculating elements (plan with reading osculating)",
+    )
+
+    oem: Annotated[str, Field(max_length=2_000_000)] | SkipJsonSchema[None] = Field(
+        default=None,
+        description="a CCSDS OEM 2.0/3.0 in KVN or XML (NDM/XML, no DTD), Earth-centred, EME2000, GCRF or ICRF, UTC: "
+        "its first segment's first state read as osculating elements (plan with reading osculating). The plan's "
+        "notes say how far two-body + J2 from that state departs from the OEM's own states over its first segment, "
+        "and how many later segments (after manoeuvres) are not flown",
     )
 
     @model_validator(mode="after")

@@ -30,11 +30,11 @@ from app.services import exports
 from inference.runtime import UNNAMED_CARD_TARGET
 from planner.access import access_windows
 from planner.alignment import HeightBox
-from planner.ccsds import elements_from_opm, omm_fields, opm_manoeuvre_note
+from planner.ccsds import elements_from_opm, ephemeris_from_oem, omm_fields, opm_manoeuvre_note
 from planner.elements import Elements
 from planner.errors import PlannerError, PlanningStopped
 from planner.optics import ObserverOptics
-from planner.orbits import Orbit, earth_frames, trajectory
+from planner.orbits import Orbit, earth_frames, ephemeris_note, trajectory
 from planner.plan import Plan, PlanOptions, StopCheck, make_plan
 from planner.propagation import Station, as_utc
 from planner.radar import CrossSection
@@ -70,6 +70,9 @@ def to_orbit(orbit: OrbitIn, where: str) -> Orbit:
         if orbit.opm is not None:
             note = opm_manoeuvre_note(orbit.opm, f"{where} {orbit.name}")
             return Orbit(orbit.name, elements=elements_from_opm(orbit.opm), notes=(note,) if note else ())
+        if orbit.oem is not None:
+            eph = ephemeris_from_oem(orbit.oem)
+            return Orbit(orbit.name, elements=eph.elements, notes=(ephemeris_note(eph, f"{where} {orbit.name}"),))
         if orbit.omm_xml is not None:
             return Orbit(orbit.name, tle=tle_from_omm(omm_fields(orbit.omm_xml, "omm_xml"), field="omm_xml"))
         if orbit.omm_csv is not None:
@@ -117,12 +120,15 @@ def _named(name: str, sets: list[tuple[str | None, str | None, T]], where: str, 
 
 
 def _osculating_states(orbits: tuple[tuple[OrbitIn, str], ...], reading: str, loc: list[str | int]) -> None:
-    """An OPM's state vector is an osculating orbit: refuse to read it as mean elements."""
+    """An OPM's or OEM's state vector is an osculating orbit: refuse to read it as mean elements."""
     for orbit, where in orbits:
-        if orbit.opm is not None and reading == "mean":
-            raise InputError(
-                loc, f"the {where} is an OPM state vector, an osculating orbit: plan with reading osculating"
-            )
+        for source in ("opm", "oem"):
+            if getattr(orbit, source) is not None and reading == "mean":
+                raise InputError(
+                    loc,
+                    f"the {where} is an {source.upper()} state vector, an osculating orbit: plan with reading "
+                    "osculating",
+                )
 
 
 def source_of(orbit: OrbitIn) -> str:

@@ -29,3 +29,19 @@ def opm_kvn(r_km, v_km_s, epoch="2008-09-20T12:25:40.104192", frame="GCRF", vers
         f"OBJECT_NAME = ISS (ZARYA)\nOBJECT_ID = 1998-067A\nCENTER_NAME = EARTH\nREF_FRAME = {frame}\n"
         f"TIME_SYSTEM = UTC\nCOMMENT the state\nEPOCH = {epoch}\n" + state
     )
+
+
+def oem_kvn(epochs, r_km, v_km_s, frame="GCRF", version="3.0", segments=1):
+    """An OEM in KVN as 502.0-B-3 lays it out (META_START..META_STOP, then a data line a state), written here by hand
+    (the reader is what is tested); ``segments`` repeats the one segment after a COMMENT (a manoeuvre's)."""
+    head = f"CCSDS_OEM_VERS = {version}\nCREATION_DATE = 2026-12-01T00:00:00\nORIGINATOR = TEST\n"
+    lines = [
+        f"{t:%Y-%m-%dT%H:%M:%S.%f} " + " ".join(f"{x:.9f}" for x in (*r, *v))
+        for t, r, v in zip(epochs, r_km, v_km_s, strict=True)
+    ]
+    meta = (
+        f"META_START\nOBJECT_NAME = ISS (ZARYA)\nOBJECT_ID = 1998-067A\nCENTER_NAME = EARTH\nREF_FRAME = {frame}\n"
+        f"TIME_SYSTEM = UTC\nSTART_TIME = {epochs[0]:%Y-%m-%dT%H:%M:%S.%f}\nSTOP_TIME = {epochs[-1]:%Y-%m-%dT%H:%M:%S.%f}\n"
+        "META_STOP\n"
+    )
+    return head + "".join(meta + "\n".join(lines) + "\n" for _ in range(segments))

@@ -459,3 +459,21 @@ def test_a_track_cut_at_the_antimeridian_runs_on_to_it():
         keep=np.array([True, False, True, True]),
     )
     assert hidden == [[[-176.0, 14.0], [-170.0, 20.0]]]  # a crossing out of view draws nothing
+
+
+@SQLITE_ONLY
+@pytest.mark.parametrize("fmt", ["kvn", "xml"])
+def test_the_oem_goes_back_in_as_a_target(client, plan, fmt):
+    """The service reads its own OEM (KVN or XML) as an orbit: its first segment is the target, which two-body + J2
+    from its first state flies again within 10 m of every state the OEM lists, and its other segments (the
+    observer's) are named in the plan's note as not flown."""
+    r = client.get(f"/v1/plans/{plan['id']}/export/oem?format={fmt}", headers=A)
+    assert r.status_code == 200
+    body = dict(PAPER_EXAMPLE, target={"name": "from its own OEM", "oem": r.text})
+    res = client.post("/v1/access-windows", json={k: body[k] for k in ("target", "ground_station")}, headers=A)
+    assert res.status_code == 200, res.text
+    back = client.post("/v1/plans", json=body, headers=A)
+    assert back.status_code == 201, back.text
+    note = next(n for n in back.json()["notes"] if "OEM" in n)
+    assert "later segment(s)" in note and "departs from its states by up to" in note
+    assert float(note.split("by up to ")[1].split(" km")[0]) < 0.01  # its own J2 flight, sampled: metres at most

@@ -384,3 +384,71 @@ def test_an_opm_in_xml_from_the_librarys_writer_reads_as_its_kvn_and_as_skyfield
         assert r.status_code == 422, r.text
         detail = r.json()["detail"][0]
         assert detail["loc"][-1] == "opm" and words in detail["msg"], detail
+
+
+def _iss_ephemeris(hours=24.0, step_s=60.0):
+    """The ISS by skyfield's SGP4 in GCRS, every ``step_s`` over ``hours`` from its TLE's epoch (epochs, r, v)."""
+    from datetime import UTC, timedelta
+
+    ts = timescale()
+    sat = EarthSatellite(ISS_L1, ISS_L2, ts=ts)
+    t0 = datetime(2008, 9, 20, 12, 25, 40, 104192, tzinfo=UTC)
+    epochs = [t0 + timedelta(seconds=s) for s in np.arange(0.0, hours * 3600.0 + 1e-9, step_s)]
+    geo = sat.at(ts.from_datetimes(epochs))
+    return epochs, geo.position.km.T, geo.velocity.km_per_s.T
+
+
+def test_an_oem_plans_as_its_first_state_and_says_how_far_j2_departs_from_it(client):
+    """An OEM of the ISS (skyfield's SGP4, a day at 60 s, written by hand in KVN) plans exactly as an OPM of its first
+    state; the plan's note gives the largest departure of two-body + J2 from the OEM's states, which the independent
+    J2 integrator (tests/utils/j2.py) flown from that state measures too."""
+    from tests.utils.j2 import propagate_tod_j2
+    from tests.utils.orbits import oem_kvn
+
+    epochs, r, v = _iss_ephemeris()
+    body = {"ground_station": STATION, "search": {"start": ISS_EPOCH.isoformat(), "duration_days": 1.0}}
+    observer = {"name": "OBS", "opm": opm_kvn(r[0] + np.array([0.0, 0.0, 60.0]), v[0])}
+    got = {}
+    for source, text in (("oem", oem_kvn(epochs, r, v, segments=2)), ("opm", opm_kvn(r[0], v[0]))):
+        res = client.post(
+            "/v1/plans", json={**body, "observer": observer, "target": {"name": "ISS", source: text}}, headers=A
+        )
+        assert res.status_code == 201, res.text
+        got[source] = res.json()
+    assert [w["rise"] for w in got["oem"]["access_windows"]] == [w["rise"] for w in got["opm"]["access_windows"]]
+    note = next(n for n in got["oem"]["notes"] if "OEM" in n)
+    assert "1 later segment(s)" in note
+    claimed = float(note.split("by up to ")[1].split(" km")[0])
+    t = np.array([(e - epochs[0]).total_seconds() for e in epochs])
+    flown = propagate_tod_j2(epochs[0], r[0], v[0], 0.0, t)
+    truth = float(np.max(np.linalg.norm(flown - r.T, axis=0)))
+    assert truth > 1.0  # SGP4's drag and higher harmonics: J2 alone departs by kilometres in a day
+    assert abs(claimed - truth) < 0.05 * truth, (claimed, truth)
+
+
+@pytest.mark.parametrize(
+    ("change", "field", "words"),
+    [
+        (lambda t: t.replace("REF_FRAME = GCRF", "REF_FRAME = ITRF"), "REF_FRAME", "EME2000 or GCRF or ICRF"),
+        (lambda t: t.replace("CCSDS_OEM_VERS = 3.0", "CCSDS_OEM_VERS = 1.0"), "CCSDS_OEM_VERS", "versions 2.0 and 3.0"),
+        (lambda t: t.replace("META_STOP\n", "META_STOP\nthis is not a state\n", 1), "oem", "line"),
+        (lambda t: t.replace("CCSDS_OEM_VERS", "CCSDS_OPM_VERS"), "oem", "OPM"),
+    ],
+)
+def test_a_bad_oem_is_refused_naming_what_to_fix(client, change, field, words):
+    from tests.utils.orbits import oem_kvn
+
+    epochs, r, v = _iss_ephemeris(hours=1.0)
+    body = {"ground_station": STATION, "start": ISS_EPOCH.isoformat(), "duration_days": 1.0}
+    res = client.post(
+        "/v1/access-windows", json={**body, "target": {"name": "ISS", "oem": change(oem_kvn(epochs, r, v))}}, headers=A
+    )
+    assert res.status_code == 422, res.text
+    d = res.json()["detail"][0]
+    assert d["loc"][:3] == ["body", "target", "oem"] and d["loc"][-1] == field and words in d["msg"], d
+    mean = client.post(
+        "/v1/access-windows",
+        json={**body, "reading": "mean", "target": {"name": "ISS", "oem": oem_kvn(epochs, r, v)}},
+        headers=A,
+    )
+    assert mean.status_code == 422 and "OEM" in mean.json()["detail"][0]["msg"]
