@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 from collections.abc import Callable
 from datetime import datetime
 from pathlib import Path
@@ -48,19 +49,83 @@ def input_line(exc: ValueError) -> str:
     return ".".join(str(x) for x in loc) + ": " + message if loc else message
 
 
-def validation_line(exc: ValidationError) -> str:
-    """The first error as the field the user wrote and what is wrong with it: pydantic's own validator and union
-    tags (``function-after[...]``, ``none``) are left out of the path, and a union's "should be None" branch is
-    passed over for the error that says what to fix."""
-    errors = exc.errors()
-    err = next((e for e in errors if e["type"] != "none_required"), errors[0])
-    parts = [
-        str(x)
-        for x in err["loc"]
-        if not (isinstance(x, str) and ("[" in x or x.startswith("function-") or x in ("none", "null")))
-    ]
-    msg = "not a field this request takes: check its spelling" if err["type"] == "extra_forbidden" else err["msg"]
-    return f"{'.'.join(parts) or 'request'}: {msg}"
+def validation_line(exc: ValidationError, model: Any = None) -> str:
+    """Every error as the field the user wrote and what is wrong with it, on one line: pydantic's own validator and
+    union tags (``function-after[...]``, ``none``, a member model's class name) are left out of the paths, a union's
+    "should be None" branch is passed over, and a misspelt field is named with the field of ``model`` (the request's
+    pydantic class) it most likely meant."""
+    return error_line(
+        [
+            {"loc": [str(x) for x in e["loc"] if not _internal(x)], "msg": e["msg"], "type": e["type"]}
+            for e in exc.errors()
+        ],
+        field_names(model) if model is not None else (),
+    )
+
+
+_CLASS_NAME = re.compile(r"^[A-Z][a-z0-9]+(?:[A-Z][a-z0-9]*)+$")  # StationIn, OmmIn: a union member's tag
+
+
+def _internal(part: Any) -> bool:
+    return isinstance(part, str) and (
+        "[" in part or part.startswith("function-") or part in ("none", "null", "str") or bool(_CLASS_NAME.match(part))
+    )
+
+
+def field_names(model: Any) -> set[str]:
+    """Every field name of a pydantic model and of the models its fields hold (through unions and lists)."""
+    import typing
+
+    from pydantic import BaseModel
+
+    seen: set[Any] = set()
+    names: set[str] = set()
+
+    def walk(t: Any) -> None:
+        if isinstance(t, type) and issubclass(t, BaseModel):
+            if t in seen:
+                return
+            seen.add(t)
+            for name, f in t.model_fields.items():
+                names.add(f.alias or name)
+                walk(f.annotation)
+        for arg in typing.get_args(t):
+            walk(arg)
+
+    walk(model)
+    return names
+
+
+def error_line(errors: list[dict[str, Any]], known: Any = ()) -> str:
+    """Validation errors (each ``loc``, ``msg``, ``type``, as pydantic and the service's 422 give them) as one line:
+    ``path: what is wrong`` joined by "; ", a typo beside the missing field it meant said once, as a typo; ``known``:
+    field names a typo may have meant where no missing field is beside it."""
+    import difflib
+
+    def path(e: dict[str, Any]) -> tuple[str, ...]:
+        return tuple(str(x) for x in e.get("loc", ()) if x not in ("body", "query", "path"))
+
+    real = [e for e in errors if e.get("type") != "none_required"] or errors
+    missing = {path(e) for e in real if e.get("type") == "missing"}
+    meant: set[tuple[str, ...]] = set()
+    out: list[str] = []
+    for e in real:
+        where = path(e)
+        if e.get("type") == "extra_forbidden" and where:
+            near = [m[-1] for m in missing if m[:-1] == where[:-1]]
+            guess = difflib.get_close_matches(where[-1], near, 1, 0.6) or difflib.get_close_matches(
+                where[-1], sorted(known), 1, 0.75
+            )
+            if guess:
+                meant.add((*where[:-1], guess[0]))
+                out.append(f"{'.'.join(where)}: not a field this request takes: did you mean {guess[0]}?")
+            else:
+                out.append(f"{'.'.join(where)}: not a field this request takes: check its spelling")
+            continue
+        msg = str(e.get("msg", "")).removeprefix("Value error, ").removeprefix("Assertion failed, ")
+        out.append(f"{'.'.join(where)}: {msg}" if where else msg)
+    lines = [line for e, line in zip(real, out, strict=True) if not (e.get("type") == "missing" and path(e) in meant)]
+    return "; ".join(dict.fromkeys(lines)) or "request: not valid"
 
 
 EXAMPLES_DIR = Path(__file__).resolve().parents[2] / "examples"
@@ -82,14 +147,14 @@ def add_client_options(p: argparse.ArgumentParser, what: str = "send it to a run
 
 
 def _server_detail(r: Any) -> str:
-    """The service's own words for a refusal: the field and message of a 422, the detail of others."""
+    """The service's own words for a refusal: every field and message of a 422 (``error_line``), the detail of
+    others."""
     try:
         detail = r.json().get("detail")
     except ValueError:
         return r.text[:300]
     if isinstance(detail, list) and detail and isinstance(detail[0], dict):
-        loc = ".".join(str(x) for x in detail[0].get("loc", ()) if x not in ("body", "query", "path"))
-        return f"{loc}: {detail[0].get('msg')}" if loc else str(detail[0].get("msg"))
+        return error_line(detail)
     return str(detail)[:300]
 
 

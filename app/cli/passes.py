@@ -119,7 +119,7 @@ def _plan_for_pass(request: Any) -> tuple[dict[str, Any], list[dict[str, Any]]]:
         )
         windows = run_access(acc).model_dump(mode="json")["access_windows"]
     except ValidationError as exc:
-        raise CliError(validation_line(exc)) from None
+        raise CliError(validation_line(exc, PlanCreate)) from None
     except InputError as exc:
         raise CliError(input_line(exc)) from None
     return req.model_dump(mode="json", exclude_none=True), windows

@@ -117,7 +117,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
         req = PlanCreate.model_validate(read_json(source))
         plan, result = run_plan(req)
     except ValidationError as exc:
-        raise CliError(validation_line(exc)) from None
+        raise CliError(validation_line(exc, PlanCreate)) from None
     except InputError as exc:
         raise CliError(input_line(exc)) from None
     req = with_radar_of(req, plan.station.name if plan.station is not None else None)
@@ -178,7 +178,7 @@ def cmd_access(args: argparse.Namespace) -> int:
             return _catalogue(req, args.workers)
         result = run_access(req)
     except ValidationError as exc:
-        raise CliError(validation_line(exc)) from None
+        raise CliError(validation_line(exc, AccessCreate)) from None
     except InputError as exc:
         raise CliError(input_line(exc)) from None
     body = result.model_dump(mode="json")
@@ -336,7 +336,7 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         req = CampaignCreate.model_validate(read_json(source))
         campaign, result = run_campaign(req, progress=progress)
     except ValidationError as exc:
-        raise CliError(validation_line(exc)) from None
+        raise CliError(validation_line(exc, CampaignCreate)) from None
     except InputError as exc:
         raise CliError(input_line(exc)) from None
     finally:

@@ -258,8 +258,17 @@ def test_plan_without_a_request_and_a_misspelt_field_say_what_to_fix(tmp_path):
     req.write_text(json.dumps(body))
     out = _gsa("plan", str(req), cwd=tmp_path)
     assert out.returncode == 2 and out.stderr.count("\n") == 1
-    assert "target.elements.inclinaton_deg: not a field this request takes" in out.stderr
+    assert "target.elements.inclinaton_deg: not a field this request takes: did you mean inclination_deg?" in out.stderr
     assert "function-after" not in out.stderr
+    # Every error on the one line, each in the request's own words (no union member's class, no "Value error").
+    body["ground_station"]["latitude_deg"] = 95
+    body["serch"] = {"duration_days": 2}
+    req.write_text(json.dumps(body))
+    out = _gsa("plan", str(req), cwd=tmp_path)
+    assert out.returncode == 2 and out.stderr.count("\n") == 1
+    assert "ground_station.latitude_deg: Input should be less than or equal to 90" in out.stderr
+    assert "serch: not a field this request takes: did you mean search?" in out.stderr
+    assert "inclinaton_deg" in out.stderr and "StationIn" not in out.stderr, out.stderr
 
 
 def test_simulate_a_scene_as_labelled_frames_and_place_j2000_labels_by_the_plan(tmp_path, smoke_models):
