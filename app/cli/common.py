@@ -158,7 +158,14 @@ def _server_detail(r: Any) -> str:
     return str(detail)[:300]
 
 
-def call_server(args: argparse.Namespace, method: str, path: str, timeout: float = 60, **kw: Any) -> Any:
+def call_server(
+    args: argparse.Namespace,
+    method: str,
+    path: str,
+    timeout: float = 60,
+    headers: dict[str, str] | None = None,
+    **kw: Any,
+) -> Any:
     """One request to ``args.server`` with ``args.api_key``; an unreachable server or a refusal is one CliError line."""
     import httpx
 
@@ -168,7 +175,11 @@ def call_server(args: argparse.Namespace, method: str, path: str, timeout: float
         )
     try:
         r = httpx.request(
-            method, args.server.rstrip("/") + path, headers={"X-API-Key": args.api_key or ""}, timeout=timeout, **kw
+            method,
+            args.server.rstrip("/") + path,
+            headers={"X-API-Key": args.api_key or "", **(headers or {})},
+            timeout=timeout,
+            **kw,
         )
     except httpx.HTTPError as exc:
         raise CliError(f"cannot reach {args.server}: {exc}") from None

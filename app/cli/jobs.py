@@ -77,10 +77,11 @@ def cmd_jobs(args: argparse.Namespace) -> int:
     return _wait(args, path)
 
 
-def _wait(args: argparse.Namespace, path: str) -> int:
-    """Follow a job to its end with a progress line; 0 when done, 1 when it failed or was cancelled."""
+def follow(args: argparse.Namespace, path: str, timeout_s: float | None = None, every_s: float = 1.0) -> dict[str, Any]:
+    """Follow a job to its end with a progress line on stderr (rewritten on a terminal; a line a stage otherwise);
+    the job as it ended. CliError after ``timeout_s`` (the job goes on)."""
     tty = sys.stderr.isatty()
-    deadline = time.monotonic() + args.timeout if args.timeout else None
+    deadline = time.monotonic() + timeout_s if timeout_s else None
     last = ""
     while True:
         job = call_server(args, "GET", path).json()
@@ -95,10 +96,35 @@ def _wait(args: argparse.Namespace, path: str) -> int:
         if deadline is not None and time.monotonic() > deadline:
             if tty:
                 print(file=sys.stderr)
-            raise CliError(f"job {job['id']} is still {job['state']} after {args.timeout:g} s (it goes on; wait again)")
-        time.sleep(args.every)
+            raise CliError(f"job {job['id']} is still {job['state']} after {timeout_s:g} s (it goes on; wait again)")
+        time.sleep(every_s)
     if tty:
         print(file=sys.stderr)
+    return job
+
+
+def submit(args: argparse.Namespace, path: str, **kw: Any) -> dict[str, Any]:
+    """POST long work with ``Prefer: respond-async`` and follow its job (``follow``: the CLI never goes silent); the
+    stored result (its ``result_url``) once done. A service that answers at once is taken at its word; a job that
+    fails or is cancelled is one CliError line (``gsa jobs show ID`` has its log)."""
+    r = call_server(args, "POST", path, headers={"Prefer": "respond-async"}, **kw)
+    if r.status_code != 202:
+        return dict(r.json())
+    job = r.json()
+    print(f"queued as job {job['id']}", file=sys.stderr, flush=True)
+    done = follow(args, f"/v1/jobs/{quote(job['id'], safe='')}")
+    if done["state"] != "done" or not done.get("result_url"):
+        raise CliError(
+            f"job {done['id']} {done['state']}"
+            + (f": {done['error']}" if done.get("error") else "")
+            + f" (gsa jobs show {done['id']} has its log)"
+        )
+    return dict(call_server(args, "GET", done["result_url"]).json())
+
+
+def _wait(args: argparse.Namespace, path: str) -> int:
+    """Follow a job to its end with a progress line; 0 when done, 1 when it failed or was cancelled."""
+    job = follow(args, path, args.timeout, args.every)
     if args.json:
         print(json.dumps(job, indent=2))
     elif job["state"] == "done":

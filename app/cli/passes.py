@@ -487,10 +487,10 @@ def _pass_on_server(args: argparse.Namespace, data: bytes, rec: dict[str, Any]) 
             form["aperture_deg"] = str(aperture)
     if args.target:
         form["target"] = args.target
+    from app.cli.jobs import submit
     from app.schemas import PassPublic
 
-    r = call_server(args, "POST", "/v1/passes", files={"files": ("frames.npz", data)}, data=form, timeout=300)
-    body = r.json()
+    body = submit(args, "/v1/passes", files={"files": ("frames.npz", data)}, data=form, timeout=300)
     answer = PassPublic.model_validate(body)
     if args.json:
         print(json.dumps(body, indent=1))

@@ -320,9 +320,9 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     if args.server:
         if args.export or args.plot:
             raise CliError("--export and --plot plan locally; with --server, GET /v1/campaigns/ID/export/... instead")
-        _print_stored_campaign(
-            args, call_server(args, "POST", "/v1/campaigns", json=read_json(source), timeout=900).json()
-        )
+        from app.cli.jobs import submit
+
+        _print_stored_campaign(args, submit(args, "/v1/campaigns", json=read_json(source), timeout=120))
         return 0
 
     shown = []

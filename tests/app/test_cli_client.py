@@ -89,6 +89,8 @@ def test_campaigns_and_passes_through_the_command_line(served, capsys, tmp_path)
     (tmp_path / "campaign.json").write_text(json.dumps({**CAMPAIGN_EXAMPLE, "duration_days": 8}))
     rc, out, err = _run(capsys, "campaign", str(tmp_path / "campaign.json"))
     assert rc == 0 and out.startswith("campaign ") and "1 scene(s)" in out, err
+    # Through the service the campaign is a job, followed to its end with its progress (never silent for minutes).
+    assert "queued as job" in err and "done" in err.splitlines()[-1] and "%" in err, err
     campaign_id = out.split()[1]
     rc, out, _ = _run(capsys, "campaigns", "list")
     assert rc == 0 and campaign_id in out and "first T_access" in out

@@ -281,9 +281,10 @@ def test_gsa_pass_sends_a_simulated_pass_to_the_service(client, plan, tmp_path, 
 
     monkeypatch.setattr(httpx, "request", request)
     rc = main(["pass", str(tmp_path), "--server", "http://gsa.test", "--api-key", KEY_A, "--plan-id", plan["id"]])
-    out = capsys.readouterr().out
+    out, err = capsys.readouterr()
     assert rc == 0, out
     assert out.startswith("pass ") and "fused, body to LVLH" in out
+    assert "queued as job" in err and "done" in err.splitlines()[-1], err  # a job, followed with its progress
 
 
 def test_a_pass_is_placed_from_one_scene(client, plan, monkeypatch):
