@@ -236,6 +236,16 @@ def check_not_coplanar(target: Trajectory, observer: Trajectory, t1_s: float) ->
         )
 
 
+def check_planes_apart(target: Orbit, observer: Orbit, start: datetime, span_s: float) -> None:
+    """``check_not_coplanar`` of two orbits themselves, osculating over ``span_s`` from ``start``: what a queued
+    campaign is checked with before it is queued (the planner checks each stretch so as it plans it)."""
+    frames = earth_frames(start, 0.0, span_s)
+    pole = pole_of_date(start, 0.0, span_s)
+    tgt = trajectory(target, start, frames, 0.0, span_s, "osculating", pole)
+    obs = trajectory(observer, start, frames, 0.0, span_s, "osculating", pole)
+    check_not_coplanar(tgt, obs, span_s)
+
+
 def check_box_reachable(elements: Elements, box: HeightBox) -> None:
     """Refuse, before any planning, a (dHa, dHp) box whose corners take the observer's perigee below the limit.
 

@@ -38,7 +38,7 @@ from planner.closed_loop import replan
 from planner.dispersion import SceneDispersion, disperse, trim_margin_km_s
 from planner.errors import PlannerError, PlanningStopped
 from planner.orbits import earth_frames, trajectory
-from planner.plan import PlanOptions, StopCheck
+from planner.plan import PlanOptions, StopCheck, check_planes_apart
 from planner.propagation import as_utc, seconds_between
 
 Vec = NDArray[np.float64]
@@ -248,15 +248,12 @@ def submit_campaign(*, session: Session, settings: Settings, operator_id: str, c
 
     checked = with_stored_station(campaign_in, stored_station_lookup(session, operator_id))
     target, observer = to_orbit(checked.target, "target"), to_orbit(checked.observer, "observer")
-    if (target.elements, target.tle) == (observer.elements, observer.tle):
-        # what the planner's plane check refuses at once on the synchronous route; here before the job is queued
-        raise InputError(
-            ["observer"],
-            "the observer's orbit is the target's: the two planes have no line of nodes, so there is no GSA scene; "
-            "use an observer in another plane",
-        )
     to_stations(checked)
-    campaign_options(checked, settings.max_grid_points)
+    opts = campaign_options(checked, settings.max_grid_points)
+    try:  # what the planner's plane check refuses at once on the synchronous route; here before the job is queued
+        check_planes_apart(target, observer, opts.start or target.epoch, min(opts.scene_span_s, opts.duration_s))
+    except PlannerError as exc:
+        raise InputError(["observer"], str(exc)) from None
     return jobs.submit(
         session,
         operator_id=operator_id,

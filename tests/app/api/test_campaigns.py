@@ -1,5 +1,6 @@
 """POST/GET /v1/campaigns and their exports: read back by ccsds-ndm, flown by an independent J2 integrator."""
 
+import copy
 import csv
 import io
 import json
@@ -149,6 +150,13 @@ def test_a_campaign_asked_for_asynchronously_is_a_job_whose_result_is_the_same_c
     same = client.post("/v1/campaigns", json=twin, headers={**A, "Prefer": "respond-async"})
     assert same.status_code == 422 and same.json()["detail"][0]["loc"][-1] == "observer", same.text
     assert client.post("/v1/campaigns", json=twin, headers=A).status_code == 422
+    # Co-orbital (the target's plane, half an orbit behind): no line of nodes either, refused before it is queued.
+    behind = copy.deepcopy(twin)
+    behind["observer"]["elements"]["mean_anomaly_deg"] = (
+        CAMPAIGN_EXAMPLE["target"]["elements"]["mean_anomaly_deg"] + 180
+    ) % 360
+    late = client.post("/v1/campaigns", json=behind, headers={**A, "Prefer": "respond-async"})
+    assert late.status_code == 422 and "line of nodes" in late.text, late.text
 
 
 def _replan_state(campaign, when, moved_km=0.0):
