@@ -4,6 +4,10 @@ It runs the job's kind (``KINDS``: a function of a :class:`JobContext`) and writ
 stage, counts, progress and a log tail as it goes (at most every half second, and a heartbeat in ``updated_at``),
 then ``done`` with the result, ``failed`` with the reason, or ``cancelled``. Cancelling is a flag on the row read
 between steps (``ctx.check()``, every progress report), and SIGTERM, which stops the work at the next step.
+
+A database that stops answering does not fail the job: progress the row cannot take is kept and written once it
+answers again, the final state is written with retries for up to ``DB_RETRY_S``, and a job whose own work met the
+outage is queued again (up to ``MAX_ATTEMPTS`` starts, then failed saying so).
 """
 
 from __future__ import annotations
@@ -19,9 +23,10 @@ from collections.abc import Callable
 from typing import Any
 
 from sqlalchemy import update
+from sqlalchemy.exc import DBAPIError
 
 from app.db.models import Job, utcnow
-from app.services.jobs import host, settings_from_env
+from app.services.jobs import MAX_ATTEMPTS, host, settings_from_env
 from inference.errors import Cancelled
 
 # kind -> "module:function"; the function takes a JobContext and returns the job's result (a JSON object).
@@ -33,6 +38,7 @@ KINDS = {
     "pass": "app.services.passes:run_pass_job",
 }
 WRITE_EVERY_S = 0.5
+DB_RETRY_S = 600.0  # how long a worker keeps trying to write its job's final state through a database outage
 
 
 class JobContext:
@@ -50,6 +56,7 @@ class JobContext:
         self._pending: dict[str, Any] = {}
         self._last = 0.0
         self.stopping = False
+        self.outage = False  # the last write found the database not answering
 
     def say(self, line: str) -> None:
         """Add a line to the job's log (kept: the last 80)."""
@@ -84,22 +91,45 @@ class JobContext:
         if not force and now - self._last < WRITE_EVERY_S:
             return
         self._last = now
-        with self.session_factory() as s:
-            values = {**self._pending, "updated_at": utcnow()}
-            s.execute(update(Job).where(Job.id == self.id, Job.state == "running").values(**values))
-            s.commit()
-            self._pending = {}
-            job = s.get(Job, self.id)
-            if job is None or job.cancel_requested or job.state != "running":
-                self.stopping = True
+        try:
+            with self.session_factory() as s:
+                values = {**self._pending, "updated_at": utcnow()}
+                s.execute(update(Job).where(Job.id == self.id, Job.state == "running").values(**values))
+                s.commit()
+                self._pending = {}
+                job = s.get(Job, self.id)
+                if job is None or job.cancel_requested or job.state != "running":
+                    self.stopping = True
+        except DBAPIError as exc:  # the database does not answer: the work goes on, the row catches up later
+            if force:
+                raise
+            if not self.outage:
+                print(f"jobs: the database does not answer ({type(exc).__name__}); going on", file=sys.stderr)
+            self.outage = True
+        else:
+            self.outage = False
 
     def finish(self, **values: Any) -> None:
-        self._flush(True)
-        with self.session_factory() as s:
-            now = utcnow()
-            values.setdefault("finished_at", now)
-            s.execute(update(Job).where(Job.id == self.id).values(**values, updated_at=now))
-            s.commit()
+        """Write the job's final state, through a database outage of up to ``DB_RETRY_S`` (then raise)."""
+
+        def write() -> None:
+            self._flush(True)
+            with self.session_factory() as s:
+                now = utcnow()
+                values.setdefault("finished_at", now)
+                s.execute(update(Job).where(Job.id == self.id).values(**values, updated_at=now))
+                s.commit()
+
+        deadline, delay = time.monotonic() + DB_RETRY_S, 0.5
+        while True:
+            try:
+                write()
+                return
+            except DBAPIError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(delay)
+                delay = min(2 * delay, 15.0)
 
 
 def kind_function(kind: str) -> Callable[[JobContext], dict[str, Any]]:
@@ -142,6 +172,15 @@ def run(job_id: str) -> int:
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
         ctx.say("jobs: cancelled; what it made so far is removed")
         ctx.finish(state="cancelled", stage="cancelled")
+        return 0
+    except DBAPIError as exc:  # the database stopped answering under the work itself: queued again, not failed
+        reason = f"the database did not answer ({type(exc).__name__})"
+        if job.attempts < MAX_ATTEMPTS:
+            ctx.say(f"jobs: {reason}; queued again (start {job.attempts} of {MAX_ATTEMPTS})")
+            ctx.finish(state="queued", stage=f"queued again: {reason}", runner="", finished_at=None)
+        else:
+            ctx.say(f"jobs: {reason}, on its last start; failed")
+            ctx.finish(state="failed", error=f"{reason} on each of its {job.attempts} starts"[:2000])
         return 0
     except ValueError as exc:  # bad input the request could not see (every domain error is a ValueError)
         ctx.say(f"jobs: failed: {exc}")

@@ -152,3 +152,88 @@ def test_a_restart_resumes_a_job_whose_process_is_gone_and_fails_one_resumed_too
         assert resumed["result"]["content_sha256"] == first["result"]["content_sha256"]
         failed = restarted.get(f"/v1/jobs/{r2['id']}", headers=A).json()
         assert failed["state"] == "failed" and "stopped while it ran, 3 times" in failed["error"]
+
+
+def _down(*_args, **_kwargs):
+    from sqlalchemy.exc import OperationalError
+
+    raise OperationalError("SELECT 1", {}, ConnectionRefusedError("the database is down"))
+
+
+def _outage_job(ctx):
+    """A job whose own work meets the database down (as a campaign storing its row would)."""
+    ctx.report(stage="working", progress=0.5)
+    _down()
+
+
+def _flaky_job(ctx):
+    """A job that reports while the database comes and goes, then ends."""
+    for k in range(6):
+        ctx.report(stage=f"step {k}", done=k, total=6)
+    return {"steps": 6}
+
+
+def test_a_database_outage_queues_the_job_again_and_the_work_outlives_a_flaky_database(client, settings, monkeypatch):
+    """A job worker (run in this process, its job claimed as the dispatcher claims one) whose work meets the
+    database down is queued again with the reason on its row, not failed, until its last start; progress writes that
+    meet the database down are kept and written later, and the job ends done."""
+    from app.services import job_worker, jobs
+    from app.services.jobs import MAX_ATTEMPTS
+
+    factory = make_session_factory(make_engine(settings.database_url))
+    operator = client.get("/v1/jobs", headers=A)  # the operator exists
+    assert operator.status_code == 200
+
+    def claimed(kind: str, attempts: int) -> str:
+        from app.db.models import Operator
+
+        with factory() as s:
+            op = s.query(Operator).filter(Operator.name.like("env-%")).first()
+            job = jobs.submit(s, operator_id=op.id, kind=kind, params={}, stage="queued", engine="local", cap=None)
+            s.execute(
+                update(Job)
+                .where(Job.id == job.id)
+                .values(state="running", runner=f"{host()}:0", attempts=attempts, started_at=Job.created_at)
+            )
+            s.commit()
+            return job.id
+
+    monkeypatch.setattr(job_worker, "settings_from_env", lambda: settings)
+    monkeypatch.setitem(job_worker.KINDS, "campaign", "tests.app.api.test_jobs:_outage_job")
+    monkeypatch.setattr(job_worker, "WRITE_EVERY_S", 0.0)
+    first = claimed("campaign", 1)
+    assert job_worker.run(first) == 0
+    with factory() as s:
+        row = s.get(Job, first)
+        assert row.state == "queued" and row.runner == "" and "database did not answer" in row.stage, row.stage
+        assert "queued again" in row.log and row.error is None
+    last = claimed("campaign", MAX_ATTEMPTS)
+    assert job_worker.run(last) == 0
+    with factory() as s:
+        row = s.get(Job, last)
+        assert row.state == "failed" and "database did not answer" in row.error and "3 starts" in row.error
+
+    import app.core.db
+
+    real = app.core.db.make_session_factory
+    calls = {"n": 0}
+
+    def flaky_factory(engine):
+        made = real(engine)
+
+        def session():
+            calls["n"] += 1
+            if 3 <= calls["n"] <= 6:  # the database away for four writes, mid-job
+                _down()
+            return made()
+
+        return session
+
+    monkeypatch.setattr(app.core.db, "make_session_factory", flaky_factory)
+    monkeypatch.setitem(job_worker.KINDS, "campaign", "tests.app.api.test_jobs:_flaky_job")
+    flaky = claimed("campaign", 1)
+    assert job_worker.run(flaky) == 0
+    with factory() as s:
+        row = s.get(Job, flaky)
+        assert row.state == "done" and row.result == {"steps": 6} and row.done == 5, (row.state, row.error)
+    assert calls["n"] > 6
