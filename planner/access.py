@@ -23,7 +23,7 @@ from planner.constants import OMEGA_EARTH_RAD_S
 from planner.errors import SearchRangeError, StationError
 from planner.propagation import EarthFrames, Station, Trajectory
 from planner.radar import validate_radar
-from planner.search import bisect_maxima, bisect_roots, time_grid
+from planner.search import KeyedFunction, Keys, bisect_roots, keyed_maxima, time_grid
 
 Vec = NDArray[np.float64]
 
@@ -251,8 +251,6 @@ class Sites:
 
 
 # f(t, k): a function of the moment t[m] for station k[m], both shape (M,).
-KeyedFunction = Callable[[Vec, NDArray[np.int64]], Vec]
-Keys = NDArray[np.int64]
 
 
 # state(t, j): the GCRS position and velocity (3, M) of satellite ``j[m]`` at ``t[m]``.
@@ -306,37 +304,6 @@ class Intervals:
     start_clipped: NDArray[np.bool_]
     end_clipped: NDArray[np.bool_]
     key: Keys
-
-
-def _keyed_maxima(
-    f: KeyedFunction, t: Vec, g: Vec, keys: Keys, tol_s: float, select: NDArray[np.bool_] | None = None
-) -> tuple[Vec, Keys, Vec]:
-    """The local maxima of ``f`` sampled as ``g`` (rows: stations ``keys``) on the grid ``t``: ``(t, key, f)``.
-
-    ``search.grid_maxima`` for every row at once: an interior maximum is bracketed by its grid neighbours (only
-    where ``select`` holds), and a maximum hiding in the first or last step while the grid falls away from it is
-    found from the one-sided slope there. Every bracket is refined in one vectorised search.
-    """
-    select = np.ones(g.shape, bool) if select is None else select
-    rows, i = np.nonzero((g[:, 1:-1] >= g[:, :-2]) & (g[:, 1:-1] > g[:, 2:]) & select[:, 1:-1])
-    lo, hi, key = [t[i]], [t[i + 2]], [keys[rows]]
-    h = 1e-3
-    for end, inner, sign in ((0, 1, 1.0), (-1, -2, -1.0)):
-        edge = keys[(g[:, end] > g[:, inner]) & select[:, end]]
-        if edge.size:
-            at = np.concatenate([np.full(edge.size, t[end]), np.full(edge.size, t[end] + sign * 2.0 * h)])
-            s = f(at, np.concatenate([edge, edge]))
-            rising_inward = s[edge.size :] > s[: edge.size]
-            edge = edge[rising_inward]
-            near, far = np.full(edge.size, t[end] + sign * h), np.full(edge.size, t[inner])
-            lo.append(near if sign > 0 else far)
-            hi.append(far if sign > 0 else near)
-            key.append(edge)
-    lo_a, hi_a, key_a = np.concatenate(lo), np.concatenate(hi), np.concatenate(key).astype(np.int64)
-    if not lo_a.size:
-        return np.empty(0), np.zeros(0, np.int64), np.empty(0)
-    t_max = bisect_maxima(f, lo_a, hi_a, tol_s, h_s=h, key=key_a)
-    return t_max, key_a, f(t_max, key_a)
 
 
 def _keyed_intervals(
@@ -523,8 +490,8 @@ def _search(
     reach = 1.2 * speed_sat[pairs.sat] * float(np.max(np.diff(t)))
     could_see = (height + reach[:, None] >= 0.0) | below_horizon[:, None]
     ext_tol = max(tol_s, 1e-3)
-    t_max, k_max, g_max = _keyed_maxima(f_el, t, g, keys, ext_tol, select=could_see)
-    t_min, k_min, g_min = _keyed_maxima(lambda x, k: -f_el(x, k), t, -g, keys, ext_tol, select=g > 0.0)
+    t_max, k_max, g_max = keyed_maxima(f_el, t, g, keys, ext_tol, select=could_see)
+    t_min, k_min, g_min = keyed_maxima(lambda x, k: -f_el(x, k), t, -g, keys, ext_tol, select=g > 0.0)
     windows = _keyed_intervals(
         f_el,
         t,
@@ -538,7 +505,7 @@ def _search(
     # Range minima: for the least range in each window and for a range limit.
     limited = keys[[s.max_range_km is not None for s in station]]
     near_select = could_see | np.isin(keys, limited)[:, None]  # a range limit needs every least range
-    t_near, k_near, near = _keyed_maxima(f_near, t, -rng, keys, ext_tol, select=near_select)
+    t_near, k_near, near = keyed_maxima(f_near, t, -rng, keys, ext_tol, select=near_select)
     if limited.size and windows.start.size:
         limit = np.array([s.max_range_km or 0.0 for s in station])
 
@@ -546,7 +513,7 @@ def _search(
             return limit[k] - look(t_s, k).range_km
 
         g_in = limit[limited, None] - rng[limited]
-        t_far, k_far, far = _keyed_maxima(lambda x, k: -f_in(x, k), t, -g_in, limited, ext_tol, select=g_in > 0.0)
+        t_far, k_far, far = keyed_maxima(lambda x, k: -f_in(x, k), t, -g_in, limited, ext_tol, select=g_in > 0.0)
         ours = np.isin(k_near, limited)
         in_range = _keyed_intervals(
             f_in,
@@ -567,7 +534,7 @@ def _search(
     masked_pair = sites.masked[pairs.site]
     if masked_pair.any():
         masked = keys[masked_pair]
-        t_sky, k_sky, _ = _keyed_maxima(f_sky, t, sky[masked], masked, ext_tol, select=could_see[masked])
+        t_sky, k_sky, _ = keyed_maxima(f_sky, t, sky[masked], masked, ext_tol, select=could_see[masked])
         plain = ~masked_pair[k_peaks]
         t_peaks = np.concatenate([t_peaks[plain], t_sky])
         k_peaks = np.concatenate([k_peaks[plain], k_sky])

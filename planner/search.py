@@ -128,6 +128,10 @@ def find_roots(
     return _find_roots_core(f, t, f(t), tol_s)
 
 
+KeyedFunction = Callable[[Vec, NDArray[np.int64]], Vec]
+Keys = NDArray[np.int64]
+
+
 def grid_maxima(
     f: TimeFunction,
     t_s: Vec,
@@ -139,36 +143,63 @@ def grid_maxima(
 ) -> tuple[Vec, Vec]:
     """Refine the local maxima of ``f`` sampled as ``values`` on the grid ``t_s``; return ``(t, f(t))``.
 
-    Algorithm core of find_maxima, for callers that already have ``f`` on a grid. An
-    interior maximum is bracketed by its grid neighbours; only grid points where
-    ``select`` holds are refined. With ``include_ends``, a maximum hiding inside the
-    first (last) step while the grid falls away from it is found from the one-sided
-    slope there (a pass peaking just after the span starts).
+    Algorithm core of find_maxima, for callers that already have ``f`` on a grid: ``keyed_maxima`` of one row. An
+    interior maximum is bracketed by its grid neighbours; only grid points where ``select`` holds are refined. With
+    ``include_ends``, a maximum hiding inside the first (last) step while the grid falls away from it is found from
+    the one-sided slope there (a pass peaking just after the span starts).
     """
-    if t_s.size < 2:
-        return np.empty(0), np.empty(0)
-    select = np.ones(t_s.size, bool) if select is None else select
-    lo: list[Vec] = []
-    hi: list[Vec] = []
-    if t_s.size >= 3:
-        peak = (values[1:-1] >= values[:-2]) & (values[1:-1] > values[2:]) & select[1:-1]
-        i = np.flatnonzero(peak) + 1
-        lo.append(t_s[i - 1])
-        hi.append(t_s[i + 1])
-    if include_ends and values[0] > values[1] and select[0]:
-        s = f(np.array([t_s[0], t_s[0] + 2.0 * h_s]))
-        if s[1] > s[0]:
-            lo.append(np.array([t_s[0] + h_s]))
-            hi.append(np.array([t_s[1]]))
-    if include_ends and values[-1] > values[-2] and select[-1]:
-        s = f(np.array([t_s[-1] - 2.0 * h_s, t_s[-1]]))
-        if s[0] > s[1]:
-            lo.append(np.array([t_s[-2]]))
-            hi.append(np.array([t_s[-1] - h_s]))
-    if not lo:
-        return np.empty(0), np.empty(0)
-    t_max = bisect_maxima(f, np.concatenate(lo), np.concatenate(hi), tol_s, h_s=h_s)
-    return t_max, f(t_max) if t_max.size else np.empty(0)
+    one = np.zeros(1, np.int64)
+    t_max, _, v_max = keyed_maxima(
+        lambda t, _k: f(t),
+        t_s,
+        np.asarray(values, float)[None, :],
+        one,
+        tol_s,
+        None if select is None else np.asarray(select, bool)[None, :],
+        include_ends,
+        h_s,
+    )
+    return t_max, v_max
+
+
+def keyed_maxima(
+    f: KeyedFunction,
+    t: Vec,
+    g: Vec,
+    keys: Keys,
+    tol_s: float,
+    select: NDArray[np.bool_] | None = None,
+    include_ends: bool = True,
+    h_s: float = 1e-3,
+) -> tuple[Vec, Keys, Vec]:
+    """The local maxima of ``f`` sampled as ``g`` (rows: members ``keys`` of the family ``f(t, key)``, a network's
+    stations) on the grid ``t``: ``(t, key, f)``.
+
+    An interior maximum is bracketed by its grid neighbours (only where ``select`` holds), and, with
+    ``include_ends``, a maximum hiding in the first or last step while the grid falls away from it is found from the
+    one-sided slope there. Every bracket of every row is refined in one vectorised search (``bisect_maxima``).
+    """
+    if t.size < 2:
+        return np.empty(0), np.zeros(0, np.int64), np.empty(0)
+    select = np.ones(g.shape, bool) if select is None else select
+    rows, i = np.nonzero((g[:, 1:-1] >= g[:, :-2]) & (g[:, 1:-1] > g[:, 2:]) & select[:, 1:-1])
+    lo, hi, key = [t[i]], [t[i + 2]], [keys[rows]]
+    for end, inner, sign in ((0, 1, 1.0), (-1, -2, -1.0)) if include_ends else ():
+        edge = keys[(g[:, end] > g[:, inner]) & select[:, end]]
+        if edge.size:
+            at = np.concatenate([np.full(edge.size, t[end]), np.full(edge.size, t[end] + sign * 2.0 * h_s)])
+            s = f(at, np.concatenate([edge, edge]))
+            rising_inward = s[edge.size :] > s[: edge.size]
+            edge = edge[rising_inward]
+            near, far = np.full(edge.size, t[end] + sign * h_s), np.full(edge.size, t[inner])
+            lo.append(near if sign > 0 else far)
+            hi.append(far if sign > 0 else near)
+            key.append(edge)
+    lo_a, hi_a, key_a = np.concatenate(lo), np.concatenate(hi), np.concatenate(key).astype(np.int64)
+    if not lo_a.size:
+        return np.empty(0), np.zeros(0, np.int64), np.empty(0)
+    t_max = bisect_maxima(f, lo_a, hi_a, tol_s, h_s=h_s, key=key_a)
+    return t_max, key_a, f(t_max, key_a)
 
 
 def find_maxima(f: TimeFunction, t0_s: float, t1_s: float, step_s: float, tol_s: float = 1e-4) -> tuple[Vec, Vec]:

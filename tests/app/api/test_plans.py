@@ -281,7 +281,7 @@ def test_the_openapi_document_says_what_the_service_enforces(client, settings):
     r = client.get("/v1/plans", params={"limit": settings.max_page_size + 1}, headers=A)
     assert r.status_code == 422
     orbit = spec["components"]["schemas"]["OrbitIn"]
-    sources = ("elements", "tle", "omm", "omm_xml", "omm_csv", "omm_kvn", "opm")
+    sources = ("elements", "tle", "omm", "omm_xml", "omm_csv", "omm_kvn", "opm", "oem")
     assert orbit["oneOf"] == [{"required": [k]} for k in sources]
     assert client.get("/v1/plans", params={"colour": "red"}).status_code == 401
     assert client.get("/v1/plans", params={"colour": "red"}, headers=A).status_code == 422
