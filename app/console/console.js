@@ -319,6 +319,51 @@ async function campaignsPage() {
       '<tr><td colspan="8" class="muted">No campaigns yet: POST /v1/campaigns, or gsa campaign --server.</td></tr>'}</tbody></table>`;
 }
 
+// The campaign's delta-v as it is spent (the cumulative sum of its burns over time) against its budget, as
+// `gsa campaign --plot` draws it: each scene's T_access a tick along the top with its number.
+function dvChart(c) {
+  const Wc = 760, Hc = 230, L = 58, R = 16, T = 22, B = 36;
+  const t0 = Date.parse(c.epoch), span = c.duration_days * 86400e3;
+  const X = (iso) => L + ((Date.parse(iso) - t0) / span) * (Wc - L - R);
+  const burns = c.scenes.flatMap((s) => s.burns).sort((a, b) => Date.parse(a.time) - Date.parse(b.time));
+  const top = Math.max(c.dv_budget_m_s, c.dv_total_m_s, 1) * 1.08;
+  const Y = (v) => Hc - B - (v / top) * (Hc - T - B);
+  let sum = 0, d = `M${L},${Y(0).toFixed(1)}`;
+  for (const b of burns) {
+    const x = X(b.time).toFixed(1);
+    d += `L${x},${Y(sum).toFixed(1)}`;
+    sum += b.dv_total_m_s;
+    d += `L${x},${Y(sum).toFixed(1)}`;
+  }
+  d += `L${Wc - R},${Y(sum).toFixed(1)}`;
+  let g = `<rect x="${L}" y="${T}" width="${Wc - L - R}" height="${Hc - T - B}" class="plotbg"/>`;
+  for (let k = 0; k <= 4; k++) {
+    const v = (top * k) / 4;
+    g += `<line x1="${L}" x2="${Wc - R}" y1="${Y(v).toFixed(1)}" y2="${Y(v).toFixed(1)}" class="gridline"/><text x="${L - 6}" y="${(Y(v) + 4).toFixed(1)}" text-anchor="end" class="tick">${num(v, 0)}</text>`;
+  }
+  const days = Math.max(1, Math.round(c.duration_days / 6));
+  for (let day = 0; day <= c.duration_days + 1e-9; day += days) {
+    const x = L + (day / c.duration_days) * (Wc - L - R);
+    g += `<text x="${x.toFixed(1)}" y="${Hc - B + 16}" text-anchor="middle" class="tick">${day}</text>`;
+  }
+  g += `<line x1="${L}" x2="${Wc - R}" y1="${Y(c.dv_budget_m_s).toFixed(1)}" y2="${Y(c.dv_budget_m_s).toFixed(1)}" class="budget"/>`;
+  if (c.trim_margin_m_s) {
+    const m = c.dv_budget_m_s - c.trim_margin_m_s;
+    g += `<line x1="${L}" x2="${Wc - R}" y1="${Y(m).toFixed(1)}" y2="${Y(m).toFixed(1)}" class="budget margin"/>`;
+  }
+  g += `<path d="${d}" class="dvline" fill="none"/>`;
+  for (const s of c.scenes) {
+    const x = X(s.t_access).toFixed(1);
+    g += `<line x1="${x}" x2="${x}" y1="${T}" y2="${T + 8}" class="scenetick"/><text x="${x}" y="${T - 5}" text-anchor="middle" class="tick">${s.index}<title>scene ${s.index}: T_access ${utc(s.t_access)}</title></text>`;
+  }
+  g += `<text x="${(L + Wc - R) / 2}" y="${Hc - 4}" text-anchor="middle" class="axisname">days from ${utc(c.epoch)}</text>`;
+  g += `<text x="14" y="${(T + Hc - B) / 2}" text-anchor="middle" class="axisname" transform="rotate(-90 14 ${(T + Hc - B) / 2})">delta-v spent (m/s)</text>`;
+  return `<svg class="panel dvchart" id="dvchart" viewBox="0 0 ${Wc} ${Hc}" role="img" aria-label="delta-v against the budget">${g}</svg>
+    <div class="legend"><span><i class="sw-dv"></i>delta-v spent, burn by burn (${num(c.dv_total_m_s, 1)} m/s)</span>
+    <span><i class="sw-budget"></i>budget ${num(c.dv_budget_m_s, 0)} m/s</span>${c.trim_margin_m_s ? `<span><i class="sw-margin"></i>less the trims' margin</span>` : ""}
+    <span>ticks along the top: each scene's T_access</span></div>`;
+}
+
 async function campaignPage(id) {
   const c = await api(`/v1/campaigns/${encodeURIComponent(id)}`);
   const scenes = c.scenes.map((s) => {
@@ -339,8 +384,9 @@ async function campaignPage(id) {
   const stretches = c.stretches.map((st) => `<tr${st.scene === null ? "" : ' class="chosen"'}><td>${utc(st.start)}</td>
       <td>${utc(st.end)}</td><td class="num">${st.candidates}</td><td class="num">${st.feasible}</td>
       <td class="reasons">${esc(st.note)}</td></tr>`).join("");
-  const exportsList = ["opm", "opm?format=xml", "oem", "oem?format=xml", "czml", "access.csv"]
-    .map((k) => `<a href="#" data-export="${k}">${k.replace("?format=xml", " (XML)")}</a>`).join(" · ");
+  const exportsList = ["opm", "opm?format=xml", "oem", "oem?format=xml", "czml", "access.csv", "geojson", "pointing.csv",
+    ...c.scenes.map((sc) => `pointing.csv?scene=${sc.index}`)]
+    .map((k) => `<a href="#" data-export="${k}">${k.replace("?format=xml", " (XML)").replace("?scene=", " of scene ")}</a>`).join(" · ");
   const margin = c.trim_margin_m_s == null ? "" : `, ${num(c.trim_margin_m_s, 1)} m/s kept for the trims`;
   const verdict = c.scenes.length
     ? `<p class="verdict good">${c.scenes.length} feasible scene(s) for ${num(c.dv_total_m_s, 1)} of ${num(c.dv_budget_m_s, 0)} m/s${margin}.</p>`
@@ -349,6 +395,7 @@ async function campaignPage(id) {
     <p class="muted">${esc(c.id)} · created ${utc(c.created_at)} · ${num(c.duration_days, 1)} days from ${utc(c.epoch)} ·
     return to orbit: ${c.return_to_orbit ? "yes" : "no"}</p>${verdict}${origin}
     ${(c.notes || []).map((n) => `<p class="muted">note: ${esc(n)}</p>`).join("")}
+    ${c.scenes.length ? `<h2>Delta-v against the budget</h2>${dvChart(c)}` : ""}
     <h2>Scenes (measured on the whole flown burn sequence)</h2>
     <div class="scroll"><table id="scenes"><thead><tr><th class="num">#</th><th>T_access (UTC)</th><th class="num">dv (m/s)</th>
     <th class="num">stand-off (km)</th><th class="num">separation (km)</th><th class="num">rate (deg/s)</th>
@@ -372,7 +419,7 @@ async function campaignPage(id) {
     const blob = await api(`/v1/campaigns/${encodeURIComponent(id)}/export/${kind}`, "blob");
     const link = document.createElement("a");
     link.href = URL.createObjectURL(blob);
-    link.download = `campaign-${id}.${kind.replace("?format=xml", ".xml")}`;
+    link.download = `campaign-${id}.${kind.replace("?format=xml", ".xml").replace("?scene=", "-scene-")}`;
     link.click();
   }));
 }
