@@ -482,29 +482,17 @@ def propagate_j2(
 
 
 class SGP4Trajectory:
-    """A TLE propagated by SGP4 (vectorised), rotated from TEME into GCRS."""
+    """A TLE propagated by SGP4 (vectorised), rotated from TEME into GCRS: the catalogue of one."""
 
     def __init__(self, tle: TLE, plan_epoch: datetime, frames: EarthFrames) -> None:
-        from sgp4.api import Satrec, jday
-
         self.tle = tle
-        self.satrec = Satrec.twoline2rv(tle.line1, tle.line2)
         self.frames = frames
-        e = as_utc(plan_epoch)
-        self._jd_whole, self._jd_frac0 = jday(e.year, e.month, e.day, e.hour, e.minute, e.second + e.microsecond * 1e-6)
+        self._one = SGP4Catalogue([tle], plan_epoch, frames)
+        self.satrec = self._one.satrecs[0]
 
     def state(self, t_s: ArrayLike) -> tuple[Vec, Vec]:
         t = np.atleast_1d(np.asarray(t_s, float))
-        jd = np.full(t.size, self._jd_whole)
-        fr = self._jd_frac0 + t / DAY_S
-        err, r_teme, v_teme = self.satrec.sgp4_array(jd, fr)
-        if np.any(err):
-            from sgp4.api import SGP4_ERRORS
-
-            code = int(err[err != 0][0])
-            raise PlannerError(f"SGP4 failed for this TLE: {SGP4_ERRORS.get(code, code)}", field="tle")
-        rot = self.frames.teme_to_gcrs(t)
-        return mxv(rot, r_teme.T), mxv(rot, v_teme.T)
+        return self._one.state(t, np.zeros(t.size, np.int64))
 
 
 class SGP4Catalogue:
@@ -534,6 +522,10 @@ class SGP4Catalogue:
                 np.full(part.size, self._jd_whole), fr_all[part]
             )
             if np.any(err):
-                raise PlannerError(f"SGP4 failed for element set {int(j[part[0]])}", field="tle")
+                from sgp4.api import SGP4_ERRORS
+
+                code = int(err[err != 0][0])
+                which = "this TLE" if len(self.satrecs) == 1 else f"element set {int(j[part[0]])}"
+                raise PlannerError(f"SGP4 failed for {which}: {SGP4_ERRORS.get(code, code)}", field="tle")
         rot = self.frames.teme_to_gcrs(t)
         return mxv(rot, r.T), mxv(rot, v.T)

@@ -66,7 +66,7 @@ SHAPES: tuple[float | None, ...] = (2.0, None)
 INFORMATIVE = 0.75
 DEVIANCE_MARGIN = 1.25  # a frame whose deviance exceeds the held-out frames' largest by this factor is flagged
 MIN_SCENES = 2
-PASS_FRAMES = 20  # a pass's frames refined together, spread over it (the service's pass refinement takes as many)
+PASS_FRAMES = 10  # a pass's frames refined together, spread over it (the service's pass refinement takes as many)
 PASS_STARTS = 1  # start directions per held-out scene in the pass check (2 starts on 2 PO scenes took ~130 CPU s)
 
 

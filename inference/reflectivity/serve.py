@@ -31,7 +31,15 @@ from inference.fit import Renderer, silhouette_iou
 from inference.reflectivity.build import PASS_FRAMES, spread
 from inference.reflectivity.likelihood import deviance
 from inference.reflectivity.model import LAW_BINS, Look, ReflectivityMap
-from inference.reflectivity.refine import FrameCost, Objective, raw_bounds, refine_on, refine_pass, window_about
+from inference.reflectivity.refine import (
+    PASS_RENDERS,
+    FrameCost,
+    Objective,
+    raw_bounds,
+    refine_on,
+    refine_pass,
+    window_about,
+)
 from inference.reflectivity.sites import sites_of
 from inference.rotations import geodesic_deg, rotation_matrix
 from inference.simulation.radar import Radar
@@ -43,7 +51,6 @@ MAP_FILE = "reflectivity.npz"
 MAP_ROLE = "map"
 MAX_ALTERNATIVES = 3  # listed alternatives scored on the image; the best-scoring one is refined beside the answer
 REFINE_RENDERS = 120
-PASS_RENDERS = 160  # a pass's objective evaluations (each renders every frame taking part)
 AMBIGUITY_GAP = 0.002  # objective per pixel within which another attitude is as likely
 MAX_BOUND_DEG = 5.0
 DISTINCT_DEG = 5.0
