@@ -188,6 +188,32 @@ def call_server(
     return r
 
 
+ID_LENGTH = 36  # a full id (a UUID); anything shorter is read as the start of one (the lists and the console show 8)
+
+
+def resolve_id(args: argparse.Namespace, listing: str, given: str, what: str) -> str:
+    """The id of one of ``what`` (plural: "plans") that ``given`` starts with, from the caller's own listing route (``/v1/plans``...): a full
+    id as it is; a prefix (as lists show them) when exactly one of yours starts so; several: one line saying which;
+    none: as given, for the service's own 404."""
+    if len(given) >= ID_LENGTH or not given:
+        return given
+    found: list[str] = []
+    offset = 0
+    while offset < 10_000:  # the listing's own page size (20, or the operator's smaller one)
+        body = call_server(args, "GET", listing, params={"offset": offset}).json()
+        rows = body.get("data", [])
+        found += [r["id"] for r in rows if str(r.get("id", "")).startswith(given)]
+        offset += len(rows)
+        if not rows or offset >= int(body.get("count", 0)):
+            break
+    if len(found) == 1:
+        return found[0]
+    if not found:
+        return given  # the service says what it says of an id it does not know (a 404)
+    shown = ", ".join(f[:12] for f in found[:5]) + (", ..." if len(found) > 5 else "")
+    raise CliError(f"{len(found)} of your {what} have ids starting with {given!r} ({shown}): give more of it")
+
+
 def print_listing(
     args: argparse.Namespace,
     path: str,

@@ -9,7 +9,16 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from app.cli.common import CliError, call_server, input_line, load_settings, local_models, print_listing, utc_text
+from app.cli.common import (
+    CliError,
+    call_server,
+    input_line,
+    load_settings,
+    local_models,
+    print_listing,
+    resolve_id,
+    utc_text,
+)
 
 if TYPE_CHECKING:
     from app.schemas import EstimateResult
@@ -21,7 +30,9 @@ def cmd_estimates(args: argparse.Namespace) -> int:
     from app.schemas import EstimatePublic
 
     if args.estimates_cmd == "show":
-        body = call_server(args, "GET", f"/v1/estimates/{quote(args.id, safe='')}").json()
+        body = call_server(
+            args, "GET", f"/v1/estimates/{quote(resolve_id(args, '/v1/estimates', args.id, 'estimates'), safe='')}"
+        ).json()
         if args.json:
             print(json.dumps(body, indent=2))
         else:

@@ -9,7 +9,7 @@ import time
 from typing import Any
 from urllib.parse import quote
 
-from app.cli.common import CliError, call_server, print_listing, utc_text
+from app.cli.common import CliError, call_server, print_listing, resolve_id, utc_text
 
 FINAL = ("done", "failed", "cancelled")
 
@@ -55,7 +55,7 @@ def cmd_jobs(args: argparse.Namespace) -> int:
         header = f"{'id':<36}  {'kind':<10} {'state':<9} {'done':>6}  {'created (UTC)':<24}  stage"
         filters = {"kind": args.kind, "state": args.state}
         return print_listing(args, "/v1/jobs", filters, "{count} jobs; newest {shown}:", header, row)
-    path = f"/v1/jobs/{quote(args.id, safe='')}"
+    path = f"/v1/jobs/{quote(resolve_id(args, '/v1/jobs', args.id, 'jobs'), safe='')}"
     if sub == "show":
         job = call_server(args, "GET", path).json()
         print(json.dumps(job, indent=2)) if args.json else _show(job)

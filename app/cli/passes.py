@@ -20,6 +20,7 @@ from app.cli.common import (
     load_settings,
     local_models,
     read_json,
+    resolve_id,
     validation_line,
 )
 
@@ -642,7 +643,9 @@ def cmd_passes(args: argparse.Namespace) -> int:
     from app.schemas import PassPublic
 
     if args.passes_cmd == "show":
-        body = call_server(args, "GET", f"/v1/passes/{quote(args.id, safe='')}").json()
+        body = call_server(
+            args, "GET", f"/v1/passes/{quote(resolve_id(args, '/v1/passes', args.id, 'passes'), safe='')}"
+        ).json()
         if args.json:
             print(json.dumps(body, indent=2))
         else:

@@ -18,6 +18,7 @@ from app.cli.common import (
     input_line,
     print_listing,
     read_json,
+    resolve_id,
     utc_text,
     validation_line,
 )
@@ -32,7 +33,9 @@ def cmd_plans(args: argparse.Namespace) -> int:
     from app.schemas import PlanPublic
 
     if args.plans_cmd == "show":
-        body = call_server(args, "GET", f"/v1/plans/{quote(args.id, safe='')}").json()
+        body = call_server(
+            args, "GET", f"/v1/plans/{quote(resolve_id(args, '/v1/plans', args.id, 'plans'), safe='')}"
+        ).json()
         if args.json:
             print(json.dumps(body, indent=2))
         else:
@@ -429,7 +432,9 @@ def cmd_campaigns(args: argparse.Namespace) -> int:
     from app.schemas import CampaignPublic
 
     if args.campaigns_cmd == "show":
-        body = call_server(args, "GET", f"/v1/campaigns/{quote(args.id, safe='')}").json()
+        body = call_server(
+            args, "GET", f"/v1/campaigns/{quote(resolve_id(args, '/v1/campaigns', args.id, 'campaigns'), safe='')}"
+        ).json()
         if args.json:
             print(json.dumps(body, indent=2))
         else:

@@ -96,6 +96,11 @@ def test_campaigns_and_passes_through_the_command_line(served, capsys, tmp_path)
     assert rc == 0 and campaign_id in out and "first T_access" in out
     rc, out, _ = _run(capsys, "campaigns", "show", campaign_id)
     assert rc == 0 and "phasing" in out and "stretches searched" in out and "aim: RTN of the target" in out
+    # An id as the lists and the console show it: its first 8 characters.
+    rc, short, _ = _run(capsys, "campaigns", "show", campaign_id[:8])
+    assert rc == 0 and short == out
+    rc, _, err = _run(capsys, "campaigns", "show", "zzzzzzzz")
+    assert rc == 2 and "404" in err and err.count("\n") == 1
     # Re-planned from its own start state (what orbit determination would give there): the same scene, re-aimed.
     from tests.utils.orbits import opm_kvn
 
