@@ -447,13 +447,13 @@ def test_a_footprint_across_the_antimeridian_and_about_a_pole_stays_fillable():
 def test_a_track_cut_at_the_antimeridian_runs_on_to_it():
     """A track crossing 180 deg between two samples: the first part ends on the antimeridian and the next begins
     there, at the latitude where the track crosses (a line in lon/lat here, so the crossing is exact), both ways."""
-    from app.services.exports import _lines
+    from app.services.exports import line_parts
 
-    east = _lines(np.array([0.0, 8.0, 14.0, 20.0]), np.array([170.0, 178.0, -176.0, -170.0]))
+    east = line_parts(np.array([0.0, 8.0, 14.0, 20.0]), np.array([170.0, 178.0, -176.0, -170.0]))
     assert east == [[[170.0, 0.0], [178.0, 8.0], [180.0, 10.0]], [[-180.0, 10.0], [-176.0, 14.0], [-170.0, 20.0]]]
-    west = _lines(np.array([20.0, 14.0, 8.0]), np.array([-170.0, -176.0, 178.0]))
+    west = line_parts(np.array([20.0, 14.0, 8.0]), np.array([-170.0, -176.0, 178.0]))
     assert west == [[[-170.0, 20.0], [-176.0, 14.0], [-180.0, 10.0]], [[180.0, 10.0], [178.0, 8.0]]]
-    hidden = _lines(
+    hidden = line_parts(
         np.array([0.0, 8.0, 14.0, 20.0]),
         np.array([170.0, 178.0, -176.0, -170.0]),
         keep=np.array([True, False, True, True]),
