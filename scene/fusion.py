@@ -496,7 +496,7 @@ def still_on_image(
 
     used = sorted(fused.used)
     bases = np.array([euler_from_matrix(placed.observation_in_lvlh(k).T @ fused.rotation) for k in used])
-    done = image.refine_still(np.asarray(images)[used].astype(np.float64), bases)
+    done = image.refine_still(images[used], bases)
     if done is None or not done.nll_per_pixel < done.start_nll_per_pixel:
         return fused, None
     rot = fused.rotation @ done.turn

@@ -20,7 +20,7 @@ from app.services.planning import access_csv, scenes_by_pass, to_orbit, to_stati
 from planner import ccsds
 from planner.campaign import CAMPAIGN_MARGIN_S, FlownTrajectory, campaign_pole, fly
 from planner.orbits import earth_frames, trajectory
-from planner.propagation import EarthFrames, Trajectory, utc
+from planner.propagation import EarthFrames, Station, Trajectory, utc
 
 Vec = NDArray[np.float64]
 
@@ -49,6 +49,8 @@ class Flight:
     accesses_s: tuple[float, ...]
     frames: EarthFrames
     scenes: list[CampaignScenePublic]
+    stations: list[Station]  # the campaign's radars, as its request gives them
+    network: bool  # several radars: each window names the one that sees it
 
     def target(self, t_s: Vec) -> tuple[Vec, Vec]:
         return self.target_trajectory.state(t_s)
@@ -98,6 +100,8 @@ def flight(request: dict[str, Any], result: dict[str, Any]) -> Flight:
         tuple((s.t_access - epoch).total_seconds() for s in stored.scenes),
         frames,
         list(stored.scenes),
+        to_stations(req),
+        req.ground_stations is not None,
     )
 
 
@@ -177,7 +181,7 @@ def export(kind: str, row: Any, fmt: ccsds.Format = "kvn", scene: int | None = N
             network=row.request.get("ground_stations"),
         )
     if kind == "geojson":
-        return geojson(fl, names, row.request, row.result.get("access_windows", []))
+        return geojson(fl, names)
     raise InputError(
         ["kind"], f"unknown export {kind!r}: opm, oem, czml, access.csv, geojson or pointing.csv", where="path"
     )
@@ -207,33 +211,23 @@ def pointing(row: Any, scene: int | None = None) -> str:
     the station that images each: the plan's pointing.csv columns, ``access`` its row in access.csv."""
     chosen = _scene_windows(row.result, scene)  # refused before anything is flown
     fl = flight(row.request, row.result)
-    stations = _stations(row.request)
+    by_name: dict[str | None, Station] = {s.name: s for s in fl.stations} if fl.network else {None: fl.stations[0]}
     lines = [",".join(exports.POINTING_COLUMNS)]
     for k, window in chosen:
-        station = stations.get(window.get("station"), next(iter(stations.values())))
+        station = by_name.get(window.get("station"), fl.stations[0])
         text = exports.pointing_lines(fl.target_trajectory, station, fl.frames, fl.epoch, [(k, window)])
         lines += text.splitlines()[1:]
     return "\n".join(lines) + "\n"
 
 
-def _stations(request: dict[str, Any]) -> dict[str | None, Any]:
-    """The campaign's stations by the name its windows give (None: a one-station campaign's windows name none)."""
-    req = CampaignCreate.model_validate(request)
-    stations = to_stations(req)
-    if req.ground_stations is None:
-        return {None: stations[0]}
-    return {s.name: s for s in stations}
-
-
-def geojson(fl: Flight, names: dict[str, str], request: dict[str, Any], windows: list[dict[str, Any]]) -> str:
+def geojson(fl: Flight, names: dict[str, str]) -> str:
     """GeoJSON (RFC 7946, WGS-84 longitude/latitude) of the whole campaign: each station, the target's track over
     each scene's pass (its in-view part), the target under each T_access with the observer there, and each burn where
     the observer makes it (the point below it), with what it costs."""
     from planner.frames import ground_track
 
     features: list[dict[str, Any]] = []
-    req = CampaignCreate.model_validate(request)
-    for st in to_stations(req):
+    for st in fl.stations:
         features.append(
             exports.feature(
                 "station",

@@ -181,7 +181,7 @@ class ImageRefiner:
             image_fit=fit,
         )
 
-    def refine_still(self, frames: Vec, angles_deg: Vec) -> StillRefinement | None:
+    def refine_still(self, frames: NDArray[np.floating], angles_deg: Vec) -> StillRefinement | None:
         """A still pass's frames refined together: ``frames`` [N, H, W], each with its attitude (Euler z, y, x deg) in its
         own observation frame, all one attitude in LVLH. One body turn common to them all is found on up to
         ``PASS_FRAMES`` frames spread over the pass (``refine_pass``); None where the map's build found that held-out
